@@ -1,0 +1,1 @@
+"""solitonde.instrument: the application (CLI, model table, inversion, REST service, store)."""

@@ -1,0 +1,41 @@
+"""The `solitonde` command line: one Typer app assembled from one module per command.
+
+Each ``cmd_*.py`` module in this folder defines ``register(app)`` that adds its commands; list it
+in ``COMMAND_MODULES`` to make it part of the CLI.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import typer
+
+COMMAND_MODULES: list[str] = [
+    "cmd_theory",
+]
+
+app = typer.Typer(
+    name="solitonde",
+    help="Plate NDE with highly nonlinear solitary waves: theory, simulation, analysis, service.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def build_app() -> typer.Typer:
+    """Attach every command module's commands to the app (idempotent)."""
+    if not getattr(app, "_solitonde_registered", False):
+        for name in COMMAND_MODULES:
+            importlib.import_module(f"solitonde.instrument.{name}").register(app)
+        app._solitonde_registered = True  # type: ignore[attr-defined]
+    return app
+
+
+def main() -> None:
+    """Console-script entry point."""
+    build_app()()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,353 @@
+"""The scene: one validated description of an experiment (PHYSICS.md section 1 as defaults).
+
+A scene has five sections: ``chain``, ``striker``, ``plate``, ``effects`` and ``output``. It is
+loaded from YAML or JSON, overridden with dotted keys (``plate.thickness=3.18e-3``) and validated
+in one place; every bad input raises :class:`SceneError` naming the field and what is allowed.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from math import sqrt
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import yaml
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+
+from .contact import hertz_sphere_flat, hertz_sphere_sphere, plate_impedance, sphere_mass
+from .errors import SceneError
+from .materials import MATERIALS, Material, get_material
+
+STANDARD_GRAVITY = 9.80665  # m/s^2
+
+PLATE_MODELS = ("rigid", "halfspace", "infinite", "sem", "greens", "auto")
+SUPPORTS = ("opposite_edges", "all_edges", "none")
+
+
+def _number(value: Any) -> Any:
+    """Accept ints, floats and numeric strings; refuse booleans (pydantic would read True as 1)."""
+    if isinstance(value, bool):
+        raise ValueError("expected a number, got a boolean")
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            raise ValueError(f"expected a number, got {value!r}") from None
+    return value
+
+
+def _integer(value: Any) -> Any:
+    """Accept whole numbers only; refuse booleans and fractional values."""
+    if isinstance(value, bool):
+        raise ValueError("expected an integer, got a boolean")
+    if isinstance(value, float) and not value.is_integer():
+        raise ValueError(f"expected an integer, got {value}")
+    return value
+
+
+def _material_name(value: Any) -> Any:
+    if isinstance(value, str) and value not in MATERIALS:
+        raise ValueError(f"unknown material {value!r}; known: {', '.join(sorted(MATERIALS))}")
+    return value
+
+
+def _duration(value: Any) -> Any:
+    if value == "auto":
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise ValueError(f"must be 'auto' or a positive number of seconds, got {value!r}")
+    try:
+        seconds = float(value)
+    except ValueError:
+        raise ValueError(f"must be 'auto' or a positive number of seconds, got {value!r}") from None
+    if not seconds > 0:
+        raise ValueError(f"must be 'auto' or a positive number of seconds, got {value!r}")
+    return seconds
+
+
+Number = Annotated[float, BeforeValidator(_number)]
+Integer = Annotated[int, BeforeValidator(_integer)]
+MaterialName = Annotated[str, BeforeValidator(_material_name)]
+
+
+def _fail(field: str, message: str) -> ValueError:
+    """An error from a cross-field check that still names the one field at fault."""
+    return ValueError(f"[{field}] {message}")
+
+
+class _Section(BaseModel):
+    """Base for scene sections: unknown keys are errors, assignments are validated."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class ChainSpec(_Section):
+    """The granular chain: N identical spheres standing on the plate."""
+
+    n_particles: Integer = Field(20, ge=1, le=100_000, description="spheres in the chain (striker not counted)")
+    diameter: Number = Field(9.53e-3, gt=0.0, le=1.0, description="sphere diameter D, m")
+    material: MaterialName = Field("steel_440c", description="sphere material key")
+    sensor_index: Integer = Field(7, ge=1, description="sensor particle, counted from the top, 1-based")
+
+    @model_validator(mode="after")
+    def _sensor_inside(self) -> ChainSpec:
+        if self.sensor_index > self.n_particles:
+            raise _fail(
+                "sensor_index",
+                f"sensor_index {self.sensor_index} is outside the chain of {self.n_particles} "
+                f"particles (allowed: 1..{self.n_particles})"
+            )
+        return self
+
+
+class StrikerSpec(_Section):
+    """The striker, identical to the chain spheres: a drop height or an impact velocity."""
+
+    drop_height: Number = Field(5e-3, gt=0.0, le=100.0, description="free-fall height, m")
+    velocity: Number | None = Field(None, gt=0.0, le=100.0, description="impact velocity, m/s")
+
+    @model_validator(mode="after")
+    def _one_of(self) -> StrikerSpec:
+        if self.velocity is not None and "drop_height" in self.model_fields_set:
+            raise _fail("velocity", "give either drop_height or velocity, not both")
+        return self
+
+    @property
+    def impact_velocity(self) -> float:
+        """v_imp: the given velocity, else free fall sqrt(2 g h) (no air drag, as in the paper)."""
+        if self.velocity is not None:
+            return self.velocity
+        return sqrt(2.0 * STANDARD_GRAVITY * self.drop_height)
+
+
+class PlateSpec(_Section):
+    """The plate: thickness, in-plane size, material, clamped supports, chain position."""
+
+    thickness: Number = Field(3.18e-3, gt=0.0, le=1.0, description="plate thickness t, m")
+    size: tuple[Number, Number] = Field(
+        (0.914, 0.914), description="in-plane size (along the centre line, across), m"
+    )
+    material: MaterialName = Field("al_6061", description="plate material key")
+    supports: Literal["opposite_edges", "all_edges", "none"] = Field(
+        "opposite_edges", description="which edges are clamped"
+    )
+    distance_to_support: Number = Field(
+        0.457, ge=0.0, description="distance L from the chain to the clamped edge at x = 0, m"
+    )
+
+    @model_validator(mode="after")
+    def _geometry(self) -> PlateSpec:
+        lx, ly = self.size
+        if lx <= 0 or ly <= 0:
+            raise _fail("size", f"must be positive in both directions, got {list(self.size)}")
+        if self.distance_to_support > lx:
+            raise _fail(
+                "distance_to_support",
+                f"{self.distance_to_support} m lies outside the plate "
+                f"(allowed: 0..{lx} m, the plate length along the centre line)"
+            )
+        return self
+
+
+class EffectsSpec(_Section):
+    """Which physical effects to simulate; each costs nothing when off."""
+
+    gravity: bool = Field(True, description="static preload m g per particle (paper Eq. 1)")
+    dissipation: bool = Field(False, description="contact damping (off in the paper's model)")
+    plate_model: Literal["rigid", "halfspace", "infinite", "sem", "greens", "auto"] = Field(
+        "auto", description="bottom boundary; auto picks the cheapest model that is right"
+    )
+
+
+class OutputSpec(_Section):
+    """What to record."""
+
+    sample_rate: Number = Field(2e6, gt=0.0, le=1e10, description="sensor sampling rate, Hz")
+    duration: Annotated[Literal["auto"] | float, BeforeValidator(_duration)] = Field(
+        "auto", description="'auto' (until the reflection has passed the sensor) or seconds"
+    )
+    traces: bool = Field(False, description="also record particle positions, velocities, forces")
+
+
+class Scene(_Section):
+    """A complete experiment. Defaults are the paper's setup (D = 9.53 mm, t = 3.18 mm, centre)."""
+
+    chain: ChainSpec = Field(default_factory=ChainSpec)
+    striker: StrikerSpec = Field(default_factory=StrikerSpec)
+    plate: PlateSpec = Field(default_factory=PlateSpec)
+    effects: EffectsSpec = Field(default_factory=EffectsSpec)
+    output: OutputSpec = Field(default_factory=OutputSpec)
+
+    # Derived physical quantities -------------------------------------------------------------
+    @property
+    def sphere_material(self) -> Material:
+        return get_material(self.chain.material, "chain.material")
+
+    @property
+    def plate_material(self) -> Material:
+        return get_material(self.plate.material, "plate.material")
+
+    @property
+    def sphere_mass(self) -> float:
+        """m, kg."""
+        return sphere_mass(self.chain.diameter, self.sphere_material)
+
+    @property
+    def a_s(self) -> float:
+        """Hertz constant between two chain spheres, N/m^1.5."""
+        return hertz_sphere_sphere(self.chain.diameter, self.sphere_material)
+
+    @property
+    def a_p(self) -> float:
+        """Hertz constant between the last sphere and the plate, N/m^1.5."""
+        return hertz_sphere_flat(self.chain.diameter, self.sphere_material, self.plate_material)
+
+    @property
+    def impact_velocity(self) -> float:
+        """v_imp, m/s."""
+        return self.striker.impact_velocity
+
+    @property
+    def plate_impedance(self) -> float:
+        """Z = 8 sqrt(rho t D_p), N s/m."""
+        return plate_impedance(self.plate.thickness, self.plate_material)
+
+    @property
+    def d_over_t(self) -> float:
+        return self.chain.diameter / self.plate.thickness
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready dict with every field, defaults included."""
+        return self.model_dump(mode="json")
+
+    def with_overrides(self, overrides: Iterable[str] | Mapping[str, Any]) -> Scene:
+        """A new scene with dotted-key overrides applied and validated."""
+        return scene_from_dict(apply_overrides(self.to_dict_explicit(), overrides))
+
+    def to_dict_explicit(self) -> dict[str, Any]:
+        """Dict of the fields that were set explicitly (keeps 'either/or' choices intact)."""
+        return self.model_dump(mode="json", exclude_unset=True)
+
+
+# Loading, overriding, validating -------------------------------------------------------------
+
+
+def _field_of(loc: tuple[Any, ...]) -> str:
+    """Dotted field path, without pydantic's internal union/validator tags."""
+    parts = [str(p) for p in loc if not any(c in str(p) for c in "[(")]
+    return ".".join(parts) or "scene"
+
+
+def scene_from_dict(data: Mapping[str, Any]) -> Scene:
+    """Validate a mapping into a Scene; raise one SceneError that names the first bad field."""
+    if not isinstance(data, Mapping):
+        raise SceneError("scene", f"expected a mapping of sections, got {type(data).__name__}",
+                         allowed="chain, striker, plate, effects, output")
+    try:
+        return Scene.model_validate(dict(data))
+    except ValidationError as exc:
+        errors = exc.errors()
+        first = errors[0]
+        field = _field_of(first["loc"])
+        message = _describe(first)
+        if message.startswith("["):
+            inner, _, message = message[1:].partition("] ")
+            field = f"{field}.{inner}" if field != "scene" else inner
+        if len(errors) > 1:
+            others = ", ".join(sorted({_field_of(e["loc"]) for e in errors[1:]}))
+            message += f" [also invalid: {others}]"
+        raise SceneError(field, message) from None
+
+
+def _describe(error: Mapping[str, Any]) -> str:
+    """Turn one pydantic error into a sentence that says what is allowed."""
+    kind = error["type"]
+    ctx = error.get("ctx") or {}
+    if kind == "extra_forbidden":
+        parent = Scene
+        for part in error["loc"][:-1]:
+            field = parent.model_fields.get(str(part)) if hasattr(parent, "model_fields") else None
+            parent = field.annotation if field is not None else None
+        known = ", ".join(parent.model_fields) if hasattr(parent, "model_fields") else ""
+        return f"unknown key (allowed keys here: {known})"
+    if kind == "greater_than":
+        return f"must be > {ctx['gt']}, got {error.get('input')!r}"
+    if kind == "greater_than_equal":
+        return f"must be >= {ctx['ge']}, got {error.get('input')!r}"
+    if kind == "less_than_equal":
+        return f"must be <= {ctx['le']}, got {error.get('input')!r}"
+    if kind == "literal_error":
+        return f"got {error.get('input')!r}; allowed: {ctx.get('expected')}"
+    if kind.startswith("bool"):
+        return f"expected true or false, got {error.get('input')!r}"
+    msg = str(error["msg"])
+    return msg.removeprefix("Value error, ")
+
+
+def parse_value(text: str) -> Any:
+    """Parse a command-line value: JSON first (numbers like 1e-3, true, lists), else YAML, else text."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        pass
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    return text if value is None else value
+
+
+def apply_overrides(
+    data: Mapping[str, Any], overrides: Iterable[str] | Mapping[str, Any]
+) -> dict[str, Any]:
+    """Return a deep copy of ``data`` with ``section.key=value`` overrides applied (not validated)."""
+    result = json.loads(json.dumps(dict(data)))
+    items: Iterable[tuple[str, Any]]
+    if isinstance(overrides, Mapping):
+        items = overrides.items()
+    else:
+        pairs = []
+        for text in overrides:
+            key, sep, raw = text.partition("=")
+            if not sep or not key.strip():
+                raise SceneError(text, "override must look like section.key=value",
+                                 allowed="e.g. plate.thickness=3.18e-3")
+            pairs.append((key.strip(), parse_value(raw.strip())))
+        items = pairs
+    for key, value in items:
+        parts = key.split(".")
+        node = result
+        for i, part in enumerate(parts[:-1]):
+            child = node.setdefault(part, {})
+            if not isinstance(child, dict):
+                raise SceneError(".".join(parts[: i + 1]), "is a value, not a section")
+            node = child
+        node[parts[-1]] = value
+    return result
+
+
+def load_scene_file(path: str | Path) -> dict[str, Any]:
+    """Read a YAML or JSON scene file into a dict (not yet validated)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneError("scene", f"cannot read scene file {str(path)!r}: {exc.strerror}") from None
+    try:
+        data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+        raise SceneError("scene", f"{path.name} is not valid {path.suffix.lstrip('.') or 'YAML'}: {exc}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise SceneError("scene", f"{path.name} must hold a mapping of sections",
+                         allowed="chain, striker, plate, effects, output")
+    return data
+
+
+def load_scene(path: str | Path | None = None, overrides: Iterable[str] = ()) -> Scene:
+    """Load a scene file (or the defaults), apply ``--set`` overrides, validate."""
+    data = load_scene_file(path) if path is not None else {}
+    return scene_from_dict(apply_overrides(data, list(overrides)))
