@@ -1,0 +1,227 @@
+"""The spectral-element plate: isotropic elasticity, diagonal mass, matrix-free stiffness.
+
+Nodes on GLL points and GLL quadrature give a diagonal mass matrix (PHYSICS.md section 9), so
+central differences (Newmark beta = 0, gamma = 1/2) are explicit. The stiffness is never assembled
+for time stepping: one dense element matrix per distinct element shape is applied to all elements
+of that shape in one GEMM (see ``sem_kernels``). Supports clamp all three displacement components
+on whole edge faces; a symmetry plane y = Ly/2 (half model) fixes u_y there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator, eigsh
+
+from .gll import gll_derivative_matrix, gll_weights
+from .materials import Material
+from .mesh import PlateMesh
+from .sem_kernels import apply_stiffness, run_plate_point_force
+
+SUPPORTS = ("opposite_edges", "all_edges", "none")
+
+
+def element_stiffness(
+    size: tuple[float, float, float], order: tuple[int, int, int], material: Material
+) -> np.ndarray:
+    """Dense stiffness of one box element with GLL quadrature, dofs ordered 3 * node + component.
+
+    K[(a,c),(b,e)] = sum_q w_q |J| (lambda G_qac G_qbe + mu G_qae G_qbc + mu delta_ce G_qad G_qbd)
+    with G_qad the x_d-derivative of shape function a at quadrature point q.
+    """
+    hx, hy, hz = size
+    px, py, pz = order
+    ix, iy, iz = np.eye(px + 1), np.eye(py + 1), np.eye(pz + 1)
+    dx = gll_derivative_matrix(px) * (2.0 / hx)
+    dy = gll_derivative_matrix(py) * (2.0 / hy)
+    dz = gll_derivative_matrix(pz) * (2.0 / hz)
+    g = np.stack(
+        (np.kron(iz, np.kron(iy, dx)), np.kron(iz, np.kron(dy, ix)), np.kron(dz, np.kron(iy, ix))),
+        axis=-1,
+    )  # (q, a, d)
+    w = np.kron(gll_weights(pz), np.kron(gll_weights(py), gll_weights(px))) * (hx * hy * hz / 8.0)
+    lam, mu = material.lame_lambda, material.shear_modulus
+    gw = g * w[:, None, None]
+    k = lam * np.einsum("qac,qbe->acbe", gw, g)
+    k += mu * np.einsum("qae,qbc->acbe", gw, g)
+    lap = np.einsum("qad,qbd->ab", gw, g)
+    n = g.shape[1]
+    k += mu * np.einsum("ab,ce->acbe", lap, np.eye(3))
+    k = k.reshape(3 * n, 3 * n)
+    return 0.5 * (k + k.T)
+
+
+def element_mass(size: tuple[float, float, float], order: tuple[int, int, int], rho: float) -> np.ndarray:
+    """Diagonal (nodal-quadrature) mass of one box element, per node."""
+    hx, hy, hz = size
+    px, py, pz = order
+    w = np.kron(gll_weights(pz), np.kron(gll_weights(py), gll_weights(px)))
+    return rho * w * (hx * hy * hz / 8.0)
+
+
+@dataclass(frozen=True)
+class ElasticPlate:
+    """An assembled-in-spirit (never as a matrix) spectral-element plate ready to time-step.
+
+    Attributes
+    ----------
+    mesh, material, supports: what it is.
+    node_mass: (n_nodes,) diagonal mass, kg (halved automatically on a symmetry plane).
+    inv_mass: (n_dofs,) 1/m per dof, 0 on constrained dofs (which then never move).
+    edofs: (n_elements, n_edof) element dofs, elements sorted by shape.
+    offsets: (n_shapes + 1,) element ranges per shape in ``edofs``.
+    kes: (n_shapes, n_edof, n_edof) element matrices.
+    """
+
+    mesh: PlateMesh
+    material: Material
+    supports: str
+    node_mass: np.ndarray
+    inv_mass: np.ndarray
+    edofs: np.ndarray
+    offsets: np.ndarray
+    kes: np.ndarray
+
+    @property
+    def n_dofs(self) -> int:
+        return self.inv_mass.size
+
+    @property
+    def contact_dof(self) -> int:
+        """Vertical (z) dof of the node under the chain."""
+        return 3 * self.mesh.contact_node + 2
+
+    @property
+    def fixed(self) -> np.ndarray:
+        return self.inv_mass == 0.0
+
+    def _work(self) -> tuple[np.ndarray, np.ndarray]:
+        width = int(np.max(np.diff(self.offsets)))
+        n = self.edofs.shape[1]
+        return np.empty((width, n)), np.empty((width, n))
+
+    def apply_stiffness(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """K u, matrix-free."""
+        if out is None:
+            out = np.empty(self.n_dofs)
+        buf, res = self._work()
+        apply_stiffness(np.ascontiguousarray(u, dtype=float), self.edofs, self.offsets, self.kes,
+                        buf, res, out)
+        return out
+
+    def stiffness_csr(self) -> sp.csr_matrix:
+        """The assembled global stiffness (for checks and the benchmark baseline only)."""
+        n = self.edofs.shape[1]
+        rows, cols, vals = [], [], []
+        for s in range(self.offsets.size - 1):
+            ed = self.edofs[self.offsets[s]: self.offsets[s + 1]]
+            rows.append(np.repeat(ed, n, axis=1).ravel())
+            cols.append(np.tile(ed, (1, n)).ravel())
+            vals.append(np.broadcast_to(self.kes[s].ravel(), (ed.shape[0], n * n)).ravel())
+        k = sp.coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(self.n_dofs, self.n_dofs),
+        ).tocsr()
+        k.sum_duplicates()
+        return k
+
+    # Stability --------------------------------------------------------------------------------
+    @cached_property
+    def max_eigenvalue(self) -> float:
+        """Largest eigenvalue of M^-1 K on the free dofs (rad^2/s^2), by Lanczos.
+
+        Works on the symmetric form M^-1/2 K M^-1/2; a rigorous upper bound (the largest element
+        eigenvalue) seeds nothing but is kept as a sanity check.
+        """
+        free = ~self.fixed
+        s = np.sqrt(self.inv_mass)
+        buf, res = self._work()
+        out = np.empty(self.n_dofs)
+
+        def matvec(x: np.ndarray) -> np.ndarray:
+            y = s * np.ravel(x)
+            apply_stiffness(y, self.edofs, self.offsets, self.kes, buf, res, out)
+            return s * out
+
+        op = LinearOperator((self.n_dofs, self.n_dofs), matvec=matvec, dtype=float)
+        rng = np.random.default_rng(0)
+        v0 = rng.standard_normal(self.n_dofs) * free
+        vals = eigsh(op, k=1, which="LA", tol=1e-6, v0=v0, return_eigenvectors=False,
+                     ncv=min(self.n_dofs, 40), maxiter=5000)
+        return float(vals[0])
+
+    @cached_property
+    def element_bound(self) -> float:
+        """max over elements of lambda_max(K_e, M_e): an upper bound of ``max_eigenvalue``."""
+        sizes, _ = self.mesh.shapes
+        best = 0.0
+        for s, size in enumerate(sizes):
+            me = np.repeat(element_mass(tuple(size), self.mesh.order, self.material.density), 3)
+            d = 1.0 / np.sqrt(me)
+            best = max(best, float(np.linalg.eigvalsh(self.kes[s] * d[:, None] * d[None, :])[-1]))
+        return best
+
+    @property
+    def critical_step(self) -> float:
+        """dt_crit = 2 / omega_max for central differences, s."""
+        return 2.0 / np.sqrt(self.max_eigenvalue)
+
+    # Energy -----------------------------------------------------------------------------------
+    def kinetic_energy(self, v: np.ndarray) -> float:
+        """0.5 v^T M v, J."""
+        m = np.repeat(self.node_mass, 3)
+        return 0.5 * float(np.dot(m * v, v))
+
+    def strain_energy(self, u: np.ndarray, u_next: np.ndarray | None = None) -> float:
+        """0.5 u^T K u, or the time-centred 0.5 u_n^T K u_{n+1} (exactly conserved by leapfrog)."""
+        ku = self.apply_stiffness(u)
+        return 0.5 * float(np.dot(ku, u if u_next is None else u_next))
+
+    def run_point_force(self, force: np.ndarray, dt: float, record_dofs: np.ndarray | None = None,
+                        dof: int | None = None) -> np.ndarray:
+        """Central differences from rest under ``force[n]`` at ``dof`` (default: contact, z).
+
+        Returns the displacement of ``record_dofs`` (default: the contact dof) at steps 0..n.
+        """
+        dof = self.contact_dof if dof is None else int(dof)
+        rec = np.asarray([dof] if record_dofs is None else record_dofs, dtype=np.int64)
+        return run_plate_point_force(np.ascontiguousarray(force, dtype=float), dof, float(dt),
+                                     self.inv_mass, self.edofs, self.offsets, self.kes, rec)
+
+
+def build_plate(mesh: PlateMesh, material: Material, supports: str = "opposite_edges") -> ElasticPlate:
+    """Element matrices, diagonal mass and constraints of a meshed plate."""
+    if supports not in SUPPORTS:
+        raise ValueError(f"supports must be one of {', '.join(SUPPORTS)}, got {supports!r}")
+    sizes, shape_id = mesh.shapes
+    kes = np.stack([element_stiffness(tuple(s), mesh.order, material) for s in sizes])
+    order = np.argsort(shape_id, kind="stable")
+    conn = mesh.connectivity[order]
+    edofs = (3 * conn[:, :, None] + np.arange(3)[None, None, :]).reshape(conn.shape[0], -1)
+    offsets = np.searchsorted(shape_id[order], np.arange(len(sizes) + 1)).astype(np.int64)
+
+    node_mass = np.zeros(mesh.n_nodes)
+    for s, size in enumerate(sizes):
+        me = element_mass(tuple(size), mesh.order, material.density)
+        els = mesh.connectivity[shape_id == s]
+        np.add.at(node_mass, els.ravel(), np.tile(me, els.shape[0]))
+
+    fixed = np.zeros((mesh.n_nodes, 3), dtype=bool)
+    x, y = mesh.nodes[:, 0], mesh.nodes[:, 1]
+    ax, ay, _ = mesh.axes
+    tol = 1e-9 * max(ax[-1], mesh.full_width)
+    if supports in ("opposite_edges", "all_edges"):
+        fixed[(np.abs(x) < tol) | (np.abs(x - ax[-1]) < tol)] = True
+    if supports == "all_edges":
+        fixed[np.abs(y) < tol] = True
+        if not mesh.symmetry:
+            fixed[np.abs(y - ay[-1]) < tol] = True
+    if mesh.symmetry:
+        fixed[np.abs(y - ay[-1]) < tol, 1] = True
+    inv_mass = np.repeat(1.0 / node_mass, 3)
+    inv_mass[fixed.ravel()] = 0.0
+    return ElasticPlate(mesh, material, supports, node_mass, inv_mass,
+                        np.ascontiguousarray(edofs, dtype=np.int64), offsets, kes)
