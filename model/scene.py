@@ -159,6 +159,18 @@ class EffectsSpec(_Section):
     plate_model: Literal["rigid", "halfspace", "infinite", "sem", "greens", "auto"] = Field(
         "auto", description="bottom boundary; auto picks the cheapest model that is right"
     )
+    damping: Number = Field(
+        0.0, ge=0.0, le=1e-3,
+        description="Kuwabara-Kono dissipative time constant tau of the sphere contacts, s; "
+        "used when dissipation is on (F = A d^1.5 + 1.5 A tau d^0.5 d')",
+    )
+
+    @model_validator(mode="after")
+    def _damping_given(self) -> EffectsSpec:
+        if self.dissipation and self.damping <= 0.0:
+            raise _fail("damping", "dissipation is on but damping is 0; give the Kuwabara-Kono "
+                        "time constant tau in seconds (allowed: 0 < damping <= 1e-3)")
+        return self
 
 
 class OutputSpec(_Section):
@@ -171,6 +183,33 @@ class OutputSpec(_Section):
     traces: bool = Field(False, description="also record particle positions, velocities, forces")
 
 
+class SemSpec(_Section):
+    """Spectral-element plate discretisation (plate models ``sem``, ``greens``, ``auto``)."""
+
+    elements: tuple[Integer, Integer, Integer] = Field(
+        (16, 16, 1), description="elements along x (centre line), y (across), z (thickness)"
+    )
+    order: tuple[Integer, Integer, Integer] = Field(
+        (4, 4, 2), description="GLL polynomial order along x, y, z"
+    )
+    symmetry: bool = Field(True, description="mesh half the plate, mirror plane y = Ly/2")
+    step_factor: Number = Field(
+        0.9, gt=0.0, le=1.0, description="time step as a fraction of the stable limit"
+    )
+    auto_margin: Number = Field(
+        2.0, gt=0.0, le=100.0,
+        description="auto uses 'infinite' when L > auto_margin * L_c (Eq. 18, k = 0.57)",
+    )
+
+    @model_validator(mode="after")
+    def _ranges(self) -> SemSpec:
+        if any(not 1 <= n <= 1024 for n in self.elements):
+            raise _fail("elements", f"each count must be in 1..1024, got {list(self.elements)}")
+        if any(not 1 <= p <= 16 for p in self.order):
+            raise _fail("order", f"each order must be in 1..16, got {list(self.order)}")
+        return self
+
+
 class Scene(_Section):
     """A complete experiment. Defaults are the paper's setup (D = 9.53 mm, t = 3.18 mm, centre)."""
 
@@ -179,6 +218,7 @@ class Scene(_Section):
     plate: PlateSpec = Field(default_factory=PlateSpec)
     effects: EffectsSpec = Field(default_factory=EffectsSpec)
     output: OutputSpec = Field(default_factory=OutputSpec)
+    sem: SemSpec = Field(default_factory=SemSpec)
 
     # Derived physical quantities -------------------------------------------------------------
     @property
