@@ -1,0 +1,345 @@
+"""The chain's bottom boundary: one interface, several plate models ("tiers").
+
+The last particle N touches the plate through a Hertz contact ``F = A_b [u_N - w]_+^(3/2)``
+(PHYSICS.md section 3). A tier decides two things: the Hertz constant ``A_b`` and how the plate's
+top surface ``w`` under the chain moves. Tiers here:
+
+``rigid``
+    An immovable wall of the sphere material: ``A_b`` is the sphere-on-flat constant with both
+    bodies steel, ``w = 0``.
+``halfspace``
+    The plate material's sphere-on-flat constant ``A_p``; the plate does not move, ``w = 0``.
+``infinite``
+    Zener's infinite thin plate: a dashpot behind the Hertz spring, ``w' = (F - F_static) / Z``
+    with ``Z = 8 sqrt(rho_p t D_p)`` (PHYSICS.md section 5). With gravity on, the plate already
+    carries the chain's static weight ``F_static = N m g`` through its supports before the impact,
+    so the dashpot answers only to the change of force ``F - F_static``. An infinite plate has no
+    static stiffness, so this is the only reading under which the chain can start at rest.
+
+The interface (what a new tier such as ``sem`` or ``greens`` implements)
+------------------------------------------------------------------------
+Subclass :class:`BottomBoundary`, give it ``name``, ``reason`` and ``a_bottom``, implement
+:meth:`BottomBoundary.integrate` (and :meth:`BottomBoundary.max_rate` if the plate has a time
+scale of its own), and add a factory with :func:`register_tier`. ``integrate`` receives a
+:class:`ChainSetup` (initial state, constants, preallocated output arrays) and a :class:`StepPlan`
+(dt, steps per sample, samples) and returns a :class:`ChainRun`. Its compiled driver loop calls
+the kernels of :mod:`solitonde.model.chain` per step, exactly as :func:`integrate_dashpot` does:
+
+    1. advance the plate by dt/2 with the chain frozen, book the work ``int F dw`` done on it,
+       refresh the bottom force and ``acc[N]`` (:func:`~solitonde.model.chain.bottom_acceleration`);
+    2. :func:`~solitonde.model.chain.verlet_step` with the plate frozen at w;
+    3. advance the plate by the second dt/2;
+    4. :func:`~solitonde.model.chain.track_peaks` each step and
+       :func:`~solitonde.model.chain.record_sample` plus the energy balance every ``n_sub`` steps.
+
+This Strang splitting keeps the chain update symplectic and the whole step second order; because
+the plate moves while the chain is frozen, the work done on the plate in a sub-step is exactly the
+drop of the bottom contact's elastic energy, so the energy balance stays exact up to the Verlet
+error. A plate that must be stepped more finely (spectral elements) sub-cycles inside step 1 and 3.
+
+Plate-model resolution (``auto``) lives in one place: :func:`resolve_plate_model`.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from .chain import (
+    PK_BOT_F,
+    accelerations,
+    bottom_acceleration,
+    chain_energy,
+    contact_forces,
+    damped_contact_forces,
+    hertz,
+    hertz_energy,
+    new_peak_tracker,
+    record_sample,
+    sensor_reading,
+    track_peaks,
+    verlet_step,
+)
+from .contact import hertz_sphere_flat
+from .errors import SceneError
+from .scene import Scene
+
+# Status codes returned by compiled drivers.
+RUN_OK = 0
+RUN_NONFINITE = 1
+
+
+@dataclass
+class ChainSetup:
+    """Everything a driver needs about the chain; arrays are modified in place by the run.
+
+    Attributes
+    ----------
+    u, v: displacements (down, m) and velocities (m/s) of particles 0..N (0 = striker).
+    w: initial top-surface deflection of the plate under the chain, m.
+    m: particle mass, kg. g: gravity, m/s^2 (0 when gravity is off).
+    a_s: sphere-sphere Hertz constant, N/m^1.5. a_b: bottom contact constant, N/m^1.5.
+    f_static: static force the bottom contact carries at the start, N (N m g, or 0).
+    tau: Kuwabara-Kono dissipative time, s (0: elastic).
+    sensor: sensor particle, 1..N.
+    samples, energy: outputs per sample (sensor force N, energy balance J).
+    u_trace, v_trace, f_trace, w_trace: per-sample fields, zero rows when traces are off.
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    w: float
+    m: float
+    g: float
+    a_s: float
+    a_b: float
+    f_static: float
+    tau: float
+    sensor: int
+    samples: np.ndarray
+    energy: np.ndarray
+    u_trace: np.ndarray
+    v_trace: np.ndarray
+    f_trace: np.ndarray
+    w_trace: np.ndarray
+
+
+@dataclass(frozen=True)
+class StepPlan:
+    """Time grid: ``n_sub`` steps of ``dt`` between samples, ``n_samples`` samples from t = 0."""
+
+    dt: float
+    n_sub: int
+    n_samples: int
+
+    @property
+    def steps(self) -> int:
+        return self.n_sub * (self.n_samples - 1)
+
+
+@dataclass
+class ChainRun:
+    """What a driver hands back (the arrays of the setup hold the sampled outputs)."""
+
+    status: int
+    samples_done: int
+    plate_work: float
+    dissipated: float
+    peaks: np.ndarray
+    wall_s: float
+    extra: dict[str, float] = field(default_factory=dict)
+
+
+class BottomBoundary(ABC):
+    """A plate model seen from the chain: a Hertz constant and a way to move the contact point."""
+
+    name: str
+    reason: str
+    a_bottom: float
+
+    def max_rate(self, bottom_stiffness: float) -> float:
+        """Fastest rate (1/s) of the boundary's own dynamics at the given contact stiffness (N/m).
+
+        The time step must resolve it; a static wall has none (0).
+        """
+        return 0.0
+
+    @abstractmethod
+    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+        """Advance chain and plate over ``plan``, filling the setup's output arrays."""
+
+
+class Wall(BottomBoundary):
+    """A bottom that never moves: ``rigid`` (steel on steel) or ``halfspace`` (steel on plate)."""
+
+    def __init__(self, name: str, reason: str, a_bottom: float) -> None:
+        self.name = name
+        self.reason = reason
+        self.a_bottom = a_bottom
+
+    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+        return _run_dashpot(setup, plan, inv_z=0.0)
+
+
+class ZenerDashpot(BottomBoundary):
+    """Zener's infinite plate: the contact point moves at ``(F - F_static) / Z``."""
+
+    def __init__(self, reason: str, a_bottom: float, impedance: float) -> None:
+        self.name = "infinite"
+        self.reason = reason
+        self.a_bottom = a_bottom
+        self.impedance = impedance
+
+    def max_rate(self, bottom_stiffness: float) -> float:
+        return bottom_stiffness / self.impedance
+
+    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+        return _run_dashpot(setup, plan, inv_z=1.0 / self.impedance)
+
+
+def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
+    u0 = setup.u.copy()
+    peaks = new_peak_tracker()
+    start = time.perf_counter()
+    status, done, w, plate_work, dissipated = integrate_dashpot(
+        setup.u, setup.v, setup.w, u0, setup.m, setup.g, setup.a_s, setup.a_b, inv_z,
+        setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_sub, plan.n_samples,
+        setup.samples, setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace,
+        peaks,
+    )
+    wall = time.perf_counter() - start
+    setup.w = w
+    return ChainRun(status, done, plate_work, dissipated, peaks, wall)
+
+
+@njit(cache=True)
+def dashpot_advance(
+    w: float, u_n: float, a_b: float, f_static: float, inv_z: float, h: float
+) -> float:
+    """Advance the dashpot ``w' = (A_b [u_N - w]_+^1.5 - F_static) / Z`` over h with u_N frozen.
+
+    Classical RK4 on this scalar ODE; the time step keeps ``h k_b / Z`` small (see
+    :func:`solitonde.model.simulate.choose_time_step`), so its error is far below Verlet's.
+    """
+    k1 = (hertz(a_b, u_n - w) - f_static) * inv_z
+    k2 = (hertz(a_b, u_n - w - 0.5 * h * k1) - f_static) * inv_z
+    k3 = (hertz(a_b, u_n - w - 0.5 * h * k2) - f_static) * inv_z
+    k4 = (hertz(a_b, u_n - w - h * k3) - f_static) * inv_z
+    return w + h * (k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0
+
+
+@njit(cache=True)
+def integrate_dashpot(
+    u: np.ndarray,
+    v: np.ndarray,
+    w: float,
+    u0: np.ndarray,
+    m: float,
+    g: float,
+    a_s: float,
+    a_b: float,
+    inv_z: float,
+    f_static: float,
+    tau: float,
+    sensor: int,
+    dt: float,
+    n_sub: int,
+    n_samples: int,
+    samples: np.ndarray,
+    energy: np.ndarray,
+    u_trace: np.ndarray,
+    v_trace: np.ndarray,
+    f_trace: np.ndarray,
+    w_trace: np.ndarray,
+    pk: np.ndarray,
+) -> tuple[int, int, float, float, float]:
+    """Driver for the wall and dashpot tiers (``inv_z = 0``: the plate never moves).
+
+    Returns (status, samples recorded, final w, work done on the plate J, dissipated energy J).
+    ``energy[k]`` holds the balance chain energy + plate work + dissipated energy at sample k.
+    """
+    n = u.size - 1
+    inv_m = 1.0 / m
+    half = 0.5 * dt
+    f = np.empty(n)
+    acc = np.empty(n + 1)
+    vp = np.empty(n + 1)
+    if tau > 0.0:
+        contact_forces(u, a_s, f)
+        f_bottom = hertz(a_b, u[n] - w)
+        accelerations(f, f_bottom, inv_m, g, acc)
+        for i in range(n + 1):
+            vp[i] = v[i]
+        power = damped_contact_forces(u, vp, a_s, tau, f)
+    else:
+        contact_forces(u, a_s, f)
+        power = 0.0
+    f_bottom = hertz(a_b, u[n] - w)
+    accelerations(f, f_bottom, inv_m, g, acc)
+    plate_work = 0.0
+    dissipated = 0.0
+    moving = inv_z > 0.0
+    t = 0.0
+    step = 0
+    for k in range(n_samples):
+        record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
+        energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + plate_work + dissipated
+        if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
+            return RUN_NONFINITE, k + 1, w, plate_work, dissipated
+        if k == n_samples - 1:
+            break
+        for _ in range(n_sub):
+            if moving:
+                e_before = hertz_energy(a_b, u[n] - w)
+                w = dashpot_advance(w, u[n], a_b, f_static, inv_z, half)
+                plate_work += e_before - hertz_energy(a_b, u[n] - w)
+                bottom_acceleration(acc, f, hertz(a_b, u[n] - w), inv_m, g)
+            power_before = power
+            f_bottom, power = verlet_step(u, v, acc, f, vp, w, a_s, a_b, inv_m, g, tau, dt)
+            dissipated += half * (power_before + power)
+            if moving:
+                e_before = hertz_energy(a_b, u[n] - w)
+                w = dashpot_advance(w, u[n], a_b, f_static, inv_z, half)
+                plate_work += e_before - hertz_energy(a_b, u[n] - w)
+            step += 1
+            t = step * dt
+            track_peaks(pk, t, dt, sensor_reading(f, f_bottom, sensor), f_bottom)
+    if not pk[PK_BOT_F] >= 0.0:
+        return RUN_NONFINITE, n_samples, w, plate_work, dissipated
+    return RUN_OK, n_samples, w, plate_work, dissipated
+
+
+# Tier registry and plate-model resolution --------------------------------------------------
+
+TierFactory = Callable[[Scene, str], BottomBoundary]
+TIERS: dict[str, TierFactory] = {}
+
+
+def register_tier(name: str, factory: TierFactory) -> None:
+    """Make a plate model available: ``factory(scene, reason)`` builds its boundary."""
+    TIERS[name] = factory
+
+
+register_tier(
+    "rigid",
+    lambda scene, reason: Wall(
+        "rigid", reason,
+        hertz_sphere_flat(scene.chain.diameter, scene.sphere_material, scene.sphere_material),
+    ),
+)
+register_tier("halfspace", lambda scene, reason: Wall("halfspace", reason, scene.a_p))
+register_tier(
+    "infinite", lambda scene, reason: ZenerDashpot(reason, scene.a_p, scene.plate_impedance)
+)
+
+
+def resolve_plate_model(scene: Scene) -> tuple[str, str]:
+    """The plate model a scene runs with and why (the one place where ``auto`` is decided).
+
+    For now ``auto`` always resolves to ``infinite``: no near-support tier is available yet.
+    """
+    requested = scene.effects.plate_model
+    if requested != "auto":
+        return requested, f"requested by effects.plate_model={requested}"
+    return "infinite", (
+        "auto: infinite plate (Zener dashpot); no near-support plate model (sem/greens) is "
+        "available yet, so the distance to the support is not taken into account"
+    )
+
+
+def make_boundary(scene: Scene) -> BottomBoundary:
+    """Build the bottom boundary of a scene, resolving ``auto``."""
+    name, reason = resolve_plate_model(scene)
+    factory = TIERS.get(name)
+    if factory is None:
+        raise SceneError(
+            "effects.plate_model",
+            f"plate model {name!r} is not available in this build",
+            allowed=", ".join([*sorted(TIERS), "auto"]),
+        )
+    return factory(scene, reason)

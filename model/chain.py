@@ -1,0 +1,272 @@
+"""Compiled per-step kernels of the discrete element chain (PHYSICS.md sections 2-3, paper Eq. 1-2).
+
+Particles are numbered 0..N: 0 is the striker, 1..N the chain, N stands on the plate. ``u[n]`` is
+the downward displacement of particle n from a reference in which neighbours just touch, so the
+overlap of contact j (between particles j and j + 1) is ``u[j] - u[j + 1]`` and the overlap with the
+plate is ``u[N] - w`` (w: the plate's top surface under the chain). Contact forces are Hertzian,
+``A [delta]_+^(3/2)``: an open contact carries nothing (no tension).
+
+Every function here is a small ``@njit(cache=True)`` kernel that knows nothing about the plate:
+a driver loop in :mod:`solitonde.model.boundary` (or a later plate tier) owns the bottom surface
+``w``, advances it, and calls these kernels in the order
+
+    plate half step -> :func:`verlet_step` (w frozen) -> plate half step -> :func:`track_peaks`
+    and, every ``n_sub`` steps, :func:`record_sample`.
+
+Time stepping is velocity Verlet (kick-drift-kick), symplectic and second order; see
+:func:`solitonde.model.simulate.choose_time_step` for the step size and its error.
+
+Dissipation (optional) is the Kuwabara-Kono viscoelastic Hertz law as written by Brilliantov,
+Spahn, Hertzsch and Pöschel (Phys. Rev. E 53, 5382, 1996; Kuwabara & Kono, Jpn. J. Appl. Phys. 26,
+1230, 1987): ``F = A delta^(3/2) + (3/2) A tau sqrt(delta) delta'``, clamped at zero so that a
+separating contact never pulls. ``tau`` (s) is the material's dissipative time constant. It acts
+on the sphere-sphere contacts only; the bottom contact stays elastic so that the plate model alone
+decides what the plate takes.
+"""
+
+from __future__ import annotations
+
+from math import sqrt
+
+import numpy as np
+from numba import njit
+
+# Layout of the peak tracker array used by :func:`track_peaks`.
+PK_PREV2, PK_PREV1 = 0, 1
+PK_INC_F, PK_INC_T = 2, 3
+PK_REF_F, PK_REF_T = 4, 5
+PK_BOT_F, PK_BOT_T = 6, 7
+PK_SIZE = 8
+
+
+def new_peak_tracker() -> np.ndarray:
+    """A fresh tracker: no peak seen yet (values -inf, times NaN)."""
+    pk = np.full(PK_SIZE, -np.inf)
+    pk[PK_INC_T] = pk[PK_REF_T] = pk[PK_BOT_T] = np.nan
+    return pk
+
+
+@njit(cache=True)
+def hertz(a: float, delta: float) -> float:
+    """Hertz force ``a delta^(3/2)`` for a closed contact, zero for an open one."""
+    if delta > 0.0:
+        return a * delta * sqrt(delta)
+    return 0.0
+
+
+@njit(cache=True)
+def hertz_energy(a: float, delta: float) -> float:
+    """Elastic energy ``(2/5) a delta^(5/2)`` stored in a closed contact."""
+    if delta > 0.0:
+        return 0.4 * a * delta * delta * sqrt(delta)
+    return 0.0
+
+
+@njit(cache=True)
+def contact_forces(u: np.ndarray, a_s: float, f: np.ndarray) -> None:
+    """Elastic forces of the N sphere-sphere contacts into ``f`` (len N); u has len N + 1."""
+    for j in range(f.size):
+        f[j] = hertz(a_s, u[j] - u[j + 1])
+
+
+@njit(cache=True)
+def damped_contact_forces(
+    u: np.ndarray, v: np.ndarray, a_s: float, tau: float, f: np.ndarray
+) -> float:
+    """Kuwabara-Kono forces of the sphere-sphere contacts into ``f``; returns the dissipated power.
+
+    ``v`` is the velocity at which the viscous part is evaluated (a second-order predictor in
+    :func:`verlet_step`). The dissipated power is the viscous force times the approach rate, over
+    the closed contacts; it is >= 0 because the clamp only removes pulling force.
+    """
+    power = 0.0
+    for j in range(f.size):
+        d = u[j] - u[j + 1]
+        if d > 0.0:
+            sd = sqrt(d)
+            el = a_s * d * sd
+            rate = v[j] - v[j + 1]
+            total = el + 1.5 * a_s * tau * sd * rate
+            if total < 0.0:
+                total = 0.0
+            f[j] = total
+            power += (total - el) * rate
+        else:
+            f[j] = 0.0
+    return power
+
+
+@njit(cache=True)
+def accelerations(
+    f: np.ndarray, f_bottom: float, inv_m: float, g: float, acc: np.ndarray
+) -> None:
+    """Newton's law for every particle: gravity, the contact above pushes down, below pushes up."""
+    n = acc.size - 1
+    acc[0] = g - f[0] * inv_m
+    for i in range(1, n):
+        acc[i] = g + (f[i - 1] - f[i]) * inv_m
+    acc[n] = g + (f[n - 1] - f_bottom) * inv_m
+
+
+@njit(cache=True)
+def kick(v: np.ndarray, acc: np.ndarray, h: float) -> None:
+    """v += h a."""
+    for i in range(v.size):
+        v[i] += h * acc[i]
+
+
+@njit(cache=True)
+def drift(u: np.ndarray, v: np.ndarray, h: float) -> None:
+    """u += h v."""
+    for i in range(u.size):
+        u[i] += h * v[i]
+
+
+@njit(cache=True)
+def bottom_acceleration(
+    acc: np.ndarray, f: np.ndarray, f_bottom: float, inv_m: float, g: float
+) -> None:
+    """Refresh the last particle's acceleration after the plate moved (w changed, u did not)."""
+    n = acc.size - 1
+    acc[n] = g + (f[n - 1] - f_bottom) * inv_m
+
+
+@njit(cache=True)
+def verlet_step(
+    u: np.ndarray,
+    v: np.ndarray,
+    acc: np.ndarray,
+    f: np.ndarray,
+    vp: np.ndarray,
+    w: float,
+    a_s: float,
+    a_b: float,
+    inv_m: float,
+    g: float,
+    tau: float,
+    dt: float,
+) -> tuple[float, float]:
+    """One kick-drift-kick step of the chain with the bottom surface frozen at ``w``.
+
+    On entry ``acc`` must hold the accelerations at (u, w) (and ``f`` the matching contact
+    forces); on exit u, v, f, acc are advanced by ``dt``. ``vp`` is scratch of len N + 1 used only
+    with dissipation (``tau > 0``): the viscous force is evaluated at the predicted end-of-step
+    velocity, which keeps the scheme second order. Returns (bottom force, dissipated power), both
+    at the end of the step.
+    """
+    half = 0.5 * dt
+    kick(v, acc, half)
+    drift(u, v, dt)
+    n = u.size - 1
+    f_bottom = hertz(a_b, u[n] - w)
+    power = 0.0
+    if tau > 0.0:
+        contact_forces(u, a_s, f)
+        accelerations(f, f_bottom, inv_m, g, acc)
+        for i in range(v.size):
+            vp[i] = v[i] + half * acc[i]
+        power = damped_contact_forces(u, vp, a_s, tau, f)
+    else:
+        contact_forces(u, a_s, f)
+    accelerations(f, f_bottom, inv_m, g, acc)
+    kick(v, acc, half)
+    return f_bottom, power
+
+
+@njit(cache=True)
+def sensor_reading(f: np.ndarray, f_bottom: float, sensor: int) -> float:
+    """Mean of the sensor particle's two contact forces; ``sensor`` is 1..N (striker not counted)."""
+    above = f[sensor - 1]
+    below = f[sensor] if sensor < f.size else f_bottom
+    return 0.5 * (above + below)
+
+
+@njit(cache=True)
+def chain_energy(
+    u: np.ndarray, v: np.ndarray, u0: np.ndarray, w: float, m: float, g: float, a_s: float, a_b: float
+) -> float:
+    """Kinetic + contact (including the bottom contact) + gravity energy of the chain, J.
+
+    Gravity energy is ``-m g sum(u - u0)``: measured from the start so that it stays small.
+    """
+    kin = 0.0
+    grav = 0.0
+    for i in range(u.size):
+        kin += v[i] * v[i]
+        grav += u[i] - u0[i]
+    pot = 0.0
+    for j in range(u.size - 1):
+        pot += hertz_energy(a_s, u[j] - u[j + 1])
+    n = u.size - 1
+    pot += hertz_energy(a_b, u[n] - w)
+    return 0.5 * m * kin + pot - m * g * grav
+
+
+@njit(cache=True)
+def track_peaks(pk: np.ndarray, t: float, dt: float, f_sensor: float, f_bottom: float) -> None:
+    """Step-resolution truth: the incident and reflected peaks of the sensor reading.
+
+    The incident peak is the largest local maximum of the sensor reading before the bottom
+    contact force reaches its maximum, the reflected peak the largest one after it. A local
+    maximum found at step t - dt is refined by the parabola through its three samples, which makes
+    the peak time and height accurate to O(dt^2) and O(dt^3) of the smooth pulse.
+    """
+    f2 = pk[PK_PREV2]
+    f1 = pk[PK_PREV1]
+    if f1 > f2 and f1 >= f_sensor:
+        denom = f2 - 2.0 * f1 + f_sensor
+        shift = 0.0
+        if denom < 0.0:
+            shift = 0.5 * (f2 - f_sensor) / denom
+        t_peak = t - dt + shift * dt
+        f_peak = f1 - 0.25 * (f2 - f_sensor) * shift
+        if t - dt <= pk[PK_BOT_T] or np.isnan(pk[PK_BOT_T]):
+            if f_peak > pk[PK_INC_F]:
+                pk[PK_INC_F] = f_peak
+                pk[PK_INC_T] = t_peak
+        elif f_peak > pk[PK_REF_F]:
+            pk[PK_REF_F] = f_peak
+            pk[PK_REF_T] = t_peak
+    if f_bottom > pk[PK_BOT_F]:
+        pk[PK_BOT_F] = f_bottom
+        pk[PK_BOT_T] = t
+        if pk[PK_REF_F] > pk[PK_INC_F]:
+            pk[PK_INC_F] = pk[PK_REF_F]
+            pk[PK_INC_T] = pk[PK_REF_T]
+        pk[PK_REF_F] = -np.inf
+        pk[PK_REF_T] = np.nan
+    pk[PK_PREV2] = f1
+    pk[PK_PREV1] = f_sensor
+
+
+@njit(cache=True)
+def record_sample(
+    k: int,
+    u: np.ndarray,
+    v: np.ndarray,
+    f: np.ndarray,
+    w: float,
+    a_b: float,
+    sensor: int,
+    samples: np.ndarray,
+    u_trace: np.ndarray,
+    v_trace: np.ndarray,
+    f_trace: np.ndarray,
+    w_trace: np.ndarray,
+) -> None:
+    """Store sample k: the sensor reading and, when trace arrays have rows, the particle fields.
+
+    The bottom force is recomputed from (u, w) because a plate tier may have moved w after the
+    last force evaluation. Trace arrays with zero rows mean traces are off and cost nothing.
+    """
+    n = u.size - 1
+    f_bottom = hertz(a_b, u[n] - w)
+    samples[k] = sensor_reading(f, f_bottom, sensor)
+    if u_trace.shape[0] > 0:
+        for i in range(n + 1):
+            u_trace[k, i] = u[i]
+            v_trace[k, i] = v[i]
+        for j in range(n):
+            f_trace[k, j] = f[j]
+        f_trace[k, n] = f_bottom
+        w_trace[k] = w
