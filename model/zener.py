@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from functools import lru_cache
+from itertools import pairwise
 from math import log1p, pi, sqrt
 from typing import Any
 
@@ -260,7 +261,9 @@ def _integrate_many(lams, rtol, a, b, c, e3, e5):
     return e, tau, ok
 
 
-def _integrate_compiled(lams: np.ndarray, rtol: float = REFERENCE_RTOL) -> tuple[np.ndarray, np.ndarray]:
+def _integrate_compiled(
+    lams: np.ndarray, rtol: float = REFERENCE_RTOL
+) -> tuple[np.ndarray, np.ndarray]:
     e, tau, ok = _integrate_many(np.ascontiguousarray(lams, dtype=np.float64), rtol,
                                  _A, _B, _C, _E3, _E5)
     if not ok:
@@ -268,7 +271,7 @@ def _integrate_compiled(lams: np.ndarray, rtol: float = REFERENCE_RTOL) -> tuple
     return e, tau
 
 
-# --- the fast path: a Chebyshev table --------------------------------------------------------------
+# --- the fast path: a Chebyshev table -----------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -302,12 +305,13 @@ def _table() -> _ChebTable:
     """
     x_max = log1p(TABLE_LAMBDA_MAX)
     edges = np.linspace(0.0, x_max, TABLE_PANELS + 1)
-    x = np.concatenate([_chebyshev_nodes(a, b, TABLE_DEGREE) for a, b in zip(edges[:-1], edges[1:])])
+    panels = list(pairwise(edges))
+    x = np.concatenate([_chebyshev_nodes(a, b, TABLE_DEGREE) for a, b in panels])
     e, tau = _integrate_compiled(np.expm1(x))
     n = TABLE_DEGREE + 1
     log_e = np.empty((TABLE_PANELS, n))
     log_tau = np.empty((TABLE_PANELS, n))
-    for p, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+    for p, (a, b) in enumerate(panels):
         xs = x[p * n:(p + 1) * n]
         cheb = np.polynomial.chebyshev
         t = (2.0 * xs - a - b) / (b - a)
@@ -364,7 +368,7 @@ def restitution_and_contact_time_many(lams: ArrayLike) -> tuple[np.ndarray, np.n
     return e.reshape(lam.shape), tau.reshape(lam.shape)
 
 
-# --- the paper's formulas --------------------------------------------------------------------------
+# --- the paper's formulas -----------------------------------------------------------------------
 
 
 def inelasticity_from(mass: float, a_p: float, v_in: float, z: float) -> float:
