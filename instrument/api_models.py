@@ -1,0 +1,186 @@
+"""Request and response bodies of the REST service (pydantic; they make the OpenAPI schema).
+
+Request models forbid unknown keys and non-finite numbers. The per-request limits come from the
+settings, so :func:`request_models` builds the measurement models for given limits; the schema
+then states them (``maxItems``) and the validator enforces the same numbers.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, create_model
+
+SCALAR = str | float | int | bool | None
+
+
+class Strict(BaseModel):
+    """Base for request bodies: unknown keys, NaN and infinity are errors."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class ShotMetadata(Strict):
+    """Where and how a shot was taken."""
+
+    plate_id: str | None = Field(None, max_length=200, description="plate identifier")
+    position: str | None = Field(None, max_length=200,
+                                 description="measurement position label on the plate")
+    sphere_diameter: float | None = Field(None, gt=0, le=1.0,
+                                          description="chain sphere diameter D, m")
+    shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
+    extra: dict[str, SCALAR] = Field(default_factory=dict, max_length=50,
+                                     description="free-form key/value pairs, kept as given")
+
+
+class ShotBase(Strict):
+    """One recorded shot: uniformly sampled sensor trace."""
+
+    t0: float = Field(0.0, ge=-1e3, le=1e3, description="time of the first sample, s")
+    dt: float = Field(..., gt=0, le=1.0, description="sample period, s")
+    samples: list[float]
+    units: Literal["N", "V"] = Field("N", description="N (force) or V (sensor voltage)")
+    calibration: float | None = Field(
+        None, description="sensor sensitivity, N/V (required when units are V; not zero)")
+    metadata: ShotMetadata = Field(default_factory=ShotMetadata)
+
+
+def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type[Strict]]:
+    """The shot and measurement request models with the service's limits built in."""
+    shot = create_model(
+        "ShotIn",
+        __base__=ShotBase,
+        __doc__=f"One recorded shot (at most {max_samples:,} samples).",
+        samples=(list[float], Field(..., min_length=1, max_length=max_samples,
+                                    description=f"sensor samples, at most {max_samples:,}")),
+    )
+    measurement = create_model(
+        "MeasurementIn",
+        __base__=Strict,
+        __doc__=(f"One or more shots taken at one position (at most {max_shots} shots, each of at "
+                 f"most {max_samples:,} samples). All shots share plate_id and position."),
+        shots=(list[shot], Field(..., min_length=1, max_length=max_shots)),  # type: ignore[valid-type]
+    )
+    return shot, measurement
+
+
+class ShotOut(BaseModel):
+    """Features measured on one shot."""
+
+    shot_index: int = Field(description="position of the shot in the request / file")
+    metadata: dict[str, Any]
+    n_samples: int
+    t0: float
+    dt: float
+    units: str
+    features: dict[str, Any] = Field(
+        description="tof_s, arr, incident_time_s, reflected_time_s, incident_peak_N, "
+                    "reflected_peak_N, snr_db, flags, ...")
+
+
+class MeasurementOut(BaseModel):
+    """A stored measurement: features per shot, aggregates, estimate."""
+
+    id: int
+    created_at: float = Field(description="Unix time the measurement was stored, s")
+    plate_id: str | None
+    position: str | None
+    n_shots: int
+    source: str = Field(description="'json' or 'upload:<format>'")
+    shots: list[ShotOut]
+    aggregates: list[dict[str, Any]] = Field(
+        description="per sphere diameter: mean, std and count of TOF and ARR, outliers reported")
+    estimate: dict[str, Any] | None = Field(
+        description="thickness_m and distance_m (map, median, ci68, ci95, status), or null")
+    estimate_reason: str | None = Field(None, description="why the estimate is null")
+    links: dict[str, str] = Field(default_factory=dict)
+
+
+class MeasurementSummary(BaseModel):
+    """One line of a measurement listing."""
+
+    id: int
+    created_at: float
+    plate_id: str | None
+    position: str | None
+    n_shots: int
+    source: str
+    aggregates: list[dict[str, Any]]
+    estimate: dict[str, Any] | None
+
+
+class MeasurementPage(BaseModel):
+    """A page of measurements in id order; follow ``next`` for the rest."""
+
+    items: list[MeasurementSummary]
+    next: str | None = Field(None, description="URL of the next page, null on the last")
+
+
+class InversionInput(Strict):
+    """Summary of the shots with one sphere size."""
+
+    diameter_m: float = Field(gt=0, le=1.0, description="sphere diameter D, m")
+    tof_s: float = Field(gt=0, le=1.0, description="mean time of flight, s")
+    tof_std_s: float | None = Field(None, ge=0, le=1.0,
+                                    description="scatter of TOF, s (default: stated default)")
+    arr: float = Field(ge=0, le=10.0, description="mean amplitude ratio")
+    arr_std: float | None = Field(None, ge=0, le=10.0, description="scatter of ARR")
+    n_shots: int = Field(1, ge=1, le=100_000)
+
+
+class Calibration(Strict):
+    """Experiment calibration: multiply model ARR by arr_factor, add tof_offset_s to model TOF."""
+
+    arr_factor: float = Field(1.0, gt=0, le=10.0)
+    tof_offset_s: float = Field(0.0, ge=-1e-2, le=1e-2)
+
+
+class InvertIn(Strict):
+    """Features in, estimate out."""
+
+    inputs: list[InversionInput] = Field(min_length=1, max_length=16)
+    calibration: Calibration | None = None
+
+
+class InvertOut(BaseModel):
+    estimate: dict[str, Any]
+
+
+class SimulateIn(Strict):
+    """A scene (same keys as a scene file) to simulate; noise is not added."""
+
+    scene: dict[str, Any] = Field(default_factory=dict,
+                                  description="chain, striker, plate, effects, output sections")
+    include_trace: bool = Field(True, description="return the sensor samples")
+
+
+class SimulateOut(BaseModel):
+    t0: float
+    dt: float
+    n_samples: int
+    samples: list[float] | None
+    units: Literal["N"] = "N"
+    features: dict[str, Any]
+    diagnostics: dict[str, Any]
+    cost: dict[str, Any]
+
+
+class TableOut(BaseModel):
+    loaded: bool
+    path: str | None
+    reason: str | None = None
+    summary: dict[str, Any] | None = None
+    limits: dict[str, int | float]
+
+
+class Health(BaseModel):
+    status: Literal["ok"] = "ok"
+    version: str
+
+
+class Ready(BaseModel):
+    ready: bool
+    store: str
+    table_loaded: bool
+    estimates: bool
+    reason: str | None = None

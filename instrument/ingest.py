@@ -1,0 +1,181 @@
+"""From request to stored measurement: waveforms, features, aggregates, estimate, store.
+
+Everything here is synchronous and CPU-bound; the routes run it in a worker thread so the event
+loop keeps serving other requests. Bad input raises :class:`~.problems.Problem` (422 naming the
+field) before anything is written, so a rejected request never leaves a trace in the store.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.waveform import Waveform
+
+from .estimates import Estimator, _jsonable
+from .problems import Problem
+from .settings import Settings
+from .store import MeasurementRecord, ShotRecord, Store
+
+
+def waveform_error(exc: WaveformError, prefix: str) -> Problem:
+    """422 for a signal-layer error, with the field under the request's own path."""
+    field = f"{prefix}.{exc.field}" if prefix else exc.field
+    message = getattr(exc, "message", None) or str(exc).partition(": ")[2] or str(exc)
+    if getattr(exc, "allowed", None):
+        message += f" (allowed: {exc.allowed})"
+    return Problem(422, f"{field}: {message}", kind="invalid-input", field=field)
+
+
+def waveforms_from_shots(shots: Sequence[Any]) -> list[Waveform]:
+    """Validated request shots (``ShotIn`` models) as waveforms."""
+    out = []
+    for i, shot in enumerate(shots):
+        meta = {k: v for k, v in shot.metadata.model_dump(exclude={"extra"}).items()
+                if v is not None}
+        meta.update(shot.metadata.extra)
+        try:
+            out.append(Waveform(t0=shot.t0, dt=shot.dt, samples=np.asarray(shot.samples),
+                                units=shot.units, calibration=shot.calibration, metadata=meta))
+        except WaveformError as exc:
+            raise waveform_error(exc, f"shots.{i}") from None
+    return out
+
+
+def read_file(path: Path, fmt: str, options: Mapping[str, Any]) -> list[Waveform]:
+    """Read an uploaded file with the signal readers; every failure becomes a 422 on ``file``."""
+    from solitonde.signal import io as signal_io  # the readers live in the signal package
+
+    try:
+        waveforms = signal_io.read(path, format=fmt, **dict(options))
+    except WaveformError as exc:
+        raise waveform_error(exc, "file") from None
+    except TypeError as exc:
+        raise Problem(422, f"file: reader options not accepted for {fmt}: {exc}",
+                      kind="invalid-input", field="file") from None
+    except Exception as exc:  # an untrusted file that breaks a parser is the client's error
+        raise Problem(422, f"file: could not be read as {fmt} ({type(exc).__name__}: {exc})",
+                      kind="invalid-input", field="file") from None
+    if not waveforms:
+        raise Problem(422, "file: holds no shots", kind="invalid-input", field="file")
+    return list(waveforms)
+
+
+def check_counts(waveforms: Sequence[Waveform], settings: Settings, prefix: str) -> None:
+    """Enforce shots per request and samples per shot (the JSON schema does the same)."""
+    if len(waveforms) > settings.max_shots_per_request:
+        raise Problem(422, f"{prefix}: {len(waveforms)} shots; at most "
+                      f"{settings.max_shots_per_request} per request", kind="limit",
+                      field=prefix)
+    for i, wf in enumerate(waveforms):
+        if wf.n > settings.max_samples_per_shot:
+            raise Problem(422, f"{prefix}.{i}.samples: {wf.n:,} samples; at most "
+                          f"{settings.max_samples_per_shot:,} per shot", kind="limit",
+                          field=f"{prefix}.{i}.samples")
+
+
+def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None, str | None]:
+    """The plate and position every shot shares; one measurement is one position."""
+    def key(wf: Waveform) -> tuple[str | None, str | None]:
+        plate, pos = wf.metadata.get("plate_id"), wf.metadata.get("position")
+        return (None if plate is None else str(plate), None if pos is None else str(pos))
+
+    first = key(waveforms[0])
+    for i, wf in enumerate(waveforms[1:], start=1):
+        if key(wf) != first:
+            which = "plate_id" if key(wf)[0] != first[0] else "position"
+            raise Problem(422, f"{prefix}.{i}.metadata.{which}: {key(wf)} differs from shot 0's "
+                          f"{first}; one measurement holds the shots of one position",
+                          kind="invalid-input", field=f"{prefix}.{i}.metadata.{which}")
+    return first
+
+
+def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list[dict[str, Any]]]:
+    """Features per shot and aggregates per sphere diameter."""
+    from solitonde.signal import features as signal_features
+
+    feats = []
+    for i, wf in enumerate(waveforms):
+        try:
+            feats.append(signal_features.extract(wf))
+        except WaveformError as exc:
+            raise waveform_error(exc, f"{prefix}.{i}") from None
+    return feats, aggregate_groups(waveforms, feats)
+
+
+def aggregate_groups(waveforms: Sequence[Waveform], feats: Sequence[Any]) -> list[dict[str, Any]]:
+    """One aggregate per sphere diameter (the inversion combines sizes, never mixes them)."""
+    from solitonde.signal import features as signal_features
+
+    groups: dict[float | None, list[Any]] = {}
+    for wf, f in zip(waveforms, feats, strict=True):
+        d = wf.metadata.get("sphere_diameter")
+        groups.setdefault(None if d is None else float(d), []).append(f)
+    out = []
+    for diameter, members in groups.items():
+        agg = signal_features.aggregate(members)
+        entry = {"sphere_diameter": diameter, "n_shots": len(members)}
+        entry.update(_to_dict(agg))
+        out.append(entry)
+    return out
+
+
+def _to_dict(obj: Any) -> dict[str, Any]:
+    data = obj.to_dict() if hasattr(obj, "to_dict") else dict(obj)
+    return _jsonable(data)
+
+
+def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
+    return {"shot_index": index, "metadata": _jsonable(wf.metadata), "n_samples": wf.n,
+            "t0": wf.t0, "dt": wf.dt, "units": wf.units, "features": _to_dict(features)}
+
+
+def measure_and_store(waveforms: Sequence[Waveform], store: Store, estimator: Estimator,
+                      source: str, prefix: str) -> dict[str, Any]:
+    """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
+    plate_id, position = location_of(waveforms, prefix)
+    feats, aggregates = analyse(waveforms, prefix)
+    try:
+        estimate, reason = estimator.estimate(aggregates)
+    except Exception as exc:  # an inversion that refuses these features (e.g. out of range)
+        estimate, reason = None, f"inversion failed: {exc}"
+    shots = [shot_out(i, wf, f) for i, (wf, f) in enumerate(zip(waveforms, feats, strict=True))]
+    records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
+                          calibration=wf.calibration, metadata=s["metadata"],
+                          features=s["features"], shot_index=i)
+               for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
+    result = {"aggregates": aggregates, "estimate": estimate, "estimate_reason": reason}
+    new_id, created_at = store.add(records, result, source=source, plate_id=plate_id,
+                                   position=position)
+    return measurement_dict(MeasurementRecord(
+        id=new_id, created_at=created_at, plate_id=plate_id, position=position,
+        n_shots=len(records), source=source, result=result, shots=records))
+
+
+def measurement_dict(record: Any) -> dict[str, Any]:
+    """A stored measurement as the API returns it."""
+    return {
+        "id": record.id,
+        "created_at": record.created_at,
+        "plate_id": record.plate_id,
+        "position": record.position,
+        "n_shots": record.n_shots,
+        "source": record.source,
+        "shots": [{"shot_index": s.shot_index, "metadata": s.metadata,
+                   "n_samples": s.n_samples, "t0": s.t0,
+                   "dt": s.dt, "units": s.units, "features": s.features} for s in record.shots],
+        "aggregates": record.result.get("aggregates", []),
+        "estimate": record.result.get("estimate"),
+        "estimate_reason": record.result.get("estimate_reason"),
+        "links": {"self": f"/v1/measurements/{record.id}",
+                  "plot": f"/v1/measurements/{record.id}/plot.png"},
+    }
+
+
+def finite_or_none(x: float) -> float | None:
+    return x if math.isfinite(x) else None

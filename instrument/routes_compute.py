@@ -1,0 +1,180 @@
+"""``/v1/invert`` (features in, estimate out) and ``/v1/simulate`` (scene in, trace out).
+
+A simulation is priced before it runs: integration steps (from the model's own step and duration
+rules) times degrees of freedom (chain particles plus, for plate models that have them, plate
+degrees of freedom). Above the service's budget the request gets a 422 naming the cost; below it
+the run happens in a worker thread, one at a time per process, so the event loop keeps serving.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import anyio
+from fastapi import APIRouter, Request
+from fastapi.concurrency import run_in_threadpool
+from pydantic import ValidationError
+
+from .api_models import InvertIn, InvertOut, SimulateIn, SimulateOut
+from .estimates import EstimateUnavailable, _jsonable
+from .problems import Problem, from_pydantic
+from .routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
+
+router = APIRouter(tags=["compute"], dependencies=[AUTH])
+
+_SIMULATIONS = anyio.CapacityLimiter(1)
+
+
+def _json_body(model: Any) -> dict[str, Any]:
+    return {"requestBody": {"required": True, "content": {
+        "application/json": {"schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}
+
+
+@router.post("/invert", response_model=InvertOut, responses={**ERRORS, 503: _PROBLEM},
+             openapi_extra=_json_body(InvertIn),
+             summary="Estimate thickness and distance to support from TOF and ARR")
+async def invert(request: Request) -> dict[str, Any]:
+    """Per sphere size: mean TOF and ARR with their scatter and shot count. Needs a loaded table
+    (503 otherwise)."""
+    from .app import service
+
+    require_json(request)
+    svc = service(request)
+    body = await request.body()
+    try:
+        payload = InvertIn.model_validate_json(body or b"null")
+    except ValidationError as exc:
+        raise from_pydantic(exc, InvertIn) from None
+    inputs = [i.model_dump() for i in payload.inputs]
+    calibration = payload.calibration.model_dump() if payload.calibration else None
+    try:
+        estimate = await run_in_threadpool(svc.estimator.invert, inputs, calibration)
+    except EstimateUnavailable as exc:
+        raise Problem(503, f"table: {exc}", kind="no-table", field="table") from None
+    except ValueError as exc:  # the inversion's own input errors (e.g. outside the table)
+        field = getattr(exc, "field", None) or "inputs"
+        raise Problem(422, f"{field}: {exc}", kind="invalid-input", field=field) from None
+    return {"estimate": estimate}
+
+
+def simulation_cost(scene: Any) -> dict[str, Any]:
+    """Price of simulating ``scene``: steps, degrees of freedom, their product.
+
+    Uses the model's own rules (:func:`~solitonde.model.simulate.choose_time_step`,
+    :func:`~solitonde.model.simulate.auto_duration`); the plate degrees of freedom come from
+    the scene's spectral-element mesh when the resolved plate model has one.
+    """
+    from solitonde.model.boundary import make_boundary, resolve_plate_model
+    from solitonde.model.simulate import auto_duration, choose_time_step
+
+    plate_model, _ = resolve_plate_model(scene)
+    if plate_model in ("sem", "greens"):
+        plate_dofs = _sem_dofs(scene)
+        boundary = None
+    else:
+        plate_dofs = 0
+        boundary = make_boundary(scene)
+    duration = (auto_duration(scene) if scene.output.duration == "auto"
+                else float(scene.output.duration))
+    if boundary is not None:
+        dt, n_sub = choose_time_step(scene, boundary)
+        steps = math.ceil(duration / (dt * n_sub)) * n_sub
+    else:
+        # Plate models with their own mesh set a step no longer than the chain's; price them
+        # at the sampling interval as a floor (their real cost is higher, never lower).
+        steps = math.ceil(duration * scene.output.sample_rate)
+    dof = scene.chain.n_particles + 1 + plate_dofs
+    n_samples = math.ceil(duration * scene.output.sample_rate) + 1
+    return {"plate_model": plate_model, "steps": int(steps), "dof": int(dof),
+            "cost": float(steps) * dof, "n_samples": int(n_samples), "duration_s": duration}
+
+
+def _sem_dofs(scene: Any) -> int:
+    sem = getattr(scene, "sem", None)
+    if sem is None:
+        return 0
+    nodes = 1
+    for n_el, p in zip(sem.elements, sem.order, strict=True):
+        nodes *= n_el * p + 1
+    return 3 * nodes
+
+
+@router.post("/simulate", response_model=SimulateOut, responses={**ERRORS},
+             openapi_extra=_json_body(SimulateIn),
+             summary="Simulate a scene; trace and measured features out (cost-limited)")
+async def simulate(request: Request) -> dict[str, Any]:
+    """Runs the chain model on the scene and measures the sensor trace like a recorded shot.
+
+    The scene has the keys of a scene file (chain, striker, plate, effects, output, ...). A scene
+    whose cost (steps x degrees of freedom) exceeds the service's budget is refused with 422.
+    """
+    from .app import service
+
+    require_json(request)
+    svc = service(request)
+    body = await request.body()
+    try:
+        payload = SimulateIn.model_validate_json(body or b"null")
+    except ValidationError as exc:
+        raise from_pydantic(exc, SimulateIn) from None
+    async with _SIMULATIONS:
+        return await run_in_threadpool(_simulate, payload, svc.settings.max_simulation_cost,
+                                       svc.settings.max_samples_per_shot)
+
+
+def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str, Any]:
+    from solitonde.model.errors import SceneError, SimulationError
+    from solitonde.model.scene import scene_from_dict
+    from solitonde.model.simulate import simulate as run_scene
+    from solitonde.signal.errors import WaveformError
+    from solitonde.signal.features import extract
+    from solitonde.signal.waveform import Waveform
+
+    try:
+        scene = scene_from_dict(payload.scene)
+        cost = simulation_cost(scene)
+    except SceneError as exc:
+        field = f"scene.{exc.field}"
+        raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
+                      field=field) from None
+    except SimulationError as exc:
+        raise Problem(422, f"scene: cannot be simulated ({exc})", kind="invalid-input",
+                      field="scene") from None
+    if cost["cost"] > budget:
+        raise Problem(422, f"scene: too expensive for a request: {cost['steps']:,} steps x "
+                      f"{cost['dof']:,} degrees of freedom = {cost['cost']:.3g} > budget "
+                      f"{budget:.3g}; shorten output.duration, use fewer particles or a cheaper "
+                      "plate model, or run `solitonde simulate` locally",
+                      kind="simulation-budget", field="scene")
+    if cost["n_samples"] > max_samples:
+        raise Problem(422, f"scene.output: {cost['n_samples']:,} samples; at most "
+                      f"{max_samples:,} (lower output.sample_rate or output.duration)",
+                      kind="simulation-budget", field="scene.output")
+    try:
+        result = run_scene(scene)
+    except SceneError as exc:
+        field = f"scene.{exc.field}"
+        raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
+                      field=field) from None
+    except SimulationError as exc:
+        raise Problem(422, f"scene: the simulation could not be carried out ({exc})",
+                      kind="simulation-failed", field="scene") from None
+    try:
+        wf = Waveform(t0=result.t0, dt=result.dt, samples=result.samples, units="N",
+                      metadata={"sphere_diameter": scene.chain.diameter, "source": "simulate"})
+        features = extract(wf).to_dict()
+    except WaveformError as exc:
+        features = {"error": str(exc)}
+    return {
+        "t0": float(result.t0),
+        "dt": float(result.dt),
+        "n_samples": int(result.samples.size),
+        "samples": result.samples.tolist() if payload.include_trace else None,
+        "units": "N",
+        "features": _jsonable(features),
+        "diagnostics": _jsonable({"plate_model": result.plate_model,
+                                  "plate_model_reason": result.plate_model_reason,
+                                  **result.diagnostics, "truth": result.truth}),
+        "cost": cost,
+    }

@@ -1,0 +1,294 @@
+"""The measurement store: SQLite in WAL mode, one transaction per measurement.
+
+Why SQLite: embedded, one file, concurrent readers with one writer at a time across worker
+processes, and atomic commits. A measurement and all its shots are written inside one
+``BEGIN IMMEDIATE ... COMMIT``: a reader (or a restart after ``kill -9``) sees all of it or none of
+it. With ``synchronous=NORMAL`` a committed transaction is in the WAL file before ``COMMIT``
+returns, so it survives the death of the process; ``FULL`` adds an fsync per commit for power loss.
+
+Traces are stored losslessly and compressed: float32 when that represents every sample exactly
+(any ADC of up to 24 bits), else float64; bytes shuffled (all first bytes, then all second bytes,
+...) and deflated; a SHA-256 of the raw samples is stored and checked on every read.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sqlite3
+import threading
+import time
+import zlib
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+CODEC = "shuffle+zlib1"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS measurements (
+    id          INTEGER PRIMARY KEY AUTOINCREMENT,
+    created_at  REAL NOT NULL,
+    plate_id    TEXT,
+    position    TEXT,
+    n_shots     INTEGER NOT NULL,
+    source      TEXT NOT NULL,
+    result      TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS measurements_by_plate ON measurements (plate_id, id);
+CREATE TABLE IF NOT EXISTS shots (
+    measurement_id    INTEGER NOT NULL REFERENCES measurements (id) ON DELETE CASCADE,
+    shot_index        INTEGER NOT NULL,
+    t0                REAL NOT NULL,
+    dt                REAL NOT NULL,
+    units             TEXT NOT NULL,
+    calibration       REAL,
+    metadata          TEXT NOT NULL,
+    n_samples         INTEGER NOT NULL,
+    dtype             TEXT NOT NULL,
+    codec             TEXT NOT NULL,
+    sha256            TEXT NOT NULL,
+    samples           BLOB NOT NULL,
+    features          TEXT NOT NULL,
+    PRIMARY KEY (measurement_id, shot_index)
+);
+"""
+
+
+class StoreError(RuntimeError):
+    """The store cannot be opened, or a stored record fails its integrity check."""
+
+
+@dataclass
+class ShotRecord:
+    """One shot as stored: the trace and what was measured on it."""
+
+    t0: float
+    dt: float
+    samples: np.ndarray
+    units: str
+    calibration: float | None
+    metadata: dict[str, Any]
+    features: dict[str, Any]
+    shot_index: int = 0
+    n_samples: int = -1
+
+    def __post_init__(self) -> None:
+        if self.n_samples < 0:
+            self.n_samples = int(np.size(self.samples))
+
+
+@dataclass
+class MeasurementRecord:
+    """One measurement as stored (shots without their samples unless asked for)."""
+
+    id: int
+    created_at: float
+    plate_id: str | None
+    position: str | None
+    n_shots: int
+    source: str
+    result: dict[str, Any]
+    shots: list[ShotRecord] = field(default_factory=list)
+
+
+def encode_samples(samples: np.ndarray) -> tuple[str, str, bytes]:
+    """Compress a trace losslessly; returns (dtype, sha256 of the raw samples, blob)."""
+    x = np.ascontiguousarray(samples, dtype="<f8")
+    x32 = x.astype("<f4")
+    raw = x32 if np.array_equal(x32.astype("<f8"), x) else x
+    width = raw.dtype.itemsize
+    shuffled = raw.view(np.uint8).reshape(-1, width).T.tobytes()
+    digest = hashlib.sha256(raw.tobytes()).hexdigest()
+    return raw.dtype.str, digest, zlib.compress(shuffled, 1)
+
+
+def decode_samples(dtype: str, blob: bytes, n_samples: int,
+                   sha256: str | None = None) -> np.ndarray:
+    """Inverse of :func:`encode_samples`; checks the length and the digest."""
+    dt = np.dtype(dtype)
+    data = zlib.decompress(blob)
+    if len(data) != n_samples * dt.itemsize:
+        raise StoreError(f"stored trace has {len(data)} bytes, expected {n_samples * dt.itemsize}")
+    raw = np.frombuffer(data, dtype=np.uint8).reshape(dt.itemsize, n_samples).T.copy().view(dt)
+    raw = raw.reshape(-1)
+    if sha256 is not None and hashlib.sha256(raw.tobytes()).hexdigest() != sha256:
+        raise StoreError("stored trace fails its SHA-256 check")
+    return raw.astype(np.float64)
+
+
+class Store:
+    """Measurement store on one SQLite file; safe to share between threads of one process.
+
+    Several processes (uvicorn workers) may open the same file: SQLite's locks serialise the
+    writers and WAL lets readers run beside them.
+    """
+
+    def __init__(self, path: str | Path, synchronous: str = "NORMAL") -> None:
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._conn = sqlite3.connect(self.path, timeout=30.0, isolation_level=None,
+                                         check_same_thread=False)
+        except (OSError, sqlite3.Error) as exc:
+            raise StoreError(f"cannot open the store at {str(self.path)!r}: {exc}") from None
+        self._lock = threading.Lock()
+        with self._lock:
+            c = self._conn
+            c.execute("PRAGMA busy_timeout = 30000")
+            mode = c.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            if str(mode).lower() != "wal":
+                raise StoreError(f"{self.path}: could not switch to WAL mode (got {mode})")
+            c.execute(f"PRAGMA synchronous = {synchronous.upper()}")
+            c.execute("PRAGMA foreign_keys = ON")
+            self._write_schema()
+
+    def _write_schema(self) -> None:
+        # Several workers may start at once: take the write lock before creating tables.
+        c = self._conn
+        c.execute("BEGIN IMMEDIATE")
+        try:
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    c.execute(statement)
+            c.execute("COMMIT")
+        except BaseException:
+            c.execute("ROLLBACK")
+            raise
+
+    def close(self) -> None:
+        with self._lock:
+            self._conn.close()
+
+    # Writing ------------------------------------------------------------------------------
+    def add(self, shots: Sequence[ShotRecord], result: dict[str, Any], source: str,
+            plate_id: str | None = None, position: str | None = None) -> tuple[int, float]:
+        """Store one measurement and its shots in one transaction; returns (id, created_at)."""
+        rows = []
+        for i, shot in enumerate(shots):
+            dtype, digest, blob = encode_samples(shot.samples)
+            rows.append((i, float(shot.t0), float(shot.dt), shot.units, shot.calibration,
+                         json.dumps(shot.metadata), int(np.size(shot.samples)), dtype, CODEC,
+                         digest, blob, json.dumps(shot.features)))
+        result_text = json.dumps(result)
+        now = time.time()
+        with self._lock:
+            c = self._conn
+            c.execute("BEGIN IMMEDIATE")
+            try:
+                cur = c.execute(
+                    "INSERT INTO measurements (created_at, plate_id, position, n_shots, source, "
+                    "result) VALUES (?, ?, ?, ?, ?, ?)",
+                    (now, plate_id, position, len(rows), source, result_text))
+                new_id = int(cur.lastrowid)
+                c.executemany(
+                    "INSERT INTO shots (measurement_id, shot_index, t0, dt, units, calibration, "
+                    "metadata, n_samples, dtype, codec, sha256, samples, features) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    [(new_id, *row) for row in rows])
+                c.execute("COMMIT")
+            except BaseException:
+                c.execute("ROLLBACK")
+                raise
+        return new_id, now
+
+    # Reading ------------------------------------------------------------------------------
+    def count(self) -> int:
+        with self._lock:
+            return int(self._conn.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])
+
+    def get(self, measurement_id: int, with_samples: bool = False) -> MeasurementRecord | None:
+        """One measurement with its shots (and their traces when ``with_samples``)."""
+        with self._lock:
+            row = self._conn.execute(
+                "SELECT id, created_at, plate_id, position, n_shots, source, result "
+                "FROM measurements WHERE id = ?", (measurement_id,)).fetchone()
+            if row is None:
+                return None
+            columns = "shot_index, t0, dt, units, calibration, metadata, features, n_samples"
+            if with_samples:
+                columns += ", dtype, sha256, samples"
+            shot_rows = self._conn.execute(
+                f"SELECT {columns} FROM shots WHERE measurement_id = ? ORDER BY shot_index",
+                (measurement_id,)).fetchall()
+        record = _measurement(row)
+        for s in shot_rows:
+            samples = (decode_samples(s[8], s[10], s[7], s[9]) if with_samples
+                       else np.empty(0))
+            record.shots.append(ShotRecord(
+                t0=s[1], dt=s[2], samples=samples, units=s[3], calibration=s[4],
+                metadata=json.loads(s[5]), features=json.loads(s[6]), shot_index=s[0],
+                n_samples=s[7]))
+        return record
+
+    def get_shot(self, measurement_id: int, shot_index: int) -> ShotRecord | None:
+        with self._lock:
+            s = self._conn.execute(
+                "SELECT shot_index, t0, dt, units, calibration, metadata, features, n_samples, "
+                "dtype, sha256, samples FROM shots WHERE measurement_id = ? AND shot_index = ?",
+                (measurement_id, shot_index)).fetchone()
+        if s is None:
+            return None
+        return ShotRecord(t0=s[1], dt=s[2], samples=decode_samples(s[8], s[10], s[7], s[9]),
+                          units=s[3], calibration=s[4], metadata=json.loads(s[5]),
+                          features=json.loads(s[6]), shot_index=s[0])
+
+    def list(self, plate_id: str | None = None, after_id: int = 0,
+             limit: int = 50) -> list[MeasurementRecord]:
+        """Measurements in id order, optionally of one plate, starting after ``after_id``."""
+        sql = ("SELECT id, created_at, plate_id, position, n_shots, source, result "
+               "FROM measurements WHERE id > ?")
+        args: list[Any] = [after_id]
+        if plate_id is not None:
+            sql += " AND plate_id = ?"
+            args.append(plate_id)
+        sql += " ORDER BY id LIMIT ?"
+        args.append(limit)
+        with self._lock:
+            rows = self._conn.execute(sql, args).fetchall()
+        return [_measurement(r) for r in rows]
+
+    def shot_rows(self, plate_id: str | None = None,
+                  limit: int = 200_000) -> Iterator[dict[str, Any]]:
+        """Flat rows (one per shot, features spread into columns) for export."""
+        sql = ("SELECT m.id, m.created_at, m.plate_id, m.position, s.shot_index, s.t0, s.dt, "
+               "s.units, s.calibration, s.n_samples, s.metadata, s.features "
+               "FROM shots s JOIN measurements m ON m.id = s.measurement_id")
+        args: list[Any] = []
+        if plate_id is not None:
+            sql += " WHERE m.plate_id = ?"
+            args.append(plate_id)
+        sql += " ORDER BY m.id, s.shot_index LIMIT ?"
+        args.append(limit)
+        with self._lock:
+            rows = self._conn.execute(sql, args).fetchall()
+        for r in rows:
+            meta = json.loads(r[10])
+            feats = json.loads(r[11])
+            yield {
+                "measurement_id": r[0], "created_at": r[1], "plate_id": r[2], "position": r[3],
+                "shot_index": r[4], "shot": meta.get("shot"),
+                "sphere_diameter": meta.get("sphere_diameter"), "t0_s": r[5], "dt_s": r[6],
+                "units": r[7], "calibration": r[8], "n_samples": r[9], **_flat(feats),
+            }
+
+
+def _measurement(row: Sequence[Any]) -> MeasurementRecord:
+    return MeasurementRecord(id=row[0], created_at=row[1], plate_id=row[2], position=row[3],
+                             n_shots=row[4], source=row[5], result=json.loads(row[6]))
+
+
+def _flat(features: dict[str, Any]) -> dict[str, Any]:
+    """Scalar features as columns; lists joined so CSV and Parquet hold one value per cell."""
+    out: dict[str, Any] = {}
+    for key, value in features.items():
+        if isinstance(value, list | tuple):
+            out[key] = ";".join(str(v) for v in value)
+        elif isinstance(value, dict):
+            out[key] = json.dumps(value)
+        else:
+            out[key] = value
+    return out

@@ -1,0 +1,119 @@
+"""Uploaded waveform files: written to a private temporary file the server names, sized up from
+their headers before any data is read, then handed to the signal readers.
+
+A compressed NPZ or HDF5 file of a few hundred kilobytes can declare 10^8 samples; reading the
+headers first turns that into a 413 instead of gigabytes of memory.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import uuid
+import zipfile
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from .problems import Problem
+
+FORMATS: dict[str, str] = {"csv": ".csv", "npy": ".npy", "npz": ".npz", "hdf5": ".h5",
+                           "tdms": ".tdms"}
+"""Upload formats and the suffix the server gives the temporary file."""
+
+SUFFIXES: dict[str, str] = {".csv": "csv", ".npy": "npy", ".npz": "npz", ".h5": "hdf5",
+                            ".hdf5": "hdf5", ".tdms": "tdms"}
+
+_CHUNK = 1 << 20
+
+
+class UploadDir:
+    """A private folder (mode 0700) for upload files, removed when closed."""
+
+    def __init__(self) -> None:
+        self.path = Path(tempfile.mkdtemp(prefix="solitonde-uploads-"))
+        os.chmod(self.path, 0o700)
+
+    def write(self, source: BinaryIO, fmt: str) -> Path:
+        """Copy an upload stream into a new file named by the server; returns its path."""
+        target = self.path / f"upload-{uuid.uuid4().hex}{FORMATS[fmt]}"
+        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as out:
+            while chunk := source.read(_CHUNK):
+                out.write(chunk)
+        return target
+
+    def close(self) -> None:
+        for child in self.path.glob("*"):
+            child.unlink(missing_ok=True)
+        self.path.rmdir()
+
+
+def pick_format(explicit: str | None, filename: str | None) -> str:
+    """The upload's format: the explicit ``format`` field, else the file name's suffix."""
+    if explicit:
+        fmt = explicit.strip().lower()
+        if fmt == "h5":
+            fmt = "hdf5"
+        if fmt not in FORMATS:
+            raise Problem(422, f"format: unknown format {explicit!r} (allowed: "
+                          f"{', '.join(FORMATS)})", kind="invalid-input", field="format")
+        return fmt
+    suffix = Path(filename or "").suffix.lower()
+    if suffix in SUFFIXES:
+        return SUFFIXES[suffix]
+    raise Problem(422, f"format: cannot tell the format of {filename or 'the upload'!r} from its "
+                  f"name; send a 'format' field (allowed: {', '.join(FORMATS)})",
+                  kind="invalid-input", field="format")
+
+
+def declared_values(path: Path, fmt: str) -> int | None:
+    """How many values the file declares in its largest array, from headers alone.
+
+    Returns ``None`` for formats without a size header (CSV, whose size the body limit bounds).
+    A file too broken to size is left to the reader, which reports it properly.
+    """
+    try:
+        if fmt == "npy":
+            with open(path, "rb") as fh:
+                return _npy_values(fh)
+        if fmt == "npz":
+            with zipfile.ZipFile(path) as zf:
+                sizes = [_npy_values(zf.open(name)) for name in zf.namelist()
+                         if name.endswith(".npy")]
+            return max(sizes, default=0)
+        if fmt == "hdf5":
+            return _hdf5_values(path)
+        if fmt == "tdms":
+            from nptdms import TdmsFile
+
+            meta = TdmsFile.read_metadata(path)
+            return max((len(ch) for g in meta.groups() for ch in g.channels()), default=0)
+    except Exception:
+        return None
+    return None
+
+
+def _npy_values(fh: BinaryIO) -> int:
+    version = np.lib.format.read_magic(fh)
+    if version == (1, 0):
+        shape, _, _ = np.lib.format.read_array_header_1_0(fh)
+    else:
+        shape, _, _ = np.lib.format.read_array_header_2_0(fh)
+    return int(np.prod(shape, dtype=np.int64)) if shape else 1
+
+
+def _hdf5_values(path: Path) -> int:
+    import h5py
+
+    largest = 0
+
+    def visit(_name: str, obj: Any) -> None:
+        nonlocal largest
+        if isinstance(obj, h5py.Dataset) and obj.shape is not None:
+            largest = max(largest, int(np.prod(obj.shape, dtype=np.int64)) if obj.shape else 1)
+
+    with h5py.File(path, "r") as fh:
+        fh.visititems(visit)
+    return largest
