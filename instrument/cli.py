@@ -23,6 +23,12 @@ app = typer.Typer(
 )
 
 
+@app.callback()
+def _root() -> None:
+    """Plate NDE with highly nonlinear solitary waves: theory, simulation, analysis, service."""
+    # A callback keeps `solitonde <command>` a group even while only one command is registered.
+
+
 def build_app() -> typer.Typer:
     """Attach every command module's commands to the app (idempotent)."""
     if not getattr(app, "_solitonde_registered", False):
