@@ -12,6 +12,7 @@ import typer
 
 COMMAND_MODULES: list[str] = [
     "cmd_theory",
+    "cmd_serve",
 ]
 
 app = typer.Typer(

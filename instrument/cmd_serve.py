@@ -1,0 +1,80 @@
+"""``solitonde serve``: run the REST service under uvicorn."""
+
+from __future__ import annotations
+
+import os
+import shlex
+from pathlib import Path
+
+import typer
+
+from .settings import DEFAULT_STORE, DEFAULT_TABLE, Settings, SettingsError
+
+SAMPLE_GLOBS = ("data_samples/*.csv", "data_samples/*.npy", "data_samples/*.h5",
+                "data_samples/*.tdms")
+
+
+def sample_file(root: Path | None = None) -> Path | None:
+    """A bundled sample waveform file to show in the curl example (CSV preferred)."""
+    root = root or Path.cwd()
+    for pattern in SAMPLE_GLOBS:
+        for path in sorted(root.glob(pattern)):
+            if path.is_file() and "table" not in path.name:
+                return path.relative_to(root)
+    return None
+
+
+def curl_example(url: str, api_key_set: bool, sample: Path | None) -> str:
+    """One curl command that posts a sample file to the running service."""
+    parts = ["curl", "-sS"]
+    if api_key_set:
+        parts += ["-H", '"X-API-Key: $SOLITONDE_API_KEY"']
+    file_arg = f"file=@{sample}" if sample else "file=@YOUR_SHOT.csv"
+    parts += ["-F", shlex.quote(file_arg), "-F", "plate_id=demo", "-F", "position=A1",
+              f"{url}/v1/measurements"]
+    return " ".join(parts)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    def serve(
+        host: str = typer.Option("127.0.0.1", help="address to bind (loopback by default)"),
+        port: int = typer.Option(8000, min=1, max=65535, help="TCP port"),
+        workers: int = typer.Option(1, min=1, max=64, help="uvicorn worker processes"),
+        table: Path | None = typer.Option(
+            None, help=f"model table for estimates (default: $SOLITONDE_TABLE, else "
+                       f"{DEFAULT_TABLE} when it exists; without one, no estimates)"),
+        store: Path | None = typer.Option(
+            None, help=f"SQLite measurement store (default: $SOLITONDE_STORE, else "
+                       f"{DEFAULT_STORE})"),
+        log_level: str = typer.Option("info", help="uvicorn log level"),
+    ) -> None:
+        """Start the REST service (OpenAPI docs at /docs); Ctrl-C stops it cleanly."""
+        import uvicorn
+
+        env_table = os.environ.get("SOLITONDE_TABLE") or None
+        table_path = table or (Path(env_table) if env_table else None)
+        if table_path is None and DEFAULT_TABLE.is_file():
+            table_path = DEFAULT_TABLE
+        try:
+            settings = Settings.from_env(host=host, port=port, table_path=table_path,
+                                         store_path=store)
+        except SettingsError as exc:
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(2) from None
+        if settings.table_path is None or not settings.table_path.is_file():
+            where = settings.table_path or DEFAULT_TABLE
+            typer.echo(f"warning: no model table at {where}: serving without estimates "
+                       "(measurements come back with \"estimate\": null)", err=True)
+        if host not in ("127.0.0.1", "localhost", "::1"):
+            typer.echo(f"warning: binding {host}: the service is reachable from other "
+                       "machines" + ("" if settings.api_key else
+                                     " and SOLITONDE_API_KEY is not set"), err=True)
+        os.environ.update(settings.to_env())
+        shown = f"[{host}]" if ":" in host else host
+        url = f"http://{shown}:{port}"
+        typer.echo(f"solitonde service on {url}  (docs: {url}/docs, store: "
+                   f"{settings.store_path}, workers: {workers})")
+        typer.echo("try:  " + curl_example(url, settings.api_key is not None, sample_file()))
+        uvicorn.run("solitonde.instrument.app:build_app_from_env", factory=True, host=host,
+                    port=port, workers=workers, log_level=log_level, access_log=False)
