@@ -327,15 +327,39 @@ register_tier(
 def resolve_plate_model(scene: Scene) -> tuple[str, str]:
     """The plate model a scene runs with and why (the one place where ``auto`` is decided).
 
-    For now ``auto`` always resolves to ``infinite``: no near-support tier is available yet.
+    ``auto``: the infinite plate (Zener dashpot) when the chain is farther from the nearest plate
+    edge than ``sem.auto_margin`` times the critical distance L_c (Eq. 18, k = 0.57), since no
+    guided wave then returns during contact; otherwise the Green's-function plate (``greens``).
     """
     requested = scene.effects.plate_model
     if requested != "auto":
         return requested, f"requested by effects.plate_model={requested}"
-    return "infinite", (
-        "auto: infinite plate (Zener dashpot); no near-support plate model (sem/greens) is "
-        "available yet, so the distance to the support is not taken into account"
+    from .zener import critical_distance
+
+    l_c = critical_distance(scene, k=0.57)
+    limit = scene.sem.auto_margin * l_c
+    edge = nearest_edge_distance(scene)
+    if edge > limit:
+        return "infinite", (
+            f"auto: the nearest plate edge is {edge * 1e3:.1f} mm away, beyond "
+            f"{scene.sem.auto_margin:g} x L_c = {limit * 1e3:.1f} mm (Eq. 18, k = 0.57): "
+            "no reflection returns during contact, so the infinite plate (Zener dashpot) applies"
+        )
+    return "greens", (
+        f"auto: the nearest plate edge is {edge * 1e3:.1f} mm away, within "
+        f"{scene.sem.auto_margin:g} x L_c = {limit * 1e3:.1f} mm (Eq. 18, k = 0.57): guided waves "
+        "return during contact, so the finite plate's Green's function is used"
     )
+
+
+def nearest_edge_distance(scene: Scene) -> float:
+    """Distance from the chain (x = L on the centre line y = Ly/2) to the nearest plate edge, m.
+
+    Every edge reflects, clamped or free, so all four count whatever ``plate.supports`` says.
+    """
+    lx, ly = scene.plate.size
+    x = scene.plate.distance_to_support
+    return float(min(x, lx - x, ly / 2.0))
 
 
 def make_boundary(scene: Scene) -> BottomBoundary:
@@ -349,3 +373,7 @@ def make_boundary(scene: Scene) -> BottomBoundary:
             allowed=", ".join([*sorted(TIERS), "auto"]),
         )
     return factory(scene, reason)
+
+
+# The spectral-element tiers (sem, greens) build on this module and register themselves.
+from . import sem_tier as _sem_tier  # noqa: E402, F401

@@ -56,7 +56,8 @@ def graded_edges(length: float, n_elements: int, target: float, order: int) -> n
                 score = max(abs(np.log(h / h_nom)) for h in sizes)
                 if best is None or score < best[0] - 1e-12:
                     edges = np.concatenate(
-                        (np.arange(n1 + 1) * h1, n1 * h1 + np.arange(1, n2 + 1) * (rest / max(n2, 1)))
+                        (np.arange(n1 + 1) * h1,
+                         n1 * h1 + np.arange(1, n2 + 1) * (rest / max(n2, 1)))
                     )
                     edges[-1] = length
                     best = (score, edges)
@@ -125,7 +126,9 @@ class PlateMesh:
     def n_dofs(self) -> int:
         return 3 * self.n_nodes
 
-    def node_index(self, i: np.ndarray | int, j: np.ndarray | int, k: np.ndarray | int) -> np.ndarray:
+    def node_index(
+        self, i: np.ndarray | int, j: np.ndarray | int, k: np.ndarray | int
+    ) -> np.ndarray:
         """Global node number of grid indices (i along x fastest, then j, then k)."""
         nx, ny, _ = self.grid_shape
         return (np.asarray(k) * ny + np.asarray(j)) * nx + np.asarray(i)
@@ -162,7 +165,6 @@ class PlateMesh:
     @cached_property
     def element_sizes(self) -> np.ndarray:
         """(n_elements, 3) element edge lengths, same element order as ``connectivity``."""
-        ex, ey, ez = self.elements
         hz, hy, hx = np.meshgrid(
             np.diff(self.z_edges), np.diff(self.y_edges), np.diff(self.x_edges), indexing="ij"
         )

@@ -9,12 +9,15 @@ on whole edge faces; a symmetry plane y = Ly/2 (half model) fixes u_y there.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, eigsh
+from threadpoolctl import threadpool_limits
 
 from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
@@ -22,6 +25,18 @@ from .mesh import PlateMesh
 from .sem_kernels import apply_stiffness, run_plate_point_force
 
 SUPPORTS = ("opposite_edges", "all_edges", "none")
+
+
+@contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """Run the time loops with one BLAS thread.
+
+    The per-step GEMMs are small (a few hundred elements times a 225 x 225 matrix); a second BLAS
+    thread gains little on an idle machine and, when the cores are shared, its spin-waiting can
+    make a run several times slower.
+    """
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
 
 
 def element_stiffness(
@@ -54,7 +69,9 @@ def element_stiffness(
     return 0.5 * (k + k.T)
 
 
-def element_mass(size: tuple[float, float, float], order: tuple[int, int, int], rho: float) -> np.ndarray:
+def element_mass(
+    size: tuple[float, float, float], order: tuple[int, int, int], rho: float
+) -> np.ndarray:
     """Diagonal (nodal-quadrature) mass of one box element, per node."""
     hx, hy, hz = size
     px, py, pz = order
@@ -93,6 +110,11 @@ class ElasticPlate:
     def contact_dof(self) -> int:
         """Vertical (z) dof of the node under the chain."""
         return 3 * self.mesh.contact_node + 2
+
+    @property
+    def force_share(self) -> float:
+        """Part of the contact force (and plate energy) the mesh carries: 1/2 for a half model."""
+        return 0.5 if self.mesh.symmetry else 1.0
 
     @property
     def fixed(self) -> np.ndarray:
@@ -188,11 +210,14 @@ class ElasticPlate:
         """
         dof = self.contact_dof if dof is None else int(dof)
         rec = np.asarray([dof] if record_dofs is None else record_dofs, dtype=np.int64)
-        return run_plate_point_force(np.ascontiguousarray(force, dtype=float), dof, float(dt),
-                                     self.inv_mass, self.edofs, self.offsets, self.kes, rec)
+        with single_threaded_blas():
+            return run_plate_point_force(np.ascontiguousarray(force, dtype=float), dof, float(dt),
+                                         self.inv_mass, self.edofs, self.offsets, self.kes, rec)
 
 
-def build_plate(mesh: PlateMesh, material: Material, supports: str = "opposite_edges") -> ElasticPlate:
+def build_plate(
+    mesh: PlateMesh, material: Material, supports: str = "opposite_edges"
+) -> ElasticPlate:
     """Element matrices, diagonal mass and constraints of a meshed plate."""
     if supports not in SUPPORTS:
         raise ValueError(f"supports must be one of {', '.join(SUPPORTS)}, got {supports!r}")

@@ -1,0 +1,210 @@
+"""The Green's-function tier: the plate seen from the chain as one linear response, convolved.
+
+The spectral-element plate is linear and starts at rest, and central differences are a linear
+time-invariant recurrence, so the deflection under the chain after n steps of dt is a discrete
+convolution of the contact force history with the plate's response to a unit force impulse:
+
+    w_n = sum_{k < n} c_k g[n - k] (F_k - F_static),   c_0 = 1/2, c_k = 1 otherwise
+
+where g[j] is the contact node's deflection j steps after a unit force acted for one step (the
+first velocity-Verlet half kick weighs F_0 by one half). With the same mesh and the same dt this
+reproduces the coupled ``sem`` run to round-off; the plate run behind g is done once per plate,
+mesh, position, supports, material and step and then cached under a key of those.
+
+The model layer does no file I/O: the cache is any object with ``load(key)`` and
+``store(key, array)``; :class:`MemoryCache` (the default) keeps responses for the process, and the
+instrument layer may install a disk cache with :func:`set_default_cache`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from typing import Protocol
+
+import numpy as np
+from numba import njit
+
+from .chain import PK_BOT_F, chain_energy, record_sample
+from .sem import ElasticPlate
+from .sem_kernels import chain_start, chain_substeps
+
+#: Bump when the meaning of a stored response changes (invalidates every cache entry).
+GREENS_VERSION = 1
+
+
+class GreensCache(Protocol):
+    """Where computed responses are kept."""
+
+    def load(self, key: str) -> np.ndarray | None:
+        """The stored response for ``key``, or None."""
+
+    def store(self, key: str, response: np.ndarray) -> None:
+        """Keep ``response`` under ``key`` (replacing a shorter one)."""
+
+
+class MemoryCache:
+    """Process-wide in-memory cache (the model layer's default)."""
+
+    def __init__(self) -> None:
+        self._items: dict[str, np.ndarray] = {}
+
+    def load(self, key: str) -> np.ndarray | None:
+        return self._items.get(key)
+
+    def store(self, key: str, response: np.ndarray) -> None:
+        self._items[key] = np.array(response, dtype=float)
+
+    def clear(self) -> None:
+        self._items.clear()
+
+
+_default_cache: GreensCache = MemoryCache()
+
+
+def default_cache() -> GreensCache:
+    return _default_cache
+
+
+def set_default_cache(cache: GreensCache) -> None:
+    """Install the cache used when none is passed (e.g. a disk cache from the instrument layer)."""
+    global _default_cache
+    _default_cache = cache
+
+
+def response_key(plate: ElasticPlate, dt: float) -> str:
+    """Hash of everything the response depends on: plate, mesh, position, supports, material, dt."""
+    mesh, mat = plate.mesh, plate.material
+    desc = {
+        "version": GREENS_VERSION,
+        "thickness_m": float(mesh.z_edges[-1]),
+        "size_m": [float(mesh.x_edges[-1]), float(mesh.full_width)],
+        "distance_to_support_m": float(mesh.contact_xy[0]),
+        "elements": list(mesh.elements),
+        "order": list(mesh.order),
+        "symmetry": bool(mesh.symmetry),
+        "supports": plate.supports,
+        "material": [mat.youngs_modulus, mat.poisson_ratio, mat.density],
+        "dt_s": float(dt),
+    }
+    text = json.dumps(desc, sort_keys=True, separators=(",", ":"), default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def compute_response(plate: ElasticPlate, dt: float, n_steps: int) -> np.ndarray:
+    """g[0..n_steps]: contact deflection (down, m) after a unit downward force for one step.
+
+    Equivalently the vertical displacement of the contact node, z up, under a unit +z force
+    (on a half model the node carries half of it).
+    """
+    force = np.zeros(n_steps)
+    force[0] = plate.force_share
+    return plate.run_point_force(force, dt)[:, 0].copy()
+
+
+def contact_response(
+    plate: ElasticPlate, dt: float, n_steps: int, cache: GreensCache | None = None
+) -> tuple[np.ndarray, bool, float]:
+    """The response g of at least ``n_steps + 1`` samples, from the cache when it holds one.
+
+    Returns (g, came from cache, seconds spent computing).
+    """
+    cache = _default_cache if cache is None else cache
+    key = response_key(plate, dt)
+    stored = cache.load(key)
+    if stored is not None and stored.size >= n_steps + 1:
+        return np.ascontiguousarray(stored[: n_steps + 1]), True, 0.0
+    start = time.perf_counter()
+    g = compute_response(plate, dt, n_steps)
+    spent = time.perf_counter() - start
+    cache.store(key, g)
+    return g, False, spent
+
+
+@njit(cache=True)
+def integrate_greens(
+    u: np.ndarray,
+    v: np.ndarray,
+    u0: np.ndarray,
+    m: float,
+    g: float,
+    a_s: float,
+    a_b: float,
+    f_static: float,
+    tau: float,
+    sensor: int,
+    h: float,
+    r: int,
+    n_sub: int,
+    n_samples: int,
+    samples: np.ndarray,
+    energy: np.ndarray,
+    u_trace: np.ndarray,
+    v_trace: np.ndarray,
+    f_trace: np.ndarray,
+    w_trace: np.ndarray,
+    pk: np.ndarray,
+    response: np.ndarray,
+) -> tuple[int, int, float, float, float]:
+    """Chain on a plate given by its contact response; the contract of ``integrate_dashpot``.
+
+    The same scheme as the coupled ``sem`` driver (plate step ``h``, ``r`` chain steps per plate
+    step, ``n_sub`` plate steps per sample), the plate's drift to step s + 1 being the convolution
+    of the force history up to step s with ``response``. Terms before the first change of the
+    bottom force (beyond round-off of the static load) are zero and skipped. Returns (status,
+    samples recorded, final w, work done on the plate J, dissipated energy J).
+    """
+    n = u.size - 1
+    inv_m = 1.0 / m
+    dt = h / r
+    f = np.empty(n)
+    acc = np.empty(n + 1)
+    vpc = np.empty(n + 1)
+    steps = n_sub * (n_samples - 1)
+    length = response.size
+    if length < steps + 1:
+        return 2, 0, 0.0, 0.0, 0.0
+    rev = response[::-1].copy()  # rev[length - 1 - j] = response[j]
+    fdyn = np.zeros(steps + 1)
+    tol = 1e-12 * f_static
+
+    w = 0.0
+    f_bottom, power = chain_start(u, v, w, a_s, a_b, inv_m, g, tau, f, acc, vpc)
+    fdyn[0] = 0.5 * (f_bottom - f_static)
+    first = -1
+    if abs(fdyn[0]) > tol:
+        first = 0
+
+    dissipated = 0.0
+    plate_work = 0.0
+    step = 0
+    for k in range(n_samples):
+        record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
+        energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + plate_work + dissipated
+        if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
+            return 1, k + 1, w, plate_work, dissipated
+        if k == n_samples - 1:
+            break
+        for _ in range(n_sub):
+            w_old = w
+            f_old = f_bottom
+            w = 0.0
+            if first >= 0:
+                # w_{s+1} = sum_{j=first..s} response[s+1-j] fdyn[j]
+                off = length - 2 - step
+                for j in range(first, step + 1):
+                    w += rev[off + j] * fdyn[j]
+            f_bottom, power, lost = chain_substeps(
+                u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_b, inv_m, g, tau, sensor, power,
+                step * h, pk,
+            )
+            dissipated += lost
+            plate_work += 0.5 * (f_old + f_bottom) * (w - w_old)
+            step += 1
+            fdyn[step] = f_bottom - f_static
+            if first < 0 and abs(fdyn[step]) > tol:
+                first = step
+    if not pk[PK_BOT_F] >= 0.0:
+        return 1, n_samples, w, plate_work, dissipated
+    return 0, n_samples, w, plate_work, dissipated

@@ -1,0 +1,139 @@
+"""The ``sem`` and ``greens`` plate models as bottom boundaries of the chain.
+
+``sem`` advances the chain and a spectral-element plate together, one velocity-Verlet step for
+both (central differences for the plate); ``greens`` replaces the plate by the convolution with
+its cached contact response (:mod:`solitonde.model.greens`). Both build the same plate from the
+scene's ``plate`` and ``sem`` sections, and both share the step: the chain's own step or the
+plate's stable step times ``sem.step_factor``, whichever is smaller, on the sample grid.
+"""
+
+from __future__ import annotations
+
+import time
+from functools import lru_cache
+
+import numpy as np
+
+from .boundary import BottomBoundary, ChainRun, ChainSetup, StepPlan, register_tier
+from .chain import new_peak_tracker
+from .greens import GreensCache, contact_response, integrate_greens
+from .materials import Material
+from .mesh import plate_mesh
+from .scene import Scene
+from .sem import ElasticPlate, build_plate, single_threaded_blas
+from .sem_kernels import integrate_sem
+
+
+@lru_cache(maxsize=8)
+def _plate_cached(
+    size: tuple[float, float], thickness: float, elements: tuple[int, int, int],
+    order: tuple[int, int, int], contact_x: float, symmetry: bool, material: Material,
+    supports: str,
+) -> ElasticPlate:
+    mesh = plate_mesh(size, thickness, elements, order, contact_x, symmetry)
+    return build_plate(mesh, material, supports)
+
+
+def plate_for(scene: Scene) -> ElasticPlate:
+    """The spectral-element plate of a scene (kept for reuse within the process)."""
+    p, s = scene.plate, scene.sem
+    return _plate_cached(
+        (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
+        tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
+        p.supports,
+    )
+
+
+class _PlateTier(BottomBoundary):
+    """Shared parts of the two tiers: the plate, its stable step, the reported diagnostics."""
+
+    def __init__(self, name: str, scene: Scene, reason: str) -> None:
+        self.name = name
+        self.reason = reason
+        self.a_bottom = scene.a_p
+        self.plate = plate_for(scene)
+        self.step_factor = float(scene.sem.step_factor)
+        # 2 / sqrt(max element eigenvalue) <= the true limit 2 / omega_max (element bound)
+        self.dt_critical = 2.0 / np.sqrt(self.plate.element_bound)
+        self.dt_plate = self.step_factor * self.dt_critical
+
+    def steps(self, plan: StepPlan) -> tuple[float, int, int]:
+        """(plate step h, chain steps per plate step r, plate steps per sample).
+
+        The plate takes the largest step within ``step_factor`` of its stability limit that fits
+        a whole number of times in a sample interval; the chain keeps at most the step it chose
+        for itself (``plan.dt``), sub-cycled r times per plate step.
+        """
+        interval = plan.dt * plan.n_sub
+        per_sample = max(1, int(np.ceil(interval / self.dt_plate * (1.0 - 1e-12))))
+        r = max(1, -(-plan.n_sub // per_sample))
+        return interval / per_sample, r, per_sample
+
+    def _extra(self, h: float, r: int, per_sample: int, plan: StepPlan) -> dict[str, object]:
+        return {
+            "mesh": self.plate.mesh.describe(),
+            "dt_s": h,
+            "dt_stability_ratio": h / self.dt_critical,
+            "dt_critical_s": self.dt_critical,
+            "chain_dt_s": h / r,
+            "chain_substeps": r,
+            "plate_steps": per_sample * (plan.n_samples - 1),
+            "steps": per_sample * r * (plan.n_samples - 1),
+        }
+
+
+class SemBoundary(_PlateTier):
+    """Chain and spectral-element plate stepped together."""
+
+    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+        plate = self.plate
+        u0 = setup.u.copy()
+        up = np.zeros(plate.n_dofs)
+        vp = np.zeros(plate.n_dofs)
+        peaks = new_peak_tracker()
+        h, r, per_sample = self.steps(plan)
+        start = time.perf_counter()
+        with single_threaded_blas():
+            status, done, w, e_plate, dissipated = integrate_sem(
+                setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
+                setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
+                setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
+                plate.inv_mass, np.repeat(plate.node_mass, 3), plate.edofs, plate.offsets,
+                plate.kes, plate.contact_dof, up, vp, plate.force_share,
+            )
+        wall = time.perf_counter() - start
+        setup.w = w
+        extra = self._extra(h, r, per_sample, plan)
+        extra["plate_energy_J"] = e_plate
+        return ChainRun(status, done, e_plate, dissipated, peaks, wall, extra)
+
+
+class GreensBoundary(_PlateTier):
+    """Chain on the plate's cached contact response (convolution)."""
+
+    def __init__(self, scene: Scene, reason: str, cache: GreensCache | None = None) -> None:
+        super().__init__("greens", scene, reason)
+        self.cache = cache
+
+    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+        h, r, per_sample = self.steps(plan)
+        n_plate = per_sample * (plan.n_samples - 1)
+        response, cached, spent = contact_response(self.plate, h, n_plate, self.cache)
+        u0 = setup.u.copy()
+        peaks = new_peak_tracker()
+        start = time.perf_counter()
+        status, done, w, plate_work, dissipated = integrate_greens(
+            setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
+            setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
+            setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
+            response,
+        )
+        wall = time.perf_counter() - start
+        setup.w = w
+        extra = self._extra(h, r, per_sample, plan)
+        extra.update({"greens_cached": cached, "greens_compute_s": spent, "chain_wall_s": wall})
+        return ChainRun(status, done, plate_work, dissipated, peaks, wall + spent, extra)
+
+
+register_tier("sem", lambda scene, reason: SemBoundary("sem", scene, reason))
+register_tier("greens", lambda scene, reason: GreensBoundary(scene, reason))
