@@ -1,0 +1,225 @@
+"""Features of a shot (TOF, ARR, SNR, flags) and their aggregate over repeated shots.
+
+TOF = t_reflected - t_incident and ARR = F_reflected / F_incident (PHYSICS.md section 6), both
+from :func:`solitonde.signal.pulses.detect`. A shot without a detectable reflection has no TOF and
+no ARR; it carries ``arr_upper_bound`` instead (the largest excursion after the incident, or the
+detection threshold, over the incident peak), so a number is never made up from noise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .errors import WaveformError
+from .pulses import DetectOptions, Detection, detect
+from .waveform import Waveform
+
+FEATURES = (
+    "tof_s",
+    "arr",
+    "incident_time_s",
+    "reflected_time_s",
+    "incident_peak_N",
+    "reflected_peak_N",
+    "snr_db",
+)
+"""The per-shot numbers, in the order tables and files list them."""
+
+OUTLIER_Z = 3.5
+"""Modified z-score (0.6745 |x - median| / MAD) above which a shot is rejected (Iglewicz-Hoaglin)."""
+
+
+@dataclass(frozen=True)
+class Features:
+    """What one shot says: times and peaks of the incident and reflected pulses, TOF, ARR, flags.
+
+    ``None`` marks a quantity the shot does not support (no reflection: no TOF, ARR, reflected
+    time or peak). ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the
+    reflection (peak over the incident peak).
+    """
+
+    tof_s: float | None
+    arr: float | None
+    incident_time_s: float
+    reflected_time_s: float | None
+    incident_peak_N: float
+    reflected_peak_N: float | None
+    snr_db: float
+    flags: list[str]
+    arr_upper_bound: float | None = None
+    secondary_times_s: list[float] = field(default_factory=list)
+    secondary_ratios: list[float] = field(default_factory=list)
+    baseline_N: float = 0.0
+    noise_N: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe dict with unit-carrying keys; flags as a list of names."""
+        return {
+            "tof_s": self.tof_s,
+            "arr": self.arr,
+            "incident_time_s": self.incident_time_s,
+            "reflected_time_s": self.reflected_time_s,
+            "incident_peak_N": self.incident_peak_N,
+            "reflected_peak_N": self.reflected_peak_N,
+            "snr_db": self.snr_db,
+            "flags": list(self.flags),
+            "arr_upper_bound": self.arr_upper_bound,
+            "secondary_times_s": list(self.secondary_times_s),
+            "secondary_ratios": list(self.secondary_ratios),
+            "baseline_N": self.baseline_N,
+            "noise_N": self.noise_N,
+        }
+
+
+def from_detection(det: Detection) -> Features:
+    """Features from a :class:`Detection`; raises if the shot holds no pulse at all."""
+    inc = det.incident
+    if inc is None:
+        raise WaveformError(
+            "samples",
+            f"no pulse rises above the noise (threshold {det.threshold_N:.3g} N over a noise of "
+            f"{det.noise_N:.3g} N)",
+            "a shot holding at least the incident pulse",
+        )
+    ref = det.reflected
+    return Features(
+        tof_s=None if ref is None else ref.time_s - inc.time_s,
+        arr=None if ref is None else ref.peak_N / inc.peak_N,
+        incident_time_s=inc.time_s,
+        reflected_time_s=None if ref is None else ref.time_s,
+        incident_peak_N=inc.peak_N,
+        reflected_peak_N=None if ref is None else ref.peak_N,
+        snr_db=inc.snr_db,
+        flags=list(det.flags),
+        arr_upper_bound=det.arr_upper_bound,
+        secondary_times_s=[p.time_s for p in det.secondary],
+        secondary_ratios=[p.peak_N / inc.peak_N for p in det.secondary],
+        baseline_N=det.baseline_N,
+        noise_N=det.noise_N,
+    )
+
+
+def extract(waveform: Waveform, **options: Any) -> Features:
+    """TOF, ARR, SNR and flags of one shot; ``options`` are :class:`DetectOptions` fields."""
+    return from_detection(detect(waveform, DetectOptions.from_kwargs(options)))
+
+
+def extract_many(waveforms: Sequence[Waveform], **options: Any) -> list[Features]:
+    """:func:`extract` over many shots with the options validated once."""
+    opts = DetectOptions.from_kwargs(options)
+    return [from_detection(detect(w, opts)) for w in waveforms]
+
+
+@dataclass(frozen=True)
+class Stat:
+    """Mean, sample standard deviation and count of one feature over the kept shots."""
+
+    mean: float | None
+    std: float | None
+    count: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"mean": self.mean, "std": self.std, "count": self.count}
+
+
+@dataclass(frozen=True)
+class Aggregate:
+    """Repeated shots at one position: statistics per feature and what was left out, and why.
+
+    ``rejected`` lists every shot index dropped as an outlier with the feature, value and
+    modified z-score that condemned it; ``no_reflection`` the shots without a reflection (they
+    count for ``arr_upper_bound`` only).
+    """
+
+    n_shots: int
+    stats: dict[str, Stat]
+    rejected: list[dict[str, Any]]
+    no_reflection: list[int]
+    arr_upper_bound: float | None
+    flag_counts: dict[str, int]
+
+    def __getitem__(self, name: str) -> Stat:
+        return self.stats[name]
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"n_shots": self.n_shots}
+        for name, stat in self.stats.items():
+            out[name] = stat.to_dict()
+        out["rejected"] = [dict(r) for r in self.rejected]
+        out["no_reflection"] = list(self.no_reflection)
+        out["arr_upper_bound"] = self.arr_upper_bound
+        out["flag_counts"] = dict(self.flag_counts)
+        return out
+
+
+def _modified_z(values: np.ndarray) -> np.ndarray:
+    med = np.median(values)
+    mad = np.median(np.abs(values - med))
+    if mad == 0:
+        return np.zeros_like(values)
+    return 0.6745 * np.abs(values - med) / mad
+
+
+def aggregate(
+    features: Sequence[Features], outlier_z: float | None = OUTLIER_Z, min_for_rejection: int = 4
+) -> Aggregate:
+    """Mean, standard deviation and count per feature over repeated shots, with outliers reported.
+
+    A shot is rejected when its TOF or ARR has a modified z-score above ``outlier_z`` among the
+    shots with a reflection (only with at least ``min_for_rejection`` of them; ``None`` turns
+    rejection off). Rejected shots are listed, never dropped silently.
+    """
+    if not features:
+        raise WaveformError("features", "nothing to aggregate", "at least one shot's features")
+    n = len(features)
+    with_ref = [i for i, f in enumerate(features) if f.tof_s is not None and f.arr is not None]
+    no_ref = [i for i in range(n) if i not in set(with_ref)]
+    rejected: list[dict[str, Any]] = []
+    dropped: set[int] = set()
+    if outlier_z is not None and len(with_ref) >= min_for_rejection:
+        for name in ("tof_s", "arr"):
+            values = np.array([getattr(features[i], name) for i in with_ref])
+            z = _modified_z(values)
+            for i, zi, vi in zip(with_ref, z, values, strict=True):
+                if zi > outlier_z and i not in dropped:
+                    dropped.add(i)
+                    rejected.append({
+                        "index": i, "feature": name, "value": float(vi),
+                        "modified_z": float(zi), "reason": f"modified z-score > {outlier_z:g}",
+                    })
+    kept = [i for i in range(n) if i not in dropped]
+    stats: dict[str, Stat] = {}
+    for name in FEATURES:
+        vals = np.array([v for i in kept if (v := getattr(features[i], name)) is not None],
+                        dtype=np.float64)
+        vals = vals[np.isfinite(vals)]
+        if vals.size == 0:
+            stats[name] = Stat(None, None, 0)
+        else:
+            std = float(np.std(vals, ddof=1)) if vals.size > 1 else None
+            stats[name] = Stat(float(np.mean(vals)), std, int(vals.size))
+    bounds = [features[i].arr_upper_bound for i in no_ref if features[i].arr_upper_bound is not None]
+    counts: dict[str, int] = {}
+    for f in features:
+        for flag in f.flags:
+            counts[flag] = counts.get(flag, 0) + 1
+    return Aggregate(
+        n_shots=n,
+        stats=stats,
+        rejected=rejected,
+        no_reflection=no_ref,
+        arr_upper_bound=max(bounds) if bounds and not with_ref else None,
+        flag_counts=counts,
+    )
+
+
+def finite_or_none(value: float | None) -> float | None:
+    """``None`` for missing or non-finite numbers (JSON has no inf)."""
+    if value is None or not math.isfinite(value):
+        return None
+    return float(value)
