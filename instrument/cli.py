@@ -11,6 +11,7 @@ import importlib
 import typer
 
 COMMAND_MODULES: list[str] = [
+    "cmd_analyze",
     "cmd_simulate",
     "cmd_theory",
     "cmd_serve",

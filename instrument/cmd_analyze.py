@@ -1,0 +1,196 @@
+"""`solitonde analyze`: TOF, ARR, SNR and flags for every shot in waveform files or folders.
+
+One row per shot, an aggregate per position (plate, position, sphere diameter). A file that
+fails is reported with its error and the others go on; the exit code says whether all succeeded
+(0 all, 1 some failed, 2 usage).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from solitonde.signal import io as signal_io
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.features import FEATURES, aggregate, extract_many
+
+OUT_SUFFIXES = (".csv", ".parquet")
+ROW_KEYS = ("source", "shot", *FEATURES, "flags", "arr_upper_bound", "plate_id", "position",
+            "sphere_diameter", "error")
+
+
+def collect(paths: Iterable[Path]) -> tuple[list[Path], list[dict[str, Any]]]:
+    """Files to analyse (folders searched recursively for known extensions) and missing paths."""
+    files: list[Path] = []
+    missing: list[dict[str, Any]] = []
+    for p in paths:
+        if p.is_dir():
+            files.extend(sorted(f for f in p.rglob("*")
+                                if f.is_file() and f.suffix.lower() in signal_io.EXTENSIONS))
+        elif p.exists():
+            files.append(p)
+        else:
+            missing.append({"source": str(p), "error": f"no such file or folder: {p}"})
+    return files, missing
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def analyse_file(path: Path, fmt: str | None, options: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per shot of ``path``; raises on a file that cannot be read."""
+    waves = signal_io.read(path, format=fmt, **options)
+    rows = []
+    for w in waves:
+        meta = w.metadata
+        row: dict[str, Any] = {"source": str(path), "shot": meta.get("shot"),
+                               "plate_id": meta.get("plate_id"),
+                               "position": meta.get("position"),
+                               "sphere_diameter": meta.get("sphere_diameter")}
+        try:
+            (feat,) = extract_many([w])
+        except WaveformError as exc:
+            row["error"] = str(exc)
+            rows.append(row)
+            continue
+        d = feat.to_dict()
+        row.update({k: _clean(d[k]) for k in FEATURES})
+        row["flags"] = d["flags"]
+        row["arr_upper_bound"] = _clean(d["arr_upper_bound"])
+        row["features"] = feat
+        rows.append(row)
+    return rows
+
+
+def aggregates(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Aggregate per (plate_id, position, sphere_diameter) over the shots that were measured."""
+    groups: dict[tuple[Any, Any, Any], list[Any]] = {}
+    for r in rows:
+        if "features" in r:
+            key = (r.get("plate_id"), r.get("position"), r.get("sphere_diameter"))
+            groups.setdefault(key, []).append(r)
+    out = []
+    for (plate, position, diameter), members in groups.items():
+        agg = aggregate([m["features"] for m in members]).to_dict()
+        for rej in agg["rejected"]:
+            m = members[rej["index"]]
+            rej.update(source=m["source"], shot=m["shot"])
+        out.append({"plate_id": plate, "position": position, "sphere_diameter": diameter, **agg})
+    return out
+
+
+def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
+    import pandas as pd
+
+    table = pd.DataFrame([{k: r.get(k) for k in ROW_KEYS} for r in rows], columns=list(ROW_KEYS))
+    table["flags"] = table["flags"].map(lambda f: ";".join(f) if isinstance(f, list) else "")
+    for col in ("plate_id", "position", "sphere_diameter", "error", "source"):
+        table[col] = table[col].map(lambda v: None if v is None else str(v))
+    tmp = out.with_name(f".{out.name}.tmp")
+    if out.suffix.lower() == ".parquet":
+        table.to_parquet(tmp, index=False)
+    else:
+        table.to_csv(tmp, index=False)
+    tmp.replace(out)
+
+
+def _fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:
+    return "-" if value is None else f"{value * scale:.{digits}g}"
+
+
+def analyze(
+    files: list[Path] = typer.Argument(..., help="Waveform files or folders (searched recursively)."),
+    fmt: str | None = typer.Option(None, "--format", help="Force a format: " +
+                                   ", ".join(signal_io.FORMATS) + "."),
+    out: Path | None = typer.Option(None, "--out", help="Write the per-shot rows to a .csv or "
+                                    ".parquet file."),
+    as_json: bool = typer.Option(False, "--json", help="Print shots, aggregates and errors as "
+                                 "JSON."),
+    sample_rate: float | None = typer.Option(None, "--sample-rate", help="Hz, for files without a "
+                                             "time axis."),
+    calibration: float | None = typer.Option(None, "--calibration", help="N/V, for files in "
+                                             "volts."),
+) -> None:
+    """Measure TOF, ARR, SNR and quality flags of every shot; aggregate per position."""
+    console = Console(stderr=as_json)
+    if out is not None and out.suffix.lower() not in OUT_SUFFIXES:
+        console.print(f"[red]--out: {out.name} must end in {' or '.join(OUT_SUFFIXES)}[/red]")
+        raise typer.Exit(code=2)
+    if fmt is not None:
+        try:
+            signal_io.detect_format("x", fmt)
+        except WaveformError as exc:
+            console.print(f"[red]--format: {exc}[/red]")
+            raise typer.Exit(code=2) from None
+    options = {k: v for k, v in (("sample_rate", sample_rate), ("calibration", calibration))
+               if v is not None}
+    paths, errors = collect(files)
+    rows: list[dict[str, Any]] = []
+    from tqdm import tqdm
+
+    for path in tqdm(paths, desc="analyze", unit="file", file=sys.stderr,
+                     disable=len(paths) < 5 or not sys.stderr.isatty()):
+        try:
+            rows.extend(analyse_file(path, fmt, options))
+        except (WaveformError, OSError, ValueError, KeyError) as exc:
+            errors.append({"source": str(path), "error": f"{type(exc).__name__}: {exc}"})
+    for r in rows:
+        if "error" in r:
+            errors.append({"source": r["source"], "shot": r["shot"], "error": r["error"]})
+    aggs = aggregates(rows)
+    if out is not None:
+        _write_rows(out, rows)
+    shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
+    if as_json:
+        json.dump({"shots": shots, "aggregates": aggs, "errors": errors},
+                  sys.stdout, indent=1, default=str)
+        sys.stdout.write("\n")
+    else:
+        _print(console, rows, aggs, errors)
+    raise typer.Exit(code=1 if errors or not paths else 0)
+
+
+def _print(console: Console, rows: list[dict[str, Any]], aggs: list[dict[str, Any]],
+           errors: list[dict[str, Any]]) -> None:
+    table = Table(title="Shots")
+    for col in ("source", "shot", "TOF (us)", "ARR", "t_inc (us)", "t_ref (us)", "F_inc (N)",
+                "F_ref (N)", "SNR (dB)", "flags"):
+        table.add_column(col)
+    for r in rows:
+        if "error" in r:
+            continue
+        arr = _fmt(r["arr"]) if r["arr"] is not None else f"< {_fmt(r['arr_upper_bound'], 1, 3)}"
+        table.add_row(Path(r["source"]).name, str(r["shot"]), _fmt(r["tof_s"], 1e6, 5), arr,
+                      _fmt(r["incident_time_s"], 1e6, 5), _fmt(r["reflected_time_s"], 1e6, 5),
+                      _fmt(r["incident_peak_N"]), _fmt(r["reflected_peak_N"]),
+                      _fmt(r["snr_db"], 1, 3), ",".join(r["flags"]))
+    console.print(table)
+    agg_table = Table(title="Per position")
+    for col in ("plate", "position", "D (m)", "shots", "TOF mean (us)", "TOF std (us)",
+                "ARR mean", "ARR std", "rejected"):
+        agg_table.add_column(col)
+    for a in aggs:
+        tof, arr = a["tof_s"], a["arr"]
+        agg_table.add_row(str(a["plate_id"]), str(a["position"]), str(a["sphere_diameter"]),
+                          str(a["n_shots"]), _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3),
+                          _fmt(arr["mean"]), _fmt(arr["std"], 1, 3), str(len(a["rejected"])))
+    console.print(agg_table)
+    for e in errors:
+        where = e["source"] + (f" shot {e['shot']}" if e.get("shot") is not None else "")
+        console.print(f"[red]failed: {where}: {e['error']}[/red]")
+
+
+def register(app: typer.Typer) -> None:
+    """Add `analyze` to the CLI."""
+    app.command("analyze")(analyze)
