@@ -26,6 +26,7 @@ implicit differentiation of G(k, w) = 0 at each root: c_g = dw/dk = -G_k / G_w.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from math import pi, sqrt
 
@@ -201,31 +202,22 @@ def lamb_dispersion(thickness: float, material: Material, frequencies: ArrayLike
     kappa = c_t / material.longitudinal_velocity
     c_r = rayleigh_velocity(material)
     W = 2.0 * pi * f * h / c_t
-    # A0 has the largest k; its phase velocity stays below both c_R and the Kirchhoff value, and
-    # above about half the smaller of them, so 3x the larger wavenumber bounds every root.
-    k_bound = 3.0 * np.maximum(W * c_t / c_r,
-                               2.0 * pi * f * h / kirchhoff_phase_velocity(f, thickness, material))
+    # A0 has the largest k; its phase velocity stays below both c_R and the Kirchhoff value but
+    # not far below the smaller of them (0.77 of it at worst for nu in [0, 0.49]), so 3x the
+    # larger wavenumber bounds every root; the tracer also checks A0 stays clear of the bound.
+    kirchhoff_kh = sqrt(h * h * sqrt(12.0) / (thickness * material.plate_velocity))
+
+    def k_bound(w: np.ndarray) -> np.ndarray:
+        """3 max(K_Rayleigh, K_Kirchhoff) at W (K = k h)."""
+        return 3.0 * np.maximum(w / (c_r / c_t), kirchhoff_kh * np.sqrt(w * c_t / h))
+
     k = {m: np.full(f.size, np.nan) for m in MODES}
-    roots = {fam: _roots(fam, W, kappa, k_bound, resolution) for fam in "AS"}
+    first_pass = {fam: _roots(fam, W, kappa, k_bound(W), resolution) for fam in "AS"}
+    tracer = _Tracer(kappa, resolution, k_bound)
     for j in range(f.size):
-        for attempt in range(4):
-            n = resolution * 8**attempt
-            if attempt:
-                roots_j = {fam: _roots(fam, W[j:j + 1], kappa, k_bound[j:j + 1], n)[0]
-                           for fam in "AS"}
-            else:
-                roots_j = {fam: roots[fam][j] for fam in "AS"}
-            a_roots, s_roots = roots_j["A"], roots_j["S"]
-            found = {
-                "A0": a_roots[0] if a_roots.size else np.nan,
-                "A1": a_roots[1] if a_roots.size > 1 else np.nan,
-                "S0": s_roots[0] if s_roots.size else np.nan,
-            }
-            cell = k_bound[j] / n
-            crowded = any(np.any(np.diff(r[::-1]) < 3.0 * cell) for r in (a_roots, s_roots))
-            if not crowded and _continues(k, found, j, W):
-                break
-        else:
+        precomputed = {fam: first_pass[fam][j] for fam in "AS"}
+        found = tracer.advance(W[j], precomputed)
+        if found is None:
             raise SimulationError(
                 f"Lamb root tracing lost a branch at {f[j]:.6g} Hz (t = {thickness} m)")
         for m in MODES:
@@ -242,44 +234,98 @@ def lamb_dispersion(thickness: float, material: Material, frequencies: ArrayLike
     return LambDispersion(f, phase, group, wavenumber, thickness, material)
 
 
-def _continues(k: dict[str, np.ndarray], found: dict[str, float], j: int, W: np.ndarray) -> bool:
-    """Whether the roots at frequency j continue the branches traced so far without a jump.
+class _Tracer:
+    """Follows A0, S0 and A1 along increasing frequency, remembering the last two points.
 
-    A0 and S0 must exist at every frequency; A1 may appear (cut-off) but never disappear, and
-    stays below A0 in k. A0 and S0 are extrapolated in log-log coordinates from their last two
-    points (slope 3/4, between the flexural 1/2 and the non-dispersive 1, when there is one
-    point), and the new root must land within 0.02 + 0.3 |d ln w| of that. A1 is extrapolated as
-    k^2 linear in w, which is exact at its cut-off (k ~ sqrt(f - f_c)), and must land within 5 %
-    of its last k^2 plus the last change. Smooth branches pass easily; a jump to a neighbouring
-    mode (at least 7 % in k, even where A0 and A1 approach c_R and c_T) fails on any frequency
-    grid fine enough to show the curves.
+    A step is accepted when the roots bracketed at the new frequency continue every branch (see
+    :meth:`_continues`). When they do not, the k grid is refined (a root pair may share a grid
+    cell) and, failing that, the frequency step is split into four and walked in small steps.
     """
-    if not (np.isfinite(found["A0"]) and np.isfinite(found["S0"])):
-        return False
-    if np.isfinite(found["A1"]) and not found["A1"] < found["A0"]:
-        return False
-    if j == 0:
-        return True
-    d_ln_w = np.log(W[j] / W[j - 1])
-    for m, value in found.items():
-        prev = k[m][j - 1]
-        if not np.isfinite(prev):
-            continue
-        if not np.isfinite(value):
+
+    def __init__(self, kappa: float, resolution: int,
+                 k_bound: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.kappa = kappa
+        self.resolution = resolution
+        self.k_bound = k_bound
+        self.history: list[tuple[float, dict[str, float]]] = []
+
+    def _found(self, W: float, n: int,
+               roots: dict[str, np.ndarray] | None) -> tuple[dict[str, float], bool]:
+        k_max = float(self.k_bound(np.array(W)))
+        if roots is None:
+            roots = {fam: _roots(fam, np.array([W]), self.kappa, np.array([k_max]), n)[0]
+                     for fam in "AS"}
+        a_roots, s_roots = roots["A"], roots["S"]
+        found = {
+            "A0": a_roots[0] if a_roots.size else np.nan,
+            "A1": a_roots[1] if a_roots.size > 1 else np.nan,
+            "S0": s_roots[0] if s_roots.size else np.nan,
+        }
+        cell = k_max / n
+        crowded = any(bool(np.any(np.diff(r[::-1]) < 3.0 * cell)) for r in (a_roots, s_roots))
+        if np.isfinite(found["A0"]) and found["A0"] > 0.7 * k_max:
+            raise SimulationError(f"A0 root near the search bound at W = {W:.6g}")
+        return found, crowded
+
+    def advance(self, W: float, roots: dict[str, np.ndarray] | None = None,
+                depth: int = 0) -> dict[str, float] | None:
+        """Roots at W continuing the traced branches, or None if they cannot be followed."""
+        for attempt in range(3):
+            n = self.resolution * 8**attempt
+            found, crowded = self._found(W, n, roots if attempt == 0 else None)
+            if not crowded and self._continues(W, found):
+                self.history = [*self.history[-1:], (W, found)]
+                return found
+        if depth >= 4 or not self.history:
+            return None
+        w_prev = self.history[-1][0]
+        for w_sub in np.linspace(w_prev, W, 5)[1:-1]:
+            if self.advance(w_sub, None, depth + 1) is None:
+                return None
+        return self.advance(W, None, depth + 1)
+
+    def _continues(self, W: float, found: dict[str, float]) -> bool:
+        """Whether ``found`` at W continues the branches traced so far without a jump.
+
+        A0 and S0 must exist at every frequency; A1 may appear (cut-off) but never disappear,
+        and stays below A0 in k. A0 and S0 are extrapolated in log-log coordinates from their
+        last two points (slope 1 when there is only one: A0's k grows as w^(1/2) to w^1, S0's as
+        w^1 to about w^2.5 where its phase velocity drops); the new root must land within
+        0.02 + 0.3 |d ln w| of that (0.02 + 1.5 |d ln w| without a slope). A1 is extrapolated as
+        k^2 linear in w, exact at its cut-off (k ~ sqrt(f - f_c)), and must land within 5 % of
+        its last k^2 plus the last change. A jump to a neighbouring mode (at least 7 % in k, even
+        where A0 and A1 approach c_R and c_T) fails once the steps are small, and the tracer
+        makes them small.
+        """
+        if not (np.isfinite(found["A0"]) and np.isfinite(found["S0"])):
             return False
-        before = k[m][j - 2] if j >= 2 else np.nan
-        if m == "A1":
-            if not np.isfinite(before):
-                continue  # second point after the cut-off: nothing to extrapolate from yet
-            change = prev**2 - before**2
-            guess = prev**2 + change * (W[j] - W[j - 1]) / (W[j - 1] - W[j - 2])
-            if abs(value**2 - guess) > 0.05 * prev**2 + abs(change):
+        if np.isfinite(found["A1"]) and not found["A1"] < found["A0"]:
+            return False
+        if not self.history:
+            return True
+        w_prev, k_prev = self.history[-1]
+        before = self.history[-2] if len(self.history) == 2 else None
+        d_ln_w = np.log(W / w_prev)
+        for m, value in found.items():
+            prev = k_prev[m]
+            if not np.isfinite(prev):
+                continue
+            if not np.isfinite(value):
                 return False
-            continue
-        slope = 0.75
-        if np.isfinite(before):
-            slope = np.log(prev / before) / np.log(W[j - 1] / W[j - 2])
-        guess = np.log(prev) + slope * d_ln_w
-        if abs(np.log(value) - guess) > 0.02 + 0.3 * abs(d_ln_w):
-            return False
-    return True
+            old = before[1][m] if before is not None else np.nan
+            if m == "A1":
+                if not np.isfinite(old):
+                    continue  # second point after the cut-off: nothing to extrapolate from
+                change = prev**2 - old**2
+                guess = prev**2 + change * (W - w_prev) / (w_prev - before[0])
+                if abs(value**2 - guess) > 0.05 * prev**2 + abs(change):
+                    return False
+                continue
+            if np.isfinite(old):
+                slope = np.log(prev / old) / np.log(w_prev / before[0])
+                tolerance = 0.02 + 0.3 * abs(d_ln_w)
+            else:
+                slope, tolerance = 1.0, 0.02 + 1.5 * abs(d_ln_w)
+            if abs(np.log(value) - np.log(prev) - slope * d_ln_w) > tolerance:
+                return False
+        return True
