@@ -20,16 +20,15 @@ from .scene import Scene, scene_from_dict
 from .simulate import SimulationResult, simulate
 
 
-def scene_grid(base: Scene | Mapping[str, Any] | None, axes: Mapping[str, Sequence[Any]]) -> list[Scene]:
+def scene_grid(
+    base: Scene | Mapping[str, Any] | None, axes: Mapping[str, Sequence[Any]]
+) -> list[Scene]:
     """Every combination of the dotted-key values in ``axes`` applied to ``base``.
 
     ``scene_grid(None, {"chain.diameter": [4.76e-3, 9.53e-3], "plate.thickness": [2.29e-3]})``
     gives two scenes; the last key varies fastest.
     """
-    if isinstance(base, Scene):
-        start = base
-    else:
-        start = scene_from_dict(dict(base or {}))
+    start = base if isinstance(base, Scene) else scene_from_dict(dict(base or {}))
     keys = list(axes)
     for key in keys:
         if isinstance(axes[key], str | bytes) or not isinstance(axes[key], Iterable):
@@ -38,7 +37,9 @@ def scene_grid(base: Scene | Mapping[str, Any] | None, axes: Mapping[str, Sequen
             for combo in itertools.product(*(list(axes[k]) for k in keys))]
 
 
-def _run_chunk(payload: list[tuple[dict[str, Any], dict[str, Any]]]) -> list[SimulationResult | Exception]:
+def _run_chunk(
+    payload: list[tuple[dict[str, Any], dict[str, Any]]],
+) -> list[SimulationResult | Exception]:
     out: list[SimulationResult | Exception] = []
     for scene_dict, options in payload:
         try:

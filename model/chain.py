@@ -178,7 +178,7 @@ def verlet_step(
 
 @njit(cache=True)
 def sensor_reading(f: np.ndarray, f_bottom: float, sensor: int) -> float:
-    """Mean of the sensor particle's two contact forces; ``sensor`` is 1..N (striker not counted)."""
+    """Mean of the sensor particle's two contact forces; ``sensor`` is 1..N (striker excluded)."""
     above = f[sensor - 1]
     below = f[sensor] if sensor < f.size else f_bottom
     return 0.5 * (above + below)
@@ -186,7 +186,14 @@ def sensor_reading(f: np.ndarray, f_bottom: float, sensor: int) -> float:
 
 @njit(cache=True)
 def chain_energy(
-    u: np.ndarray, v: np.ndarray, u0: np.ndarray, w: float, m: float, g: float, a_s: float, a_b: float
+    u: np.ndarray,
+    v: np.ndarray,
+    u0: np.ndarray,
+    w: float,
+    m: float,
+    g: float,
+    a_s: float,
+    a_b: float,
 ) -> float:
     """Kinetic + contact (including the bottom contact) + gravity energy of the chain, J.
 

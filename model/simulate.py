@@ -113,8 +113,9 @@ def choose_time_step(
     real peak (the default 400 steps/period gives an energy drift below 1e-6 in practice; see
     tests/test_chain_physics.py), and the phase error is second order in dt. A plate with
     dynamics of its own (the dashpot) also needs ``dt <= 0.0125 Z / k_b``: the Strang splitting
-    error grows with the dashpot rate ``k_b / Z`` and this keeps the drift below 1e-6 up to D/t = 12. The step is then shrunk
-    so that a whole number ``n_sub`` of steps fits in one sample interval: samples fall on steps.
+    error grows with the dashpot rate ``k_b / Z`` and this keeps the drift below 1e-6 up to
+    D/t = 12. The step is then shrunk so that a whole number ``n_sub`` of steps fits in one
+    sample interval: samples fall on steps.
     """
     m = scene.sphere_mass
     g = STANDARD_GRAVITY if scene.effects.gravity else 0.0

@@ -1,4 +1,4 @@
-"""Extreme scenes: no NaN, bounded energy, a clear status, and clear errors for impossible requests."""
+"""Extreme scenes: no NaN, bounded energy, a clear status; impossible requests: clear errors."""
 
 from __future__ import annotations
 
