@@ -152,15 +152,42 @@ def _roots(family: str, W: np.ndarray, kappa: float, k_max: np.ndarray, n: int) 
     return [np.sort(root[row == j])[::-1] for j in range(W.size)]
 
 
+def _dispersion_complex(family: str, K: np.ndarray, W: np.ndarray, kappa: float) -> np.ndarray:
+    """G_S or G_A for complex K and W (unscaled), for complex-step derivatives.
+
+    cos(x), sin(x)/x and x sin(x) are even in x, so any branch of x = sqrt(x^2) gives the same,
+    analytic, value.
+    """
+    k2 = K * K
+    q2 = W * W - k2
+    p2 = (kappa * W) ** 2 - k2
+    xp = np.sqrt(p2.astype(complex))
+    xq = np.sqrt(q2.astype(complex))
+    cp, cq = np.cos(xp), np.cos(xq)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sp = np.where(xp == 0, 1.0, np.sin(xp) / np.where(xp == 0, 1.0, xp))
+        sq = np.where(xq == 0, 1.0, np.sin(xq) / np.where(xq == 0, 1.0, xq))
+    pp, pq = xp * np.sin(xp), xq * np.sin(xq)
+    lead = (k2 - q2) ** 2
+    if family == "S":
+        return lead * cp * sq + 4.0 * k2 * pp * cq
+    return lead * sp * cq + 4.0 * k2 * cp * pq
+
+
 def _group_velocity_ratio(family: str, K: np.ndarray, W: np.ndarray, kappa: float) -> np.ndarray:
-    """dW/dK along G(K, W) = 0 by implicit differentiation (central differences, unscaled G)."""
-    dk = 1e-6 * np.maximum(K, 1e-3)
-    dw = 1e-6 * np.maximum(W, 1e-3)
-    g_k = (dispersion_function(family, K + dk, W, kappa, scaled=False)
-           - dispersion_function(family, K - dk, W, kappa, scaled=False)) / (2 * dk)
-    g_w = (dispersion_function(family, K, W + dw, kappa, scaled=False)
-           - dispersion_function(family, K, W - dw, kappa, scaled=False)) / (2 * dw)
-    return -g_k / g_w
+    """dW/dK along G(K, W) = 0 by implicit differentiation, -G_K / G_W.
+
+    Both partial derivatives are complex-step derivatives (Im G(x + i eps) / eps), which have no
+    subtractive cancellation: finite differences lose digits at low frequency, where the terms of
+    G cancel to many digits at the A0 root.
+    """
+    K = np.asarray(K, dtype=float)
+    W = np.asarray(W, dtype=float)
+    eps = 1e-30
+    g_k = _dispersion_complex(family, K + 1j * eps, W + 0j, kappa).imag / eps
+    g_w = _dispersion_complex(family, K + 0j, W + 1j * eps, kappa).imag / eps
+    with np.errstate(invalid="ignore"):
+        return -g_k / g_w
 
 
 @dataclass(frozen=True)
