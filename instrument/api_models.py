@@ -15,9 +15,10 @@ SCALAR = str | float | int | bool | None
 
 
 class Strict(BaseModel):
-    """Base for request bodies: unknown keys, NaN and infinity are errors."""
+    """Base for request bodies: unknown keys, NaN, infinity and type coercion (true as 1,
+    "5e-7" as a number) are errors."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class ShotMetadata(Strict):
@@ -58,8 +59,10 @@ def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type
         "MeasurementIn",
         __base__=Strict,
         __doc__=(f"One or more shots taken at one position (at most {max_shots} shots, each of at "
-                 f"most {max_samples:,} samples). All shots share plate_id and position."),
+                 f"most {max_samples:,} samples). All shots share plate_id and position. "
+                 "Top-level metadata applies to every shot unless a shot sets the key itself."),
         shots=(list[shot], Field(..., min_length=1, max_length=max_shots)),  # type: ignore[valid-type]
+        metadata=(ShotMetadata | None, Field(None, description="metadata shared by all shots")),
     )
     return shot, measurement
 

@@ -106,31 +106,29 @@ class Estimator:
 
 
 def inversion_input(agg: Mapping[str, Any]) -> dict[str, Any] | str:
-    """One aggregate (see :func:`solitonde.instrument.ingest.aggregate_groups`) as an inversion
-    input, or the reason it cannot be one."""
+    """One aggregate (``Aggregate.to_dict()`` plus ``sphere_diameter``, see
+    :func:`solitonde.instrument.ingest.aggregate_groups`) as an inversion input, or the reason it
+    cannot be one."""
     diameter = agg.get("sphere_diameter")
     if diameter is None:
         return "metadata.sphere_diameter is missing: the inversion needs the sphere size"
-    tof = _first(agg, "tof_mean_s", "tof_s", "tof")
-    arr = _first(agg, "arr_mean", "arr")
-    if tof is None or arr is None:
-        return "no shot at this sphere size gave both a TOF and an ARR"
+    tof, arr = _stat(agg, "tof_s"), _stat(agg, "arr")
+    if tof.get("mean") is None or arr.get("mean") is None:
+        return (f"no shot with D = {diameter} m has a detected reflection (no TOF, no ARR); "
+                "see the aggregate's arr_upper_bound")
     return {
         "diameter_m": float(diameter),
-        "tof_s": float(tof),
-        "tof_std_s": _first(agg, "tof_std_s", "tof_std"),
-        "arr": float(arr),
-        "arr_std": _first(agg, "arr_std"),
-        "n_shots": int(_first(agg, "n_used", "n_shots", "n", "count") or 1),
+        "tof_s": float(tof["mean"]),
+        "tof_std_s": tof.get("std"),
+        "arr": float(arr["mean"]),
+        "arr_std": arr.get("std"),
+        "n_shots": int(tof.get("count") or 1),
     }
 
 
-def _first(mapping: Mapping[str, Any], *keys: str) -> Any:
-    for key in keys:
-        value = mapping.get(key)
-        if value is not None:
-            return value
-    return None
+def _stat(agg: Mapping[str, Any], name: str) -> Mapping[str, Any]:
+    value = agg.get(name)
+    return value if isinstance(value, Mapping) else {}
 
 
 def _jsonable(value: Any) -> Any:

@@ -32,13 +32,21 @@ def waveform_error(exc: WaveformError, prefix: str) -> Problem:
     return Problem(422, f"{field}: {message}", kind="invalid-input", field=field)
 
 
-def waveforms_from_shots(shots: Sequence[Any]) -> list[Waveform]:
-    """Validated request shots (``ShotIn`` models) as waveforms."""
+def _meta(metadata: Any) -> dict[str, Any]:
+    if metadata is None:
+        return {}
+    meta = {k: v for k, v in metadata.model_dump(exclude={"extra"}).items() if v is not None}
+    meta.update(metadata.extra)
+    return meta
+
+
+def waveforms_from_shots(shots: Sequence[Any], common: Any = None) -> list[Waveform]:
+    """Validated request shots (``ShotIn`` models) as waveforms; ``common`` metadata (the
+    request's top-level ``metadata``) applies to every shot unless the shot says otherwise."""
     out = []
+    shared = _meta(common)
     for i, shot in enumerate(shots):
-        meta = {k: v for k, v in shot.metadata.model_dump(exclude={"extra"}).items()
-                if v is not None}
-        meta.update(shot.metadata.extra)
+        meta = {**shared, **_meta(shot.metadata)}
         try:
             out.append(Waveform(t0=shot.t0, dt=shot.dt, samples=np.asarray(shot.samples),
                                 units=shot.units, calibration=shot.calibration, metadata=meta))
@@ -67,7 +75,7 @@ def read_file(path: Path, fmt: str, options: Mapping[str, Any]) -> list[Waveform
 
 
 def check_counts(waveforms: Sequence[Waveform], settings: Settings, prefix: str) -> None:
-    """Enforce shots per request and samples per shot (the JSON schema does the same)."""
+    """Enforce shots per request, samples per shot and per request (the schema states them)."""
     if len(waveforms) > settings.max_shots_per_request:
         raise Problem(422, f"{prefix}: {len(waveforms)} shots; at most "
                       f"{settings.max_shots_per_request} per request", kind="limit",
@@ -77,6 +85,11 @@ def check_counts(waveforms: Sequence[Waveform], settings: Settings, prefix: str)
             raise Problem(422, f"{prefix}.{i}.samples: {wf.n:,} samples; at most "
                           f"{settings.max_samples_per_shot:,} per shot", kind="limit",
                           field=f"{prefix}.{i}.samples")
+    total = sum(wf.n for wf in waveforms)
+    if total > settings.max_samples_per_request:
+        raise Problem(422, f"{prefix}: {total:,} samples in all; at most "
+                      f"{settings.max_samples_per_request:,} per request", kind="limit",
+                      field=prefix)
 
 
 def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None, str | None]:

@@ -15,7 +15,7 @@ from fastapi import APIRouter, Depends, Path, Query, Request, Security
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
-from pydantic import Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError
 
 from .api_models import MeasurementOut, MeasurementPage, Strict
 from .ingest import (
@@ -71,6 +71,9 @@ router = APIRouter(tags=["measurements"], dependencies=[AUTH])
 class UploadFields(Strict):
     """Form fields that come with an uploaded file (all optional)."""
 
+    # Form values arrive as text: numbers are parsed from it (still no NaN, no unknown fields).
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
+
     format: str | None = Field(None, description=f"one of {', '.join(FORMATS)}; "
                                "default: from the file name's suffix")
     plate_id: str | None = Field(None, max_length=200)
@@ -79,7 +82,9 @@ class UploadFields(Strict):
     units: str | None = Field(None, description="N or V, for files that do not say")
     calibration: float | None = Field(None, description="sensor sensitivity, N/V")
     sample_rate: float | None = Field(None, gt=0, le=1e10,
-                                      description="Hz, for single-column CSV files")
+                                      description="Hz, for files without a time column")
+    dt: float | None = Field(None, gt=0, le=1.0, description="s, instead of sample_rate")
+    t0: float | None = Field(None, ge=-1e3, le=1e3, description="s, time of the first sample")
     group: str | None = Field(None, max_length=200, description="TDMS group")
     channel: str | None = Field(None, max_length=200, description="TDMS channel")
     dataset: str | None = Field(None, max_length=200, description="HDF5 dataset")
@@ -88,7 +93,8 @@ class UploadFields(Strict):
 MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
 ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 0")]
 
-_READER_OPTIONS = ("units", "calibration", "sample_rate", "group", "channel", "dataset")
+_READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "group", "channel",
+                   "dataset")
 
 
 def upload_schema() -> dict[str, Any]:
@@ -159,7 +165,7 @@ def _ingest_json(svc: Any, body: bytes) -> dict[str, Any]:
         request = svc.measurement_model.model_validate_json(body)
     except ValidationError as exc:
         raise from_pydantic(exc, svc.measurement_model) from None
-    waveforms = waveforms_from_shots(request.shots)
+    waveforms = waveforms_from_shots(request.shots, request.metadata)
     check_counts(waveforms, svc.settings, "shots")
     return measure_and_store(waveforms, svc.store, svc.estimator, "json", "shots")
 
@@ -196,11 +202,10 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields) -> dict[st
     path = svc.uploads.write(stream, fmt)
     try:
         declared = declared_values(path, fmt)
-        limit = settings.max_samples_per_shot * settings.max_shots_per_request
+        limit = settings.max_samples_per_request
         if declared is not None and declared > limit:
-            raise Problem(413, f"file: declares {declared:,} samples; at most "
-                          f"{settings.max_shots_per_request} shots of "
-                          f"{settings.max_samples_per_shot:,} samples per request",
+            raise Problem(413, f"file: declares {declared:,} samples; at most {limit:,} per "
+                          f"request ({settings.max_samples_per_shot:,} per shot)",
                           kind="content-too-large", field="file")
         options = {k: getattr(opts, k) for k in _READER_OPTIONS if getattr(opts, k) is not None}
         waveforms = read_file(path, fmt, options)

@@ -26,6 +26,7 @@ ENV_VARS: dict[str, str] = {
     "SOLITONDE_MAX_BODY_BYTES": "max_body_bytes",
     "SOLITONDE_MAX_SHOTS": "max_shots_per_request",
     "SOLITONDE_MAX_SAMPLES": "max_samples_per_shot",
+    "SOLITONDE_MAX_REQUEST_SAMPLES": "max_samples_per_request",
     "SOLITONDE_MAX_SIM_COST": "max_simulation_cost",
     "SOLITONDE_STORE_SYNC": "store_synchronous",
 }
@@ -57,6 +58,9 @@ class Settings:
         Largest request body accepted (413 above it).
     max_shots_per_request, max_samples_per_shot:
         Per-request limits (422 above them), stated in the OpenAPI schema.
+    max_samples_per_request:
+        All shots of a request together (64 MB as float64 by default); an uploaded file that
+        declares more in its header is refused (413) before its data is read.
     max_simulation_cost:
         Budget for ``POST /v1/simulate`` in particle-steps (integration steps x chain particles,
         plate degrees of freedom added for plate models that have them).
@@ -73,6 +77,7 @@ class Settings:
     max_body_bytes: int = 64 * 1024 * 1024
     max_shots_per_request: int = 64
     max_samples_per_shot: int = 2_000_000
+    max_samples_per_request: int = 8_000_000
     max_simulation_cost: float = 5e8
     store_synchronous: str = "NORMAL"
     page_size_max: int = 500
@@ -80,7 +85,8 @@ class Settings:
 
     def __post_init__(self) -> None:
         positive = ("port", "max_body_bytes", "max_shots_per_request", "max_samples_per_shot",
-                    "max_simulation_cost", "page_size_max", "export_rows_max")
+                    "max_samples_per_request", "max_simulation_cost", "page_size_max",
+                    "export_rows_max")
         for name in positive:
             if not getattr(self, name) > 0:
                 raise SettingsError(name, f"must be positive, got {getattr(self, name)!r}")
@@ -128,6 +134,7 @@ class Settings:
             "max_body_bytes": self.max_body_bytes,
             "max_shots_per_request": self.max_shots_per_request,
             "max_samples_per_shot": self.max_samples_per_shot,
+            "max_samples_per_request": self.max_samples_per_request,
             "max_simulation_cost": self.max_simulation_cost,
             "page_size_max": self.page_size_max,
             "export_rows_max": self.export_rows_max,

@@ -7,26 +7,29 @@ it. With ``synchronous=NORMAL`` a committed transaction is in the WAL file befor
 returns, so it survives the death of the process; ``FULL`` adds an fsync per commit for power loss.
 
 Traces are stored losslessly and compressed: float32 when that represents every sample exactly
-(any ADC of up to 24 bits), else float64; bytes shuffled (all first bytes, then all second bytes,
-...) and deflated; a SHA-256 of the raw samples is stored and checked on every read.
+(any ADC of up to 24 bits), else float64; compressed with zstd (pyarrow's codec: a third of
+zlib's time at the same ratio on quantised traces); a SHA-256 of the raw samples is stored and
+checked on every read.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import os
 import sqlite3
 import threading
 import time
-import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
-CODEC = "shuffle+zlib1"
+CODEC = "zstd"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS measurements (
@@ -100,24 +103,27 @@ def encode_samples(samples: np.ndarray) -> tuple[str, str, bytes]:
     x = np.ascontiguousarray(samples, dtype="<f8")
     x32 = x.astype("<f4")
     raw = x32 if np.array_equal(x32.astype("<f8"), x) else x
-    width = raw.dtype.itemsize
-    shuffled = raw.view(np.uint8).reshape(-1, width).T.tobytes()
-    digest = hashlib.sha256(raw.tobytes()).hexdigest()
-    return raw.dtype.str, digest, zlib.compress(shuffled, 1)
+    data = raw.tobytes()
+    digest = hashlib.sha256(data).hexdigest()
+    return raw.dtype.str, digest, pa.compress(data, codec="zstd", asbytes=True)
 
 
 def decode_samples(dtype: str, blob: bytes, n_samples: int,
-                   sha256: str | None = None) -> np.ndarray:
+                   sha256: str | None = None, codec: str = CODEC) -> np.ndarray:
     """Inverse of :func:`encode_samples`; checks the length and the digest."""
     dt = np.dtype(dtype)
-    data = zlib.decompress(blob)
-    if len(data) != n_samples * dt.itemsize:
-        raise StoreError(f"stored trace has {len(data)} bytes, expected {n_samples * dt.itemsize}")
-    raw = np.frombuffer(data, dtype=np.uint8).reshape(dt.itemsize, n_samples).T.copy().view(dt)
-    raw = raw.reshape(-1)
-    if sha256 is not None and hashlib.sha256(raw.tobytes()).hexdigest() != sha256:
+    size = n_samples * dt.itemsize
+    if codec != CODEC:
+        raise StoreError(f"stored trace uses unknown codec {codec!r}")
+    try:
+        data = pa.decompress(blob, decompressed_size=size, codec="zstd", asbytes=True)
+    except (OSError, ValueError, pa.ArrowException) as exc:
+        raise StoreError(f"stored trace cannot be decompressed: {exc}") from None
+    if len(data) != size:
+        raise StoreError(f"stored trace has {len(data)} bytes, expected {size}")
+    if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
         raise StoreError("stored trace fails its SHA-256 check")
-    return raw.astype(np.float64)
+    return np.frombuffer(data, dtype=dt).astype(np.float64)
 
 
 class Store:
@@ -127,7 +133,12 @@ class Store:
     writers and WAL lets readers run beside them.
     """
 
-    def __init__(self, path: str | Path, synchronous: str = "NORMAL") -> None:
+    CHECKPOINT_INTERVAL_S = 0.5
+    AUTOCHECKPOINT_PAGES = 16384
+    """Safety net: SQLite checkpoints itself in the writer once the WAL reaches 64 MiB."""
+
+    def __init__(self, path: str | Path, synchronous: str = "NORMAL",
+                 background_checkpoint: bool = True) -> None:
         self.path = Path(path)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -136,6 +147,7 @@ class Store:
         except (OSError, sqlite3.Error) as exc:
             raise StoreError(f"cannot open the store at {str(self.path)!r}: {exc}") from None
         self._lock = threading.Lock()
+        self._writer_fd = _open_writer_lock(self.path)
         with self._lock:
             c = self._conn
             c.execute("PRAGMA busy_timeout = 30000")
@@ -145,6 +157,28 @@ class Store:
             c.execute(f"PRAGMA synchronous = {synchronous.upper()}")
             c.execute("PRAGMA foreign_keys = ON")
             self._write_schema()
+        self._stop = threading.Event()
+        self._checkpointer: threading.Thread | None = None
+        if background_checkpoint:
+            # Copying the WAL into the database (and its fsync) happens in a thread of its
+            # own instead of inside whichever request crosses the WAL size threshold.
+            self._conn.execute(f"PRAGMA wal_autocheckpoint = {self.AUTOCHECKPOINT_PAGES}")
+            self._checkpointer = threading.Thread(target=self._checkpoint_loop,
+                                                  name="store-checkpoint", daemon=True)
+            self._checkpointer.start()
+
+    def _checkpoint_loop(self) -> None:
+        try:
+            conn = sqlite3.connect(self.path, timeout=0.1, isolation_level=None,
+                                   check_same_thread=False)
+        except sqlite3.Error:
+            return
+        try:
+            while not self._stop.wait(self.CHECKPOINT_INTERVAL_S):
+                with contextlib.suppress(sqlite3.Error):
+                    conn.execute("PRAGMA wal_checkpoint(PASSIVE)")
+        finally:
+            conn.close()
 
     def _write_schema(self) -> None:
         # Several workers may start at once: take the write lock before creating tables.
@@ -160,8 +194,34 @@ class Store:
             raise
 
     def close(self) -> None:
+        self._stop.set()
+        if self._checkpointer is not None:
+            self._checkpointer.join(timeout=5)
         with self._lock:
             self._conn.close()
+            if self._writer_fd is not None:
+                os.close(self._writer_fd)
+                self._writer_fd = None
+
+    @contextlib.contextmanager
+    def _writer(self) -> Iterator[None]:
+        """Exclusive writer across processes, taken before SQLite's own lock.
+
+        SQLite's busy handler polls a held lock with sleeps growing to 100 ms, which shows up as
+        latency spikes when several uvicorn workers write at once; a blocking ``flock`` wakes
+        the next writer as soon as the lock is released. SQLite's locking stays the safety net.
+        """
+        with self._lock:
+            if self._writer_fd is None:
+                yield
+                return
+            import fcntl
+
+            fcntl.flock(self._writer_fd, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(self._writer_fd, fcntl.LOCK_UN)
 
     # Writing ------------------------------------------------------------------------------
     def add(self, shots: Sequence[ShotRecord], result: dict[str, Any], source: str,
@@ -174,8 +234,8 @@ class Store:
                          json.dumps(shot.metadata), int(np.size(shot.samples)), dtype, CODEC,
                          digest, blob, json.dumps(shot.features)))
         result_text = json.dumps(result)
-        now = time.time()
-        with self._lock:
+        with self._writer():
+            now = time.time()
             c = self._conn
             c.execute("BEGIN IMMEDIATE")
             try:
@@ -210,13 +270,13 @@ class Store:
                 return None
             columns = "shot_index, t0, dt, units, calibration, metadata, features, n_samples"
             if with_samples:
-                columns += ", dtype, sha256, samples"
+                columns += ", dtype, sha256, samples, codec"
             shot_rows = self._conn.execute(
                 f"SELECT {columns} FROM shots WHERE measurement_id = ? ORDER BY shot_index",
                 (measurement_id,)).fetchall()
         record = _measurement(row)
         for s in shot_rows:
-            samples = (decode_samples(s[8], s[10], s[7], s[9]) if with_samples
+            samples = (decode_samples(s[8], s[10], s[7], s[9], s[11]) if with_samples
                        else np.empty(0))
             record.shots.append(ShotRecord(
                 t0=s[1], dt=s[2], samples=samples, units=s[3], calibration=s[4],
@@ -228,11 +288,13 @@ class Store:
         with self._lock:
             s = self._conn.execute(
                 "SELECT shot_index, t0, dt, units, calibration, metadata, features, n_samples, "
-                "dtype, sha256, samples FROM shots WHERE measurement_id = ? AND shot_index = ?",
+                "dtype, sha256, samples, codec FROM shots WHERE measurement_id = ? AND "
+                "shot_index = ?",
                 (measurement_id, shot_index)).fetchone()
         if s is None:
             return None
-        return ShotRecord(t0=s[1], dt=s[2], samples=decode_samples(s[8], s[10], s[7], s[9]),
+        return ShotRecord(t0=s[1], dt=s[2],
+                          samples=decode_samples(s[8], s[10], s[7], s[9], s[11]),
                           units=s[3], calibration=s[4], metadata=json.loads(s[5]),
                           features=json.loads(s[6]), shot_index=s[0])
 
@@ -274,6 +336,15 @@ class Store:
                 "sphere_diameter": meta.get("sphere_diameter"), "t0_s": r[5], "dt_s": r[6],
                 "units": r[7], "calibration": r[8], "n_samples": r[9], **_flat(feats),
             }
+
+
+def _open_writer_lock(path: Path) -> int | None:
+    """File descriptor of ``<store>.writer-lock`` for :meth:`Store._writer` (None off POSIX)."""
+    try:
+        import fcntl  # noqa: F401  (POSIX only)
+    except ImportError:
+        return None
+    return os.open(f"{path}.writer-lock", os.O_RDWR | os.O_CREAT, 0o600)
 
 
 def _measurement(row: Sequence[Any]) -> MeasurementRecord:

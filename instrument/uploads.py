@@ -19,11 +19,11 @@ import numpy as np
 from .problems import Problem
 
 FORMATS: dict[str, str] = {"csv": ".csv", "npy": ".npy", "npz": ".npz", "hdf5": ".h5",
-                           "tdms": ".tdms"}
+                           "tdms": ".tdms", "json": ".json"}
 """Upload formats and the suffix the server gives the temporary file."""
 
 SUFFIXES: dict[str, str] = {".csv": "csv", ".npy": "npy", ".npz": "npz", ".h5": "hdf5",
-                            ".hdf5": "hdf5", ".tdms": "tdms"}
+                            ".hdf5": "hdf5", ".hdf": "hdf5", ".tdms": "tdms", ".json": "json"}
 
 _CHUNK = 1 << 20
 

@@ -1,0 +1,348 @@
+"""The instrument service in-process (TestClient): measure, read back, plot, export, errors."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from fastapi.testclient import TestClient
+from service_support import (
+    DT,
+    INCIDENT_N,
+    INCIDENT_S,
+    REFLECTED_N,
+    REFLECTED_S,
+    shot_json,
+    shot_samples,
+)
+
+from solitonde.instrument.app import build_app
+from solitonde.instrument.settings import Settings
+
+PROBLEM = "application/problem+json"
+
+
+def make_client(tmp_path: Path, **settings: object) -> TestClient:
+    return TestClient(build_app(Settings(store_path=tmp_path / "store.sqlite", **settings)))
+
+
+@pytest.fixture
+def client(tmp_path: Path):
+    with make_client(tmp_path, max_samples_per_shot=50_000, max_shots_per_request=8) as c:
+        yield c
+
+
+def stored(client: TestClient) -> int:
+    return client.app.state.service.store.count()
+
+
+def test_health_and_readiness_report_missing_table(client: TestClient) -> None:
+    """healthz answers; readyz is ready (store works) and says estimates are off without a table."""
+    assert client.get("/healthz").json()["status"] == "ok"
+    ready = client.get("/readyz").json()
+    assert ready["ready"] is True
+    assert ready["table_loaded"] is False and ready["estimates"] is False
+    assert "table" in ready["reason"]
+    table = client.get("/v1/table").json()
+    assert table["loaded"] is False
+    assert table["limits"]["max_samples_per_shot"] == 50_000
+
+
+def test_post_measurement_measures_stores_and_reads_back(client: TestClient) -> None:
+    """Three shots: features match the synthetic truth, aggregate counts 3, stored bit for bit."""
+    shots = [shot_json(seed=s, shot=s) for s in range(3)]
+    r = client.post("/v1/measurements", json={"shots": shots})
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert r.headers["location"] == f"/v1/measurements/{body['id']}"
+    assert body["n_shots"] == 3 and body["plate_id"] == "P1" and body["position"] == "A1"
+    for s in body["shots"]:
+        f = s["features"]
+        # 40 dB SNR, 12 bits: TOF within one sample period, ARR within 2 % (the signal issue's bar).
+        assert abs(f["tof_s"] - (REFLECTED_S - INCIDENT_S)) < DT
+        assert abs(f["arr"] - REFLECTED_N / INCIDENT_N) < 0.02 * REFLECTED_N / INCIDENT_N
+    (agg,) = body["aggregates"]
+    assert agg["sphere_diameter"] == pytest.approx(9.53e-3)
+    assert agg["tof_s"]["count"] == 3
+    assert body["estimate"] is None and "table" in body["estimate_reason"]
+
+    got = client.get(f"/v1/measurements/{body['id']}").json()
+    assert got["shots"] == body["shots"] and got["aggregates"] == body["aggregates"]
+    for k, sent in enumerate(shots):
+        back = client.get(f"/v1/measurements/{body['id']}/shots/{k}").json()
+        assert back["samples"] == sent["samples"]  # exact: the store is lossless
+        assert back["dt"] == DT and back["metadata"]["shot"] == k
+    assert stored(client) == 1
+
+
+def test_plot_png(client: TestClient) -> None:
+    """The plot is a PNG of reasonable size; a missing shot or measurement is a 404 problem."""
+    mid = client.post("/v1/measurements", json={"shots": [shot_json()]}).json()["id"]
+    r = client.get(f"/v1/measurements/{mid}/plot.png")
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    assert r.content[:8] == b"\x89PNG\r\n\x1a\n" and len(r.content) > 10_000
+    for url, field in [(f"/v1/measurements/{mid}/plot.png?shot=5", "shot"),
+                       ("/v1/measurements/999/plot.png", "id"),
+                       ("/v1/measurements/999", "id")]:
+        r = client.get(url)
+        assert r.status_code == 404 and r.headers["content-type"] == PROBLEM
+        assert r.json()["field"] == field
+
+
+def test_listing_pages_and_filters(client: TestClient) -> None:
+    """Paging follows 'next' through every measurement of a plate and only that plate."""
+    ids = {}
+    for i in range(5):
+        plate = "PA" if i % 2 == 0 else "PB"
+        r = client.post("/v1/measurements", json={"shots": [shot_json(seed=i, plate_id=plate)]})
+        ids[r.json()["id"]] = plate
+    seen = []
+    url = "/v1/measurements?plate_id=PA&limit=2"
+    while url:
+        page = client.get(url).json()
+        assert len(page["items"]) <= 2
+        seen += [item["id"] for item in page["items"]]
+        url = page["next"]
+    assert seen == sorted(k for k, v in ids.items() if v == "PA")
+    assert len(client.get("/v1/measurements?limit=500").json()["items"]) == 5
+
+
+def test_export_csv_and_parquet(client: TestClient) -> None:
+    """One row per shot with the features as columns, in both formats, filtered by plate."""
+    client.post("/v1/measurements", json={"shots": [shot_json(seed=1), shot_json(seed=2)]})
+    client.post("/v1/measurements", json={"shots": [shot_json(seed=3, plate_id="other")]})
+    r = client.get("/v1/measurements/export?format=csv&plate_id=P1")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("text/csv")
+    frame = pd.read_csv(io.StringIO(r.text))
+    assert len(frame) == 2 and set(frame["plate_id"]) == {"P1"}
+    assert np.allclose(frame["tof_s"], REFLECTED_S - INCIDENT_S, atol=DT)
+    r = client.get("/v1/measurements/export?format=parquet")
+    frame = pd.read_parquet(io.BytesIO(r.content))
+    assert len(frame) == 3 and {"tof_s", "arr", "snr_db", "flags"} <= set(frame.columns)
+    assert client.get("/v1/measurements/export?format=xlsx").status_code == 422
+
+
+def _raw(client: TestClient, body: bytes | str, ctype: str | None = "application/json",
+         url: str = "/v1/measurements"):
+    headers = {"content-type": ctype} if ctype else {}
+    return client.post(url, content=body, headers=headers)
+
+
+def _body(**shot_changes: object) -> str:
+    shot = shot_json()
+    shot.update(shot_changes)
+    return json.dumps({"shots": [shot]})
+
+
+def _with_nan() -> str:
+    shot = shot_json()
+    shot["samples"][100] = math.nan
+    return json.dumps({"shots": [shot]})  # Python writes the non-standard literal NaN
+
+
+def _with_meta(**meta: object) -> str:
+    shot = shot_json()
+    shot["metadata"].update(meta)
+    return json.dumps({"shots": [shot]})
+
+
+BAD_INPUTS = [
+    # (case, body, content type, status, field)
+    ("nan sample", _with_nan(), "application/json", 422, "shots.0.samples.100"),
+    ("infinite dt", _body().replace('"dt": 5e-07', '"dt": Infinity'), "application/json", 422,
+     "shots.0.dt"),
+    ("empty samples", _body(samples=[]), "application/json", 422, "shots.0.samples"),
+    ("too few samples", _body(samples=[0.0] * 10), "application/json", 422, "shots.0.samples"),
+    ("too many samples", _body(samples=[0.0] * 50_001), "application/json", 422,
+     "shots.0.samples"),
+    ("no shots", json.dumps({"shots": []}), "application/json", 422, "shots"),
+    ("too many shots", json.dumps({"shots": [shot_json(n=64)] * 9}), "application/json", 422,
+     "shots"),
+    ("empty body", "", "application/json", 422, "body"),
+    ("empty object", "{}", "application/json", 422, "shots"),
+    ("not json", "{shots: [", "application/json", 422, "body"),
+    ("unknown top-level field", json.dumps({"shots": [shot_json()], "plate": "x"}),
+     "application/json", 422, "plate"),
+    ("unknown shot field", _body(gain=2.0), "application/json", 422, "shots.0.gain"),
+    ("unknown metadata field", _with_meta(operator="bob"), "application/json", 422,
+     "shots.0.metadata.operator"),
+    ("negative dt", _body(dt=-5e-7), "application/json", 422, "shots.0.dt"),
+    ("zero dt", _body(dt=0), "application/json", 422, "shots.0.dt"),
+    ("dt as boolean", _body(dt=True), "application/json", 422, "shots.0.dt"),
+    ("samples as text", _body(samples="1,2,3"), "application/json", 422, "shots.0.samples"),
+    ("unknown units", _body(units="mV"), "application/json", 422, "shots.0.units"),
+    ("volts without calibration", _body(units="V"), "application/json", 422,
+     "shots.0.calibration"),
+    ("zero calibration", _body(calibration=0.0), "application/json", 422,
+     "shots.0.calibration"),
+    ("negative sphere diameter", _with_meta(sphere_diameter=-0.01), "application/json", 422,
+     "shots.0.metadata.sphere_diameter"),
+    ("noise only, no pulse", _body(samples=np.random.default_rng(0).normal(0, 1, 4000).tolist()),
+     "application/json", 422, "shots.0.samples"),
+    ("two positions in one request",
+     json.dumps({"shots": [shot_json(), shot_json(position="B7")]}), "application/json", 422,
+     "shots.1.metadata.position"),
+    ("text/plain", _body(), "text/plain", 415, "content-type"),
+    ("xml", "<shots/>", "application/xml", 415, "content-type"),
+    ("form-urlencoded", "shots=1", "application/x-www-form-urlencoded", 415, "content-type"),
+    ("no content type", _body(), None, 415, "content-type"),
+]
+
+
+@pytest.mark.parametrize(("case", "body", "ctype", "status", "field"), BAD_INPUTS,
+                         ids=[c[0] for c in BAD_INPUTS])
+def test_bad_input_gets_a_problem_and_stores_nothing(client: TestClient, case: str, body: str,
+                                                     ctype: str | None, status: int,
+                                                     field: str) -> None:
+    """Each bad input: its 4xx, problem+json naming the field, a readable detail, store empty."""
+    r = _raw(client, body, ctype)
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"] == PROBLEM
+    problem = r.json()
+    assert problem["status"] == status and problem["field"] == field
+    assert problem["detail"].startswith(field) and len(problem["detail"]) > len(field) + 5
+    assert problem["type"].startswith("urn:solitonde:problem:")
+    assert stored(client) == 0
+
+
+def test_hundred_million_samples_rejected_before_reading(tmp_path: Path) -> None:
+    """10^8 samples: the declared body size (>= 100 MB in any encoding) is refused with 413
+    before a byte of it is read; the streamed case (no Content-Length) is cut off at the limit."""
+    with make_client(tmp_path, max_body_bytes=1_000_000) as client:
+        claimed = str(10**8 * 8)
+        r = client.post("/v1/measurements", content=b"{}", headers={
+            "content-type": "application/json", "content-length": claimed})
+        assert r.status_code == 413 and r.json()["field"] == "body"
+        assert "at most 1,000,000 bytes" in r.json()["detail"]
+
+        def stream():
+            yield b'{"shots": [{"dt": 5e-7, "samples": [0'
+            for _ in range(100):  # 10^6 more samples, in chunks, with no declared length
+                yield b",0" * 10_000
+            yield b"]}]}"
+
+        r = client.post("/v1/measurements", content=stream(),
+                        headers={"content-type": "application/json"})
+        assert r.status_code == 413 and r.headers["content-type"] == PROBLEM
+        assert client.app.state.service.store.count() == 0
+
+
+def test_compressed_upload_declaring_1e8_samples_is_refused(tmp_path: Path) -> None:
+    """A 100 kB NPZ that inflates to 10^8 samples is sized from its header and refused (413)."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, samples=np.zeros(10**8, dtype=np.int8))
+    assert buf.tell() < 1_000_000
+    with make_client(tmp_path) as client:
+        r = client.post("/v1/measurements", files={"file": ("shots.npz", buf.getvalue())},
+                        data={"plate_id": "P1"})
+        assert r.status_code == 413, r.text
+        assert r.json()["field"] == "file" and "100,000,000" in r.json()["detail"]
+        assert client.app.state.service.store.count() == 0
+
+
+def test_upload_problems_name_the_field(client: TestClient) -> None:
+    """Uploads: missing file, unknown format, unknown form field, garbage content: 422, no store."""
+    cases = [
+        ({"data": {"plate_id": "P1"}, "files": {"other": ("x.csv", b"1,2")}}, "file"),
+        ({"files": {"file": ("shot.xyz", b"123")}}, "format"),
+        ({"files": {"file": ("shot.csv", b"123")}, "data": {"format": "wav"}}, "format"),
+        ({"files": {"file": ("shot.csv", b"1\n2\n")}, "data": {"colour": "red"}}, "colour"),
+        ({"files": {"file": ("shot.npy", b"not an npy file")}}, "file"),
+        ({"files": {"file": ("shot.h5", b"\x89HDF garbage")}}, "file"),
+    ]
+    for kwargs, field in cases:
+        r = client.post("/v1/measurements", **kwargs)
+        assert r.status_code == 422, (field, r.text)
+        assert r.json()["field"].startswith(field), r.json()
+    assert stored(client) == 0
+
+
+def test_api_key_guards_writes_and_stored_data(tmp_path: Path) -> None:
+    """With a key set: no key or a wrong key is a 401 (nothing stored); header or bearer works;
+    health and docs stay open."""
+    with make_client(tmp_path, api_key="s3cret-key") as client:
+        body = {"shots": [shot_json()]}
+        r = client.post("/v1/measurements", json=body)
+        assert r.status_code == 401 and r.json()["field"] == "api_key"
+        assert r.headers["www-authenticate"].startswith("Bearer")
+        r = client.post("/v1/measurements", json=body, headers={"X-API-Key": "wrong"})
+        assert r.status_code == 401
+        assert client.app.state.service.store.count() == 0
+        for url in ["/v1/measurements", "/v1/measurements/1", "/v1/measurements/1/plot.png",
+                    "/v1/measurements/export", "/v1/measurements/1/shots/0", "/v1/table"]:
+            assert client.get(url).status_code == 401, url
+        r = client.post("/v1/measurements", json=body, headers={"X-API-Key": "s3cret-key"})
+        assert r.status_code == 201
+        mid = r.json()["id"]
+        r = client.get(f"/v1/measurements/{mid}",
+                       headers={"Authorization": "Bearer s3cret-key"})
+        assert r.status_code == 200 and r.json()["id"] == mid
+        assert client.get("/healthz").status_code == 200
+        assert client.get("/readyz").status_code == 200
+        assert client.get("/docs").status_code == 200
+
+
+def test_invert_without_table_is_503_and_validates_first(client: TestClient) -> None:
+    """No table: a valid request gets 503 naming the table; an invalid one its 422."""
+    good = {"inputs": [{"diameter_m": 9.53e-3, "tof_s": 5e-4, "arr": 0.6}]}
+    r = client.post("/v1/invert", json=good)
+    assert r.status_code == 503 and r.json()["field"] == "table"
+    r = client.post("/v1/invert", json={"inputs": [{"diameter_m": 9.53e-3, "tof_s": -1,
+                                                    "arr": 0.6}]})
+    assert r.status_code == 422 and r.json()["field"] == "inputs.0.tof_s"
+    r = _raw(client, json.dumps(good), "text/plain", "/v1/invert")
+    assert r.status_code == 415
+
+
+def test_simulate_runs_and_prices_scenes(client: TestClient) -> None:
+    """A small scene runs and is measured like a recorded shot; an expensive one is refused
+    with a 422 that states its cost; a bad scene field is named."""
+    scene = {"chain": {"n_particles": 20}, "plate": {"thickness": 3.18e-3}}
+    r = client.post("/v1/simulate", json={"scene": scene})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["n_samples"] == len(out["samples"]) > 100
+    truth = out["diagnostics"]["truth"]
+    assert out["features"]["tof_s"] == pytest.approx(truth["tof_s"], abs=2 * out["dt"])
+    assert out["cost"]["cost"] <= client.app.state.settings.max_simulation_cost
+
+    big = {"chain": {"n_particles": 100_000}, "output": {"duration": 1.0}}
+    r = client.post("/v1/simulate", json={"scene": big})
+    assert r.status_code == 422 and r.json()["field"] == "scene"
+    assert "too expensive" in r.json()["detail"]
+
+    r = client.post("/v1/simulate", json={"scene": {"chain": {"diameter": -1}}})
+    assert r.status_code == 422 and r.json()["field"] == "scene.chain.diameter"
+    r = client.post("/v1/simulate", json={"scene": {}, "trace": True})
+    assert r.status_code == 422 and r.json()["field"] == "trace"
+
+
+def test_openapi_states_the_limits(tmp_path: Path) -> None:
+    """The schema carries the configured limits (maxItems) and both request content types."""
+    with make_client(tmp_path, max_samples_per_shot=12_345, max_shots_per_request=7) as client:
+        schema = client.get("/openapi.json").json()
+    shots = schema["components"]["schemas"]["MeasurementIn"]["properties"]["shots"]
+    assert shots["maxItems"] == 7
+    shot = schema["components"]["schemas"]["ShotIn"]["properties"]["samples"]
+    assert shot["maxItems"] == 12_345
+    content = schema["paths"]["/v1/measurements"]["post"]["requestBody"]["content"]
+    assert set(content) == {"application/json", "multipart/form-data"}
+    assert "12,345 samples per shot" in schema["info"]["description"]
+
+
+def test_shots_are_float32_when_exact_else_float64(client: TestClient) -> None:
+    """Lossless either way: 12-bit ADC steps fit float32; full float64 noise is kept as float64."""
+    from solitonde.instrument.store import decode_samples, encode_samples
+
+    adc = np.round(shot_samples(1) * 64) / 64
+    wide = shot_samples(1) + 1e-9 * np.random.default_rng(1).normal(size=4000)
+    for x, dtype in [(adc, "<f4"), (wide, "<f8")]:
+        kind, digest, blob = encode_samples(x)
+        assert kind == dtype
+        back = decode_samples(kind, blob, x.size, digest)
+        assert np.array_equal(back, x)
