@@ -12,6 +12,7 @@ import typer
 
 COMMAND_MODULES: list[str] = [
     "cmd_analyze",
+    "cmd_samples",
     "cmd_simulate",
     "cmd_theory",
     "cmd_serve",
