@@ -1,0 +1,63 @@
+"""Repository layout: the mapped folders, the stdlib `signal`, one-way dependencies."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_signal_folder_is_not_a_regular_package():
+    assert (ROOT / "signal").is_dir()
+    assert not (ROOT / "signal" / "__init__.py").exists()
+
+
+def test_stdlib_signal_wins_from_the_repository_root():
+    """`python -c "import signal; signal.SIGINT"` from the root must reach the stdlib module."""
+    out = subprocess.run(
+        [sys.executable, "-c", "import signal; signal.SIGINT; print(signal.__file__)"],
+        cwd=ROOT, capture_output=True, text=True, timeout=60,
+    )
+    assert out.returncode == 0, out.stderr
+    assert not Path(out.stdout.strip()).resolve().is_relative_to(ROOT)
+
+
+def test_package_imports_from_the_root_and_elsewhere(tmp_path):
+    code = ("import asyncio, subprocess, signal; signal.SIGINT; "
+            "import solitonde.model, solitonde.instrument, solitonde.signal; "
+            "print(solitonde.model.__file__)")
+    for cwd in (ROOT, tmp_path):
+        out = subprocess.run([sys.executable, "-c", code], cwd=cwd, capture_output=True,
+                             text=True, timeout=120)
+        assert out.returncode == 0, out.stderr
+        assert Path(out.stdout.strip()).resolve().is_relative_to(ROOT / "model")
+
+
+def _imported_modules(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            prefix = "." * node.level
+            names.add(prefix + (node.module or ""))
+    return names
+
+
+def test_dependencies_point_one_way():
+    """model and signal import neither each other nor instrument."""
+    forbidden = {
+        "model": ("solitonde.signal", "solitonde.instrument", "..signal", "..instrument"),
+        "signal": ("solitonde.model", "solitonde.instrument", "..model", "..instrument"),
+    }
+    offenders = []
+    for folder, bad in forbidden.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            for name in _imported_modules(path):
+                if name.startswith(bad):
+                    offenders.append(f"{path.relative_to(ROOT)} imports {name}")
+    assert not offenders, offenders
