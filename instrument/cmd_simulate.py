@@ -1,90 +1,73 @@
 """`solitonde simulate`: run one scene through the chain model and measure its sensor trace.
 
 The model (``solitonde.model``) makes the trace; the features (TOF, ARR, pulse peaks) are
-measured from the sampled trace the way a recorded waveform would be measured.
+measured by ``solitonde.signal`` exactly as a recorded waveform would be, so simulated and
+measured shots share one extractor and its biases.
 
-``--out`` writes the trace as CSV: ``# key: <JSON>`` comment lines first (``format``,
-``scene``, ``plate_model``, ``plate_model_reason``, ``units``, ``sample_rate_hz``), then the
-header ``time_s,force_N`` and one row per sample.
+``--out`` writes the trace with ``solitonde.signal.io`` as CSV: ``# key: <JSON>`` comment lines
+first (``scene``, ``plate_model``, ``plate_model_reason``, ``source``), then the header
+``time_s,force_N`` and one row per sample; ``solitonde.signal.io.read`` reads it back with the
+scene in ``metadata["scene"]``.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.table import Table
 
+from solitonde.instrument import greens_cache
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import SimulationResult, simulate
+from solitonde.signal import io as signal_io
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.features import Features, extract
+from solitonde.signal.waveform import Waveform
 
-CSV_FORMAT = "solitonde-trace-csv/1"
+
+def to_waveform(result: SimulationResult) -> Waveform:
+    """The simulated sensor trace as a signal Waveform, with the scene as metadata."""
+    return Waveform(
+        result.t0, result.dt, result.samples, "N",
+        metadata={
+            "scene": result.scene.to_dict(),
+            "plate_model": result.plate_model,
+            "plate_model_reason": result.plate_model_reason,
+            "source": "solitonde simulate",
+        },
+    )
 
 
-def two_largest_separated_peaks(
-    time: np.ndarray, force: np.ndarray
-) -> dict[str, float]:
-    """TOF and ARR from the two largest local maxima that are further apart than the pulse.
+def _nan(value: float | None) -> float:
+    return math.nan if value is None else float(value)
 
-    The baseline is the first sample (the static load). The separation needed is twice the
-    largest pulse's full width at half its rise, so a pulse's own shoulders never count twice.
+
+def summary(
+    result: SimulationResult, features: Features | None, feature_error: str | None = None
+) -> dict[str, Any]:
+    """The JSON of ``solitonde simulate --json`` (the first twelve keys are a public contract).
+
+    Pulse quantities the trace does not support (no reflection found, or no pulse the signal
+    extractor could detect: ``features`` None, ``feature_error`` says why) are NaN here, null in
+    JSON.
     """
-    base = float(force[0])
-    rise = force - base
-    inner = np.flatnonzero((rise[1:-1] > rise[:-2]) & (rise[1:-1] >= rise[2:])) + 1
-    nan = {"incident_time_s": math.nan, "incident_peak_N": math.nan,
-           "reflected_time_s": math.nan, "reflected_peak_N": math.nan,
-           "tof_s": math.nan, "arr": math.nan}
-    if inner.size == 0:
-        return nan
-    order = inner[np.argsort(rise[inner])[::-1]]
-    top = order[0]
-    above = rise >= 0.5 * rise[top]
-    left = top
-    while left > 0 and above[left - 1]:
-        left -= 1
-    right = top
-    while right < rise.size - 1 and above[right + 1]:
-        right += 1
-    min_gap = 2.0 * max(time[right] - time[left], time[1] - time[0])
-    second = next((k for k in order[1:] if abs(time[k] - time[top]) > min_gap), None)
-    if second is None:
-        return nan
-    first, later = sorted((int(top), int(second)))
-    return {
-        "incident_time_s": float(time[first]),
-        "incident_peak_N": float(force[first]),
-        "reflected_time_s": float(time[later]),
-        "reflected_peak_N": float(force[later]),
-        "tof_s": float(time[later] - time[first]),
-        "arr": float(rise[later] / rise[first]),
-    }
-
-
-def measure(result: SimulationResult) -> dict[str, float]:
-    """Pulse features of the sampled sensor trace."""
-    return two_largest_separated_peaks(result.time, result.samples)
-
-
-def summary(result: SimulationResult, features: dict[str, float]) -> dict[str, Any]:
-    """The JSON of ``solitonde simulate --json`` (the first twelve keys are a public contract)."""
     d = result.diagnostics
+    if features is None:
+        features = Features(None, None, math.nan, None, math.nan, None, math.nan, ["no_features"])
     return {
         "plate_model": result.plate_model,
-        "tof_s": features["tof_s"],
-        "arr": features["arr"],
-        "incident_peak_N": features["incident_peak_N"],
-        "reflected_peak_N": features["reflected_peak_N"],
-        "incident_time_s": features["incident_time_s"],
-        "reflected_time_s": features["reflected_time_s"],
+        "tof_s": _nan(features.tof_s),
+        "arr": _nan(features.arr),
+        "incident_peak_N": _nan(features.incident_peak_N),
+        "reflected_peak_N": _nan(features.reflected_peak_N),
+        "incident_time_s": _nan(features.incident_time_s),
+        "reflected_time_s": _nan(features.reflected_time_s),
         "energy_drift": d["energy_drift"],
         "steps": d["steps"],
         "dt_s": d["dt_s"],
@@ -96,7 +79,13 @@ def summary(result: SimulationResult, features: dict[str, float]) -> dict[str, A
         "duration_s": d["duration_s"],
         "plate_work_J": d["plate_work_J"],
         "dissipated_J": d["dissipated_J"],
+        "snr_db": features.snr_db,
+        "flags": list(features.flags),
+        "feature_error": feature_error,
         "model_truth": result.truth,
+        # spectral-element plate models (sem, greens) only
+        **{k: d[k] for k in ("mesh", "dt_stability_ratio", "chain_dt_s", "greens_cached")
+           if k in d},
     }
 
 
@@ -113,31 +102,7 @@ def _json_safe(data: Any) -> Any:
     return data
 
 
-def write_csv(path: Path, result: SimulationResult) -> None:
-    """Write the sensor trace with the scene as metadata, atomically (temporary name, rename)."""
-    header = {
-        "format": CSV_FORMAT,
-        "scene": result.scene.to_dict(),
-        "plate_model": result.plate_model,
-        "plate_model_reason": result.plate_model_reason,
-        "units": "N",
-        "sample_rate_hz": 1.0 / result.dt,
-    }
-    lines = [f"# {key}: {json.dumps(value)}" for key, value in header.items()]
-    lines.append("time_s,force_N")
-    body = "\n".join(f"{t:.12e},{f:.12e}" for t, f in zip(result.time, result.samples, strict=True))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write("\n".join(lines) + "\n" + body + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_plot(path: Path, result: SimulationResult, features: dict[str, float]) -> None:
+def write_plot(path: Path, result: SimulationResult, data: dict[str, Any]) -> None:
     """Sensor trace with the detected incident and reflected pulses marked."""
     import matplotlib
 
@@ -147,13 +112,13 @@ def write_plot(path: Path, result: SimulationResult, features: dict[str, float])
     fig, ax = plt.subplots(figsize=(8, 4))
     ax.plot(result.time * 1e3, result.samples, lw=1.0, color="0.2", label="sensor")
     for name, color in (("incident", "tab:blue"), ("reflected", "tab:red")):
-        t, f = features[f"{name}_time_s"], features[f"{name}_peak_N"]
+        t, f = data[f"{name}_time_s"], data[f"{name}_peak_N"]
         if math.isfinite(t) and math.isfinite(f):
             ax.plot([t * 1e3], [f], "o", color=color, label=f"{name} {f:.3g} N at {t * 1e3:.4g} ms")
     s = result.scene
     ax.set_title(
         f"D = {s.chain.diameter * 1e3:.2f} mm, t = {s.plate.thickness * 1e3:.2f} mm, "
-        f"{result.plate_model}: TOF = {features['tof_s'] * 1e3:.4g} ms, ARR = {features['arr']:.3g}"
+        f"{result.plate_model}: TOF = {data['tof_s'] * 1e3:.4g} ms, ARR = {data['arr']:.3g}"
     )
     ax.set_xlabel("time after impact (ms)")
     ax.set_ylabel("sensor force (N)")
@@ -200,6 +165,7 @@ def simulate_command(
     """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
     try:
         scene = load_scene(scene_file, overrides or [])
+        greens_cache.install()
         result = simulate(scene)
     except SceneError as exc:
         typer.echo(f"error: {exc}", err=True)
@@ -207,12 +173,20 @@ def simulate_command(
     except SimulationError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=1) from None
-    features = measure(result)
-    data = summary(result, features)
+    waveform = to_waveform(result)
+    features: Features | None = None
+    feature_error = None
+    try:
+        features = extract(waveform)
+    except WaveformError as exc:
+        feature_error = str(exc)
+        typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
+    data = summary(result, features, feature_error)
     if out is not None:
-        write_csv(out, result)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        signal_io.write(out, waveform, format="csv")
     if plot is not None:
-        write_plot(plot, result, features)
+        write_plot(plot, result, data)
     if as_json:
         typer.echo(json.dumps(_json_safe(data), indent=2))
     else:
