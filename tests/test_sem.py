@@ -1,0 +1,163 @@
+"""Spectral-element plate: mesh layout, elasticity, mass, stability, symmetry, point impedance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.sparse.linalg import eigsh
+
+from solitonde.model.contact import plate_impedance
+from solitonde.model.materials import MATERIALS
+from solitonde.model.mesh import plate_mesh
+from solitonde.model.sem import build_plate
+
+AL = MATERIALS["al_6061"]
+
+
+def test_paper_preset_counts() -> None:
+    """16 x 16 x 1 elements of order 4 x 4 x 2: 12,675 nodes and 38,025 dofs (PHYSICS.md 9)."""
+    mesh = plate_mesh((0.914, 0.914), 3.18e-3, (16, 16, 1), (4, 4, 2), contact_x=0.457)
+    assert mesh.n_nodes == 12_675
+    assert mesh.n_dofs == 38_025
+    half = plate_mesh((0.914, 0.914), 3.18e-3, (16, 16, 1), (4, 4, 2), 0.457, symmetry=True)
+    assert half.elements == (16, 8, 1)
+    assert half.n_nodes == 65 * 33 * 3
+
+
+@pytest.mark.parametrize("distance", [0.0, 0.001, 0.01, 0.0123, 0.05, 0.2, 0.3171, 0.457, 0.914])
+@pytest.mark.parametrize("symmetry", [False, True])
+def test_contact_node_lies_under_the_chain(distance: float, symmetry: bool) -> None:
+    """For any L the top-surface node under the chain is at (L, Ly/2, t), with at most two
+    element sizes per direction, none far from the uniform size unless L forces it."""
+    mesh = plate_mesh((0.914, 0.914), 3.18e-3, (16, 16, 1), (4, 4, 2), distance, symmetry)
+    x, y, z = mesh.nodes[mesh.contact_node]
+    assert x == pytest.approx(distance, abs=1e-12)
+    assert y == pytest.approx(0.457, abs=1e-12)
+    assert z == pytest.approx(3.18e-3, abs=1e-15)
+    hx = np.diff(mesh.x_edges)
+    assert len(np.unique(np.round(hx / hx.max(), 9))) <= 2
+    assert hx.sum() == pytest.approx(0.914)
+    if distance >= 0.01:  # a node at L = 1 mm needs some element near 1 mm / 0.17 at least
+        assert hx.min() > 0.5 * 0.914 / 16
+    assert len(mesh.shapes[0]) <= 4
+
+
+def test_stiffness_matches_assembled_and_is_symmetric() -> None:
+    """Matrix-free K u equals the assembled CSR matvec on a graded mesh; K is symmetric."""
+    mesh = plate_mesh((0.2, 0.15), 4e-3, (3, 3, 2), (3, 2, 2), contact_x=0.031)
+    plate = build_plate(mesh, AL, "none")
+    assert len(mesh.shapes[0]) >= 2
+    k = plate.stiffness_csr()
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal(plate.n_dofs)
+    ku = plate.apply_stiffness(u)
+    assert np.allclose(ku, k @ u, rtol=0, atol=1e-12 * np.abs(ku).max())
+    assert abs(k - k.T).max() <= 1e-12 * abs(k).max()
+
+
+def test_rigid_body_motions_carry_no_force() -> None:
+    """Translations and infinitesimal rotations of a free plate lie in the kernel of K."""
+    mesh = plate_mesh((0.2, 0.15), 4e-3, (3, 3, 1), (4, 3, 2), contact_x=0.05)
+    plate = build_plate(mesh, AL, "none")
+    x, y, z = mesh.nodes.T
+    scale = np.abs(plate.apply_stiffness(np.random.default_rng(0).standard_normal(plate.n_dofs)))
+    zero = np.zeros_like(x)
+    modes = [
+        (np.ones_like(x), zero, zero), (zero, np.ones_like(x), zero), (zero, zero, np.ones_like(x)),
+        (-y, x, zero), (zero, -z, y), (z, zero, -x),
+    ]
+    for mode in modes:
+        u = np.column_stack(mode).ravel()
+        assert np.abs(plate.apply_stiffness(u)).max() < 1e-11 * scale.max()
+
+
+def test_uniform_strain_gives_hookes_law_tractions() -> None:
+    """u_x = eps x: the nodal forces on the face x = Lx add up to (lambda + 2 mu) eps A and
+    those on y = Ly to lambda eps A_y; interior nodes carry nothing (a patch test)."""
+    lx, ly, t = 0.12, 0.08, 5e-3
+    mesh = plate_mesh((lx, ly), t, (3, 2, 1), (3, 4, 2), contact_x=0.05)
+    plate = build_plate(mesh, AL, "none")
+    eps = 1e-4
+    x, y, _ = mesh.nodes.T
+    u = np.column_stack((eps * x, 0 * x, 0 * x)).ravel()
+    f = plate.apply_stiffness(u).reshape(-1, 3)
+    lam, mu = AL.lame_lambda, AL.shear_modulus
+    face_x = np.isclose(x, lx)
+    face_y = np.isclose(y, ly)
+    assert f[face_x, 0].sum() == pytest.approx((lam + 2 * mu) * eps * ly * t, rel=1e-10)
+    assert f[face_y, 1].sum() == pytest.approx(lam * eps * lx * t, rel=1e-10)
+    inside = ~(np.isclose(x, 0) | face_x | np.isclose(y, 0) | face_y
+               | np.isclose(mesh.nodes[:, 2], 0) | np.isclose(mesh.nodes[:, 2], t))
+    assert np.abs(f[inside]).max() < 1e-9 * np.abs(f).max()
+
+
+@pytest.mark.parametrize("symmetry", [False, True])
+def test_mass_is_the_plate_mass(symmetry: bool) -> None:
+    """Nodal quadrature conserves mass: sum of the diagonal = rho V (half of it on a half model)."""
+    mesh = plate_mesh((0.914, 0.914), 3.18e-3, (7, 6, 1), (4, 3, 2), 0.2, symmetry)
+    plate = build_plate(mesh, AL)
+    share = 0.5 if symmetry else 1.0
+    assert plate.node_mass.sum() == pytest.approx(share * AL.density * 0.914**2 * 3.18e-3)
+    assert np.all(plate.node_mass > 0)
+
+
+def test_stable_step_bound_and_instability_beyond_it() -> None:
+    """The element bound is above the global omega_max^2 and close to it; central differences
+    stay bounded at 0.98 of the critical step and blow up at 1.03 of it."""
+    mesh = plate_mesh((0.1, 0.1), 3e-3, (3, 3, 1), (3, 3, 2), contact_x=0.05)
+    plate = build_plate(mesh, AL, "opposite_edges")
+    lanczos = plate.max_eigenvalue
+    assert plate.element_bound >= lanczos * (1 - 1e-9)
+    assert plate.element_bound <= 1.3 * lanczos
+    dt_crit = 2.0 / np.sqrt(lanczos)
+    force = np.zeros(4000)
+    force[0] = 1.0
+    every = np.arange(plate.n_dofs)[~plate.fixed][::7]
+    stable = np.abs(plate.run_point_force(force, 0.98 * dt_crit, every))
+    unstable = np.abs(plate.run_point_force(force, 1.03 * dt_crit, every))
+    assert stable[-500:].max() < 10 * stable[:500].max()
+    assert not unstable[-500:].max() < 1e6 * unstable[:500].max()
+
+
+@pytest.mark.parametrize("supports", ["opposite_edges", "all_edges", "none"])
+def test_half_model_reproduces_full_plate(supports: str) -> None:
+    """The mirror plane y = Ly/2 with half the force gives the full plate's contact response."""
+    args = ((0.3, 0.24), 3.18e-3, (6, 6, 1), (3, 3, 2), 0.07)
+    full = build_plate(plate_mesh(*args, symmetry=False), AL, supports)
+    half = build_plate(plate_mesh(*args, symmetry=True), AL, supports)
+    dt = 0.9 * 2 / np.sqrt(max(full.element_bound, half.element_bound))
+    force = np.sin(np.pi * np.arange(600) / 150) ** 2 * (np.arange(600) < 150)
+    w_full = full.run_point_force(force, dt)[:, 0]
+    w_half = half.run_point_force(0.5 * force, dt)[:, 0]
+    assert np.abs(w_half - w_full).max() < 1e-9 * np.abs(w_full).max()
+
+
+@pytest.mark.parametrize("thickness", [2.29e-3, 3.18e-3, 4.83e-3])
+def test_point_impedance_of_the_infinite_plate(thickness: float) -> None:
+    """After a short force pulse and before any edge reflection returns, the contact point has
+    moved by impulse / Z with Z = 8 sqrt(rho t D_p) (Zener; the Kirchhoff plate's point
+    mobility is real and frequency independent). Mean over 30-100 us, 20 us sin^2 pulse."""
+    size = 0.3
+    mesh = plate_mesh((size, size), thickness, (12, 12, 1), (4, 4, 2), size / 2, symmetry=True)
+    plate = build_plate(mesh, AL, "opposite_edges")
+    dt = 0.9 * 2 / np.sqrt(plate.element_bound)
+    n = int(110e-6 / dt)
+    t = np.arange(n) * dt
+    pulse = np.where(t < 20e-6, np.sin(np.pi * t / 20e-6) ** 2, 0.0)
+    impulse = pulse.sum() * dt
+    w = plate.run_point_force(plate.force_share * pulse, dt)[:, 0]
+    tw = np.arange(n + 1) * dt
+    window = (tw > 30e-6) & (tw < 100e-6)
+    ratio = w[window].mean() / impulse * plate_impedance(thickness, AL)
+    assert ratio == pytest.approx(1.0, abs=0.02)
+
+
+def test_lanczos_agrees_with_scipy_on_assembled_matrix() -> None:
+    """omega_max^2 from the matrix-free Lanczos equals eigsh on the assembled M^-1/2 K M^-1/2."""
+    mesh = plate_mesh((0.1, 0.08), 3e-3, (2, 2, 1), (3, 3, 2), contact_x=0.05)
+    plate = build_plate(mesh, AL, "all_edges")
+    k = plate.stiffness_csr().toarray()
+    s = np.sqrt(plate.inv_mass)
+    a = s[:, None] * k * s[None, :]
+    ref = eigsh(a, k=1, which="LA", return_eigenvectors=False)[0]
+    assert plate.max_eigenvalue == pytest.approx(ref, rel=1e-6)
