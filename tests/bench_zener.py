@@ -38,6 +38,8 @@ def test_bench_restitution_many():
     e_fast, tau_fast = z.restitution_and_contact_time_many(lams)
 
     sample = lams[:: N_LAMBDAS // N_BASELINE]  # same lambda distribution as the 10,000
+    # The compiled DOP853 alone (what builds the table and serves lambdas above 20).
+    t_compiled = _best_of(lambda: z._integrate_compiled(sample), repeats=3)
     rows = {}
     for label, rtol in (("rtol 1e-12, same accuracy", 1e-12), ("rtol 1e-7, looser", 1e-7)):
         start = time.perf_counter()
@@ -52,6 +54,8 @@ def test_bench_restitution_many():
     print(f"  warm-up (numba cache load + Chebyshev table build): {warm * 1e3:8.1f} ms (once)")
     print(f"  fast path (table), best of 5:                      {t_fast * 1e3:8.3f} ms"
           f"   max rel. error vs reference {err_fast:.1e}")
+    print(f"  compiled DOP853 (no table), {sample.size} lambdas:       {t_compiled * 1e3:8.1f} ms"
+          f" -> {t_compiled / sample.size * N_LAMBDAS:6.2f} s per {N_LAMBDAS} (extrapolated)")
     for label, (elapsed, res) in rows.items():
         per_10k = elapsed / sample.size * N_LAMBDAS
         err = max(np.max(np.abs(res[:, 0] / ref[:, 0] - 1)),
