@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shlex
+import signal
 from pathlib import Path
 
 import typer
@@ -30,8 +31,7 @@ def curl_example(url: str, api_key_set: bool, sample: Path | None) -> str:
     if api_key_set:
         parts += ["-H", '"X-API-Key: $SOLITONDE_API_KEY"']
     file_arg = f"file=@{sample}" if sample else "file=@YOUR_SHOT.csv"
-    parts += ["-F", shlex.quote(file_arg), "-F", "plate_id=demo", "-F", "position=A1",
-              f"{url}/v1/measurements"]
+    parts += ["-F", shlex.quote(file_arg), f"{url}/v1/measurements"]
     return " ".join(parts)
 
 
@@ -76,5 +76,13 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"solitonde service on {url}  (docs: {url}/docs, store: "
                    f"{settings.store_path}, workers: {workers})")
         typer.echo("try:  " + curl_example(url, settings.api_key is not None, sample_file()))
+        # uvicorn shuts down gracefully on SIGINT and SIGTERM, restores the previous handlers
+        # and re-raises the signal; with these handlers a clean stop exits with status 0.
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, _exit_cleanly)
         uvicorn.run("solitonde.instrument.app:build_app_from_env", factory=True, host=host,
                     port=port, workers=workers, log_level=log_level, access_log=False)
+
+
+def _exit_cleanly(signum: int, frame: object) -> None:
+    raise SystemExit(0)

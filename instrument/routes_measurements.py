@@ -192,12 +192,23 @@ async def _ingest_upload(svc: Any, request: Request) -> dict[str, Any]:
         except ValidationError as exc:
             raise from_pydantic(exc, UploadFields) from None
         fmt = pick_format(opts.format, upload.filename)
-        return await run_in_threadpool(_ingest_file, svc, upload.file, fmt, opts)
+        return await run_in_threadpool(_ingest_file, svc, upload.file, fmt, opts,
+                                       client_name(upload.filename))
     finally:
         await form.close()
 
 
-def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields) -> dict[str, Any]:
+def client_name(filename: str | None) -> str | None:
+    """The upload's file name as a label (never used as a path): last component, printable."""
+    if not filename:
+        return None
+    name = filename.replace("\\", "/").rsplit("/", 1)[-1]
+    name = "".join(ch for ch in name if ch.isprintable())[:200]
+    return name or None
+
+
+def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
+                 filename: str | None = None) -> dict[str, Any]:
     settings = svc.settings
     path = svc.uploads.write(stream, fmt)
     try:
@@ -213,6 +224,8 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields) -> dict[st
         path.unlink(missing_ok=True)
     meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter")
             if getattr(opts, k) is not None}
+    if filename:
+        meta["source"] = filename  # the reader named it after the server's temporary file
     if meta:
         waveforms = [wf.with_metadata(**meta) for wf in waveforms]
     check_counts(waveforms, settings, "file.shots")
