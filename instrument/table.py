@@ -1,0 +1,185 @@
+"""The model table: simulated features over a grid of sphere diameter, plate thickness and distance.
+
+One HDF5 file (h5py) holds
+
+``axes/``        ``diameter_m``, ``thickness_m``, ``distance_m`` (increasing), the grid
+``features/``    per point (shape ``(nD, nT, nL)``): ``tof_s``, ``arr``, ``incident_time_s``,
+                 ``incident_peak_N``, ``reflected_peak_N``, ``snr_db``, ``arr_upper_bound``; and
+                 ``secondary_times_s`` / ``secondary_ratios`` (shape ``(nD, nT, nL, K)``,
+                 NaN-padded): what :func:`solitonde.signal.features.extract` reads from the
+                 simulated sensor trace, exactly as from a measurement
+``status``       per point: 0 ok, 1 no reflection detected, 2 failed (``messages`` says why),
+                 -1 not computed yet
+``done``         per point: the build's resume mask
+``flags``        per point: bitmask of the signal package's quality flags (``attrs['flag_names']``)
+``plate_model``  per point: index into ``attrs['plate_model_names']`` (the tier ``auto`` chose)
+``diagnostics/`` ``wall_s``, ``energy_drift`` per point
+``traces/``      optional: per point the sensor samples (variable length) with ``t0_s``, ``dt_s``
+
+and, in the root attributes, the sweep that defines the grid and the provenance (JSON strings):
+solitonde version, scene defaults, tiers, mesh, step, build time, machine, git revision.
+Missing values are NaN, never a number made up.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+FORMAT = "solitonde-model-table"
+FORMAT_VERSION = 1
+AXES = ("diameter_m", "thickness_m", "distance_m")
+SCALAR_FEATURES = (
+    "tof_s",
+    "arr",
+    "incident_time_s",
+    "incident_peak_N",
+    "reflected_peak_N",
+    "snr_db",
+    "arr_upper_bound",
+)
+SECONDARY_FEATURES = ("secondary_times_s", "secondary_ratios")
+MAX_SECONDARY = 4
+STATUS_PENDING, STATUS_OK, STATUS_NO_REFLECTION, STATUS_FAILED = -1, 0, 1, 2
+STATUS_NAMES = {
+    STATUS_PENDING: "pending",
+    STATUS_OK: "ok",
+    STATUS_NO_REFLECTION: "no_reflection",
+    STATUS_FAILED: "failed",
+}
+PLATE_MODEL_NAMES = ("rigid", "halfspace", "infinite", "sem", "greens", "unknown")
+
+
+class TableError(ValueError):
+    """A table file that cannot be used; ``field`` names what is wrong."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+@dataclass
+class ModelTable:
+    """A loaded model table (everything in memory; a table is a few MB).
+
+    Attributes
+    ----------
+    axes: grid axes by name (:data:`AXES`), increasing, SI units.
+    features: per-point arrays by name (:data:`SCALAR_FEATURES`, :data:`SECONDARY_FEATURES`).
+    status: per-point status codes (:data:`STATUS_NAMES`).
+    flags: per-point bitmask over ``flag_names``.
+    plate_model: per-point index into ``plate_model_names``.
+    diagnostics: per-point ``wall_s`` and ``energy_drift``.
+    sweep: the sweep definition the table was built from.
+    provenance: how and where it was built.
+    complete: every point was computed.
+    """
+
+    axes: dict[str, np.ndarray]
+    features: dict[str, np.ndarray]
+    status: np.ndarray
+    flags: np.ndarray
+    plate_model: np.ndarray
+    diagnostics: dict[str, np.ndarray]
+    sweep: dict[str, Any]
+    provenance: dict[str, Any]
+    complete: bool
+    flag_names: tuple[str, ...] = ()
+    plate_model_names: tuple[str, ...] = PLATE_MODEL_NAMES
+    path: Path | None = None
+    _cache: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.axes[a].size for a in AXES)
+
+    @classmethod
+    def load(cls, path: str | Path) -> ModelTable:
+        """Read a table file written by :mod:`solitonde.instrument.table_build`.
+
+        Raises
+        ------
+        TableError
+            When the file is missing, is not a model table, or has a newer format.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise TableError("table", f"no such file: {str(path)!r}")
+        try:
+            fh = h5py.File(path, "r")
+        except OSError as exc:
+            raise TableError("table", f"{str(path)!r} is not an HDF5 file ({exc})") from None
+        with fh:
+            if fh.attrs.get("format") != FORMAT:
+                raise TableError("table", f"{str(path)!r} is not a solitonde model table")
+            version = int(fh.attrs.get("format_version", 0))
+            if version > FORMAT_VERSION:
+                raise TableError("format_version", f"table format {version} is newer than this "
+                                 f"solitonde reads (up to {FORMAT_VERSION})")
+            axes = {a: np.asarray(fh["axes"][a][...], dtype=float) for a in AXES}
+            features = {k: np.asarray(fh["features"][k][...], dtype=float)
+                        for k in (*SCALAR_FEATURES, *SECONDARY_FEATURES)}
+            diag = {k: np.asarray(v[...]) for k, v in fh["diagnostics"].items()}
+            return cls(
+                axes=axes,
+                features=features,
+                status=np.asarray(fh["status"][...], dtype=np.int8),
+                flags=np.asarray(fh["flags"][...], dtype=np.int32),
+                plate_model=np.asarray(fh["plate_model"][...], dtype=np.int8),
+                diagnostics=diag,
+                sweep=json.loads(fh.attrs["sweep"]),
+                provenance=json.loads(fh.attrs.get("provenance", "{}")),
+                complete=bool(fh.attrs.get("complete", False)),
+                flag_names=tuple(json.loads(fh.attrs.get("flag_names", "[]"))),
+                plate_model_names=tuple(json.loads(fh.attrs.get("plate_model_names", "[]")))
+                or PLATE_MODEL_NAMES,
+                path=path,
+            )
+
+    def diameter_index(self, diameter: float, rel_tol: float = 0.01) -> int:
+        """Index of ``diameter`` (m) on the diameter axis.
+
+        Raises
+        ------
+        TableError
+            When no table diameter lies within ``rel_tol`` of it (the table is not interpolated
+            across sphere sizes: that would be extrapolating the physics).
+        """
+        d = self.axes["diameter_m"]
+        i = int(np.argmin(np.abs(d - diameter)))
+        if not np.isfinite(diameter) or abs(d[i] - diameter) > rel_tol * d[i]:
+            listed = ", ".join(f"{x * 1e3:.4g}" for x in d)
+            raise TableError("diameter_m", f"{diameter!r} m is not a sphere size of this table "
+                             f"(table diameters: {listed} mm)")
+        return i
+
+    def status_counts(self) -> dict[str, int]:
+        values, counts = np.unique(self.status, return_counts=True)
+        return {STATUS_NAMES.get(int(v), str(int(v))): int(c) for v, c in zip(values, counts,
+                                                                              strict=True)}
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready description: axes (values and ranges), point counts, provenance."""
+        models, counts = np.unique(self.plate_model, return_counts=True)
+        return {
+            "path": str(self.path) if self.path else None,
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "complete": self.complete,
+            "shape": list(self.shape),
+            "n_points": int(np.prod(self.shape)),
+            "axes": {a: {"values": self.axes[a].tolist(), "min": float(self.axes[a][0]),
+                         "max": float(self.axes[a][-1]), "n": int(self.axes[a].size)}
+                     for a in AXES},
+            "features": [*SCALAR_FEATURES, *SECONDARY_FEATURES],
+            "status_counts": self.status_counts(),
+            "plate_models": {self.plate_model_names[int(m)] if 0 <= m < len(self.plate_model_names)
+                             else str(int(m)): int(c) for m, c in zip(models, counts, strict=True)},
+            "sweep": self.sweep,
+            "provenance": self.provenance,
+        }
