@@ -16,6 +16,7 @@ COMMAND_MODULES: list[str] = [
     "cmd_simulate",
     "cmd_theory",
     "cmd_serve",
+    "cmd_table",
 ]
 
 app = typer.Typer(
