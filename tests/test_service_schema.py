@@ -1,0 +1,52 @@
+"""Schemathesis against the service's own OpenAPI schema: generated requests, no server errors.
+
+The default run is bounded (a few examples per operation); ``-m slow`` runs many more.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import pytest
+import schemathesis
+from hypothesis import HealthCheck, settings
+from schemathesis.checks import not_a_server_error
+
+from solitonde.instrument.app import build_app
+from solitonde.instrument.settings import Settings
+
+_STORE = Path(tempfile.mkdtemp(prefix="solitonde-schema-")) / "store.sqlite"
+# Small limits keep generated requests cheap; they are what the schema states, so the generator
+# explores the edges of the same limits the server enforces. (Schemathesis runs the lifespan.)
+APP = build_app(Settings(store_path=_STORE, max_samples_per_shot=5000, max_shots_per_request=4,
+                         max_simulation_cost=5e6))
+schema = schemathesis.openapi.from_asgi("/openapi.json", APP)
+
+
+def no_server_error(ctx, response, case):  # the signature schemathesis calls checks with
+    """No 5xx, except the documented 503 of /v1/invert while no model table is loaded."""
+    service = APP.state.service
+    if (response.status_code == 503 and case.path == "/v1/invert" and service is not None
+            and not service.estimator.loaded):
+        assert response.json()["field"] == "table"
+        return None
+    return not_a_server_error(ctx, response, case)
+
+
+CHECKS = [no_server_error]
+
+
+@schema.parametrize()
+@settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck))
+def test_no_server_error(case) -> None:
+    """Every operation, a few generated requests each: never a 5xx."""
+    case.call_and_validate(checks=CHECKS)
+
+
+@pytest.mark.slow
+@schema.parametrize()
+@settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+def test_no_server_error_long(case) -> None:
+    """The same with 150 examples per operation (about a minute per operation)."""
+    case.call_and_validate(checks=CHECKS)
