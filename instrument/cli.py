@@ -17,6 +17,8 @@ COMMAND_MODULES: list[str] = [
     "cmd_theory",
     "cmd_serve",
     "cmd_table",
+    "cmd_reproduce",
+    "cmd_bench",
 ]
 
 app = typer.Typer(

@@ -110,7 +110,7 @@ def _fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:
 
 
 def analyze(
-    files: list[Path] = typer.Argument(..., help="Waveform files or folders (searched recursively)."),
+    files: list[Path] = typer.Argument(..., help="Waveform files or folders (recursive)."),
     fmt: str | None = typer.Option(None, "--format", help="Force a format: " +
                                    ", ".join(signal_io.FORMATS) + "."),
     out: Path | None = typer.Option(None, "--out", help="Write the per-shot rows to a .csv or "

@@ -4,7 +4,8 @@ Each file holds shots simulated by the project's own chain model (model.simulate
 with acquisition defects added (white noise at a stated SNR, baseline drift, 12-bit quantisation;
 see solitonde.signal.synth.degrade). Shots differ by their noise and by a drop height varied
 +-1 % (the paper's striker spread), so every shot has its own truth. The model's own peaks
-(integration-step resolution, amplitudes above the static sensor reading) go to truth.tsv (tab-separated, so that `solitonde analyze data_samples` skips it).
+(integration-step resolution, amplitudes above the static sensor reading) go to truth.tsv
+(tab-separated, so that `solitonde analyze data_samples` skips it).
 """
 
 from __future__ import annotations
@@ -70,7 +71,8 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
             base = t["static_sensor_N"]
             reference = t["incident_peak_N"] - base
             samples = degrade(sim.samples, spec.snr_db, rng, reference, drift=DRIFT, bits=BITS)
-            meta = {"shot": shot, "plate_id": "synthetic", "position": scene.plate.distance_to_support,
+            meta = {"shot": shot, "plate_id": "synthetic",
+                    "position": scene.plate.distance_to_support,
                     "sphere_diameter": scene.chain.diameter, "synthetic": True,
                     "snr_db": spec.snr_db, "drop_height_m": height}
             waves.append(Waveform(sim.t0, sim.dt, samples, "N", None, meta))

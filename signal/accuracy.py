@@ -51,7 +51,7 @@ def study(
 ) -> list[dict[str, Any]]:
     """One row per SNR: TOF error (median and 95th percentile of |error|, in sample periods, and
     the signed median), ARR error (relative and absolute), detection rate and flag counts."""
-    step = int(round(1.0 / (sample_rate * fine_dt)))
+    step = round(1.0 / (sample_rate * fine_dt))
     if step < 1 or abs(step * fine_dt * sample_rate - 1.0) > 1e-6:
         raise ValueError("sample_rate must divide the fine trace's rate")
     dt = step * fine_dt

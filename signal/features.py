@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WaveformError
-from .pulses import DetectOptions, Detection, detect
+from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
 FEATURES = (
@@ -31,7 +31,8 @@ FEATURES = (
 """The per-shot numbers, in the order tables and files list them."""
 
 OUTLIER_Z = 3.5
-"""Modified z-score (0.6745 |x - median| / MAD) above which a shot is rejected (Iglewicz-Hoaglin)."""
+"""Modified z-score (0.6745 |x - median| / MAD) above which a shot is rejected
+(Iglewicz-Hoaglin)."""
 
 
 @dataclass(frozen=True)
@@ -203,7 +204,7 @@ def aggregate(
         else:
             std = float(np.std(vals, ddof=1)) if vals.size > 1 else None
             stats[name] = Stat(float(np.mean(vals)), std, int(vals.size))
-    bounds = [features[i].arr_upper_bound for i in no_ref if features[i].arr_upper_bound is not None]
+    bounds = [b for i in no_ref if (b := features[i].arr_upper_bound) is not None]
     counts: dict[str, int] = {}
     for f in features:
         for flag in f.flags:

@@ -475,7 +475,7 @@ def _write_tdms(path: Path, waves: list[Waveform], group: str = "shots") -> None
         writer.write_segment(objects)
 
 
-# --- JSON -------------------------------------------------------------------------------------------
+# --- JSON ---
 
 
 def from_json(body: Any) -> list[Waveform]:

@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 MAX_FIT_POINTS = 96
-"""A fit window longer than this is block-averaged down to it (the pulse is smooth on that scale)."""
+"""A longer fit window is block-averaged down to this (the pulse is smooth on that scale)."""
 
 R_MIN, R_MAX = 1.2, 8.0
 """Bounds on the shape exponent r of the template A exp(-|u|^r)."""
@@ -20,15 +20,28 @@ R_MIN, R_MAX = 1.2, 8.0
 def boxcar(x: np.ndarray, h: int) -> np.ndarray:
     """Centred moving average over 2h+1 samples (zero phase); the window shrinks at the ends."""
     n = x.size
-    c = np.empty(n + 1)
-    c[0] = 0.0
-    for i in range(n):
-        c[i + 1] = c[i] + x[i]
     out = np.empty(n)
-    for i in range(n):
-        lo = max(0, i - h)
-        hi = min(n, i + h + 1)
-        out[i] = (c[hi] - c[lo]) / (hi - lo)
+    if n <= 2 * h + 1:
+        for i in range(n):
+            lo = max(0, i - h)
+            hi = min(n, i + h + 1)
+            out[i] = np.mean(x[lo:hi])
+        return out
+    acc = 0.0
+    for i in range(h + 1):
+        acc += x[i]
+    for i in range(h + 1):  # left edge: window [0, i + h]
+        out[i] = acc / (i + h + 1)
+        acc += x[i + h + 1]
+    width = 2 * h + 1
+    for i in range(h + 1, n - h):  # acc holds x[i - h - 1 .. i + h]
+        acc -= x[i - h - 1]
+        out[i] = acc / width
+        if i + h + 1 < n:
+            acc += x[i + h + 1]
+    for i in range(n - h, n):  # right edge: window [i - h, n)
+        acc -= x[i - h - 1]
+        out[i] = acc / (n - i + h)
     return out
 
 
@@ -146,7 +159,7 @@ def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndar
     for i in range(n):
         if mask[i]:
             u = i / n
-            p0, p1, p2 = 1.0, u, u * u
+            p1, p2 = u, u * u
             m[0, 0] += 1.0
             m[0, 1] += p1
             m[0, 2] += p2
@@ -170,6 +183,16 @@ def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndar
     k = degree + 1
     coef[:k] = np.linalg.solve(m[:k, :k], rhs[:k])
     return coef, count
+
+
+@njit(cache=True)
+def poly_eval(coef: np.ndarray, n: int) -> np.ndarray:
+    """c0 + c1 u + c2 u^2 at u = i / n for i in 0..n-1."""
+    out = np.empty(n)
+    for i in range(n):
+        u = i / n
+        out[i] = coef[0] + u * (coef[1] + u * coef[2])
+    return out
 
 
 @njit(cache=True)

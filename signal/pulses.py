@@ -204,8 +204,8 @@ class _Trace:
     """Working state of one detection: raw and smoothed trace, baseline line, noise levels.
 
     The baseline starts as the pre-trigger median; once pulses are known it becomes the
-    least-squares quadratic through every quiet sample of the record (pre-trigger, gaps, tail), which
-    follows a slow drift without being pulled by the pulses.
+    least-squares quadratic through every quiet sample of the record (pre-trigger, gaps, tail),
+    which follows a slow drift without being pulled by the pulses.
     """
 
     def __init__(self, x: np.ndarray, n_pre: int, h: int) -> None:
@@ -225,8 +225,7 @@ class _Trace:
         self.smooth(self.h)
 
     def set_baseline(self, coef: np.ndarray) -> None:
-        u = self.idx / self.x.size
-        self.line = coef[0] + u * (coef[1] + u * coef[2])
+        self.line = K.poly_eval(coef, self.x.size)
         self.v = self.s - self.line
 
     def smooth(self, h: int) -> None:
@@ -279,7 +278,7 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
                 f"{MIN_PRETRIGGER} samples to the record length minus {MIN_PRETRIGGER}",
             )
     else:
-        n_pre = max(MIN_PRETRIGGER, n // 10)
+        n_pre = _initial_pretrigger(x)
 
     h0 = opts.smooth_samples if opts.smooth_samples is not None else 2
     tr = _Trace(x, n_pre, h0)
@@ -314,7 +313,7 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     if peaks.size:
         # Drift: the baseline line through all quiet samples, then detect once more against it.
         # Iterated because the pulses' extents, hence the quiet samples, depend on the baseline.
-        for _ in range(3):
+        for _ in range(2):
             quiet = _quiet_mask(tr, peaks, thr)
             coef, count = K.quadratic_fit(x, quiet, 2)
             if count < 2 * MIN_PRETRIGGER or quiet[tr.n_pre :].sum() < MIN_PRETRIGGER:
@@ -369,6 +368,25 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         arr_upper_bound=upper,
         notes=tuple(notes),
     )
+
+
+def _initial_pretrigger(x: np.ndarray) -> int:
+    """Samples before the largest pulse's onset (a first guess; refined once pulses are known).
+
+    The onset is where the lightly smoothed trace, walking back from its first crossing of a
+    quarter of the largest excursion, falls to 2 % of it; a margin of half the rise is kept.
+    """
+    n = x.size
+    dev = np.abs(K.triangle(x, 2) - np.median(x[:: max(1, n // 1024)]))
+    big = float(dev.max())
+    if big <= 0:
+        return max(MIN_PRETRIGGER, n // 10)
+    cross = int(np.argmax(dev > 0.25 * big))
+    onset = cross
+    while onset > 0 and dev[onset - 1] > 0.02 * big:
+        onset -= 1
+    guess = onset - max(8, (cross - onset) // 2)
+    return int(min(max(guess, MIN_PRETRIGGER), max(n // 2, MIN_PRETRIGGER)))
 
 
 def _sign(value: float, inverted: bool) -> float:

@@ -1,4 +1,4 @@
-"""Synthetic traces for tests, benchmarks and accuracy studies: pulse shapes and acquisition defects.
+"""Synthetic traces for tests, benchmarks and accuracy studies: pulse shapes, acquisition defects.
 
 The pulse shape is Nesterenko's long-wave solitary wave: the strain goes as cos^4 of
 sqrt(10) x / (5 D) and Hertz contact turns it into a force going as cos^6 over a support of about

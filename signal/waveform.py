@@ -112,9 +112,10 @@ class Waveform:
     units:
         ``"N"`` (force) or ``"V"`` (raw sensor voltage).
     calibration:
-        Sensor sensitivity in N/V; required to turn volts into newtons (``force = V * calibration``).
+        Sensor sensitivity in N/V; turns volts into newtons (``force = V * calibration``).
     metadata:
-        Free-form; by convention ``shot``, ``plate_id``, ``position``, ``sphere_diameter``, ``source``.
+        Free-form; by convention ``shot``, ``plate_id``, ``position``, ``sphere_diameter``,
+        ``source``.
     """
 
     t0: float
@@ -148,7 +149,8 @@ class Waveform:
                 "sensor sensitivity in N/V",
             )
         if not isinstance(self.metadata, Mapping):
-            raise WaveformError("metadata", f"must be a mapping, got {type(self.metadata).__name__}")
+            kind = type(self.metadata).__name__
+            raise WaveformError("metadata", f"must be a mapping, got {kind}")
         set_(self, "metadata", dict(self.metadata))
 
     @classmethod

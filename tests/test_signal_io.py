@@ -1,4 +1,4 @@
-"""Waveform files: every format round-trips, and every bad input raises an error naming its field."""
+"""Waveform files: every format round-trips; every bad input raises an error naming its field."""
 
 from __future__ import annotations
 
