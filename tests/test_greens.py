@@ -1,0 +1,80 @@
+"""Green's-function tier: the response, its cache key, memory and disk caches."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from solitonde.instrument.greens_cache import DiskGreensCache, LayeredCache
+from solitonde.model import greens
+from solitonde.model.materials import MATERIALS
+from solitonde.model.mesh import plate_mesh
+from solitonde.model.sem import build_plate
+
+AL = MATERIALS["al_6061"]
+
+
+def _plate(distance: float = 0.05, thickness: float = 3.18e-3, supports: str = "opposite_edges",
+           elements: tuple[int, int, int] = (4, 4, 1), material=AL):
+    mesh = plate_mesh((0.3, 0.3), thickness, elements, (3, 3, 2), distance, symmetry=True)
+    return build_plate(mesh, material, supports)
+
+
+def test_response_is_the_plate_run_it_stands_for() -> None:
+    """Convolving g with a force history gives the directly computed deflection."""
+    plate = _plate()
+    dt = 0.8 * 2 / np.sqrt(plate.element_bound)
+    n = 400
+    g = greens.compute_response(plate, dt, n)
+    force = np.sin(np.linspace(0, 3, n)) ** 2
+    direct = plate.run_point_force(plate.force_share * force, dt)[:, 0]
+    conv = np.array([np.dot(g[s - np.arange(s)], force[:s]) for s in range(n + 1)])
+    assert np.allclose(conv, direct, rtol=0, atol=1e-10 * np.abs(direct).max())
+    assert g[1] == pytest.approx(dt**2 * plate.inv_mass[plate.contact_dof] * plate.force_share)
+
+
+def test_key_depends_on_everything_the_response_depends_on() -> None:
+    """Plate, mesh, position, supports, material and step change the key; nothing else does."""
+    base = _plate()
+    key = greens.response_key(base, 1e-7)
+    assert key == greens.response_key(_plate(), 1e-7)
+    others = [
+        greens.response_key(_plate(distance=0.06), 1e-7),
+        greens.response_key(_plate(thickness=2.29e-3), 1e-7),
+        greens.response_key(_plate(supports="all_edges"), 1e-7),
+        greens.response_key(_plate(elements=(5, 4, 1)), 1e-7),
+        greens.response_key(_plate(material=MATERIALS["al_6061_paper"]), 1e-7),
+        greens.response_key(base, 1.1e-7),
+    ]
+    assert len({key, *others}) == 7
+
+
+def test_cache_reuses_and_extends() -> None:
+    """A stored response serves shorter requests; a longer request recomputes and replaces."""
+    plate = _plate()
+    dt = 0.8 * 2 / np.sqrt(plate.element_bound)
+    cache = greens.MemoryCache()
+    g1, hit1, _ = greens.contact_response(plate, dt, 100, cache)
+    g2, hit2, _ = greens.contact_response(plate, dt, 50, cache)
+    g3, hit3, _ = greens.contact_response(plate, dt, 200, cache)
+    assert (hit1, hit2, hit3) == (False, True, False)
+    assert np.array_equal(g2, g1[:51])
+    assert np.allclose(g3[:101], g1)
+    assert cache.load(greens.response_key(plate, dt)).size == 201
+
+
+def test_disk_cache_round_trip_is_atomic(tmp_path) -> None:
+    """npz files under the folder, written by rename (no temporary left), read back equal;
+    a corrupt file counts as missing."""
+    disk = DiskGreensCache(tmp_path)
+    data = np.linspace(0, 1, 17)
+    disk.store("abc123", data)
+    assert [p.name for p in tmp_path.iterdir()] == ["abc123.npz"]
+    assert np.array_equal(disk.load("abc123"), data)
+    assert disk.load("missing") is None
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    assert disk.load("bad") is None
+    with pytest.raises(ValueError, match="alphanumeric"):
+        disk.path("../escape")
+    layered = LayeredCache(DiskGreensCache(tmp_path))
+    assert np.array_equal(layered.load("abc123"), data)
