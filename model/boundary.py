@@ -68,6 +68,7 @@ from .chain import (
 )
 from .contact import hertz_sphere_flat
 from .errors import SceneError
+from .leapfrog import integrate_elastic
 from .scene import Scene
 
 # Status codes returned by compiled drivers.
@@ -241,6 +242,50 @@ def integrate_dashpot(
 
     Returns (status, samples recorded, final w, work done on the plate J, dissipated energy J).
     ``energy[k]`` holds the balance chain energy + plate work + dissipated energy at sample k.
+    Without dissipation it runs the fused leapfrog form of the same scheme
+    (:func:`solitonde.model.leapfrog.integrate_elastic`); with it, :func:`integrate_dashpot_steps`.
+    """
+    if tau > 0.0:
+        return integrate_dashpot_steps(
+            u, v, w, u0, m, g, a_s, a_b, inv_z, f_static, tau, sensor, dt, n_sub, n_samples,
+            samples, energy, u_trace, v_trace, f_trace, w_trace, pk,
+        )
+    status, done, w_end, plate_work = integrate_elastic(
+        u, v, w, u0, m, g, a_s, a_b, inv_z, f_static, sensor, dt, n_sub, n_samples,
+        samples, energy, u_trace, v_trace, f_trace, w_trace, pk,
+    )
+    return status, done, w_end, plate_work, 0.0
+
+
+@njit(cache=True)
+def integrate_dashpot_steps(
+    u: np.ndarray,
+    v: np.ndarray,
+    w: float,
+    u0: np.ndarray,
+    m: float,
+    g: float,
+    a_s: float,
+    a_b: float,
+    inv_z: float,
+    f_static: float,
+    tau: float,
+    sensor: int,
+    dt: float,
+    n_sub: int,
+    n_samples: int,
+    samples: np.ndarray,
+    energy: np.ndarray,
+    u_trace: np.ndarray,
+    v_trace: np.ndarray,
+    f_trace: np.ndarray,
+    w_trace: np.ndarray,
+    pk: np.ndarray,
+) -> tuple[int, int, float, float, float]:
+    """Step-by-step driver built from the :mod:`~solitonde.model.chain` kernels (any ``tau``).
+
+    The reference form of the scheme, which plate tiers imitate; arguments and return as
+    :func:`integrate_dashpot`.
     """
     n = u.size - 1
     inv_m = 1.0 / m
