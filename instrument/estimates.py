@@ -63,6 +63,18 @@ class Estimator:
             log.warning(self.reason)
             return
         self._invert = inversion_mod.invert
+        self._warm_up(inversion_mod)
+
+    def _warm_up(self, inversion_mod: Any) -> None:
+        """Build the inversion's fine grids now, not in the first request that needs them."""
+        fine_grid = getattr(inversion_mod, "fine_grid", None)
+        if fine_grid is None:
+            return
+        for i in range(len(self.table.axes["diameter_m"])):
+            try:
+                fine_grid(self.table, i)
+            except Exception as exc:  # a sphere size the inversion cannot use: say so, go on
+                log.warning("model table: no inversion grid for diameter index %d: %s", i, exc)
 
     @property
     def loaded(self) -> bool:

@@ -16,7 +16,14 @@ from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import ValidationError
 
-from .api_models import InvertIn, InvertOut, SimulateIn, SimulateOut
+from .api_models import (
+    Calibration,
+    InversionInput,
+    InvertIn,
+    InvertOut,
+    SimulateIn,
+    SimulateOut,
+)
 from .estimates import EstimateUnavailable, _jsonable
 from .problems import Problem, from_pydantic
 from .routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
@@ -52,9 +59,14 @@ async def invert(request: Request) -> dict[str, Any]:
         estimate = await run_in_threadpool(svc.estimator.invert, inputs, calibration)
     except EstimateUnavailable as exc:
         raise Problem(503, f"table: {exc}", kind="no-table", field="table") from None
-    except ValueError as exc:  # the inversion's own input errors (e.g. outside the table)
+    except ValueError as exc:  # InversionError, TableError, CalibrationError: they name a field
         field = getattr(exc, "field", None) or "inputs"
-        raise Problem(422, f"{field}: {exc}", kind="invalid-input", field=field) from None
+        if field in InversionInput.model_fields:
+            field = f"inputs.{field}"
+        elif field in Calibration.model_fields:
+            field = f"calibration.{field}"
+        message = str(exc).partition(": ")[2] or str(exc)
+        raise Problem(422, f"{field}: {message}", kind="invalid-input", field=field) from None
     return {"estimate": estimate}
 
 
@@ -129,7 +141,8 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
     from solitonde.model.simulate import simulate as run_scene
     from solitonde.signal.errors import WaveformError
     from solitonde.signal.features import extract
-    from solitonde.signal.waveform import Waveform
+
+    from .table_build import measured_waveform
 
     try:
         scene = scene_from_dict(payload.scene)
@@ -160,17 +173,19 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
     except SimulationError as exc:
         raise Problem(422, f"scene: the simulation could not be carried out ({exc})",
                       kind="simulation-failed", field="scene") from None
+    # Measured exactly as the table builder measures a simulated point: a static pre-trigger
+    # segment in front of the shot (the detector takes baseline and noise from it).
+    wf = measured_waveform(result).with_metadata(sphere_diameter=scene.chain.diameter,
+                                                 source="simulate")
     try:
-        wf = Waveform(t0=result.t0, dt=result.dt, samples=result.samples, units="N",
-                      metadata={"sphere_diameter": scene.chain.diameter, "source": "simulate"})
         features = extract(wf).to_dict()
     except WaveformError as exc:
         features = {"error": str(exc)}
     return {
-        "t0": float(result.t0),
-        "dt": float(result.dt),
-        "n_samples": int(result.samples.size),
-        "samples": result.samples.tolist() if payload.include_trace else None,
+        "t0": float(wf.t0),
+        "dt": float(wf.dt),
+        "n_samples": int(wf.n),
+        "samples": wf.samples.tolist() if payload.include_trace else None,
         "units": "N",
         "features": _jsonable(features),
         "diagnostics": _jsonable({"plate_model": result.plate_model,

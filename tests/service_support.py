@@ -94,3 +94,42 @@ def stop_group(proc: subprocess.Popen, sig: int = signal.SIGTERM, timeout: float
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         return proc.wait(timeout=timeout)
+
+
+TABLE_DIAMETER = 9.53e-3
+TABLE_THICKNESSES = (2.0e-3, 2.5e-3, 3.18e-3, 4.0e-3, 4.83e-3)
+TABLE_DISTANCES = (0.3, 0.4)
+
+
+def build_tiny_table(path: Path) -> Path:
+    """A 1 x 5 x 2 model table (D 9.53 mm, t 2-4.83 mm, L 0.3-0.4 m, infinite plate): about a
+    second to build, enough to exercise the estimate path end to end."""
+    from solitonde.instrument.table_build import Sweep, build_table
+
+    sweep = Sweep([TABLE_DIAMETER], list(TABLE_THICKNESSES), list(TABLE_DISTANCES),
+                  scene={"effects": {"plate_model": "infinite"}})
+    build_table(sweep, path, workers=1)
+    return path
+
+
+def simulated_shots(thickness: float, n_shots: int = 3, snr_db: float = 40.0,
+                    distance: float = 0.35) -> list[dict[str, Any]]:
+    """Shots of the model itself at ``thickness`` (infinite plate), as an acquisition records
+    them (pre-trigger, noise, 12 bits), in the REST body shape."""
+    from solitonde.instrument.table_build import measured_waveform
+    from solitonde.model.scene import scene_from_dict
+    from solitonde.model.simulate import simulate
+
+    scene = scene_from_dict({"chain": {"diameter": TABLE_DIAMETER},
+                             "plate": {"thickness": thickness, "distance_to_support": distance},
+                             "effects": {"plate_model": "infinite"}})
+    result = simulate(scene)
+    clean = measured_waveform(result)
+    peak = float(result.truth["incident_peak_N"] - result.truth["static_sensor_N"])
+    shots = []
+    for k in range(n_shots):
+        noisy = degrade(clean.samples, snr_db, np.random.default_rng(100 + k), peak, bits=12)
+        shots.append({"t0": clean.t0, "dt": clean.dt, "samples": noisy.tolist(),
+                      "metadata": {"plate_id": "sim", "position": "L350",
+                                   "sphere_diameter": TABLE_DIAMETER, "shot": k}})
+    return shots

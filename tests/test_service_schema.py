@@ -12,14 +12,18 @@ import pytest
 import schemathesis
 from hypothesis import HealthCheck, settings
 from schemathesis.checks import not_a_server_error
+from service_support import build_tiny_table
 
 from solitonde.instrument.app import build_app
 from solitonde.instrument.settings import Settings
 
-_STORE = Path(tempfile.mkdtemp(prefix="solitonde-schema-")) / "store.sqlite"
+_DIR = Path(tempfile.mkdtemp(prefix="solitonde-schema-"))
+# A real (tiny) model table, so that /v1/invert and the estimate path run their real code.
 # Small limits keep generated requests cheap; they are what the schema states, so the generator
 # explores the edges of the same limits the server enforces. (Schemathesis runs the lifespan.)
-APP = build_app(Settings(store_path=_STORE, max_samples_per_shot=5000, max_shots_per_request=4,
+APP = build_app(Settings(store_path=_DIR / "store.sqlite",
+                         table_path=build_tiny_table(_DIR / "table.h5"),
+                         max_samples_per_shot=5000, max_shots_per_request=4,
                          max_simulation_cost=5e6))
 schema = schemathesis.openapi.from_asgi("/openapi.json", APP)
 
