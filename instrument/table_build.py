@@ -401,24 +401,27 @@ def _local_cluster(workers: int) -> Any:
                         env=dict(WORKER_ENV), dashboard_address=None, silence_logs=40)
 
 
-def _results(tasks: list[tuple[int, int, list[int]]], sweep: dict[str, Any], workers: int,
-             scheduler: str | None) -> Iterator[dict[str, Any]]:
-    """Run the tasks and yield their results as they complete."""
+def run_tasks(fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], workers: int,
+              scheduler: str | None) -> Iterator[Any]:
+    """``fn(*task)`` for every task, serially or on Dask; yields results as they complete.
+
+    Serial when ``workers <= 1`` and no scheduler is given; else a :func:`_local_cluster` (closed
+    afterwards) or the cluster at ``scheduler`` (left running).
+    """
     if scheduler is None and workers <= 1:
-        for i_t, i_l, todo in tasks:
-            yield run_plate(sweep, i_t, i_l, todo)
+        for task in tasks:
+            yield fn(*task)
         return
     from dask.distributed import Client, as_completed
 
     cluster = None
     if scheduler is None:
-        cluster = _local_cluster(workers)
+        cluster = _local_cluster(min(workers, max(1, len(tasks))))
         client = Client(cluster)
     else:
         client = Client(scheduler, timeout="30s")
     try:
-        futures = [client.submit(run_plate, sweep, i_t, i_l, todo, pure=False)
-                   for i_t, i_l, todo in tasks]
+        futures = [client.submit(fn, *task, pure=False) for task in tasks]
         for future in as_completed(futures):
             result = future.result()
             future.release()
@@ -492,7 +495,8 @@ def build_table(
 
             bar = tqdm(total=total, unit="scene", desc="table", smoothing=0.05)
         try:
-            for result in _results(tasks, spec, workers, scheduler):
+            jobs = [(spec, i_t, i_l, todo) for i_t, i_l, todo in tasks]
+            for result in run_tasks(run_plate, jobs, workers, scheduler):
                 n = _write_plate(fh, result)
                 written += n
                 plates += 1

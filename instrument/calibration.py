@@ -1,0 +1,186 @@
+"""Calibration of the model to an experiment: an ARR factor and a TOF offset per sphere size.
+
+Real chains lose energy the elastic model does not (contact damping, friction, plasticity): the
+measured ARR sits below the simulated one, by a factor that depends on the sphere size but hardly
+on the plate, and the reflection arrives a little late. Shots on a reference plate of known
+thickness and position give both: with the model's (TOF, ARR) there from the table,
+
+    arr_factor = ARR_measured / ARR_model,    tof_offset_s = TOF_measured - TOF_model
+
+per sphere size (inverse-variance means when several references are given). The inversion then
+compares ``arr_factor * ARR_model`` and ``TOF_model + tof_offset_s`` with new measurements. Stored
+as JSON (written to a temporary name, then renamed).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .inversion import FeatureSummary
+    from .table import ModelTable
+
+
+class CalibrationError(ValueError):
+    """A calibration that cannot be used; ``field`` names what is wrong."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+def _positive(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CalibrationError(name, f"expected a number, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise CalibrationError(name, f"must be a positive finite number, got {value!r}")
+    return v
+
+
+def _finite(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CalibrationError(name, f"expected a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise CalibrationError(name, f"must be finite, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """ARR factor and TOF offset: global, and optionally per sphere diameter.
+
+    ``per_diameter`` maps a diameter in m to ``{"arr_factor": .., "tof_offset_s": ..}`` (plus
+    optional uncertainties); a sphere size not listed uses the global values.
+    """
+
+    arr_factor: float = 1.0
+    tof_offset_s: float = 0.0
+    per_diameter: dict[float, dict[str, float]] = field(default_factory=dict)
+    reference: dict[str, Any] | None = None
+
+    def for_diameter(self, diameter_m: float) -> tuple[float, float]:
+        """(arr_factor, tof_offset_s) for a sphere size."""
+        for d, entry in self.per_diameter.items():
+            if abs(d - diameter_m) <= 0.01 * d:
+                return float(entry["arr_factor"]), float(entry["tof_offset_s"])
+        return self.arr_factor, self.tof_offset_s
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "arr_factor": self.arr_factor,
+            "tof_offset_s": self.tof_offset_s,
+            "per_diameter": [{"diameter_m": d, **e} for d, e in sorted(self.per_diameter.items())],
+            "reference": self.reference,
+        }
+
+    @classmethod
+    def from_any(cls, data: Calibration | Mapping[str, Any] | None) -> Calibration | None:
+        """From a Calibration, its dict (as :meth:`to_dict` writes, or just the two globals), or
+        None."""
+        if data is None or isinstance(data, Calibration):
+            return data
+        if not isinstance(data, Mapping):
+            raise CalibrationError("calibration", f"expected a mapping, got {type(data).__name__}")
+        known = {"arr_factor", "tof_offset_s", "per_diameter", "reference"}
+        extra = set(data) - known
+        if extra:
+            raise CalibrationError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
+        per: dict[float, dict[str, float]] = {}
+        for i, entry in enumerate(data.get("per_diameter") or []):
+            if not isinstance(entry, Mapping) or "diameter_m" not in entry:
+                raise CalibrationError(f"per_diameter[{i}]", "needs diameter_m, arr_factor, "
+                                       "tof_offset_s")
+            d = _positive(f"per_diameter[{i}].diameter_m", entry["diameter_m"])
+            rest = {k: float(v) for k, v in entry.items() if k != "diameter_m" and v is not None}
+            rest["arr_factor"] = _positive(f"per_diameter[{i}].arr_factor",
+                                           entry.get("arr_factor", 1.0))
+            rest["tof_offset_s"] = _finite(f"per_diameter[{i}].tof_offset_s",
+                                           entry.get("tof_offset_s", 0.0))
+            per[d] = rest
+        return cls(_positive("arr_factor", data.get("arr_factor", 1.0)),
+                   _finite("tof_offset_s", data.get("tof_offset_s", 0.0)), per,
+                   data.get("reference"))
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> Calibration:
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise CalibrationError("calibration", f"cannot read {str(path)!r}: {exc.strerror}") from None
+        except json.JSONDecodeError as exc:
+            raise CalibrationError("calibration", f"{path.name} is not JSON: {exc}") from None
+        cal = cls.from_any(data)
+        assert cal is not None
+        return cal
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Shots of one sphere size on a reference plate of known thickness and position."""
+
+    thickness_m: float
+    distance_m: float
+    summary: FeatureSummary
+
+
+def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calibration:
+    """ARR factor and TOF offset per sphere size from reference shots; globals as their means.
+
+    Each reference gives ``factor = ARR / ARR_model`` and ``offset = TOF - TOF_model`` with the
+    model interpolated from ``table`` at the known (t, L); several references of one size are
+    combined with inverse-variance weights (shot scatter over sqrt(n), or the inversion's stated
+    defaults). The global values weigh every size equally.
+    """
+    from .inversion import InversionError, predict
+
+    if not references:
+        raise CalibrationError("references", "need at least one reference measurement")
+    by_d: dict[float, list[tuple[float, float, float, float]]] = {}
+    for ref in references:
+        s = ref.summary
+        d = float(table.axes["diameter_m"][table.diameter_index(s.diameter_m)])
+        tof_m, arr_m = predict(table, d, ref.thickness_m, ref.distance_m)
+        if arr_m <= 0:
+            raise InversionError("arr", f"the model ARR at the reference is {arr_m:g}: no factor "
+                                 "can be fitted there; use a thicker or closer reference")
+        s_tof, s_arr = s.sigmas()
+        by_d.setdefault(d, []).append((s.arr / arr_m, s_arr / arr_m, s.tof_s - tof_m, s_tof))
+    per: dict[float, dict[str, float]] = {}
+    for d, rows in by_d.items():
+        f, sf, o, so = (list(c) for c in zip(*rows, strict=True))
+        wf = [1 / x**2 for x in sf]
+        wo = [1 / x**2 for x in so]
+        per[d] = {
+            "arr_factor": sum(a * w for a, w in zip(f, wf, strict=True)) / sum(wf),
+            "arr_factor_std": 1 / math.sqrt(sum(wf)),
+            "tof_offset_s": sum(a * w for a, w in zip(o, wo, strict=True)) / sum(wo),
+            "tof_offset_std_s": 1 / math.sqrt(sum(wo)),
+            "n_references": len(rows),
+        }
+    n = len(per)
+    reference = {
+        "references": [{"thickness_m": r.thickness_m, "distance_m": r.distance_m,
+                        **vars(r.summary)} for r in references],
+        "table": str(table.path) if table.path else None,
+    }
+    return Calibration(sum(e["arr_factor"] for e in per.values()) / n,
+                       sum(e["tof_offset_s"] for e in per.values()) / n, per, reference)

@@ -1,0 +1,419 @@
+"""Invert measured TOF and ARR against a model table: thickness and distance to the support.
+
+Bayesian grid inversion. The table's features are interpolated (linear in log t and in L, the
+axes along which TOF and ARR vary smoothly) onto a fine (log t, L) grid once per table and
+sphere size; a prior uniform in log t (thickness is a scale) and in L over the table's range; independent Gaussian errors on the mean TOF
+and mean ARR of each sphere size:
+
+    sigma_tof^2 = s_tof^2 / n + sigma_model_tof^2,   sigma_arr^2 = s_arr^2 / n + sigma_model_arr^2
+
+with s the shot scatter (or the stated defaults :data:`DEFAULT_TOF_REL_STD`,
+:data:`DEFAULT_ARR_STD` when not given; floored at :data:`MIN_TOF_STD_S`, :data:`MIN_ARR_STD`) and
+sigma_model the table's own interpolation error (leave-one-out along both axes, scaled to the grid
+spacing). A calibration multiplies the model ARR by ``arr_factor`` (experiments lose energy the
+model does not) and adds ``tof_offset_s`` to the model TOF. Sphere sizes multiply their
+likelihoods. Grid points where the model detects no reflection cannot explain a measured one and
+get zero posterior.
+
+Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
+status: when the posterior still carries at least :data:`EDGE_FRACTION` of its peak density at an
+end of the table that is not a physical limit, the data do not bound the parameter on that side
+(``lower_bound_only``: e.g. L beyond the critical distance, where TOF and ARR no longer depend on
+L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
+bound (``ci95 = [lower, null]``, the 5 % quantile), no MAP or median: the table's end is not an
+estimate. A measurement no table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range``
+with no numbers at all.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+
+from .calibration import Calibration
+from .table import STATUS_OK, ModelTable, TableError
+
+DEFAULT_TOF_REL_STD = 0.01
+"""Per-shot TOF scatter assumed when none is given: 1 % of the TOF."""
+DEFAULT_ARR_STD = 0.03
+"""Per-shot ARR scatter assumed when none is given (absolute)."""
+MIN_TOF_STD_S = 0.2e-6
+"""Floor of the per-shot TOF scatter (a tenth of a 2 MHz sample): a scatter of 0 from few
+identical shots must not make the likelihood infinitely sharp."""
+MIN_ARR_STD = 0.003
+"""Floor of the per-shot ARR scatter."""
+EDGE_FRACTION = 0.2
+"""A marginal posterior with at least this fraction of its peak density at a table end is open
+there (the data do not bound the parameter on that side)."""
+OUT_OF_RANGE_TAIL = 1e-6
+"""Tail probability of the best chi^2 beyond which no table point explains the data."""
+FINE_THICKNESS_POINTS = 121
+FINE_DISTANCE_STEP_M = 0.0025
+PARAMETERS = ("thickness_m", "distance_m")
+
+
+class InversionError(ValueError):
+    """Bad inversion input; ``field`` names it."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+@dataclass(frozen=True)
+class FeatureSummary:
+    """The shots of one sphere size: mean TOF and ARR, their scatter and the shot count."""
+
+    diameter_m: float
+    tof_s: float
+    arr: float
+    tof_std_s: float | None = None
+    arr_std: float | None = None
+    n_shots: int = 1
+
+    def __post_init__(self) -> None:
+        def check(name: str, value: Any, ok: bool, allowed: str) -> None:
+            if not ok:
+                raise InversionError(name, f"got {value!r} (allowed: {allowed})")
+
+        for name in ("diameter_m", "tof_s", "arr"):
+            v = getattr(self, name)
+            check(name, v, isinstance(v, int | float) and not isinstance(v, bool)
+                  and math.isfinite(v), "a finite number")
+        check("diameter_m", self.diameter_m, self.diameter_m > 0, "> 0 m")
+        check("tof_s", self.tof_s, self.tof_s > 0, "> 0 s")
+        check("arr", self.arr, self.arr >= 0, ">= 0")
+        for name in ("tof_std_s", "arr_std"):
+            v = getattr(self, name)
+            check(name, v, v is None or (isinstance(v, int | float) and math.isfinite(v)
+                                         and v >= 0), ">= 0, or null for the default")
+        check("n_shots", self.n_shots, isinstance(self.n_shots, int) and self.n_shots >= 1,
+              "an integer >= 1")
+
+    @classmethod
+    def from_any(cls, item: FeatureSummary | Mapping[str, Any]) -> FeatureSummary:
+        if isinstance(item, FeatureSummary):
+            return item
+        if not isinstance(item, Mapping):
+            raise InversionError("inputs", f"expected a mapping, got {type(item).__name__}")
+        known = {"diameter_m", "tof_s", "arr", "tof_std_s", "arr_std", "n_shots"}
+        extra = set(item) - known
+        if extra:
+            raise InversionError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
+        for key in ("diameter_m", "tof_s", "arr"):
+            if item.get(key) is None:
+                raise InversionError(key, "missing")
+        n = item.get("n_shots", 1)
+        if isinstance(n, float) and n.is_integer():
+            n = int(n)
+        return cls(float(item["diameter_m"]), float(item["tof_s"]), float(item["arr"]),
+                   None if item.get("tof_std_s") is None else float(item["tof_std_s"]),
+                   None if item.get("arr_std") is None else float(item["arr_std"]),
+                   1 if n is None else n)
+
+    def sigmas(self) -> tuple[float, float]:
+        """Standard errors of the mean TOF (s) and mean ARR, before the model error."""
+        s_tof = self.tof_std_s if self.tof_std_s is not None else DEFAULT_TOF_REL_STD * self.tof_s
+        s_arr = self.arr_std if self.arr_std is not None else DEFAULT_ARR_STD
+        root = math.sqrt(self.n_shots)
+        return max(s_tof, MIN_TOF_STD_S) / root, max(s_arr, MIN_ARR_STD) / root
+
+
+# The fine grid ----------------------------------------------------------------------------
+
+
+def _interp_matrix(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Linear-interpolation weights W (len(x), len(nodes)): f(x) = W @ f(nodes)."""
+    w = np.zeros((x.size, nodes.size))
+    if nodes.size == 1:
+        w[:, 0] = 1.0
+        return w
+    j = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, nodes.size - 2)
+    frac = np.clip((x - nodes[j]) / (nodes[j + 1] - nodes[j]), 0.0, 1.0)
+    rows = np.arange(x.size)
+    w[rows, j] = 1.0 - frac
+    w[rows, j + 1] += frac
+    return w
+
+
+def _loo_rms(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
+             coord_l: np.ndarray) -> float:
+    """Interpolation error of the table at its own spacing, from leave-one-out along both axes.
+
+    Linear interpolation over twice the spacing errs about four times as much as over the
+    spacing itself (error ~ h^2), hence the division by 4.
+    """
+    errs: list[np.ndarray] = []
+    for axis, c in ((0, coord_t), (1, coord_l)):
+        v = np.moveaxis(values, axis, 0)
+        ok = np.moveaxis(valid, axis, 0)
+        if v.shape[0] < 3:
+            continue
+        cc = c.reshape((-1,) + (1,) * (v.ndim - 1))
+        a = (cc[1:-1] - cc[:-2]) / (cc[2:] - cc[:-2])
+        pred = v[:-2] * (1 - a) + v[2:] * a
+        good = ok[:-2] & ok[1:-1] & ok[2:]
+        errs.append((v[1:-1] - pred)[good])
+    if not errs:
+        return 0.0
+    e = np.concatenate(errs)
+    return float(np.sqrt(np.mean(e**2)) / 4.0) if e.size else 0.0
+
+
+@dataclass
+class FineGrid:
+    """One sphere size's table features on the fine (t, L) grid, ready for likelihoods."""
+
+    diameter_m: float
+    thickness_m: np.ndarray
+    distance_m: np.ndarray
+    tof_s: np.ndarray
+    arr: np.ndarray
+    valid: np.ndarray
+    penalty: np.ndarray
+    model_tof_std_s: float
+    model_arr_std: float
+
+
+def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
+    """The fine grid of sphere size ``i_d`` (computed once per table and kept on it)."""
+    key = f"fine:{i_d}"
+    cached = table._cache.get(key)
+    if cached is not None:
+        return cached
+    t_nodes, l_nodes = table.axes["thickness_m"], table.axes["distance_m"]
+    # Uniform in log t: the prior is uniform in log t (thickness is a scale) and the grid has
+    # the same relative resolution everywhere.
+    t_f = np.geomspace(t_nodes[0], t_nodes[-1], FINE_THICKNESS_POINTS if t_nodes.size > 1 else 1)
+    n_l = max(2, int(round((l_nodes[-1] - l_nodes[0]) / FINE_DISTANCE_STEP_M)) + 1)
+    l_f = np.linspace(l_nodes[0], l_nodes[-1], n_l if l_nodes.size > 1 else 1)
+    wt = _interp_matrix(np.log(t_nodes), np.log(t_f))
+    wl = _interp_matrix(l_nodes, l_f)
+    ok = table.status[i_d] == STATUS_OK
+    tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
+    arr = np.where(ok, table.features["arr"][i_d], 0.0)
+    bad = (~ok).astype(float)
+    touched = (wt > 1e-12).astype(float) @ bad @ (wl > 1e-12).astype(float).T
+    grid = FineGrid(
+        diameter_m=float(table.axes["diameter_m"][i_d]),
+        thickness_m=t_f,
+        distance_m=l_f,
+        tof_s=wt @ tof @ wl.T,
+        arr=wt @ arr @ wl.T,
+        valid=touched == 0,
+        penalty=np.where(touched == 0, 0.0, np.inf),
+        model_tof_std_s=_loo_rms(table.features["tof_s"][i_d], ok, np.log(t_nodes), l_nodes),
+        model_arr_std=_loo_rms(table.features["arr"][i_d], ok, np.log(t_nodes), l_nodes),
+    )
+    table._cache[key] = grid
+    return grid
+
+
+def predict(table: ModelTable, diameter_m: float, thickness_m: float,
+            distance_m: float) -> tuple[float, float]:
+    """Model (TOF s, ARR) at one (D, t, L) inside the table, interpolated as the inversion does.
+
+    Raises
+    ------
+    InversionError
+        Outside the table's range, or where the model detects no reflection.
+    """
+    i_d = table.diameter_index(diameter_m)
+    t_nodes, l_nodes = table.axes["thickness_m"], table.axes["distance_m"]
+    for name, x, nodes in (("thickness_m", thickness_m, t_nodes), ("distance_m", distance_m,
+                                                                    l_nodes)):
+        if not nodes[0] <= x <= nodes[-1]:
+            raise InversionError(name, f"{x!r} m is outside the table ({nodes[0]:g}..{nodes[-1]:g} m)")
+    wt = _interp_matrix(np.log(t_nodes), np.array([math.log(thickness_m)]))
+    wl = _interp_matrix(l_nodes, np.array([distance_m]))
+    ok = table.status[i_d] == STATUS_OK
+    if ((wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T)[0, 0]:
+        raise InversionError("thickness_m", "the model detects no reflection next to this point")
+    tof = float((wt @ np.where(ok, table.features["tof_s"][i_d], 0.0) @ wl.T)[0, 0])
+    arr = float((wt @ np.where(ok, table.features["arr"][i_d], 0.0) @ wl.T)[0, 0])
+    return tof, arr
+
+
+# The estimate -----------------------------------------------------------------------------
+
+
+@dataclass
+class ParameterEstimate:
+    """One parameter's answer. Numbers the data do not support are None."""
+
+    map: float | None
+    median: float | None
+    ci68: tuple[float | None, float | None] | None
+    ci95: tuple[float | None, float | None] | None
+    status: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"map": self.map, "median": self.median,
+                "ci68": None if self.ci68 is None else list(self.ci68),
+                "ci95": None if self.ci95 is None else list(self.ci95), "status": self.status}
+
+
+@dataclass
+class Estimate:
+    """Thickness and distance to the support, with what the inversion used."""
+
+    thickness_m: ParameterEstimate
+    distance_m: ParameterEstimate
+    inputs: list[FeatureSummary]
+    calibration: Calibration | None
+    chi2_min: float
+    n_terms: int
+    reason: str | None = None
+    posterior: dict[str, np.ndarray] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def out_of_range(self) -> bool:
+        return self.thickness_m.status == "out_of_range"
+
+    def to_dict(self, posterior: bool = False) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "thickness_m": self.thickness_m.to_dict(),
+            "distance_m": self.distance_m.to_dict(),
+            "chi2_min": self.chi2_min,
+            "n_terms": self.n_terms,
+            "reason": self.reason,
+            "inputs": [vars(i).copy() for i in self.inputs],
+            "calibration": None if self.calibration is None else self.calibration.to_dict(),
+        }
+        if posterior and self.posterior is not None:
+            out["posterior"] = {k: v.tolist() for k, v in self.posterior.items()}
+        return out
+
+
+def _quantiles(x: np.ndarray, p: np.ndarray, qs: Sequence[float]) -> list[float]:
+    """Quantiles of a density sampled at uniform points x (each point a cell of width dx)."""
+    if x.size == 1:
+        return [float(x[0])] * len(qs)
+    dx = x[1] - x[0]
+    edges = np.concatenate([[x[0] - dx / 2], x + dx / 2])
+    edges = np.clip(edges, x[0], x[-1])
+    cdf = np.concatenate([[0.0], np.cumsum(p)])
+    cdf /= cdf[-1]
+    return [float(np.interp(q, cdf, edges)) for q in qs]
+
+
+def _summarise(x: np.ndarray, p: np.ndarray, lower_physical: bool,
+               transform: Any = None) -> ParameterEstimate:
+    """MAP, median, intervals and status of a marginal density ``p`` on uniform points ``x``
+    (``transform`` maps x back to the parameter, e.g. exp for log t)."""
+    est = _summarise_x(x, p, lower_physical)
+    if transform is None:
+        return est
+
+    def f(v: float | None) -> float | None:
+        return None if v is None else float(transform(v))
+
+    def pair(c: tuple[float | None, float | None] | None) -> tuple[float | None, float | None] | None:
+        return None if c is None else (f(c[0]), f(c[1]))
+
+    return ParameterEstimate(f(est.map), f(est.median), pair(est.ci68), pair(est.ci95), est.status)
+
+
+def _summarise_x(x: np.ndarray, p: np.ndarray, lower_physical: bool) -> ParameterEstimate:
+    peak = p.max()
+    lower_open = x.size > 1 and not lower_physical and p[0] >= EDGE_FRACTION * peak
+    upper_open = x.size > 1 and p[-1] >= EDGE_FRACTION * peak
+    if lower_open and upper_open:
+        return ParameterEstimate(None, None, None, None, "unconstrained")
+    if upper_open:
+        q95, q68 = _quantiles(x, p, (0.05, 0.32))
+        return ParameterEstimate(None, None, (q68, None), (q95, None), "lower_bound_only")
+    if lower_open:
+        q95, q68 = _quantiles(x, p, (0.95, 0.68))
+        return ParameterEstimate(None, None, (None, q68), (None, q95), "upper_bound_only")
+    q = _quantiles(x, p, (0.025, 0.16, 0.5, 0.84, 0.975))
+    return ParameterEstimate(float(x[int(np.argmax(p))]), q[2], (q[1], q[3]), (q[0], q[4]),
+                             "constrained")
+
+
+def _out_of_range(inputs: list[FeatureSummary], cal: Calibration | None, chi2_min: float,
+                  n_terms: int, reason: str) -> Estimate:
+    nothing = ParameterEstimate(None, None, None, None, "out_of_range")
+    return Estimate(nothing, ParameterEstimate(None, None, None, None, "out_of_range"), inputs,
+                    cal, chi2_min, n_terms, reason)
+
+
+def invert(
+    table: ModelTable,
+    inputs: Sequence[FeatureSummary | Mapping[str, Any]],
+    calibration: Calibration | Mapping[str, Any] | None = None,
+    *,
+    return_posterior: bool = False,
+) -> Estimate:
+    """Posterior estimate of plate thickness and distance to the support.
+
+    Parameters
+    ----------
+    table: the model table.
+    inputs: one summary per sphere size (:class:`FeatureSummary` or a mapping with its fields).
+    calibration: ARR factor and TOF offset (:class:`Calibration` or its dict).
+    return_posterior: keep the 2-D posterior (``Estimate.posterior``: axes and density).
+
+    Raises
+    ------
+    InversionError, TableError
+        Bad input, or a sphere size the table does not hold.
+    """
+    if isinstance(inputs, Mapping | FeatureSummary) or not inputs:
+        raise InversionError("inputs", "give a non-empty list of per-sphere-size summaries")
+    items = [FeatureSummary.from_any(i) for i in inputs]
+    cal = Calibration.from_any(calibration)
+    grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
+    chi2 = np.zeros_like(grids[0].tof_s)
+    r = np.empty_like(chi2)
+    for item, g in zip(items, grids, strict=True):
+        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        s_tof, s_arr = item.sigmas()
+        w_tof = 1.0 / math.sqrt(s_tof**2 + g.model_tof_std_s**2)
+        w_arr = 1.0 / math.sqrt(s_arr**2 + (factor * g.model_arr_std) ** 2)
+        # ((obs - model) / sigma)^2 in place: this loop is the inversion's whole cost
+        np.multiply(g.tof_s, -w_tof, out=r)
+        r += (item.tof_s - offset) * w_tof
+        r *= r
+        chi2 += r
+        np.multiply(g.arr, -factor * w_arr, out=r)
+        r += item.arr * w_arr
+        r *= r
+        chi2 += r
+        chi2 += g.penalty
+    n_terms = 2 * len(items)
+    best = float(chi2.min())
+    if not math.isfinite(best):
+        return _out_of_range(items, cal, best, n_terms,
+                             "the model detects no reflection anywhere in the table for these "
+                             "sphere sizes, but one was measured")
+    limit = float(chi2_dist.isf(OUT_OF_RANGE_TAIL, n_terms))
+    if best > limit:
+        return _out_of_range(items, cal, best, n_terms,
+                             f"no table point explains the measurement (best chi^2 {best:.3g} > "
+                             f"{limit:.3g} for {n_terms} terms): outside the table's range or "
+                             "not this kind of plate; no extrapolated number is given")
+    chi2 -= best
+    chi2 *= -0.5
+    post = np.exp(chi2, out=chi2)
+    post /= post.sum()
+    g0 = grids[0]
+    thickness = _summarise(np.log(g0.thickness_m), post.sum(axis=1), lower_physical=False,
+                           transform=np.exp)
+    distance = _summarise(g0.distance_m, post.sum(axis=0),
+                          lower_physical=bool(g0.distance_m[0] <= 0.0))
+    est = Estimate(thickness, distance, items, cal, best, n_terms)
+    if return_posterior:
+        est.posterior = {"thickness_m": g0.thickness_m, "distance_m": g0.distance_m,
+                         "density": post}
+    return est
+
+
+__all__ = ["Estimate", "FeatureSummary", "InversionError", "ParameterEstimate", "TableError",
+           "fine_grid", "invert", "predict"]
