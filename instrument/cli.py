@@ -17,6 +17,9 @@ COMMAND_MODULES: list[str] = [
     "cmd_theory",
     "cmd_serve",
     "cmd_table",
+    "cmd_invert",
+    "cmd_calibrate",
+    "cmd_validate",
     "cmd_reproduce",
     "cmd_bench",
 ]
