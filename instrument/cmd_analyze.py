@@ -121,6 +121,11 @@ def analyze(
                                              "time axis."),
     calibration: float | None = typer.Option(None, "--calibration", help="N/V, for files in "
                                              "volts."),
+    invert: bool = typer.Option(False, "--invert", help="Also estimate thickness and distance "
+                                "to support per position (sphere sizes combined)."),
+    table: Path | None = typer.Option(None, "--table", help="Model table for --invert."),
+    calibration_file: Path | None = typer.Option(None, "--calibration-file", help="Calibration "
+                                                 "JSON (solitonde calibrate) for --invert."),
 ) -> None:
     """Measure TOF, ARR, SNR and quality flags of every shot; aggregate per position."""
     console = Console(stderr=as_json)
@@ -149,15 +154,29 @@ def analyze(
         if "error" in r:
             errors.append({"source": r["source"], "shot": r["shot"], "error": r["error"]})
     aggs = aggregates(rows)
+    estimates = None
+    if invert:
+        from .cmd_invert import estimates_for_aggregates
+
+        try:
+            estimates = estimates_for_aggregates(aggs, table, calibration_file)
+        except ValueError as exc:  # table or calibration unreadable
+            errors.append({"source": str(table or "table"), "error": str(exc)})
     if out is not None:
         _write_rows(out, rows)
     shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
     if as_json:
-        json.dump({"shots": shots, "aggregates": aggs, "errors": errors},
+        json.dump({"shots": shots, "aggregates": aggs, "errors": errors,
+                   **({"estimates": estimates} if invert else {})},
                   sys.stdout, indent=1, default=str)
         sys.stdout.write("\n")
     else:
         _print(console, rows, aggs, errors)
+        if estimates is not None:
+            from .cmd_invert import describe_row
+
+            for row in estimates:
+                console.print(describe_row(row))
     raise typer.Exit(code=1 if errors or not paths else 0)
 
 

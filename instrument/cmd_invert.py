@@ -149,3 +149,25 @@ def _clean(value: Any) -> Any:
 def register(app: typer.Typer) -> None:
     """Add `invert` to the CLI."""
     app.command("invert")(invert_command)
+
+
+def describe_row(row: Mapping[str, Any]) -> str:
+    """One `analyze --invert` estimate as text."""
+    head = f"estimate for plate {row.get('plate_id')}, position {row.get('position')}:"
+    est = row.get("estimate")
+    if est is None:
+        why = row.get("error") or "; ".join(s["reason"] for s in row.get("skipped", [])) or "-"
+        return f"{head} none ({why})"
+    lines = [head]
+    for key, name in (("thickness_m", "thickness"), ("distance_m", "distance to support")):
+        p = est[key]
+        if p["status"] == "constrained":
+            lines.append(f"  {name}: {_fmt_mm(p['median'])} mm (95 % {_fmt_mm(p['ci95'][0])}.."
+                         f"{_fmt_mm(p['ci95'][1])} mm)")
+        elif p["status"] == "lower_bound_only":
+            lines.append(f"  {name}: at least {_fmt_mm(p['ci95'][0])} mm (95 %)")
+        elif p["status"] == "upper_bound_only":
+            lines.append(f"  {name}: at most {_fmt_mm(p['ci95'][1])} mm (95 %)")
+        else:
+            lines.append(f"  {name}: {p['status']}")
+    return "\n".join(lines)
