@@ -209,7 +209,7 @@ def _description(s: Settings) -> str:
 
 def _custom_openapi(app: FastAPI, *models: type[Strict]) -> None:
     """Add the request models the routes parse themselves (for speed) to the schema."""
-    from .routes_measurements import upload_schema
+    from .routes_measurements import SECURITY_SCHEMES, upload_schema
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema:
@@ -224,6 +224,11 @@ def _custom_openapi(app: FastAPI, *models: type[Strict]) -> None:
             components.update(js.pop("$defs", {}))
             components[model.__name__] = js
         components["MeasurementUpload"] = upload_schema()
+        schema["components"]["securitySchemes"] = SECURITY_SCHEMES
+        for path, operations in schema.get("paths", {}).items():
+            if path.startswith("/v1/"):
+                for op in operations.values():
+                    op["security"] = [{"APIKeyHeader": []}, {"HTTPBearer": []}, {}]
         app.openapi_schema = schema
         return schema
 
