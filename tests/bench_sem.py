@@ -1,0 +1,82 @@
+"""Benchmarks of the spectral-element plate (run with ``pytest -m bench -s tests/bench_sem.py``).
+
+Each prints its figure, the issue's target and a ratio against a baseline timed in the same run;
+nothing here asserts a time. Compilation is kept out of the figures by a warm-up run.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from solitonde.model import greens
+from solitonde.model.scene import load_scene
+from solitonde.model.sem import single_threaded_blas
+from solitonde.model.sem_tier import plate_for
+from solitonde.model.simulate import simulate
+
+pytestmark = pytest.mark.bench
+
+PAPER = ["sem.elements=[16,16,1]", "sem.order=[4,4,2]", "sem.symmetry=true"]
+
+
+def _timed(fn, repeat: int = 1):
+    best, out = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, out
+
+
+def test_bench_stiffness_vs_csr() -> None:
+    """K u matrix-free (one GEMM per element shape, 1 BLAS thread) vs assembled CSR, full plate."""
+    scene = load_scene(None, ["sem.symmetry=false"])
+    plate = plate_for(scene)
+    k = plate.stiffness_csr()
+    u = np.random.default_rng(0).standard_normal(plate.n_dofs)
+    out = np.empty_like(u)
+    with single_threaded_blas():
+        plate.apply_stiffness(u, out)
+        t_mf, _ = _timed(lambda: [plate.apply_stiffness(u, out) for _ in range(50)], 3)
+    t_csr, ref = _timed(lambda: [k @ u for _ in range(50)], 3)
+    assert np.allclose(out, ref[-1], atol=1e-12 * np.abs(ref[-1]).max())
+    print(f"\n[bench] stiffness, paper mesh full plate ({plate.n_dofs} dofs, {k.nnz:,} nonzeros): "
+          f"matrix-free {t_mf / 50 * 1e3:.3f} ms, CSR {t_csr / 50 * 1e3:.3f} ms, "
+          f"ratio {t_csr / t_mf:.1f}x (target >= 10x)")
+
+
+def test_bench_green_function_and_runs() -> None:
+    """Paper mesh (half model): coupled sem run, one Green's function, one greens chain run."""
+    scene = load_scene(None, [*PAPER, "effects.plate_model=sem"])
+    simulate(scene.with_overrides(["output.duration=2e-5"]))  # compile
+    t_sem, sem = _timed(lambda: simulate(scene))
+    d = sem.diagnostics
+
+    g_scene = scene.with_overrides(["effects.plate_model=greens"])
+    cache = greens.MemoryCache()
+    greens.set_default_cache(cache)
+    try:
+        _, first = _timed(lambda: simulate(g_scene))
+        t_green = first.diagnostics["greens_compute_s"]
+        t_chain, again = _timed(lambda: simulate(g_scene), 3)
+    finally:
+        greens.set_default_cache(greens.MemoryCache())
+    t_inf, _ = _timed(lambda: simulate(scene.with_overrides(["effects.plate_model=infinite"])), 3)
+    peak = np.abs(sem.samples).max()
+    mismatch = np.abs(again.samples - sem.samples).max() / peak
+    print(f"\n[bench] paper mesh {d['mesh']}, plate step {d['dt_s']:.3g} s "
+          f"(ratio {d['dt_stability_ratio']:.2f} of the limit), chain sub-step "
+          f"{d['chain_dt_s']:.3g} s, {d['plate_steps']} plate steps to "
+          f"{d['duration_s'] * 1e3:.2f} ms (reflection passed)")
+    print(f"[bench] coupled sem run: {t_sem:.2f} s (target <= 20 s); "
+          f"{t_sem / t_inf:.0f}x the infinite-plate run ({t_inf * 1e3:.1f} ms)")
+    print(f"[bench] one Green's function: {t_green:.2f} s (target <= 15 s); "
+          f"{t_green / t_sem:.2f} of the coupled run")
+    print(f"[bench] greens chain run (cached response): {t_chain * 1e3:.1f} ms (target <= 50 ms); "
+          f"{t_sem / t_chain:.0f}x faster than sem; |greens - sem| = {mismatch:.1e} of peak")
+    print(f"[bench] energy drift sem {d['energy_drift']:.2e}, greens "
+          f"{again.diagnostics['energy_drift']:.2e}")
+    assert mismatch < 1e-6
