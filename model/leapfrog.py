@@ -58,13 +58,27 @@ def _kick_drift(
 
 
 @njit(cache=True)
-def _kick(v: np.ndarray, f: np.ndarray, f_bottom: float, inv_m: float, g: float, c: float) -> None:
-    """v += c a(f, f_bottom) for every particle (the closing half kick before a sample)."""
+def _close(
+    u: np.ndarray, v: np.ndarray, u0: np.ndarray, f: np.ndarray, f_bottom: float,
+    inv_m: float, g: float, c: float, m: float,
+) -> float:
+    """Closing kick ``v += c a(f, f_bottom)`` and, in the same pass, the chain's kinetic +
+    sphere-contact + gravity energy at the new velocities, J (the bottom contact's is not in it).
+    """
     n = v.size - 1
     v[0] += c * (g - f[0] * inv_m)
+    kin = v[0] * v[0]
+    grav = u[0] - u0[0]
+    pot = (u[0] - u[1]) * f[0]
     for i in range(1, n):
         v[i] += c * (g + (f[i - 1] - f[i]) * inv_m)
+        kin += v[i] * v[i]
+        grav += u[i] - u0[i]
+        pot += (u[i] - u[i + 1]) * f[i]
     v[n] += c * (g + (f[n - 1] - f_bottom) * inv_m)
+    kin += v[n] * v[n]
+    grav += u[n] - u0[n]
+    return 0.5 * m * kin + 0.4 * pot - m * g * grav
 
 
 @njit(cache=True)
@@ -129,14 +143,20 @@ def integrate_elastic(
     plate_work = 0.0
     moving = inv_z > 0.0
     step = 0
+    traces = u_trace.shape[0] > 0
+    f_bottom = hertz(a_b, u[n] - w)
+    e_chain = _energy(u, v, u0, f, w, m, g, a_b)
     for k in range(n_samples):
-        record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
-        energy[k] = _energy(u, v, u0, f, w, m, g, a_b) + plate_work
+        # Here u, v, w are synchronous; f and f_bottom are the forces at (u, w).
+        below = f[sensor] if sensor < n else f_bottom
+        samples[k] = 0.5 * (f[sensor - 1] + below)
+        if traces:
+            record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
+        energy[k] = e_chain + plate_work
         if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
             return RUN_NONFINITE, k + 1, w, plate_work
         if k == n_samples - 1:
             break
-        f_bottom = hertz(a_b, u[n] - w)
         if moving:
             # Opening half step of the dashpot; its later half steps merge into full ones.
             e_before = 0.4 * (u[n] - w) * f_bottom
@@ -145,25 +165,26 @@ def integrate_elastic(
             plate_work += e_before - 0.4 * (u[n] - w) * f_bottom
         c = half
         f_kick = f_bottom
+        f_after = f_bottom
         for sub in range(n_sub):
             _kick_drift(u, v, f, f_kick, inv_m, g, c, dt)
             _hertz_forces(u, a_s, f)
             f_bottom = hertz(a_b, u[n] - w)
             f_after = f_bottom
-            last = sub == n_sub - 1
             if moving:
                 e_before = 0.4 * (u[n] - w) * f_bottom
-                w = _dashpot(w, u[n], a_b, f_static, inv_z, half if last else dt)
+                w = _dashpot(w, u[n], a_b, f_static, inv_z, half if sub == n_sub - 1 else dt)
                 f_after = hertz(a_b, u[n] - w)
                 plate_work += e_before - 0.4 * (u[n] - w) * f_after
             step += 1
             below = f[sensor] if sensor < n else f_bottom
             track_peaks(pk, step * dt, dt, 0.5 * (f[sensor - 1] + below), f_bottom)
-            if last:
-                _kick(v, f, f_bottom, inv_m, g, half)
-            else:
-                c = dt
-                f_kick = 0.5 * (f_bottom + f_after)
+            c = dt
+            f_kick = 0.5 * (f_bottom + f_after)
+        # Closing half kick (with the bottom force before the plate's last half step), fused with
+        # the energy sum; then the state is synchronous again.
+        e_chain = _close(u, v, u0, f, f_bottom, inv_m, g, half, m) + 0.4 * (u[n] - w) * f_after
+        f_bottom = f_after
     if not pk[PK_BOT_F] >= 0.0:
         return RUN_NONFINITE, n_samples, w, plate_work
     return RUN_OK, n_samples, w, plate_work

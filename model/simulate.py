@@ -23,8 +23,12 @@ from .scene import STANDARD_GRAVITY, Scene
 
 #: Verlet steps per period of the stiffest chain oscillation (see :func:`choose_time_step`).
 STEPS_PER_PERIOD = 1600
-#: Largest step, in units of the plate dashpot's relaxation time Z / k_b.
+#: Largest step, in units of the plate dashpot's relaxation time Z / k_b, at STEPS_PER_PERIOD; it
+#: scales with the chain's step when ``steps_per_period`` changes (see :func:`choose_time_step`).
 DASHPOT_STEP_FRACTION = 0.0125
+#: Upper bound of that fraction at coarse resolution: the explicit midpoint sub-step of the
+#: dashpot is stable up to h k_b / Z = 2 (linearised); half a relaxation time keeps a margin.
+DASHPOT_STEP_FRACTION_MAX = 0.5
 #: Default limits on one run.
 MAX_STEPS = 20_000_000
 MAX_SAMPLES = 20_000_000
@@ -108,14 +112,19 @@ def choose_time_step(
     largest force any contact can reach (all the striker's energy in one contact on top of its
     static load) the Hertz contact stiffness is ``k = 1.5 A^(2/3) F^(1/3)``, and Gershgorin's
     bound puts the highest chain frequency below ``omega = 2 sqrt(k_max / m)``. With
-    ``dt = 2 pi / (omega steps_per_period)`` velocity Verlet's relative energy error, of order
-    ``(omega dt)^2 / 8``, stays below 3e-5 at that worst-case stiffness and far below it at the
-    real peak (the default 400 steps/period gives an energy drift below 1e-6 in practice; see
-    tests/test_chain_physics.py), and the phase error is second order in dt. A plate with
-    dynamics of its own (the dashpot) also needs ``dt <= 0.0125 Z / k_b``: the Strang splitting
-    error grows with the dashpot rate ``k_b / Z`` and this keeps the drift below 1e-6 up to
-    D/t = 12. The step is then shrunk so that a whole number ``n_sub`` of steps fits in one
-    sample interval: samples fall on steps.
+    ``dt = 2 pi / (omega steps_per_period)`` velocity Verlet's relative energy error is
+    ``C (omega dt)^2`` with C about 0.02-0.03 measured on the default scene (rigid, half-space and
+    infinite plate, gravity on and off), so the default 1600 steps/period, ``(omega dt)^2 =
+    1.5e-5``, is the step an energy-drift target of 1e-6 asks for with a margin of two to three
+    (measured drift 3e-7 to 5e-7; tests/test_chain_physics.py); the error falls as dt^2. A plate
+    with dynamics of its own (the dashpot) also needs ``dt <= 0.0125 Z / k_b``: the Strang
+    splitting error grows with the dashpot rate ``k_b / Z`` and this keeps the drift below 1e-6
+    up to D/t = 12. Both limits are resolutions of one second-order scheme, so one knob sets them:
+    ``steps_per_period`` below the default loosens the dashpot limit in proportion (80 steps per
+    relaxation time at 1600 steps/period, 1.25 at 25, never coarser than half a relaxation time),
+    which is how a cheaper, coarser run is asked for (e.g. the peaks within 0.1 %, 25
+    steps/period on the default scene; tests/bench_chain.py). The step is then shrunk so that a
+    whole number ``n_sub`` of steps fits in one sample interval: samples fall on steps.
     """
     m = scene.sphere_mass
     g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
@@ -129,7 +138,9 @@ def choose_time_step(
     dt_max = 2.0 * math.pi / (omega * steps_per_period)
     rate = boundary.max_rate(k_b)
     if rate > 0.0:
-        dt_max = min(dt_max, DASHPOT_STEP_FRACTION / rate)
+        fraction = min(DASHPOT_STEP_FRACTION * STEPS_PER_PERIOD / steps_per_period,
+                       DASHPOT_STEP_FRACTION_MAX)
+        dt_max = min(dt_max, fraction / rate)
     interval = 1.0 / scene.output.sample_rate
     n_sub = max(1, math.ceil(interval / dt_max * (1.0 - 1e-12)))
     return interval / n_sub, n_sub
@@ -150,14 +161,14 @@ def auto_duration(scene: Scene) -> float:
 
     m, d = scene.sphere_mass, scene.chain.diameter
     v_in = zener.incident_velocity(scene)
-    e, tau_c = zener.restitution_and_contact_time_many([zener.inelasticity(scene)])
+    e, tau_c = zener.restitution_and_contact_time_one(zener.inelasticity(scene))
     # e -> 0 sends Eq. 15's reflected trip to infinity; below e = 0.01 the reflection carries
     # ARR < 0.4 % and the record ends when a wave at 1 % of v_in would be back.
-    e_floor = max(float(e[0]), 0.01)
+    e_floor = max(e, 0.01)
     speed = zener.solitary_wave_speed(d, scene.a_s, m, v_in)
     trip = zener.travel_diameters(scene) * d
     tof = (trip / speed + trip / zener.solitary_wave_speed(d, scene.a_s, m, e_floor * v_in)
-           + float(tau_c[0]) * zener.time_scale(m, scene.a_p, v_in))
+           + tau_c * zener.time_scale(m, scene.a_p, v_in))
     incident = (scene.chain.sensor_index + 1) * d / speed
     return incident + 1.25 * tof + 2.0 * (5.0 * d / speed)
 
