@@ -213,7 +213,7 @@ def dashpot_advance(
     return w + h * k2
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_dashpot(
     u: np.ndarray,
     v: np.ndarray,
@@ -244,6 +244,7 @@ def integrate_dashpot(
     ``energy[k]`` holds the balance chain energy + plate work + dissipated energy at sample k.
     Without dissipation it runs the fused leapfrog form of the same scheme
     (:func:`solitonde.model.leapfrog.integrate_elastic`); with it, :func:`integrate_dashpot_steps`.
+    It releases the GIL, so that threads run scenes in parallel (:mod:`~solitonde.model.batch`).
     """
     if tau > 0.0:
         return integrate_dashpot_steps(
