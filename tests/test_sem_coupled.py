@@ -92,3 +92,13 @@ def test_auto_picks_greens_near_the_support_and_infinite_far_from_it() -> None:
     assert resolve_plate_model(load_scene(None, ["plate.distance_to_support=0.9"]))[0] == "greens"
     explicit = load_scene(None, ["effects.plate_model=sem"])
     assert resolve_plate_model(explicit)[0] == "sem"
+
+
+def test_near_the_support_arr_rises_and_tof_falls() -> None:
+    """10 mm from the clamped edge the plate's reflection comes back during contact: the
+    reflected pulse is stronger and earlier than 200 mm away (quick, coarse-mesh version of the
+    slow study in test_sem_study.py)."""
+    near = _run("effects.plate_model=greens", "plate.distance_to_support=0.01", *COARSE)
+    far = _run("effects.plate_model=greens", "plate.distance_to_support=0.2", *COARSE)
+    assert near.truth["arr"] > far.truth["arr"] + 0.2
+    assert near.truth["tof_s"] < 0.97 * far.truth["tof_s"]
