@@ -21,6 +21,10 @@ def validate_command(
     workers: int | None = typer.Option(None, help="local worker processes (default: one per "
                                        "core); 1 runs serially"),
     scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
+    diameters: str | None = typer.Option(None, "--diameters", help="sphere sizes to measure, m, "
+                                         "comma list (default: all of the table's)"),
+    measurements: Path | None = typer.Option(None, "--measurements", help="JSON file keeping the "
+                                             "simulated shots; reused when it matches the draw"),
     out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
@@ -32,7 +36,9 @@ def validate_command(
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(2) from None
     report = validate(model, n, seed, workers=default_workers() if workers is None else workers,
-                      scheduler=scheduler, progress=progress)
+                      scheduler=scheduler, progress=progress,
+                      diameters=[float(x) for x in diameters.split(",")] if diameters else None,
+                      measurements=measurements)
     m = report.metrics
     if out is not None:
         out.write_text(json.dumps({"metrics": m, "scenes": report.scenes}, indent=1) + "\n")

@@ -398,7 +398,7 @@ def _local_cluster(workers: int) -> Any:
     from dask.distributed import LocalCluster
 
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                        env=dict(WORKER_ENV), dashboard_address=None, silence_logs=40)
+                        env=dict(WORKER_ENV), dashboard_address=":0", silence_logs=40)
 
 
 def run_tasks(fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], workers: int,

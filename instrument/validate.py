@@ -11,21 +11,27 @@ calibration (ARR factor and TOF offset per size) fitted by
 :func:`~solitonde.instrument.calibration.fit_calibration` from shots simulated the same way on a
 reference plate (:data:`REFERENCE_THICKNESS_M`, :data:`REFERENCE_DISTANCE_M`).
 
-Scored: relative thickness error of the posterior median (median and 90th percentile), coverage
-of the 95 % interval (thickness; distance too, one-sided bounds counted as such), and the status.
-The expected status: thickness ``constrained``; distance ``lower_bound_only`` when the scene is
-beyond ``L_flat`` (the distance from which on, at the true thickness, the table's TOF and ARR of
-every measured size stay within two standard errors of their far-field values, i.e. where the data
-cannot tell L from the plate centre), else ``constrained``; within :data:`STATUS_BAND` (relative)
-of ``L_flat`` either answer is accepted.
+Scored: relative thickness error of the posterior median (median and 90th percentile, over the
+plates where thickness comes back ``constrained``), coverage of the 95 % interval (thickness;
+distance too, one-sided bounds counted as such), and the status. The expected status is what the
+noise-free model says the data can tell: for each parameter, moving it to a table end (the other
+kept at the truth) changes the features of all measured sizes together by ``d`` standard errors
+(the inversion's own sigmas, :func:`separations`); that side is open (the parameter is not bounded
+there) when ``d < 1.5``, closed when ``d > 3``, and either answer counts as right in between.
+L = 0 is a physical end and never open. So far from the support the distance must come back
+``lower_bound_only``, and right at the support, where TOF and ARR no longer depend on the plate,
+thickness may honestly come back unbounded.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,7 +54,8 @@ SHOTS = 5
 SNR_DB = 40.0
 REFERENCE_THICKNESS_M = 5.5e-3
 REFERENCE_DISTANCE_M = 0.457
-STATUS_BAND = 0.25
+OPEN_BELOW = 1.5
+CLOSED_ABOVE = 3.0
 
 
 def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> dict[str, Any]:
@@ -108,25 +115,47 @@ def _inputs(summaries: Mapping[float, Any]) -> list[FeatureSummary]:
                            int(s["n_shots"])) for s in summaries.values() if s is not None]
 
 
-def flat_distance(table: ModelTable, inputs: Sequence[FeatureSummary], thickness_m: float,
-                  calibration: Calibration | None) -> float:
-    """L_flat: from here on the table's features at ``thickness_m`` stay within 2 standard errors
-    of their values at the table's largest L, for every measured size (see the module doc)."""
-    l_flat = 0.0
+def separations(table: ModelTable, inputs: Sequence[FeatureSummary], thickness_m: float,
+                distance_m: float, calibration: Calibration | None) -> dict[str, np.ndarray]:
+    """How far, in standard errors, the features move when one parameter goes to a table end.
+
+    ``d = sqrt(sum over sizes of (dTOF/sigma_tof)^2 + (dARR/sigma_arr)^2)`` between the truth and
+    the point with thickness (distance) at the table's low/high end, the other parameter kept at
+    the truth, with the inversion's own sigmas. Returns ``{"thickness_m": [d_low, d_high],
+    "distance_m": [...]}``.
+    """
+    out = {"thickness_m": np.zeros(2), "distance_m": np.zeros(2)}
     for item in inputs:
         g = fine_grid(table, table.diameter_index(item.diameter_m))
-        i_t = int(np.argmin(np.abs(np.log(g.thickness_m / thickness_m))))
+        i = int(np.argmin(np.abs(np.log(g.thickness_m / thickness_m))))
+        j = int(np.argmin(np.abs(g.distance_m - distance_m)))
         factor = 1.0 if calibration is None else calibration.for_diameter(g.diameter_m)[0]
         s_tof, s_arr = item.sigmas()
         s_tof = math.hypot(s_tof, g.model_tof_std_s)
         s_arr = math.hypot(s_arr, factor * g.model_arr_std)
-        tof, arr = g.tof_s[i_t], factor * g.arr[i_t]
-        differs = (np.abs(tof - tof[-1]) > 2 * s_tof) | (np.abs(arr - arr[-1]) > 2 * s_arr)
-        differs |= ~g.valid[i_t]
-        idx = np.flatnonzero(differs)
-        if idx.size:
-            l_flat = max(l_flat, float(g.distance_m[min(idx[-1] + 1, g.distance_m.size - 1)]))
-    return l_flat
+        for name, ends in (("thickness_m", ((0, j), (-1, j))), ("distance_m", ((i, 0), (i, -1)))):
+            for k, end in enumerate(ends):
+                if not g.valid[end]:
+                    out[name][k] += np.inf  # no reflection there: certainly distinguishable
+                    continue
+                out[name][k] += ((g.tof_s[end] - g.tof_s[i, j]) / s_tof) ** 2
+                out[name][k] += (factor * (g.arr[end] - g.arr[i, j]) / s_arr) ** 2
+    return {k: np.sqrt(v) for k, v in out.items()}
+
+
+def expected_statuses(d: np.ndarray, lower_physical: bool) -> set[str]:
+    """Statuses the data support, from the separations at the two ends (:func:`separations`):
+    an end is open below :data:`OPEN_BELOW` standard errors, closed above :data:`CLOSED_ABOVE`,
+    and either in between."""
+    def states(x: float, physical: bool) -> set[bool]:
+        if physical or x > CLOSED_ABOVE:
+            return {False}
+        return {True} if x < OPEN_BELOW else {True, False}
+
+    names = {(False, False): "constrained", (False, True): "lower_bound_only",
+             (True, False): "upper_bound_only", (True, True): "unconstrained"}
+    return {names[(lo, hi)] for lo in states(float(d[0]), lower_physical)
+            for hi in states(float(d[1]), False)}
 
 
 @dataclass
@@ -139,11 +168,21 @@ class ValidationReport:
 
 
 def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
-             scheduler: str | None = None, progress: bool = False) -> ValidationReport:
-    """Run the synthetic validation on ``table`` (see the module doc)."""
+             scheduler: str | None = None, progress: bool = False,
+             diameters: Sequence[float] | None = None,
+             measurements: str | Path | None = None) -> ValidationReport:
+    """Run the synthetic validation on ``table`` (see the module doc).
+
+    ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
+    names a JSON file that keeps the simulated, measured plates: when it holds the same draw
+    (n, seed, sizes, table grid range and scene) they are reused and only the inversion runs.
+    """
     rng = np.random.default_rng(seed)
     t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
-    diameters = [float(d) for d in table.axes["diameter_m"]]
+    if diameters is None:
+        diameters = [float(d) for d in table.axes["diameter_m"]]
+    else:
+        diameters = [float(table.axes["diameter_m"][table.diameter_index(d)]) for d in diameters]
     base = table.sweep.get("scene", {})
     lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
     draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_axis[-1])))
@@ -159,15 +198,25 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         from tqdm import tqdm
 
         bar = tqdm(total=len(tasks), unit="plate", desc="validate")
-    measured: list[dict[str, Any]] = []
+    key = {"n": n, "seed": seed, "diameters_m": diameters, "scene": base,
+           "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
+           "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
+           "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB}
+    stored = _load_measurements(measurements, key)
     started = time.perf_counter()
-    for res in run_tasks(measure_plate, tasks, workers, scheduler):
-        measured.append(res)
-        if bar is not None:
-            bar.update(1)
+    if stored is not None:
+        measured, wall = stored
+    else:
+        measured = []
+        for res in run_tasks(measure_plate, tasks, workers, scheduler):
+            measured.append(res)
+            if bar is not None:
+                bar.update(1)
+        wall = time.perf_counter() - started
+        if measurements is not None:
+            _save_measurements(measurements, key, measured, wall)
     if bar is not None:
         bar.close()
-    wall = time.perf_counter() - started
     ref = next(m for m in measured if m["thickness_m"] == t_ref and m["distance_m"] == l_ref)
     measured.remove(ref)
     refs = [Reference(t_ref, l_ref, s) for s in _inputs(ref["summaries"])]
@@ -186,18 +235,15 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
             continue
         est = invert(table, inputs, calibration)
         t_est, l_est = est.thickness_m, est.distance_m
-        l_flat = flat_distance(table, inputs, m["thickness_m"], calibration)
         true_l = m["distance_m"]
-        if abs(true_l - l_flat) <= STATUS_BAND * l_flat:
-            expected = {"constrained", "lower_bound_only"}
-        elif true_l > l_flat:
-            expected = {"lower_bound_only"}
-        else:
-            expected = {"constrained"}
+        sep = separations(table, inputs, m["thickness_m"], true_l, calibration)
+        exp_t = expected_statuses(sep["thickness_m"], lower_physical=False)
+        exp_l = expected_statuses(sep["distance_m"], lower_physical=bool(l_axis[0] <= 0.0))
         row.update(
-            thickness=t_est.to_dict(), distance=l_est.to_dict(), l_flat_m=l_flat,
-            expected_distance_status=sorted(expected),
-            status_ok=t_est.status == "constrained" and l_est.status in expected,
+            thickness=t_est.to_dict(), distance=l_est.to_dict(),
+            separations={k: v.tolist() for k, v in sep.items()},
+            expected_thickness_status=sorted(exp_t), expected_distance_status=sorted(exp_l),
+            status_ok=t_est.status in exp_t and l_est.status in exp_l,
             thickness_error=(abs(t_est.median - m["thickness_m"]) / m["thickness_m"]
                              if t_est.median is not None else None),
             thickness_covered=(t_est.ci95 is not None and t_est.ci95[0] is not None
@@ -219,6 +265,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "status_accuracy": float(np.mean([r["status_ok"] for r in rows])) if rows else None,
         "thickness_constrained": float(np.mean([r.get("thickness", {}).get("status")
                                                 == "constrained" for r in rows])),
+        "thickness_status_counts": _counts(r.get("thickness", {}).get("status") for r in rows),
         "distance_status_counts": _counts(r.get("distance", {}).get("status") for r in rows),
         "n_estimated": int(errors.size),
         "damping_s": DAMPING_S,
@@ -226,10 +273,32 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "snr_db": SNR_DB,
         "reference": {"thickness_m": t_ref, "distance_m": l_ref},
         "calibration": calibration.to_dict()["per_diameter"],
+        "diameters_m": diameters,
         "simulation_wall_s": wall,
         "table": str(table.path) if table.path else None,
     }
     return ValidationReport(metrics, rows, calibration)
+
+
+def _load_measurements(path: str | Path | None,
+                       key: Mapping[str, Any]) -> tuple[list[dict[str, Any]], float] | None:
+    if path is None or not Path(path).is_file():
+        return None
+    data = json.loads(Path(path).read_text())
+    if data.get("key") != json.loads(json.dumps(key)):
+        return None
+    plates = data["plates"]
+    for m in plates:  # JSON keys are strings
+        m["summaries"] = {float(d): s for d, s in m["summaries"].items()}
+    return plates, float(data["wall_s"])
+
+
+def _save_measurements(path: str | Path, key: Mapping[str, Any], plates: list[dict[str, Any]],
+                       wall: float) -> None:
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps({"key": key, "plates": plates, "wall_s": wall}))
+    os.replace(tmp, path)
 
 
 def _covered(ci: Any, truth: float) -> bool | None:

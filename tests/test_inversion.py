@@ -1,0 +1,207 @@
+"""Inversion against an analytic table: recovery, coverage, statuses, calibration, errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from solitonde.instrument.calibration import Calibration, Reference, fit_calibration
+from solitonde.instrument.inversion import (
+    FeatureSummary,
+    InversionError,
+    fine_grid,
+    invert,
+    predict,
+)
+from solitonde.instrument.table import STATUS_NO_REFLECTION, STATUS_OK, ModelTable, TableError
+
+DIAMETERS = np.array([5e-3, 10e-3])
+THICKNESS = np.geomspace(1.5e-3, 6e-3, 10)
+DISTANCE = np.array([0, 0.01, 0.02, 0.035, 0.05, 0.07, 0.09, 0.115, 0.14, 0.17, 0.2, 0.26, 0.34,
+                     0.457])
+
+
+def l_c(d: float) -> float:
+    return 3.0 * d
+
+
+def model(d: float, t: float, length: float) -> tuple[float, float]:
+    """Smooth stand-in with the real table's traits: ARR falls with D/t and rises to 1 at the
+    support; TOF grows with D/t and falls near the support; both flat far from it."""
+    near = math.exp(-length / l_c(d))
+    base = 1.0 / (1.0 + (d / t / 2.5) ** 2)
+    arr = base + (1.0 - base) * near
+    tof = d * (25e-3 + 2e-3 * d / t) * (1.0 - 0.3 * near)
+    return tof, arr
+
+
+def analytic_table(dead: tuple[int, int, int] | None = None) -> ModelTable:
+    shape = (DIAMETERS.size, THICKNESS.size, DISTANCE.size)
+    tof, arr = np.empty(shape), np.empty(shape)
+    for idx in np.ndindex(shape):
+        tof[idx], arr[idx] = model(DIAMETERS[idx[0]], THICKNESS[idx[1]], DISTANCE[idx[2]])
+    status = np.full(shape, STATUS_OK, dtype=np.int8)
+    if dead is not None:
+        status[dead] = STATUS_NO_REFLECTION
+        tof[dead] = arr[dead] = np.nan
+    nan = np.full(shape, np.nan)
+    features = {"tof_s": tof, "arr": arr}
+    for k in ("incident_time_s", "incident_peak_N", "reflected_peak_N", "snr_db",
+              "arr_upper_bound"):
+        features[k] = nan
+    for k in ("secondary_times_s", "secondary_ratios"):
+        features[k] = np.full((*shape, 4), np.nan)
+    return ModelTable(
+        axes={"diameter_m": DIAMETERS, "thickness_m": THICKNESS, "distance_m": DISTANCE},
+        features=features, status=status, flags=np.zeros(shape, np.int32),
+        plate_model=np.zeros(shape, np.int8), diagnostics={}, sweep={}, provenance={},
+        complete=True)
+
+
+@pytest.fixture(scope="module")
+def table() -> ModelTable:
+    return analytic_table()
+
+
+def summaries(t: float, length: float, rng: np.random.Generator | None = None,
+              tof_rel: float = 0.005, arr_std: float = 0.01, n: int = 1) -> list[FeatureSummary]:
+    out = []
+    for d in DIAMETERS:
+        tof, arr = model(d, t, length)
+        if rng is not None:
+            tof += rng.normal(0, tof_rel * tof / math.sqrt(n))
+            arr += rng.normal(0, arr_std / math.sqrt(n))
+        out.append(FeatureSummary(float(d), tof, arr, tof_rel * tof, arr_std, n))
+    return out
+
+
+def test_recovers_thickness_and_near_distance(table: ModelTable) -> None:
+    """Noise-free features between grid nodes give back t and L inside tight intervals."""
+    t, length = 2.7e-3, 0.024
+    est = invert(table, summaries(t, length))
+    assert est.thickness_m.status == "constrained"
+    assert est.distance_m.status == "constrained"
+    assert est.thickness_m.ci68[0] < t < est.thickness_m.ci68[1]
+    assert est.distance_m.ci95[0] < length < est.distance_m.ci95[1]
+    assert abs(est.thickness_m.median - t) / t < 0.03
+
+
+def test_far_from_support_is_a_lower_bound(table: ModelTable) -> None:
+    """Beyond where the features stop depending on L, L comes back as a lower bound only."""
+    est = invert(table, summaries(3.3e-3, 0.4))
+    assert est.distance_m.status == "lower_bound_only"
+    assert est.distance_m.map is None and est.distance_m.median is None
+    assert est.distance_m.ci95[1] is None and 0.0 < est.distance_m.ci95[0] < 0.4
+    assert est.thickness_m.status == "constrained"
+
+
+def test_thickness_beyond_table_edge_is_one_sided(table: ModelTable) -> None:
+    """A plate thicker than the table's thickest: only a lower bound on t, no made-up value."""
+    t_big = THICKNESS[-1] * 1.001
+    items = summaries(t_big, 0.3, tof_rel=0.01, arr_std=0.03)
+    est = invert(table, items)
+    assert est.thickness_m.status == "lower_bound_only"
+    assert est.thickness_m.median is None
+
+
+def test_coverage_of_95_percent_intervals(table: ModelTable) -> None:
+    """With errors drawn from the stated scatter, the 95 % intervals cover the truth ~95 %."""
+    rng = np.random.default_rng(3)
+    hits = total = 0
+    for _ in range(200):
+        t = float(np.exp(rng.uniform(np.log(1.7e-3), np.log(5.3e-3))))
+        length = float(rng.uniform(0.0, 0.457))
+        est = invert(table, summaries(t, length, rng, n=5))
+        if est.thickness_m.status == "constrained":
+            total += 1
+            hits += est.thickness_m.ci95[0] <= t <= est.thickness_m.ci95[1]
+    # binomial: 0.95 +- 3 sqrt(0.95 * 0.05 / 200) = +-0.046; the model error term widens a bit
+    assert total >= 190
+    assert 0.90 <= hits / total <= 0.995
+
+
+def test_sizes_combined_narrow_the_interval(table: ModelTable) -> None:
+    """Two sphere sizes constrain thickness at least as well as either alone."""
+    items = summaries(3.0e-3, 0.3)
+    both = invert(table, items).thickness_m.ci95
+    for one in items:
+        alone = invert(table, [one]).thickness_m.ci95
+        if alone is not None and None not in alone:
+            assert both[1] - both[0] <= alone[1] - alone[0] + 1e-12
+
+
+def test_out_of_range_measurement_has_no_numbers(table: ModelTable) -> None:
+    """A TOF no table point comes near gives status out_of_range, never an extrapolated value."""
+    est = invert(table, [FeatureSummary(5e-3, 5e-3, 0.5, 1e-6, 0.01, 5)])
+    assert est.thickness_m.status == est.distance_m.status == "out_of_range"
+    assert est.thickness_m.median is None and est.reason
+
+
+def test_unknown_diameter_is_an_error(table: ModelTable) -> None:
+    with pytest.raises(TableError, match="diameter_m"):
+        invert(table, [FeatureSummary(7e-3, 1e-4, 0.5)])
+
+
+@pytest.mark.parametrize(("item", "field"), [
+    ({"diameter_m": 5e-3, "tof_s": -1.0, "arr": 0.5}, "tof_s"),
+    ({"diameter_m": 5e-3, "tof_s": 1e-4, "arr": float("nan")}, "arr"),
+    ({"diameter_m": 5e-3, "tof_s": 1e-4, "arr": 0.5, "n_shots": 0}, "n_shots"),
+    ({"diameter_m": 5e-3, "tof_s": 1e-4}, "arr"),
+    ({"diameter_m": 5e-3, "tof_s": 1e-4, "arr": 0.5, "colour": 1}, "colour"),
+])
+def test_bad_inputs_name_the_field(table: ModelTable, item: dict, field: str) -> None:
+    with pytest.raises(InversionError) as info:
+        invert(table, [item])
+    assert info.value.field == field
+
+
+def test_dead_points_cannot_explain_a_reflection() -> None:
+    """Cells next to a point without a detected reflection get no posterior mass."""
+    dead = (0, 3, 5)
+    tab = analytic_table(dead)
+    g = fine_grid(tab, 0)
+    t_node, l_node = THICKNESS[3], DISTANCE[5]
+    i = int(np.argmin(np.abs(g.thickness_m - t_node)))
+    j = int(np.argmin(np.abs(g.distance_m - l_node)))
+    assert not g.valid[i, j]
+    est = invert(tab, summaries(t_node, l_node)[:1], return_posterior=True)
+    assert est.posterior["density"][i, j] == 0.0
+
+
+def test_calibration_fit_and_use(table: ModelTable) -> None:
+    """A known ARR loss and TOF delay are fitted on a reference and removed from the estimate."""
+    factor, offset = {5e-3: 0.8, 10e-3: 0.9}, {5e-3: 3e-6, 10e-3: 5e-6}
+
+    def lossy(t: float, length: float) -> list[FeatureSummary]:
+        return [FeatureSummary(s.diameter_m, s.tof_s + offset[s.diameter_m],
+                               s.arr * factor[s.diameter_m], s.tof_std_s, s.arr_std, 5)
+                for s in summaries(t, length)]
+
+    refs = [Reference(4.4e-3, 0.41, s) for s in lossy(4.4e-3, 0.41)]
+    cal = fit_calibration(table, refs)
+    for d in DIAMETERS:
+        f, o = cal.for_diameter(float(d))
+        assert f == pytest.approx(factor[float(d)], rel=0.01)
+        assert o == pytest.approx(offset[float(d)], abs=2e-7)
+    t = 2.2e-3
+    biased = invert(table, lossy(t, 0.3)).thickness_m
+    fixed = invert(table, lossy(t, 0.3), cal).thickness_m
+    assert fixed.status == "constrained"
+    assert fixed.ci95[0] <= t <= fixed.ci95[1]
+    assert biased.median is None or abs(biased.median - t) > abs(fixed.median - t)
+    again = Calibration.from_any(cal.to_dict())
+    assert again.for_diameter(5e-3) == cal.for_diameter(5e-3)
+
+
+def test_predict_refuses_points_outside(table: ModelTable) -> None:
+    with pytest.raises(InversionError, match="thickness_m"):
+        predict(table, 5e-3, 7e-3, 0.1)
+
+
+def test_to_dict_contract(table: ModelTable) -> None:
+    """The public JSON keys (CLI and service)."""
+    d = invert(table, summaries(3e-3, 0.05)).to_dict()
+    for key in ("thickness_m", "distance_m"):
+        assert set(d[key]) == {"map", "median", "ci68", "ci95", "status"}
