@@ -88,10 +88,8 @@ def initial_state(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Positions and velocities of striker + N particles at the instant of impact (w = 0)."""
     deltas, delta_b = static_overlaps(n, m, g, a_s, a_b)
-    u = np.empty(n + 1)
-    u[n] = delta_b
-    for j in range(n - 1, -1, -1):
-        u[j] = u[j + 1] + deltas[j]
+    # u[N] = delta_b, u[j] = u[j + 1] + deltas[j]: a running sum from the bottom, in that order.
+    u = np.cumsum(np.concatenate(([delta_b], deltas[::-1])))[::-1].copy()
     v = np.zeros(n + 1)
     v[0] = v_imp
     return u, v
