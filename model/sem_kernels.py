@@ -10,6 +10,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .chain import (
+    PK_BOT_F,
+    accelerations,
+    chain_energy,
+    contact_forces,
+    damped_contact_forces,
+    hertz,
+    record_sample,
+    sensor_reading,
+    track_peaks,
+    verlet_step,
+)
+
 
 @njit(cache=True)
 def gather(u: np.ndarray, edofs: np.ndarray, start: int, stop: int, buf: np.ndarray) -> None:
@@ -134,19 +147,6 @@ def plate_step(
 # the chain's weight F_static before the impact, so only F_bottom - F_static drives its
 # (dynamic) displacement; the static deflection shifts w by a constant that drops out of every
 # overlap.
-
-from .chain import (  # noqa: E402
-    PK_BOT_F,
-    accelerations,
-    chain_energy,
-    contact_forces,
-    damped_contact_forces,
-    hertz,
-    record_sample,
-    sensor_reading,
-    track_peaks,
-    verlet_step,
-)
 
 
 @njit(cache=True)
