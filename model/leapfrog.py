@@ -100,9 +100,12 @@ def _energy(
 
 
 @njit(cache=True)
-def _dashpot(w: float, u_n: float, a_b: float, f_static: float, inv_z: float, h: float) -> float:
-    """Explicit midpoint step of ``w' = (A_b [u_N - w]_+^1.5 - F_static) / Z`` (u_N frozen)."""
-    k1 = (hertz(a_b, u_n - w) - f_static) * inv_z
+def _dashpot(
+    w: float, u_n: float, f_now: float, a_b: float, f_static: float, inv_z: float, h: float
+) -> float:
+    """Explicit midpoint step of ``w' = (A_b [u_N - w]_+^1.5 - F_static) / Z`` (u_N frozen);
+    ``f_now`` is the bottom force at (u_N, w), which the caller already has."""
+    k1 = (f_now - f_static) * inv_z
     k2 = (hertz(a_b, u_n - w - 0.5 * h * k1) - f_static) * inv_z
     return w + h * k2
 
@@ -160,7 +163,7 @@ def integrate_elastic(
         if moving:
             # Opening half step of the dashpot; its later half steps merge into full ones.
             e_before = 0.4 * (u[n] - w) * f_bottom
-            w = _dashpot(w, u[n], a_b, f_static, inv_z, half)
+            w = _dashpot(w, u[n], f_bottom, a_b, f_static, inv_z, half)
             f_bottom = hertz(a_b, u[n] - w)
             plate_work += e_before - 0.4 * (u[n] - w) * f_bottom
         c = half
@@ -173,7 +176,8 @@ def integrate_elastic(
             f_after = f_bottom
             if moving:
                 e_before = 0.4 * (u[n] - w) * f_bottom
-                w = _dashpot(w, u[n], a_b, f_static, inv_z, half if sub == n_sub - 1 else dt)
+                w = _dashpot(w, u[n], f_bottom, a_b, f_static, inv_z,
+                             half if sub == n_sub - 1 else dt)
                 f_after = hertz(a_b, u[n] - w)
                 plate_work += e_before - 0.4 * (u[n] - w) * f_after
             step += 1
