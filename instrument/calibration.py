@@ -125,7 +125,8 @@ class Calibration:
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except OSError as exc:
-            raise CalibrationError("calibration", f"cannot read {str(path)!r}: {exc.strerror}") from None
+            raise CalibrationError("calibration",
+                                   f"cannot read {str(path)!r}: {exc.strerror}") from None
         except json.JSONDecodeError as exc:
             raise CalibrationError("calibration", f"{path.name} is not JSON: {exc}") from None
         cal = cls.from_any(data)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from .calibration import Calibration, CalibrationError, Reference, fit_calibration
+from .calibration import CalibrationError, Reference, fit_calibration
 from .cmd_invert import table_path
 from .inversion import FeatureSummary, InversionError
 from .table import ModelTable, TableError

@@ -2,8 +2,8 @@
 
 Bayesian grid inversion. The table's features are interpolated (linear in log t and in L, the
 axes along which TOF and ARR vary smoothly) onto a fine (log t, L) grid once per table and
-sphere size; a prior uniform in log t (thickness is a scale) and in L over the table's range; independent Gaussian errors on the mean TOF
-and mean ARR of each sphere size:
+sphere size; a prior uniform in log t (thickness is a scale) and in L over the table's range;
+independent Gaussian errors on the mean TOF and mean ARR of each sphere size:
 
     sigma_tof^2 = s_tof^2 / n + sigma_model_tof^2,   sigma_arr^2 = s_arr^2 / n + sigma_model_arr^2
 
@@ -190,7 +190,7 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     # Uniform in log t: the prior is uniform in log t (thickness is a scale) and the grid has
     # the same relative resolution everywhere.
     t_f = np.geomspace(t_nodes[0], t_nodes[-1], FINE_THICKNESS_POINTS if t_nodes.size > 1 else 1)
-    n_l = max(2, int(round((l_nodes[-1] - l_nodes[0]) / FINE_DISTANCE_STEP_M)) + 1)
+    n_l = max(2, round((l_nodes[-1] - l_nodes[0]) / FINE_DISTANCE_STEP_M) + 1)
     l_f = np.linspace(l_nodes[0], l_nodes[-1], n_l if l_nodes.size > 1 else 1)
     wt = _interp_matrix(np.log(t_nodes), np.log(t_f))
     wl = _interp_matrix(l_nodes, l_f)
@@ -228,7 +228,8 @@ def predict(table: ModelTable, diameter_m: float, thickness_m: float,
     for name, x, nodes in (("thickness_m", thickness_m, t_nodes), ("distance_m", distance_m,
                                                                     l_nodes)):
         if not nodes[0] <= x <= nodes[-1]:
-            raise InversionError(name, f"{x!r} m is outside the table ({nodes[0]:g}..{nodes[-1]:g} m)")
+            raise InversionError(name, f"{x!r} m is outside the table "
+                                 f"({nodes[0]:g}..{nodes[-1]:g} m)")
     wt = _interp_matrix(np.log(t_nodes), np.array([math.log(thickness_m)]))
     wl = _interp_matrix(l_nodes, np.array([distance_m]))
     ok = table.status[i_d] == STATUS_OK
@@ -314,7 +315,9 @@ def _summarise(x: np.ndarray, p: np.ndarray, lower_physical: bool,
     def f(v: float | None) -> float | None:
         return None if v is None else float(transform(v))
 
-    def pair(c: tuple[float | None, float | None] | None) -> tuple[float | None, float | None] | None:
+    Pair = tuple[float | None, float | None] | None
+
+    def pair(c: Pair) -> Pair:
         return None if c is None else (f(c[0]), f(c[1]))
 
     return ParameterEstimate(f(est.map), f(est.median), pair(est.ci68), pair(est.ci95), est.status)

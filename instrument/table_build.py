@@ -137,7 +137,8 @@ class Sweep:
             i_t, i_l = key
             finite = resolve_plate_model(self.scene_at(len(self.diameters_m) - 1, i_t, i_l))[0]
             return (0 if finite in ("greens", "sem") else 1, self.thicknesses_m[i_t])
-        keys = [(i, j) for i in range(len(self.thicknesses_m)) for j in range(len(self.distances_m))]
+        keys = [(i, j) for i in range(len(self.thicknesses_m))
+                for j in range(len(self.distances_m))]
         return sorted(keys, key=cost)
 
 
@@ -167,7 +168,8 @@ def point_record(features: Features | None, result: SimulationResult | None,
     rec["error"] = error or ""
     rec["plate_model"] = result.plate_model if result is not None else "unknown"
     rec["wall_s"] = float(result.diagnostics.get("wall_s", math.nan)) if result else math.nan
-    rec["energy_drift"] = float(result.diagnostics.get("energy_drift", math.nan)) if result else math.nan
+    rec["energy_drift"] = (float(result.diagnostics.get("energy_drift", math.nan)) if result
+                           else math.nan)
     rec["dt_s"] = float(result.diagnostics.get("dt_s", math.nan)) if result else math.nan
     rec["mesh"] = result.diagnostics.get("mesh") if result else None
     rec["trace"] = None

@@ -146,7 +146,7 @@ def test_point_features_are_the_signal_packages(reference: Path) -> None:
 def test_sweep_validation_names_the_field() -> None:
     with pytest.raises(TableError, match="thicknesses_m"):
         Sweep([4.76e-3], [3e-3, 3e-3], [0.1])
-    with pytest.raises(Exception, match="plate.material"):
+    with pytest.raises(Exception, match=r"plate\.material"):
         Sweep([4.76e-3], [3e-3], [0.1], scene={"plate": {"material": "cheese"}})
 
 

@@ -19,8 +19,9 @@ FAST = {"sem": {"elements": [6, 6, 1], "order": [2, 2, 2]}}
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("val") / "tiny.h5"
-    build_table(Sweep([4.76e-3, 9.53e-3], [2.5e-3, 3.5e-3, 5e-3], [0.0, 0.01, 0.03, 0.06, 0.1, 0.16, 0.3,
-                                                       0.457], scene=FAST), out, workers=1)
+    distances = [0.0, 0.01, 0.03, 0.06, 0.1, 0.16, 0.3, 0.457]
+    build_table(Sweep([4.76e-3, 9.53e-3], [2.5e-3, 3.5e-3, 5e-3], distances, scene=FAST), out,
+                workers=1)
     return out
 
 
