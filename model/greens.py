@@ -193,8 +193,7 @@ def integrate_greens(
             if first >= 0:
                 # w_{s+1} = sum_{j=first..s} response[s+1-j] fdyn[j]
                 off = length - 2 - step
-                for j in range(first, step + 1):
-                    w += rev[off + j] * fdyn[j]
+                w = np.dot(rev[off + first: off + step + 1], fdyn[first: step + 1])
             f_bottom, power, lost = chain_substeps(
                 u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_b, inv_m, g, tau, sensor, power,
                 step * h, pk,

@@ -122,12 +122,13 @@ class GreensBoundary(_PlateTier):
         u0 = setup.u.copy()
         peaks = new_peak_tracker()
         start = time.perf_counter()
-        status, done, w, plate_work, dissipated = integrate_greens(
-            setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
-            setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
-            setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
-            response,
-        )
+        with single_threaded_blas():
+            status, done, w, plate_work, dissipated = integrate_greens(
+                setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
+                setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
+                setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
+                response,
+            )
         wall = time.perf_counter() - start
         setup.w = w
         extra = self._extra(h, r, per_sample, plan)
