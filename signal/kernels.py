@@ -1,7 +1,10 @@
-"""Numba kernels behind pulse detection: smoothing, peak search, pulse-shape fit.
+"""Numba kernels behind pulse detection: the whole search-and-measure pass of one shot.
 
-Every function here is O(n) or works on a window of at most :data:`MAX_FIT_POINTS` points, so a
-10,000-sample shot costs a few passes over its samples and no Python work per sample.
+:func:`analyze` does everything that touches the samples: pre-trigger segment, baseline and noise,
+smoothing, peak search, drift, and the template fit of every pulse. It returns plain arrays
+(:data:`HEAD` and :data:`PULSE` name their columns), so a 10,000-sample shot costs a few O(n)
+passes and no Python work per sample or per pulse; :mod:`solitonde.signal.pulses` only turns the
+arrays into objects.
 """
 
 from __future__ import annotations
@@ -9,55 +12,94 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-MAX_FIT_POINTS = 96
+MAX_FIT_POINTS = 64
 """A longer fit window is block-averaged down to this (the pulse is smooth on that scale)."""
 
 R_MIN, R_MAX = 1.2, 8.0
 """Bounds on the shape exponent r of the template A exp(-|u|^r)."""
 
+MIN_PRETRIGGER = 16
+MAD_TO_SIGMA = 1.4826
+NOISE_FLOOR = 1e-9
+"""Noise is never taken below this fraction of the largest excursion (noise-free model traces)."""
+
+FOOT = 1.5
+"""A pulse's foot lies this many of its FWHM before (and after) its peak: the solitary wave has
+fallen below 0.5 % of its peak there. The level the sensor holds before the foot is the pulse's
+baseline."""
+
+LEVEL_SPAN = 12.0
+"""The baseline window before a pulse's foot is at most this many FWHM long (the noise of the
+level falls as the root of its length; the slow trend carries it to the peak)."""
+
+TRUNC_SPAN = 2.5
+"""A pulse counts as truncated when the record ends (or starts) within this many FWHM of its peak
+while the pulse is still above ``fit_fraction`` of its height."""
+
+# Columns of the head array returned by analyze.
+(H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
+ H_UPPER) = range(10)
+HEAD = 10
+# Columns of the per-pulse array returned by analyze (times and widths in samples).
+(P_TIME, P_AMP, P_BASE, P_WIDTH, P_ONSET, P_END, P_INDEX, P_METHOD, P_TRUNC, P_MERGED,
+ P_LEVEL) = range(11)
+PULSE = 11
+
+
+@njit(cache=True)
+def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
+    """Centred moving average over 2h+1 samples by a running (prefix) sum; shrinks at the ends."""
+    n = x.size
+    c[0] = 0.0
+    for i in range(n):
+        c[i + 1] = c[i] + x[i]
+    inv = 1.0 / (2 * h + 1)
+    for i in range(min(h, n)):
+        hi = min(n, i + h + 1)
+        out[i] = c[hi] / hi
+    for i in range(h, n - h):
+        out[i] = (c[i + h + 1] - c[i - h]) * inv
+    for i in range(max(n - h, h), n):
+        lo = i - h
+        out[i] = (c[n] - c[lo]) / (n - lo)
+
 
 @njit(cache=True)
 def boxcar(x: np.ndarray, h: int) -> np.ndarray:
     """Centred moving average over 2h+1 samples (zero phase); the window shrinks at the ends."""
-    n = x.size
-    out = np.empty(n)
-    if n <= 2 * h + 1:
-        for i in range(n):
-            lo = max(0, i - h)
-            hi = min(n, i + h + 1)
-            out[i] = np.mean(x[lo:hi])
+    out = np.empty(x.size)
+    if h < 1:
+        out[:] = x
         return out
-    acc = 0.0
-    for i in range(h + 1):
-        acc += x[i]
-    for i in range(h + 1):  # left edge: window [0, i + h]
-        out[i] = acc / (i + h + 1)
-        acc += x[i + h + 1]
-    width = 2 * h + 1
-    for i in range(h + 1, n - h):  # acc holds x[i - h - 1 .. i + h]
-        acc -= x[i - h - 1]
-        out[i] = acc / width
-        if i + h + 1 < n:
-            acc += x[i + h + 1]
-    for i in range(n - h, n):  # right edge: window [i - h, n)
-        acc -= x[i - h - 1]
-        out[i] = acc / (n - i + h)
+    _box_into(x, h, np.empty(x.size + 1), out)
     return out
 
 
 @njit(cache=True)
 def triangle(x: np.ndarray, h: int) -> np.ndarray:
     """Two boxcars in a row: a zero-phase triangular smoother of half-width about 2h."""
+    out = np.empty(x.size)
     if h < 1:
-        return x.copy()
-    return boxcar(boxcar(x, h), h)
+        out[:] = x
+        return out
+    c = np.empty(x.size + 1)
+    mid = np.empty(x.size)
+    _box_into(x, h, c, mid)
+    _box_into(mid, h, c, out)
+    return out
 
 
 @njit(cache=True)
-def median_mad(x: np.ndarray) -> tuple[float, float]:
-    """Median and median absolute deviation of ``x``."""
-    med = np.median(x)
-    return med, np.median(np.abs(x - med))
+def smoother_gain(h: int) -> float:
+    """Standard deviation of white noise after :func:`triangle` with half-width ``h``."""
+    if h < 1:
+        return 1.0
+    width = 2 * h + 1
+    acc = 0.0
+    for k in range(-2 * h, 2 * h + 1):
+        tap = width - abs(k)
+        acc += tap * tap
+    return np.sqrt(acc) / width**2
 
 
 @njit(cache=True)
@@ -78,7 +120,9 @@ def detrended_mad(x: np.ndarray) -> float:
     for i in range(n):
         r[i] = x[i] - mean - slope * (i - tm)
     med = np.median(r)
-    return np.median(np.abs(r - med))
+    for i in range(n):
+        r[i] = abs(r[i] - med)
+    return np.median(r)
 
 
 @njit(cache=True)
@@ -90,7 +134,7 @@ def find_peaks_hysteresis(v: np.ndarray, thr: float, delta: float) -> np.ndarray
     A peak still rising at the end of the record is reported too (the caller flags truncation).
     """
     n = v.size
-    out = np.empty(n, dtype=np.int64)
+    out = np.empty(n // 2 + 1, dtype=np.int64)
     k = 0
     seeking_max = True
     cur = v[0]
@@ -149,8 +193,7 @@ def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndar
     """Least-squares polynomial of ``degree`` (0-2) in u = i / n through the masked-in samples.
 
     Returns the coefficients (c0, c1, c2) (unused ones zero) and the number of samples used.
-    The baseline under the pulses: the quiet samples all along the record pin it down and a slow
-    drift (a ramp with some curvature) is followed. Fewer than three samples give a constant.
+    Fewer than three samples, or a singular system, give a constant.
     """
     n = x.size
     m = np.zeros((3, 3))
@@ -159,14 +202,14 @@ def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndar
     for i in range(n):
         if mask[i]:
             u = i / n
-            p1, p2 = u, u * u
+            p2 = u * u
             m[0, 0] += 1.0
-            m[0, 1] += p1
+            m[0, 1] += u
             m[0, 2] += p2
-            m[1, 2] += p1 * p2
+            m[1, 2] += u * p2
             m[2, 2] += p2 * p2
             rhs[0] += x[i]
-            rhs[1] += p1 * x[i]
+            rhs[1] += u * x[i]
             rhs[2] += p2 * x[i]
             count += 1
     coef = np.zeros(3)
@@ -176,12 +219,14 @@ def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndar
     m[1, 1] = m[0, 2]
     m[2, 0] = m[0, 2]
     m[2, 1] = m[1, 2]
-    det = np.linalg.det(m)
-    if count < 3 or abs(det) < 1e-12 * m[0, 0] ** 3 * 1e-6:
-        coef[0] = rhs[0] / m[0, 0]
-        return coef, count
     k = degree + 1
-    coef[:k] = np.linalg.solve(m[:k, :k], rhs[:k])
+    if count < 3:
+        k = 1
+    sub = m[:k, :k].copy()
+    if k > 1 and abs(np.linalg.det(sub)) < 1e-14 * m[0, 0] ** k:
+        k = 1
+        sub = m[:1, :1].copy()
+    coef[:k] = np.linalg.solve(sub, rhs[:k].copy())
     return coef, count
 
 
@@ -217,20 +262,27 @@ def block_average(t: np.ndarray, y: np.ndarray, m: int) -> tuple[np.ndarray, np.
 
 
 @njit(cache=True)
-def _template(t: np.ndarray, p: np.ndarray, f: np.ndarray, jac: np.ndarray) -> None:
-    """Super-Gaussian A exp(-|u|^r), u = (t - tc)/w, and its Jacobian in (A, tc, w, r)."""
+def template(t: np.ndarray, p: np.ndarray, skew: float, f: np.ndarray, jac: np.ndarray) -> None:
+    """Skewed super-Gaussian and its Jacobian in (A, tc, w, r).
+
+    ``A exp(-|u|^r)`` with ``u = (t - tc) / (w (1 + skew sign(t - tc)))``: the peak is at ``tc``
+    whatever the skew, and the half-widths on the two sides differ by the factor
+    ``(1 + skew) / (1 - skew)``.
+    """
     amp, tc, w, r = p[0], p[1], p[2], p[3]
     nfree = jac.shape[1]
     for i in range(t.size):
         d = t[i] - tc
-        a = abs(d) / w
+        side = 1.0 + skew if d > 0 else 1.0 - skew
+        ws = w * side
+        a = abs(d) / ws
         if a > 0:
             la = np.log(a)
             g = np.exp(r * la)
             e = np.exp(-g)
             f[i] = amp * e
             jac[i, 0] = e
-            jac[i, 1] = amp * e * r * g / a / w * (1.0 if d > 0 else -1.0)
+            jac[i, 1] = amp * e * r * g / a / ws * (1.0 if d > 0 else -1.0)
             jac[i, 2] = amp * e * r * g / w
             if nfree > 3:
                 jac[i, 3] = -amp * e * g * la
@@ -243,20 +295,20 @@ def _template(t: np.ndarray, p: np.ndarray, f: np.ndarray, jac: np.ndarray) -> N
 
 @njit(cache=True)
 def fit_pulse(
-    t: np.ndarray, y: np.ndarray, p0: np.ndarray, nfree: int, max_iter: int
+    t: np.ndarray, y: np.ndarray, p0: np.ndarray, skew: float, nfree: int, max_iter: int
 ) -> tuple[np.ndarray, bool]:
-    """Levenberg-Marquardt fit of a symmetric super-Gaussian to (t, y): (params, converged).
+    """Levenberg-Marquardt fit of the skewed super-Gaussian to (t, y): (params, converged).
 
     Parameters are amplitude, peak time, width and shape exponent r; with ``nfree = 3`` the
     exponent stays at ``p0[3]``. ``t`` should be centred and in sample units and ``y`` scaled to
-    the peak, so the normal equations are well conditioned. A symmetric shape uses both flanks to
-    place the peak, which is what makes it far less noisy than a parabola through the top.
+    the peak, so the normal equations are well conditioned. The whole pulse informs the peak time
+    (both flanks), which makes it far less noisy than a parabola through the top.
     """
     n = t.size
     p = p0.copy()
     f = np.empty(n)
     jac = np.empty((n, nfree))
-    _template(t, p, f, jac)
+    template(t, p, skew, f, jac)
     cost = 0.0
     for i in range(n):
         cost += (y[i] - f[i]) ** 2
@@ -264,13 +316,25 @@ def fit_pulse(
     trial = p.copy()
     ft = np.empty(n)
     jt = np.empty((n, nfree))
+    jtj = np.empty((nfree, nfree))
+    g = np.empty(nfree)
+    a = np.empty((nfree, nfree))
     tmin, tmax = t[0], t[n - 1]
     for _ in range(max_iter):
-        jtj = jac.T @ jac
-        g = jac.T @ (y - f)
+        for k in range(nfree):
+            acc = 0.0
+            for i in range(n):
+                acc += jac[i, k] * (y[i] - f[i])
+            g[k] = acc
+            for q in range(k, nfree):
+                acc = 0.0
+                for i in range(n):
+                    acc += jac[i, k] * jac[i, q]
+                jtj[k, q] = acc
+                jtj[q, k] = acc
         improved = False
         for _inner in range(8):
-            a = jtj.copy()
+            a[:, :] = jtj
             for k in range(nfree):
                 a[k, k] += lam * (jtj[k, k] + 1e-12)
             step = np.linalg.solve(a, g)
@@ -279,7 +343,7 @@ def fit_pulse(
             trial[1] = min(max(trial[1], tmin), tmax)
             trial[2] = max(trial[2], 0.25)
             trial[3] = min(max(trial[3], R_MIN), R_MAX)
-            _template(t, trial, ft, jt)
+            template(t, trial, skew, ft, jt)
             c = 0.0
             for i in range(n):
                 c += (y[i] - ft[i]) ** 2
@@ -299,3 +363,371 @@ def fit_pulse(
         if not improved:
             return p, True  # no descent direction left: at a (local) minimum
     return p, False
+
+
+@njit(cache=True)
+def parabola_top(tb: np.ndarray, yb: np.ndarray) -> tuple[float, float, bool]:
+    """Least-squares parabola through the top 30 % of (tb, yb): (peak time, peak value, ok)."""
+    top = yb.max()
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    r0 = 0.0
+    r1 = 0.0
+    r2 = 0.0
+    lo = np.inf
+    hi = -np.inf
+    count = 0
+    for i in range(tb.size):
+        if yb[i] > 0.7 * top:
+            u = tb[i]
+            s0 += 1
+            s1 += u
+            s2 += u * u
+            s3 += u * u * u
+            s4 += u * u * u * u
+            r0 += yb[i]
+            r1 += u * yb[i]
+            r2 += u * u * yb[i]
+            lo = min(lo, u)
+            hi = max(hi, u)
+            count += 1
+    if count >= 3:
+        m = np.array([[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]])
+        if abs(np.linalg.det(m)) > 1e-12 * max(s4, 1.0) ** 3:
+            c0, c1, c2 = np.linalg.solve(m, np.array([r0, r1, r2]))
+            if c2 < 0:
+                tc = -c1 / (2 * c2)
+                if lo <= tc <= hi:
+                    return tc, c0 - c1 * c1 / (4 * c2), True
+    return 0.0, 1.0, False
+
+
+@njit(cache=True)
+def _onset_pretrigger(s1: np.ndarray, ref: float) -> int:
+    """Samples before the first rise (a first guess; refined once the pulses are known).
+
+    The rise is the first crossing of a quarter of the largest excursion above ``ref``; its onset
+    is where the lightly smoothed trace, walking back, falls to 2 % of it; half the rise is kept
+    as a margin. Returns 0 when the record starts inside that rise (no pre-trigger exists).
+    """
+    n = s1.size
+    big = 0.0
+    for i in range(n):
+        big = max(big, s1[i] - ref)
+    if big <= 0:
+        return max(MIN_PRETRIGGER, n // 10)
+    cross = 0
+    while s1[cross] - ref <= 0.25 * big:
+        cross += 1
+    onset = cross
+    while onset > 0 and s1[onset - 1] - ref > 0.02 * big:
+        onset -= 1
+    if onset == 0:
+        return 0
+    guess = onset - max(8, (cross - onset) // 2)
+    return min(max(guess, MIN_PRETRIGGER), max(n // 2, MIN_PRETRIGGER))
+
+
+@njit(cache=True)
+def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[float, float]:
+    """Baseline and per-sample noise from the pre-trigger segment ``y[:n_pre]``.
+
+    Median, and the MAD about the segment's least-squares line (slow drift is not noise). With no
+    pre-trigger (``n_pre`` 0: the record starts inside a pulse) the record's median and the MAD of
+    its first differences (the pulses are smooth on the sample scale) stand in.
+    """
+    if n_pre > 0:
+        return np.median(y[:n_pre]), max(MAD_TO_SIGMA * detrended_mad(y[:n_pre]), floor)
+    d = np.diff(y)
+    med = np.median(d)
+    for i in range(d.size):
+        d[i] = abs(d[i] - med)
+    return ref, max(MAD_TO_SIGMA * np.median(d) / np.sqrt(2.0), floor)
+
+
+@njit(cache=True)
+def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: float) -> float:
+    """Noise of the smoothed trace: the smoother's gain (exact for white noise), or the MAD of
+    the smoothed pre-trigger if larger (coloured noise; itself noisy, few independent values)."""
+    out = max(smoother_gain(h) * sigma, floor)
+    if n_pre > 0:
+        out = max(out, MAD_TO_SIGMA * detrended_mad(s[:n_pre]))
+    return out
+
+
+@njit(cache=True)
+def _fwhm(v: np.ndarray, peak: int, lo: int, hi: int) -> int:
+    a, b = pulse_extent(v, peak, 0.5 * v[peak], lo, hi)
+    return b - a + 1
+
+
+@njit(cache=True)
+def _peaks(v: np.ndarray, sigma_s: float, thr_sigma: float, min_ratio: float
+           ) -> tuple[np.ndarray, float]:
+    largest = v.max()
+    thr = max(thr_sigma * sigma_s, min_ratio * largest)
+    return find_peaks_hysteresis(v, thr, thr), thr
+
+
+@njit(cache=True)
+def _bounds(v: np.ndarray, peaks: np.ndarray) -> np.ndarray:
+    """Valleys between consecutive peaks, with the record ends: pulse j lives in [b[j], b[j+1]]."""
+    m = peaks.size
+    b = np.empty(m + 1, dtype=np.int64)
+    b[0] = 0
+    for j in range(m - 1):
+        b[j + 1] = valley(v, peaks[j], peaks[j + 1])
+    b[m] = v.size - 1
+    return b
+
+
+@njit(cache=True)
+def _widths(v: np.ndarray, peaks: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    m = peaks.size
+    w = np.empty(m)
+    for j in range(m):
+        w[j] = _fwhm(v, peaks[j], bounds[j], bounds[j + 1] + 1)
+    return w
+
+
+@njit(cache=True)
+def analyze(
+    x: np.ndarray,
+    sign_in: float,
+    n_pre_in: int,
+    h_in: int,
+    thr_sigma: float,
+    min_ratio: float,
+    fit_fraction: float,
+    shape_r: float,
+    skew: float,
+    free_r: bool,
+    max_iter: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Detect and measure every pulse of one shot.
+
+    Parameters
+    ----------
+    x:
+        Samples, N.
+    sign_in:
+        +1 (pulses are positive), -1 (negative) or 0 (whichever excursion is larger).
+    n_pre_in:
+        Pre-trigger length in samples, or -1 to find it before the first rise.
+    h_in:
+        Half-width of the detection smoother, or -1 to follow the largest pulse's width.
+    thr_sigma, min_ratio:
+        A pulse rises ``thr_sigma`` smoothed-noise deviations and ``min_ratio`` of the largest
+        pulse above the baseline, and stands out by as much from its neighbours.
+    fit_fraction:
+        The template is fitted to the part of each pulse above this fraction of its height.
+    shape_r, skew, free_r:
+        Template exponent (fitted too when ``free_r``) and skew; the first pulse gets ``+skew``,
+        the later ones (travelling back up the chain) ``-skew``.
+    max_iter:
+        Levenberg-Marquardt iterations per pulse.
+
+    Returns
+    -------
+    head, pulses:
+        ``head[H_*]`` and one row ``pulses[j, P_*]`` per pulse, times in samples from the record
+        start, amplitudes above each pulse's own baseline in the sign-corrected trace.
+    """
+    n = x.size
+    head = np.zeros(HEAD)
+    # Polarity, from the lightly smoothed trace against the record's median.
+    step = max(1, n // 1024)
+    ref = np.median(x[::step])
+    s1 = triangle(x, 2)
+    sign = sign_in
+    if sign == 0.0:
+        sign = 1.0 if s1.max() - ref >= ref - s1.min() else -1.0
+    y = x * sign
+    s1 *= sign
+    ref *= sign
+    head[H_SIGN] = sign
+
+    n_pre = n_pre_in if n_pre_in > 0 else _onset_pretrigger(s1, ref)
+    if n_pre == 0:
+        head[H_EARLY] = 1.0
+    span = 0.0
+    for i in range(n):
+        span = max(span, abs(y[i] - ref))
+    floor = NOISE_FLOOR * max(span, 1e-300)
+
+    base, sigma = _level_noise(y, n_pre, ref, floor)
+    line = np.full(n, base)
+
+    # Smoother width: a sixth of the largest pulse's FWHM (a cheap stand-in for a matched filter).
+    h = h_in if h_in >= 0 else 2
+    s = s1 if h == 2 else triangle(y, h)
+    if h_in < 0:
+        for _ in range(3):
+            v = s - line
+            hn = max(1, _fwhm(v, int(np.argmax(v)), 0, n) // 6)
+            if 2 * hn <= 3 * h and 3 * hn >= 2 * h:
+                break
+            h = hn
+            s = triangle(y, h)
+    v = s - line
+    sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
+    peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
+
+    # Pre-trigger: everything before the first pulse's foot, once that pulse is known.
+    if n_pre_in <= 0 and peaks.size > 0:
+        p0 = peaks[0]
+        new_pre = int(p0 - FOOT * _fwhm(v, p0, 0, n))
+        if new_pre < MIN_PRETRIGGER:
+            head[H_EARLY] = 1.0
+            if n_pre > 0:  # keep what lies before the rise, if that is long enough
+                new_pre = min(n_pre, max(p0 - 2 * h, 0))
+            new_pre = new_pre if new_pre >= MIN_PRETRIGGER else 0
+        # Re-estimate when the first guess reached into the rise, or when twice the samples
+        # (noise matters for thresholds only: each pulse's own baseline is measured later).
+        redo = (new_pre == 0) != (n_pre == 0) or new_pre < 0.9 * n_pre or new_pre > 2 * n_pre
+        if redo:
+            n_pre = new_pre
+            base, sigma = _level_noise(y, n_pre, ref, floor)
+            line[:] = base
+            v = s - line
+            sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
+            peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
+
+    # Slow trend (drift and the chain's slow level changes): a quadratic through the quiet samples,
+    # those further than 2 FWHM from every pulse; twice, since the pulses depend on the line.
+    quiet = np.ones(n, dtype=np.bool_)
+    for it in range(2):
+        if peaks.size == 0:
+            break
+        bounds = _bounds(v, peaks)
+        widths = _widths(v, peaks, bounds)
+        quiet[:] = True
+        # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
+        # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
+        cap = 3.0 * widths[np.argmax(v[peaks])]
+        for j in range(peaks.size):
+            reach = int(2.0 * min(widths[j], cap)) + 2 * h + 2
+            quiet[max(0, peaks[j] - reach) : min(n, peaks[j] + reach + 1)] = False
+        count_pre = 0
+        count_post = 0
+        for i in range(n):
+            if quiet[i]:
+                if i < n_pre:
+                    count_pre += 1
+                else:
+                    count_post += 1
+        if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
+            break
+        late = False
+        middle = False
+        for i in range(n // 3, n):
+            if quiet[i]:
+                if i >= 2 * n // 3:
+                    late = True
+                else:
+                    middle = True
+        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1)
+        line = poly_eval(coef, n)
+        for i in range(n):
+            v[i] = s[i] - line[i]
+        before = peaks
+        peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
+        if it == 0 and peaks.size == before.size and np.all(np.abs(peaks - before) <= h):
+            break  # the same pulses: the quiet samples, hence the line, would not change
+
+    head[H_BASE] = base
+    head[H_SIGMA] = sigma
+    head[H_THR] = thr
+    head[H_NPRE] = n_pre
+    head[H_SMOOTH] = h
+    m = peaks.size
+    head[H_NPEAKS] = m
+    out = np.zeros((m, PULSE))
+    if m == 0:
+        return head, out
+
+    bounds = _bounds(v, peaks)
+    widths = _widths(v, peaks, bounds)
+    nfree = 4 if free_r else 3
+    prev_end = 0
+    for j in range(m):
+        ip = peaks[j]
+        lo, hi = bounds[j], bounds[j + 1]
+        wj = widths[j]
+        row = out[j]
+        # Baseline: the level (about the slow trend) the sensor holds before the pulse's foot.
+        stop = int(ip - FOOT * wj)
+        start = max(prev_end, int(stop - LEVEL_SPAN * wj))
+        level = 0.0
+        if stop - start >= MIN_PRETRIGGER:
+            acc = 0.0
+            for i in range(start, stop):
+                acc += y[i] - line[i]
+            level = acc / (stop - start)
+            row[P_LEVEL] = 1.0
+        prev_end = min(n, int(ip + FOOT * wj) + 1)
+        base_j = line[ip] + level
+        top = s[ip] - base_j
+        if top <= 0:
+            top = v[ip]
+            level = 0.0
+            base_j = line[ip]
+        fa, fb = pulse_extent(v, ip, level + fit_fraction * top, lo, hi + 1)
+        reach = int(TRUNC_SPAN * wj) + 1
+        trunc = (fa <= 0 and ip - reach < 0) or (fb >= n - 1 and ip + reach > n - 1)
+        fa = max(fa, ip - reach)
+        fb = min(fb, ip + reach)
+        if fb - fa < 8:
+            fa, fb = max(0, ip - 4), min(n - 1, ip + 4)
+        k = fb - fa + 1
+        tt = np.empty(k)
+        yy = np.empty(k)
+        for i in range(k):
+            tt[i] = fa + i - ip
+            yy[i] = (y[fa + i] - line[fa + i] - level) / top
+        tb, yb = block_average(tt, yy, MAX_FIT_POINTS)
+        ha, hb = pulse_extent(v, ip, v[ip] - 0.5 * top, lo, hi + 1)
+        p0 = np.array([1.0, 0.0, 0.5 * max(hb - ha, 2) / np.log(2.0) ** (1.0 / shape_r), shape_r])
+        sk = skew if j == 0 else -skew
+        p, ok = fit_pulse(tb, yb, p0, sk, nfree, max_iter)
+        method = 0.0
+        if ok and 0.2 < p[0] < 5.0 and tb[0] < p[1] < tb[-1]:
+            width = 2.0 * p[2] * np.log(2.0) ** (1.0 / p[3])
+            t_pk = p[1]
+            amp = p[0]
+        else:
+            method = 1.0
+            t_pk, amp, good = parabola_top(tb, yb)
+            if not good:
+                t_pk, amp = 0.0, 1.0
+            width = float(hb - ha + 1)
+        a, b = pulse_extent(v, ip, 0.5 * thr, lo, hi + 1)
+        row[P_TIME] = ip + t_pk
+        row[P_AMP] = amp * top
+        row[P_BASE] = base_j
+        row[P_WIDTH] = width
+        row[P_ONSET] = a
+        row[P_END] = b
+        row[P_INDEX] = ip
+        row[P_METHOD] = method
+        row[P_TRUNC] = 1.0 if trunc else 0.0
+        row[P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
+
+    # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
+    after = 0.0
+    for i in range(min(n, int(peaks[0] + FOOT * widths[0]) + 1), n):
+        after = max(after, v[i])
+    head[H_UPPER] = max(thr, after) / max(out[0, P_AMP], 1e-300)
+
+    # Clipping: the record's top value repeats over more than a twentieth of the incident's width.
+    ymax = y.max()
+    tol = 1e-9 * max(abs(ymax), 1e-300)
+    count = 0
+    for i in range(n):
+        if y[i] >= ymax - tol:
+            count += 1
+    head[H_SATURATED] = 1.0 if count >= max(3.0, 0.05 * out[0, P_WIDTH]) else 0.0
+    return head, out
