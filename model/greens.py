@@ -31,7 +31,9 @@ from .sem import ElasticPlate
 from .sem_kernels import chain_start, chain_substeps
 
 #: Bump when the meaning of a stored response changes (invalidates every cache entry).
-GREENS_VERSION = 1
+#: 2: the force acts through a contact patch and g is the patch-weighted deflection; the key
+#: holds the patch radius and the element edges (local refinement).
+GREENS_VERSION = 2
 
 
 class GreensCache(Protocol):
@@ -74,9 +76,15 @@ def set_default_cache(cache: GreensCache) -> None:
 
 
 def response_key(plate: ElasticPlate, dt: float) -> str:
-    """Hash of everything the response depends on: plate, mesh, position, supports, material, dt."""
+    """Hash of everything the response depends on: plate, mesh, position, patch, supports,
+    material, dt."""
     mesh, mat = plate.mesh, plate.material
+    edges = hashlib.sha256(
+        np.concatenate((mesh.x_edges, mesh.y_edges, mesh.z_edges)).astype("<f8").tobytes()
+    ).hexdigest()[:16]
     desc = {
+        "contact_radius_m": float(mesh.contact_radius),
+        "edges": edges,
         "version": GREENS_VERSION,
         "thickness_m": float(mesh.z_edges[-1]),
         "size_m": [float(mesh.x_edges[-1]), float(mesh.full_width)],
@@ -93,14 +101,14 @@ def response_key(plate: ElasticPlate, dt: float) -> str:
 
 
 def compute_response(plate: ElasticPlate, dt: float, n_steps: int) -> np.ndarray:
-    """g[0..n_steps]: contact deflection (down, m) after a unit downward force for one step.
+    """g[0..n_steps]: deflection under the chain (down, m) after a unit downward force for one step.
 
-    Equivalently the vertical displacement of the contact node, z up, under a unit +z force
-    (on a half model the node carries half of it).
+    Equivalently the patch-weighted vertical displacement (z up, :meth:`ElasticPlate.
+    run_contact_load`) under a unit +z contact force (on a half model the mesh carries half).
     """
     force = np.zeros(n_steps)
-    force[0] = plate.force_share
-    return plate.run_point_force(force, dt)[:, 0].copy()
+    force[0] = 1.0
+    return plate.run_contact_load(force, dt)[0].copy()
 
 
 def contact_response(

@@ -22,7 +22,7 @@ from threadpoolctl import threadpool_limits
 from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
 from .mesh import PlateMesh
-from .sem_kernels import apply_stiffness, run_plate_point_force
+from .sem_kernels import apply_stiffness, run_plate_load, run_plate_point_force
 
 SUPPORTS = ("opposite_edges", "all_edges", "none")
 
@@ -91,6 +91,9 @@ class ElasticPlate:
     edofs: (n_elements, n_edof) element dofs, elements sorted by shape.
     offsets: (n_shapes + 1,) element ranges per shape in ``edofs``.
     kes: (n_shapes, n_edof, n_edof) element matrices.
+    load_dofs, load_weights: the contact patch as vertical dofs and weights b (sum = share), see
+        :meth:`PlateMesh.contact_load`: a contact force F acts as F b, the deflection under the
+        chain is b . u / share.
     """
 
     mesh: PlateMesh
@@ -101,6 +104,8 @@ class ElasticPlate:
     edofs: np.ndarray
     offsets: np.ndarray
     kes: np.ndarray
+    load_dofs: np.ndarray
+    load_weights: np.ndarray
 
     @property
     def n_dofs(self) -> int:
@@ -108,13 +113,13 @@ class ElasticPlate:
 
     @property
     def contact_dof(self) -> int:
-        """Vertical (z) dof of the node under the chain."""
+        """Vertical (z) dof of the node under the chain (when the mesh has one there)."""
         return 3 * self.mesh.contact_node + 2
 
     @property
     def force_share(self) -> float:
         """Part of the contact force (and plate energy) the mesh carries: 1/2 for a half model."""
-        return 0.5 if self.mesh.symmetry else 1.0
+        return self.mesh.share
 
     @property
     def fixed(self) -> np.ndarray:
@@ -215,6 +220,22 @@ class ElasticPlate:
                                          self.inv_mass, self.edofs, self.offsets, self.kes, rec)
 
 
+    def run_contact_load(self, force: np.ndarray, dt: float,
+                         record_dofs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Central differences from rest under a contact force history ``force[n]`` (+z, N).
+
+        The force acts through the contact patch (nodal forces force[n] b). Returns (w, rec):
+        w[n] = b . u_n / share, the patch-weighted vertical displacement under the chain (+z),
+        and rec[n, r] = u_n[record_dofs[r]] (empty without ``record_dofs``), n = 0..len(force).
+        """
+        rec = np.asarray([] if record_dofs is None else record_dofs, dtype=np.int64)
+        with single_threaded_blas():
+            w, out = run_plate_load(np.ascontiguousarray(force, dtype=float), self.load_dofs,
+                                    self.load_weights, float(dt), self.inv_mass, self.edofs,
+                                    self.offsets, self.kes, rec)
+        return w / self.force_share, out
+
+
 def build_plate(
     mesh: PlateMesh, material: Material, supports: str = "opposite_edges"
 ) -> ElasticPlate:
@@ -248,5 +269,8 @@ def build_plate(
         fixed[np.abs(y - ay[-1]) < tol, 1] = True
     inv_mass = np.repeat(1.0 / node_mass, 3)
     inv_mass[fixed.ravel()] = 0.0
+    nodes, weights = mesh.contact_load
     return ElasticPlate(mesh, material, supports, node_mass, inv_mass,
-                        np.ascontiguousarray(edofs, dtype=np.int64), offsets, kes)
+                        np.ascontiguousarray(edofs, dtype=np.int64), offsets, kes,
+                        np.ascontiguousarray(3 * nodes + 2, dtype=np.int64),
+                        np.ascontiguousarray(weights, dtype=float))

@@ -110,6 +110,62 @@ def run_plate_point_force(
 
 
 @njit(cache=True)
+def run_plate_load(
+    force: np.ndarray,
+    ldofs: np.ndarray,
+    lw: np.ndarray,
+    dt: float,
+    inv_mass: np.ndarray,
+    edofs: np.ndarray,
+    offsets: np.ndarray,
+    kes: np.ndarray,
+    record_dofs: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Central differences from rest under force[n] spread as nodal forces force[n] lw on ldofs.
+
+    Returns (wsum, rec): wsum[n] = sum_i lw_i u_n[ldofs_i] (the work-conjugate deflection times
+    sum(lw)) and rec[n, r] = u_n[record_dofs[r]], n = 0..len(force), u_0 = 0.
+    """
+    ndof = inv_mass.size
+    nsteps = force.size
+    nrec = record_dofs.size
+    nl = ldofs.size
+    u = np.zeros(ndof)
+    v = np.zeros(ndof)
+    ku = np.zeros(ndof)
+    width = 0
+    for s in range(offsets.size - 1):
+        width = max(width, offsets[s + 1] - offsets[s])
+    buf = np.empty((width, edofs.shape[1]))
+    res = np.empty((width, edofs.shape[1]))
+    rec = np.zeros((nsteps + 1, nrec))
+    wsum = np.zeros(nsteps + 1)
+    for n in range(nsteps):
+        apply_stiffness(u, edofs, offsets, kes, buf, res, ku)
+        for i in range(nl):
+            ku[ldofs[i]] -= force[n] * lw[i]
+        for i in range(ndof):
+            v[i] -= dt * inv_mass[i] * ku[i]
+            u[i] += dt * v[i]
+        for r in range(nrec):
+            rec[n + 1, r] = u[record_dofs[r]]
+        acc = 0.0
+        for i in range(nl):
+            acc += lw[i] * u[ldofs[i]]
+        wsum[n + 1] = acc
+    return wsum, rec
+
+
+@njit(cache=True)
+def patch_deflection(up: np.ndarray, ldofs: np.ndarray, lw: np.ndarray, share: float) -> float:
+    """Downward deflection under the chain: -(sum lw u_z) / share (z up)."""
+    acc = 0.0
+    for i in range(ldofs.size):
+        acc += lw[i] * up[ldofs[i]]
+    return -acc / share
+
+
+@njit(cache=True)
 def plate_step(
     u: np.ndarray,
     v: np.ndarray,
@@ -235,7 +291,8 @@ def integrate_sem(
     edofs: np.ndarray,
     offsets: np.ndarray,
     kes: np.ndarray,
-    cdof: int,
+    ldofs: np.ndarray,
+    lw: np.ndarray,
     up: np.ndarray,
     vp: np.ndarray,
     share: float,
@@ -243,8 +300,9 @@ def integrate_sem(
     """Chain on a spectral-element plate; the contract of ``boundary.integrate_dashpot``.
 
     ``h`` is the plate step, ``r`` chain steps per plate step, ``n_sub`` plate steps per sample.
-    ``cdof`` is the vertical dof of the contact node (z up, so w = -up[cdof]); ``up``, ``vp``
-    hold the plate's displacement and velocity (in and out). ``share`` is the part of the plate
+    The contact force acts through the patch (vertical dofs ``ldofs``, weights ``lw`` summing to
+    ``share``) and the Hertz spring sees the work-conjugate deflection w = -(lw . up) / share
+    (z up); ``up``, ``vp`` hold the plate's displacement and velocity (in and out). ``share`` is the part of the plate
     that is modelled (1/2 for a half model on a symmetry plane: it carries half the force and half
     the energy). Returns (status, samples recorded, final w, plate energy J, dissipated energy J);
     ``energy[k]`` is the full balance (chain + plate + dissipated).
@@ -265,12 +323,14 @@ def integrate_sem(
     buf = np.empty((width, edofs.shape[1]))
     res = np.empty((width, edofs.shape[1]))
 
-    w = -up[cdof]
+    nl = ldofs.size
+    w = patch_deflection(up, ldofs, lw, share)
     f_bottom, power = chain_start(u, v, w, a_s, a_b, inv_m, g, tau, f, acc, vpc)
     apply_stiffness(up, edofs, offsets, kes, buf, res, ku)
     for i in range(ndof):
         ap[i] = -inv_mass[i] * ku[i]
-    ap[cdof] -= inv_mass[cdof] * (f_bottom - f_static) * share
+    for i in range(nl):
+        ap[ldofs[i]] -= inv_mass[ldofs[i]] * (f_bottom - f_static) * lw[i]
 
     dissipated = 0.0
     e_plate = 0.0
@@ -288,7 +348,7 @@ def integrate_sem(
                 vp[i] += half * ap[i]
                 up[i] += h * vp[i]
             w_old = w
-            w = -up[cdof]
+            w = patch_deflection(up, ldofs, lw, share)
             f_bottom, power, lost = chain_substeps(
                 u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_b, inv_m, g, tau, sensor, power,
                 step * h, pk,
@@ -297,7 +357,8 @@ def integrate_sem(
             apply_stiffness(up, edofs, offsets, kes, buf, res, ku)
             for i in range(ndof):
                 ap[i] = -inv_mass[i] * ku[i]
-            ap[cdof] -= inv_mass[cdof] * (f_bottom - f_static) * share
+            for i in range(nl):
+                ap[ldofs[i]] -= inv_mass[ldofs[i]] * (f_bottom - f_static) * lw[i]
             for i in range(ndof):
                 vp[i] += half * ap[i]
             step += 1

@@ -16,6 +16,7 @@ import numpy as np
 
 from .boundary import BottomBoundary, ChainRun, ChainSetup, StepPlan, register_tier
 from .chain import new_peak_tracker
+from .errors import SceneError
 from .greens import GreensCache, contact_response, integrate_greens
 from .materials import Material
 from .mesh import plate_mesh
@@ -28,10 +29,22 @@ from .sem_kernels import integrate_sem
 def _plate_cached(
     size: tuple[float, float], thickness: float, elements: tuple[int, int, int],
     order: tuple[int, int, int], contact_x: float, symmetry: bool, material: Material,
-    supports: str,
+    supports: str, contact_radius: float = 0.0, contact_refinement: int = 0,
 ) -> ElasticPlate:
-    mesh = plate_mesh(size, thickness, elements, order, contact_x, symmetry)
+    mesh = plate_mesh(size, thickness, elements, order, contact_x, symmetry, contact_radius,
+                      contact_refinement)
     return build_plate(mesh, material, supports)
+
+
+def contact_radius(scene: Scene) -> float:
+    """The contact patch radius r_c of a scene, m ('auto': the plate thickness, see PHYSICS)."""
+    rc = scene.sem.contact_radius
+    radius = float(scene.plate.thickness) if rc == "auto" else float(rc)
+    limit = 0.1 * min(float(v) for v in scene.plate.size)
+    if radius > limit:
+        raise SceneError("sem.contact_radius", f"{radius} m is too large for a "
+                         f"{list(scene.plate.size)} m plate", f"0..{limit:g} m or 'auto'")
+    return radius
 
 
 def plate_for(scene: Scene) -> ElasticPlate:
@@ -40,7 +53,7 @@ def plate_for(scene: Scene) -> ElasticPlate:
     return _plate_cached(
         (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
         tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
-        p.supports,
+        p.supports, contact_radius(scene), int(s.contact_refinement),
     )
 
 
@@ -99,7 +112,7 @@ class SemBoundary(_PlateTier):
                 setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
                 setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
                 plate.inv_mass, np.repeat(plate.node_mass, 3), plate.edofs, plate.offsets,
-                plate.kes, plate.contact_dof, up, vp, plate.force_share,
+                plate.kes, plate.load_dofs, plate.load_weights, up, vp, plate.force_share,
             )
         wall = time.perf_counter() - start
         setup.w = w
