@@ -67,6 +67,21 @@ def _duration(value: Any) -> Any:
     return seconds
 
 
+def _contact_radius(value: Any) -> Any:
+    message = f"must be 'auto' or a radius in metres, 0 <= r <= 0.05, got {value!r}"
+    if value == "auto":
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float | str):
+        raise ValueError(message)
+    try:
+        radius = float(value)
+    except ValueError:
+        raise ValueError(message) from None
+    if not 0.0 <= radius <= 0.05:
+        raise ValueError(message)
+    return radius
+
+
 Number = Annotated[float, BeforeValidator(_number)]
 Integer = Annotated[int, BeforeValidator(_integer)]
 MaterialName = Annotated[str, BeforeValidator(_material_name)]
@@ -199,6 +214,14 @@ class SemSpec(_Section):
     auto_margin: Number = Field(
         2.0, gt=0.0, le=100.0,
         description="auto uses 'infinite' when L > auto_margin * L_c (Eq. 18, k = 0.57)",
+    )
+    contact_radius: Annotated[Literal["auto"] | float, BeforeValidator(_contact_radius)] = Field(
+        "auto", description="radius r_c of the contact patch the chain loads the plate through, "
+        "m; 'auto' = the plate thickness; 0 = a single node (mesh-dependent, for comparison)",
+    )
+    contact_refinement: Integer = Field(
+        1, ge=0, le=8, description="elements of size 2 r_c / n around the chain (0: none, the "
+        "paper's uniform layout)",
     )
 
     @model_validator(mode="after")
