@@ -21,6 +21,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from . import problems
 from .api_models import Health, Ready, Strict, TableOut, request_models
 from .estimates import Estimator
+from .ingest import warm_up
 from .problems import Problem
 from .settings import Settings
 from .store import Store
@@ -117,6 +118,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         store = Store(settings.store_path, settings.store_synchronous)
+        log.info("feature extractor ready in %.2f s", warm_up())
         estimator = Estimator(settings.table_path)
         if not estimator.loaded:
             log.warning("serving without estimates: %s", estimator.reason)

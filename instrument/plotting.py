@@ -70,8 +70,8 @@ def trace_png(
         FigureCanvasAgg(fig)
         ax = fig.add_subplot(1, 1, 1)
         ax.plot(tt * scale, yy, lw=0.8, color="0.25", label="sensor")
-        _mark(ax, features, "incident", "tab:blue", scale)
-        _mark(ax, features, "reflected", "tab:red", scale)
+        _mark(ax, features, "incident", "tab:blue", scale, unit)
+        _mark(ax, features, "reflected", "tab:red", scale, unit)
         for k, (ts, amp) in enumerate(_secondary(features)):
             ax.axvline(ts * scale, color="tab:green", lw=0.8, ls=":",
                        label="secondary" if k == 0 else None)
@@ -108,14 +108,17 @@ def _number(value: Any) -> float | None:
     return x if np.isfinite(x) else None
 
 
-def _mark(ax: Any, features: Mapping[str, Any], which: str, color: str, scale: float) -> None:
+def _mark(ax: Any, features: Mapping[str, Any], which: str, color: str, scale: float,
+          unit: str) -> None:
     ts = _number(features.get(f"{which}_time_s"))
     if ts is None:
         return
-    ax.axvline(ts * scale, color=color, lw=1.0, ls="--", label=f"{which} {ts * scale:.4g}")
+    ax.axvline(ts * scale, color=color, lw=1.0, ls="--", label=f"{which} {ts * scale:.4g} {unit}")
     amp = _number(features.get(f"{which}_peak_N"))
     if amp is not None:
-        ax.plot([ts * scale], [amp], "o", color=color, ms=5)
+        # peaks are reported above the baseline; the trace is drawn as recorded
+        ax.plot([ts * scale], [amp + (_number(features.get("baseline_N")) or 0.0)], "o",
+                color=color, ms=5)
 
 
 def _secondary(features: Mapping[str, Any]) -> list[tuple[float, float | None]]:

@@ -369,6 +369,9 @@ async def plot_measurement(
         title += f" - plate {meta['plate_id']}"
     if meta.get("position") is not None:
         title += f", position {meta['position']}"
-    png = await run_in_threadpool(trace_png, record.t0, record.dt, record.samples,
-                                  record.features, units=record.units, title=title)
+    samples = record.samples
+    if record.units == "V" and record.calibration:  # features are in newtons: draw the force
+        samples = samples * record.calibration
+    png = await run_in_threadpool(trace_png, record.t0, record.dt, samples, record.features,
+                                  units="N", title=title)
     return Response(png, media_type="image/png")

@@ -374,3 +374,22 @@ def test_upload_each_format(client: TestClient, tmp_path: Path, fmt: str) -> Non
     upload_dir = client.app.state.service.uploads.path
     assert upload_dir.stat().st_mode & 0o777 == 0o700
     assert list(upload_dir.iterdir()) == []
+
+
+def test_plot_of_a_volt_shot_draws_the_force(client: TestClient) -> None:
+    """A shot in volts with a calibration is stored in volts, measured and plotted in newtons:
+    its features equal those of the same shot sent in newtons."""
+    in_newtons = client.post("/v1/measurements", json={"shots": [shot_json()]}).json()
+    shot = shot_json()
+    shot["samples"] = (np.asarray(shot["samples"]) / 25.0).tolist()
+    shot.update(units="V", calibration=25.0)
+    r = client.post("/v1/measurements", json={"shots": [shot]})
+    assert r.status_code == 201, r.text
+    f, f_n = r.json()["shots"][0]["features"], in_newtons["shots"][0]["features"]
+    for key in ("incident_peak_N", "reflected_peak_N", "tof_s", "arr"):
+        assert f[key] == pytest.approx(f_n[key], rel=1e-9), key
+    back = client.get(f"/v1/measurements/{r.json()['id']}/shots/0").json()
+    assert back["units"] == "V" and back["calibration"] == 25.0
+    assert back["samples"] == shot["samples"]
+    png = client.get(f"/v1/measurements/{r.json()['id']}/plot.png")
+    assert png.status_code == 200 and png.content.startswith(b"\x89PNG")

@@ -70,8 +70,9 @@ def _serve(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen, str, list[str
 
 @pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM])
 def test_serve_post_read_plot_and_stop(tmp_path: Path, stop_signal: int) -> None:
-    """`solitonde serve` without a table: prints URL and curl example, serves without
-    estimates, round-trips a sample file, and exits 0 on SIGINT and on SIGTERM."""
+    """`solitonde serve` without a table: prints URL and a curl example (which works: run
+    here with curl), serves without estimates, round-trips a sample file (features match the
+    sample's truth), and exits 0 on SIGINT and on SIGTERM."""
     proc, url, lines = _serve(tmp_path)
     try:
         text = "\n".join(lines)
@@ -81,7 +82,7 @@ def test_serve_post_read_plot_and_stop(tmp_path: Path, stop_signal: int) -> None
         assert f"{url}/v1/measurements" in curl
 
         sample = _sample_file(tmp_path)
-        with httpx.Client(base_url=url, timeout=30) as client:
+        with httpx.Client(base_url=url, timeout=120) as client:
             r = client.post("/v1/measurements", files={"file": (sample.name, sample.read_bytes())},
                             data={"plate_id": "proc", "position": "A1",
                                   "sphere_diameter": "0.00953"})
@@ -97,6 +98,14 @@ def test_serve_post_read_plot_and_stop(tmp_path: Path, stop_signal: int) -> None
             listing = client.get("/v1/measurements", params={"plate_id": "proc"}).json()
             assert [m["id"] for m in listing["items"]] == [created["id"]]
             assert client.get("/readyz").json()["table_loaded"] is False
+        if stop_signal == signal.SIGINT and shutil.which("curl"):
+            # the curl line `serve` printed posts the bundled sample and gets its 201
+            result = subprocess.run([*shlex.split(curl.removeprefix("try:")), "-w",
+                                     "\n%{http_code}"], cwd=ROOT, capture_output=True,
+                                    text=True, timeout=60)
+            body, _, status = result.stdout.rstrip().rpartition("\n")
+            assert status == "201", result.stdout + result.stderr
+            _check_against_truth(json.loads(body))
     finally:
         code = stop_group(proc, stop_signal)
     out = proc.stdout.read()
@@ -122,39 +131,22 @@ def _check_against_truth(created: dict) -> None:
         assert f["arr"] == pytest.approx(float(row["arr"].iloc[0]), rel=0.02)
 
 
-@pytest.mark.skipif(shutil.which("curl") is None, reason="curl is not installed")
-def test_printed_curl_example_works(tmp_path: Path) -> None:
-    """The curl line that `serve` prints posts the bundled sample and gets a 201 body."""
-    from solitonde.instrument.cmd_serve import sample_file
-
-    if sample_file(ROOT) is None:
-        pytest.skip("no bundled sample file in data_samples/ yet")
-    proc, _url, lines = _serve(tmp_path)
-    try:
-        curl = next(line for line in lines if line.startswith("try:")).removeprefix("try:")
-        result = subprocess.run([*shlex.split(curl), "-w", "\n%{http_code}"], cwd=ROOT,
-                                capture_output=True, text=True, timeout=60)
-        body, _, status = result.stdout.rstrip().rpartition("\n")
-        assert status == "201", result.stdout + result.stderr
-        _check_against_truth(json.loads(body))
-    finally:
-        assert stop_group(proc, signal.SIGINT) == 0
-
-
 def test_kill_9_while_posting_loses_no_acknowledged_measurement(tmp_path: Path) -> None:
     """SIGKILL to the server (and its workers) while 4 clients post: afterwards every
     measurement that got its 201 is in the store with the exact samples and features, and
     nothing half-written is visible (every stored measurement has all its shots, each passing
     its SHA-256 check)."""
     store_path = tmp_path / "store.sqlite"
+    t_start = time.monotonic()
     proc, url = start_uvicorn(store_path, workers=2)
+    t_ready = time.monotonic()
     acked: list[tuple[int, list[list[float]], dict]] = []
     lock = threading.Lock()
     stop = threading.Event()
 
     def client(k: int) -> None:
         seed = 1000 * k
-        with httpx.Client(base_url=url, timeout=10) as http:
+        with httpx.Client(base_url=url, timeout=60) as http:
             while not stop.is_set():
                 seed += 1
                 shots = [shot_json(seed=seed, n=2000, position=f"K{k}", shot=j)
@@ -172,13 +164,17 @@ def test_kill_9_while_posting_loses_no_acknowledged_measurement(tmp_path: Path) 
     threads = [threading.Thread(target=client, args=(k,)) for k in range(4)]
     for t in threads:
         t.start()
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 60
     while len(acked) < 60 and time.monotonic() < deadline:
         time.sleep(0.05)
+    t_kill = time.monotonic()
     stop_group(proc, signal.SIGKILL)
     stop.set()
     for t in threads:
-        t.join(timeout=30)
+        t.join(timeout=90)
+    print(f"\nkill test: ready after {t_ready - t_start:.1f} s, {len(acked)} acknowledged in "
+          f"{t_kill - t_ready:.1f} s, clients stopped {time.monotonic() - t_kill:.1f} s after "
+          "the kill")
     assert len(acked) >= 60, "clients did not get enough measurements through before the kill"
 
     store = Store(store_path, background_checkpoint=False)
