@@ -5,12 +5,13 @@ axes along which TOF and ARR vary smoothly) onto a fine (log t, L) grid once per
 sphere size; a prior uniform in log t (thickness is a scale) and in L over the table's range;
 independent Gaussian errors on the mean TOF and mean ARR of each sphere size:
 
-    sigma_tof^2 = s_tof^2 / n + sigma_model_tof^2,   sigma_arr^2 = s_arr^2 / n + sigma_model_arr^2
+    sigma_tof^2 = s_tof^2 / n + sigma_model_tof(t, L)^2,   likewise for ARR
 
 with s the shot scatter (or the stated defaults :data:`DEFAULT_TOF_REL_STD`,
 :data:`DEFAULT_ARR_STD` when not given; floored at :data:`MIN_TOF_STD_S`, :data:`MIN_ARR_STD`) and
-sigma_model the table's own interpolation error (leave-one-out along both axes, scaled to the grid
-spacing). A calibration multiplies the model ARR by ``arr_factor`` (experiments lose energy the
+sigma_model the table's own interpolation error where the cell lies (leave-one-out at each node
+along both axes, scaled to the grid spacing, interpolated like the features): large where TOF and
+ARR oscillate with L near a support, small where they are smooth. A calibration multiplies the model ARR by ``arr_factor`` (experiments lose energy the
 model does not) and adds ``tof_offset_s`` to the model TOF. Sphere sizes multiply their
 likelihoods. Grid points where the model detects no reflection cannot explain a measured one and
 get zero posterior.
@@ -141,28 +142,32 @@ def _interp_matrix(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
     return w
 
 
-def _loo_rms(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
-             coord_l: np.ndarray) -> float:
-    """Interpolation error of the table at its own spacing, from leave-one-out along both axes.
+def _node_variance(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
+                   coord_l: np.ndarray) -> np.ndarray:
+    """Variance of the table's interpolation error at each node, from leave-one-out.
 
-    Linear interpolation over twice the spacing errs about four times as much as over the
-    spacing itself (error ~ h^2), hence the division by 4.
+    Along each axis, an interior node is predicted linearly from its two neighbours; linear
+    interpolation over twice the spacing errs about four times as much as over the spacing
+    itself (error ~ h^2 f''), so (LOO error / 4)^2 is the variance there. End nodes take their
+    neighbour's value, nodes without valid neighbours the mean over the table; the two axes add.
+    Rough regions (near a support, where guided waves make TOF and ARR oscillate with L) so get
+    large errors and smooth ones small errors.
     """
-    errs: list[np.ndarray] = []
+    total = np.zeros(values.shape)
     for axis, c in ((0, coord_t), (1, coord_l)):
         v = np.moveaxis(values, axis, 0)
         ok = np.moveaxis(valid, axis, 0)
-        if v.shape[0] < 3:
-            continue
-        cc = c.reshape((-1,) + (1,) * (v.ndim - 1))
-        a = (cc[1:-1] - cc[:-2]) / (cc[2:] - cc[:-2])
-        pred = v[:-2] * (1 - a) + v[2:] * a
-        good = ok[:-2] & ok[1:-1] & ok[2:]
-        errs.append((v[1:-1] - pred)[good])
-    if not errs:
-        return 0.0
-    e = np.concatenate(errs)
-    return float(np.sqrt(np.mean(e**2)) / 4.0) if e.size else 0.0
+        e2 = np.full(v.shape, np.nan)
+        if v.shape[0] >= 3:
+            cc = c.reshape((-1,) + (1,) * (v.ndim - 1))
+            a = (cc[1:-1] - cc[:-2]) / (cc[2:] - cc[:-2])
+            pred = v[:-2] * (1 - a) + v[2:] * a
+            good = ok[:-2] & ok[1:-1] & ok[2:]
+            e2[1:-1] = np.where(good, ((v[1:-1] - pred) / 4.0) ** 2, np.nan)
+            e2[0], e2[-1] = e2[1], e2[-2]
+        fill = float(np.nanmean(e2)) if np.isfinite(e2).any() else 0.0
+        total += np.moveaxis(np.where(np.isfinite(e2), e2, fill), 0, axis)
+    return np.where(valid, total, 0.0)
 
 
 @dataclass
@@ -176,8 +181,18 @@ class FineGrid:
     arr: np.ndarray
     valid: np.ndarray
     penalty: np.ndarray
-    model_tof_std_s: float
-    model_arr_std: float
+    model_tof_var: np.ndarray
+    model_arr_var: np.ndarray
+
+    @property
+    def model_tof_std_s(self) -> float:
+        """RMS interpolation error of TOF over the valid cells, s."""
+        return float(np.sqrt(self.model_tof_var[self.valid].mean())) if self.valid.any() else 0.0
+
+    @property
+    def model_arr_std(self) -> float:
+        """RMS interpolation error of ARR over the valid cells."""
+        return float(np.sqrt(self.model_arr_var[self.valid].mean())) if self.valid.any() else 0.0
 
 
 def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
@@ -207,8 +222,8 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
         arr=wt @ arr @ wl.T,
         valid=touched == 0,
         penalty=np.where(touched == 0, 0.0, np.inf),
-        model_tof_std_s=_loo_rms(table.features["tof_s"][i_d], ok, np.log(t_nodes), l_nodes),
-        model_arr_std=_loo_rms(table.features["arr"][i_d], ok, np.log(t_nodes), l_nodes),
+        model_tof_var=wt @ _node_variance(tof, ok, np.log(t_nodes), l_nodes) @ wl.T,
+        model_arr_var=wt @ _node_variance(arr, ok, np.log(t_nodes), l_nodes) @ wl.T,
     )
     table._cache[key] = grid
     return grid
@@ -347,6 +362,19 @@ def _out_of_range(inputs: list[FeatureSummary], cal: Calibration | None, chi2_mi
                     cal, chi2_min, n_terms, reason)
 
 
+def _misfit(items: Sequence[FeatureSummary], grids: Sequence[FineGrid], cal: Calibration | None,
+            cell: tuple[Any, ...]) -> float:
+    """chi^2 (residuals over sigma, squared and summed) at one cell of the fine grid."""
+    total = 0.0
+    for item, g in zip(items, grids, strict=True):
+        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        s_tof, s_arr = item.sigmas()
+        total += (item.tof_s - offset - g.tof_s[cell]) ** 2 / (s_tof**2 + g.model_tof_var[cell])
+        total += (item.arr - factor * g.arr[cell]) ** 2 / (s_arr**2
+                                                          + factor**2 * g.model_arr_var[cell])
+    return float(total)
+
+
 def invert(
     table: ModelTable,
     inputs: Sequence[FeatureSummary | Mapping[str, Any]],
@@ -373,33 +401,40 @@ def invert(
     items = [FeatureSummary.from_any(i) for i in inputs]
     cal = Calibration.from_any(calibration)
     grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
+    # -2 log likelihood, up to a constant: sum of r^2 / var + log var (the variance differs from
+    # cell to cell through the model error, so its log-determinant matters)
     chi2 = np.zeros_like(grids[0].tof_s)
+    var = np.empty_like(chi2)
     r = np.empty_like(chi2)
     for item, g in zip(items, grids, strict=True):
         factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
         s_tof, s_arr = item.sigmas()
-        w_tof = 1.0 / math.sqrt(s_tof**2 + g.model_tof_std_s**2)
-        w_arr = 1.0 / math.sqrt(s_arr**2 + (factor * g.model_arr_std) ** 2)
-        # ((obs - model) / sigma)^2 in place: this loop is the inversion's whole cost
-        np.multiply(g.tof_s, -w_tof, out=r)
-        r += (item.tof_s - offset) * w_tof
-        r *= r
-        chi2 += r
-        np.multiply(g.arr, -factor * w_arr, out=r)
-        r += item.arr * w_arr
-        r *= r
-        chi2 += r
+        for model, obs, scale, s2, model_var in (
+            (g.tof_s, item.tof_s - offset, 1.0, s_tof**2, g.model_tof_var),
+            (g.arr, item.arr, factor, s_arr**2, g.model_arr_var),
+        ):
+            np.multiply(model_var, scale * scale, out=var)
+            var += s2
+            np.multiply(model, -scale, out=r)
+            r += obs
+            r *= r
+            r /= var
+            chi2 += r
+            np.log(var, out=var)
+            chi2 += var
         chi2 += g.penalty
     n_terms = 2 * len(items)
     best = float(chi2.min())
+    i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
     if not math.isfinite(best):
         return _out_of_range(items, cal, best, n_terms,
                              "the model detects no reflection anywhere in the table for these "
                              "sphere sizes, but one was measured")
     limit = float(chi2_dist.isf(OUT_OF_RANGE_TAIL, n_terms))
-    if best > limit:
-        return _out_of_range(items, cal, best, n_terms,
-                             f"no table point explains the measurement (best chi^2 {best:.3g} > "
+    fit = _misfit(items, grids, cal, i_best)
+    if fit > limit:
+        return _out_of_range(items, cal, fit, n_terms,
+                             f"no table point explains the measurement (best chi^2 {fit:.3g} > "
                              f"{limit:.3g} for {n_terms} terms): outside the table's range or "
                              "not this kind of plate; no extrapolated number is given")
     chi2 -= best
@@ -411,7 +446,7 @@ def invert(
                            transform=np.exp)
     distance = _summarise(g0.distance_m, post.sum(axis=0),
                           lower_physical=bool(g0.distance_m[0] <= 0.0))
-    est = Estimate(thickness, distance, items, cal, best, n_terms)
+    est = Estimate(thickness, distance, items, cal, fit, n_terms)
     if return_posterior:
         est.posterior = {"thickness_m": g0.thickness_m, "distance_m": g0.distance_m,
                          "density": post}
