@@ -451,9 +451,10 @@ def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[f
 @njit(cache=True)
 def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: float) -> float:
     """Noise of the smoothed trace: the smoother's gain (exact for white noise), or the MAD of
-    the smoothed pre-trigger if larger (coloured noise; itself noisy, few independent values)."""
+    the smoothed pre-trigger if larger (coloured noise). The latter only over at least eight
+    smoother lengths: with fewer independent values it is itself too noisy to trust."""
     out = max(smoother_gain(h) * sigma, floor)
-    if n_pre > 0:
+    if n_pre >= 8 * (4 * h + 1):
         out = max(out, MAD_TO_SIGMA * detrended_mad(s[:n_pre]))
     return out
 

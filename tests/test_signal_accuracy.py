@@ -2,7 +2,8 @@
 
 Traces: model.simulate for D = 9.53 mm on a 4.83 mm plate (ARR 0.55), sampled at 50 MHz and
 re-acquired at the scene's default 2 MHz with random sub-sample offsets. Truth: the model's peaks
-at integration-step resolution (amplitudes above the static sensor reading).
+at integration-step resolution, amplitudes above the level before each pulse's foot
+(Truth.from_trace, the extractor's own baseline definition).
 """
 
 from __future__ import annotations
@@ -27,20 +28,22 @@ def model_trace(thickness: float = 4.83e-3) -> tuple[np.ndarray, float, Truth]:
                               f"output.sample_rate={FINE_RATE}", "output.duration=0.95e-3"])
     sim = simulate(scene)
     t = sim.truth
-    base = t["static_sensor_N"]
-    truth = Truth(t["incident_time_s"], t["reflected_time_s"], t["incident_peak_N"] - base,
-                  t["reflected_peak_N"] - base)
+    truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
+                             (t["incident_time_s"], t["incident_peak_N"]),
+                             (t["reflected_time_s"], t["reflected_peak_N"]))
     return sim.samples, sim.dt, truth
 
 
 def test_20db_criteria():
     """At 20 dB (drift 2 %, 12 bits): median |TOF error| < 1 sample at 2 MHz; median |ARR error|
-    < 2 % at 5 MHz.
+    < 2 % at 5 MHz; both medians within 15 % of the Cramer-Rao bound.
 
-    Both at one rate is not reachable: the reflected pulse (ARR 0.55) is at 14.8 dB, and the
-    Cramer-Rao spread of its amplitude at 2 MHz (about 3 % rms) puts the ARR median near 2.1 %,
-    while at 5 MHz the timing spread in sample periods grows as sqrt(rate). The slow study prints
-    the full table for 1, 2 and 5 MHz.
+    Both criteria at one rate, or on the 95th percentile, are out of reach of any unbiased
+    estimator: the reflected pulse (ARR 0.55) is at 14.8 dB, and the Cramer-Rao bound for this
+    pulse shape (amplitude, time and width unknown) puts the median |ARR error| at 2.2 % at 2 MHz
+    (p95 6.5 %) and the median |TOF error| at 1.3 samples at 5 MHz (p95 3.7); the timing spread in
+    sample periods grows as the root of the rate. The slow study prints the full table with the
+    bound beside every figure for 1, 2 and 5 MHz.
     """
     fine, dt, truth = model_trace()
     (row2,) = study(fine, dt, truth, 2e6, [20.0], trials=200, seed=1)
@@ -50,15 +53,18 @@ def test_20db_criteria():
     assert row2["detected"] == row2["trials"] and row5["detected"] == row5["trials"]
     assert row2["tof_err_median_samples"] < 1.0
     assert row5["arr_err_median_rel"] < 0.02
+    for row in (row2, row5):
+        assert row["tof_err_median_samples"] < 1.15 * 0.674 * row["crb_tof_samples"]
+        assert row["arr_err_median_rel"] < 1.15 * 0.674 * row["crb_arr_rel"]
 
 
 def test_noise_free_bias_is_small():
-    """Without noise the estimator's own bias: TOF within 0.5 sample, ARR within 1 %."""
+    """Without noise the estimator's own bias: TOF within 0.2 sample, ARR within 0.5 %."""
     fine, dt, truth = model_trace()
     (row,) = study(fine, dt, truth, RATE, [None], trials=10, seed=2)
     assert row["detected"] == 10
-    assert row["tof_err_p95_samples"] < 0.5
-    assert row["arr_err_p95_rel"] < 0.01
+    assert row["tof_err_p95_samples"] < 0.2
+    assert row["arr_err_p95_rel"] < 0.005
 
 
 @pytest.mark.slow
