@@ -61,6 +61,30 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def group_cpu_seconds(pgid: int) -> float | None:
+    """CPU seconds (user + system) used so far by the processes of a process group (Linux).
+
+    The server's own CPU per request, unlike its throughput, does not depend on what else the
+    machine is running: with it, the capacity of a quiet machine can be stated honestly.
+    """
+    total = 0.0
+    tick = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    proc = Path("/proc")
+    if not proc.is_dir():
+        return None
+    for entry in proc.iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rpartition(")")[2].split()
+        except OSError:
+            continue
+        # after the command: state ppid pgrp session ... utime(12) stime(13)
+        if int(fields[2]) == pgid:
+            total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
 def start_server(workers: int, store: Path, extra_env: dict[str, str] | None = None,
                  port: int | None = None) -> tuple[subprocess.Popen, str]:
     """uvicorn running the app factory on a free loopback port; returns (process, url)."""
@@ -71,7 +95,7 @@ def start_server(workers: int, store: Path, extra_env: dict[str, str] | None = N
            "solitonde.instrument.app:build_app_from_env", "--host", "127.0.0.1",
            "--port", str(port), "--workers", str(workers), "--no-access-log",
            "--log-level", "warning"]
-    proc = subprocess.Popen(cmd, cwd=ROOT, env=env)
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True)
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
@@ -231,8 +255,26 @@ def report(result: dict, label: str) -> str:
             f"{result['elapsed_s']:.1f} s)")
 
 
-def measure(url: str, args: argparse.Namespace) -> dict:
-    """Warm up, then the baseline (healthz) and the measurement load."""
+def cpu_line(load: dict) -> str:
+    """CPU per request and what it means for a machine with nothing else running."""
+    server = load.get("server_cpu_ms")
+    client = load["client_cpu_ms"]
+    text = f"CPU per request: client {client:.2f} ms"
+    if server:
+        cores = os.cpu_count() or 1
+        text += (f", server {server:.2f} ms (all workers); {cores} idle cores would sustain "
+                 f"about {cores / (server + client) * 1e3:.0f} req/s")
+    if load.get("loadavg_1min") is not None:
+        text += f"; load average during the run {load['loadavg_1min']:.1f}"
+    return text
+
+
+def measure(url: str, args: argparse.Namespace, server_pgid: int | None = None) -> dict:
+    """Warm up, then the baseline (healthz) and the measurement load.
+
+    With ``server_pgid`` (a server started in its own session), also the server's CPU time per
+    measurement request and the client's own.
+    """
     body = json.dumps({"shots": [synthetic_shot(args.samples)]}).encode()
     headers = {"X-API-Key": args.api_key} if args.api_key else None
     kind = args.client
@@ -240,8 +282,17 @@ def measure(url: str, args: argparse.Namespace) -> dict:
                          headers, kind))
     base = asyncio.run(run_load(url, "/healthz", None, args.concurrency, args.requests,
                                 args.duration, headers, kind))
+    cpu0 = group_cpu_seconds(server_pgid) if server_pgid else None
+    own0 = os.times()
     load = asyncio.run(run_load(url, "/v1/measurements", body, args.concurrency, args.requests,
                                 args.duration, headers, kind))
+    own1 = os.times()
+    n = max(load["requests"], 1)
+    load["client_cpu_ms"] = (own1.user - own0.user + own1.system - own0.system) / n * 1e3
+    if cpu0 is not None:
+        cpu1 = group_cpu_seconds(server_pgid)
+        load["server_cpu_ms"] = (cpu1 - cpu0) / n * 1e3 if cpu1 is not None else None
+    load["loadavg_1min"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     return {"baseline": base, "measurements": load, "body_bytes": len(body),
             "samples": args.samples, "workers": args.workers, "client": kind}
 
@@ -270,7 +321,7 @@ def main(argv: list[str] | None = None) -> dict:
         tmp = tempfile.TemporaryDirectory(prefix="solitonde-load-")
         proc, url = start_server(args.workers, Path(tmp.name) / "load.sqlite")
     try:
-        result = measure(url, args)
+        result = measure(url, args, proc.pid if proc is not None else None)
     finally:
         if proc is not None:
             proc.terminate()
@@ -284,6 +335,7 @@ def main(argv: list[str] | None = None) -> dict:
     print(report(result["measurements"], "POST /v1/measurements"))
     ratio = result["measurements"]["rps"] / max(result["baseline"]["rps"], 1e-9)
     print(f"ratio measurements/baseline throughput: {ratio:.3f}")
+    print(cpu_line(result["measurements"]))
     result["ratio"] = ratio
     if args.json:
         print(json.dumps(result))
