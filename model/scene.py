@@ -201,6 +201,11 @@ class OutputSpec(_Section):
 class SemSpec(_Section):
     """Spectral-element plate discretisation (plate models ``sem``, ``greens``, ``auto``)."""
 
+    preset: Literal["resolved", "paper"] = Field(
+        "resolved", description="'resolved': the contact patch below, resolved by local "
+        "refinement; 'paper': the paper's model, a single-node force on the uniform mesh "
+        "(contact_radius 0, contact_refinement 0; under-resolved, kept for comparison)",
+    )
     elements: tuple[Integer, Integer, Integer] = Field(
         (16, 16, 1), description="elements along x (centre line), y (across), z (thickness)"
     )
@@ -226,6 +231,13 @@ class SemSpec(_Section):
 
     @model_validator(mode="after")
     def _ranges(self) -> SemSpec:
+        if self.preset == "paper":
+            clash = [name for name in ("contact_radius", "contact_refinement")
+                     if name in self.model_fields_set and getattr(self, name) != 0]
+            if clash:
+                raise _fail("preset", f"'paper' loads a single node; it cannot be combined with "
+                            f"{', '.join(clash)} (allowed: preset 'resolved' with a patch, or "
+                            "'paper' alone)")
         if any(not 1 <= n <= 1024 for n in self.elements):
             raise _fail("elements", f"each count must be in 1..1024, got {list(self.elements)}")
         if any(not 1 <= p <= 16 for p in self.order):
