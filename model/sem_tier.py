@@ -37,7 +37,10 @@ def _plate_cached(
 
 
 def contact_radius(scene: Scene) -> float:
-    """The contact patch radius r_c of a scene, m ('auto': the plate thickness, see PHYSICS)."""
+    """The contact patch radius r_c of a scene, m ('auto': the plate thickness, see
+    :func:`solitonde.model.mesh.patch_pressure`; 0 for the 'paper' preset)."""
+    if scene.sem.preset == "paper":
+        return 0.0
     rc = scene.sem.contact_radius
     radius = float(scene.plate.thickness) if rc == "auto" else float(rc)
     limit = 0.1 * min(float(v) for v in scene.plate.size)
@@ -53,7 +56,7 @@ def plate_for(scene: Scene) -> ElasticPlate:
     return _plate_cached(
         (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
         tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
-        p.supports, contact_radius(scene), int(s.contact_refinement),
+        p.supports, contact_radius(scene), 0 if s.preset == "paper" else int(s.contact_refinement),
     )
 
 

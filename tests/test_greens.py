@@ -15,8 +15,10 @@ AL = MATERIALS["al_6061"]
 
 
 def _plate(distance: float = 0.05, thickness: float = 3.18e-3, supports: str = "opposite_edges",
-           elements: tuple[int, int, int] = (4, 4, 1), material=AL):
-    mesh = plate_mesh((0.3, 0.3), thickness, elements, (3, 3, 2), distance, symmetry=True)
+           elements: tuple[int, int, int] = (4, 4, 1), material=AL, radius: float = 3e-3,
+           refinement: int = 1):
+    mesh = plate_mesh((0.3, 0.3), thickness, elements, (3, 3, 2), distance, True, radius,
+                      refinement)
     return build_plate(mesh, material, supports)
 
 
@@ -27,14 +29,18 @@ def test_response_is_the_plate_run_it_stands_for() -> None:
     n = 400
     g = greens.compute_response(plate, dt, n)
     force = np.sin(np.linspace(0, 3, n)) ** 2
-    direct = plate.run_point_force(plate.force_share * force, dt)[:, 0]
+    direct = plate.run_contact_load(force, dt)[0]
     conv = np.array([np.dot(g[s - np.arange(s)], force[:s]) for s in range(n + 1)])
     assert np.allclose(conv, direct, rtol=0, atol=1e-10 * np.abs(direct).max())
-    assert g[1] == pytest.approx(dt**2 * plate.inv_mass[plate.contact_dof] * plate.force_share)
+    # after one step u = dt^2 M^-1 b, seen through the same weights: w = b . u / share
+    b = plate.load_weights
+    expected = dt**2 * np.sum(b * b * plate.inv_mass[plate.load_dofs]) / plate.force_share
+    assert g[1] == pytest.approx(expected)
 
 
 def test_key_depends_on_everything_the_response_depends_on() -> None:
-    """Plate, mesh, position, supports, material and step change the key; nothing else does."""
+    """Plate, mesh, position, patch, refinement, supports, material and step change the key;
+    nothing else does."""
     base = _plate()
     key = greens.response_key(base, 1e-7)
     assert key == greens.response_key(_plate(), 1e-7)
@@ -45,8 +51,11 @@ def test_key_depends_on_everything_the_response_depends_on() -> None:
         greens.response_key(_plate(elements=(5, 4, 1)), 1e-7),
         greens.response_key(_plate(material=MATERIALS["al_6061_paper"]), 1e-7),
         greens.response_key(base, 1.1e-7),
+        greens.response_key(_plate(radius=2e-3), 1e-7),
+        greens.response_key(_plate(refinement=2), 1e-7),
+        greens.response_key(_plate(radius=0.0, refinement=0), 1e-7),
     ]
-    assert len({key, *others}) == 7
+    assert len({key, *others}) == 10
 
 
 def test_cache_reuses_and_extends() -> None:

@@ -120,15 +120,18 @@ def test_stable_step_bound_and_instability_beyond_it() -> None:
 
 
 @pytest.mark.parametrize("supports", ["opposite_edges", "all_edges", "none"])
-def test_half_model_reproduces_full_plate(supports: str) -> None:
-    """The mirror plane y = Ly/2 with half the force gives the full plate's contact response."""
+@pytest.mark.parametrize(("radius", "refinement"), [(0.0, 0), (3.18e-3, 1)])
+def test_half_model_reproduces_full_plate(supports: str, radius: float, refinement: int) -> None:
+    """The mirror plane y = Ly/2 with half the force gives the full plate's contact response,
+    for a single-node force and for the patch on a locally refined mesh."""
     args = ((0.3, 0.24), 3.18e-3, (6, 6, 1), (3, 3, 2), 0.07)
-    full = build_plate(plate_mesh(*args, symmetry=False), AL, supports)
-    half = build_plate(plate_mesh(*args, symmetry=True), AL, supports)
+    full = build_plate(plate_mesh(*args, False, radius, refinement), AL, supports)
+    half = build_plate(plate_mesh(*args, True, radius, refinement), AL, supports)
+    assert half.mesh.n_nodes < 0.6 * full.mesh.n_nodes
     dt = 0.9 * 2 / np.sqrt(max(full.element_bound, half.element_bound))
     force = np.sin(np.pi * np.arange(600) / 150) ** 2 * (np.arange(600) < 150)
-    w_full = full.run_point_force(force, dt)[:, 0]
-    w_half = half.run_point_force(0.5 * force, dt)[:, 0]
+    w_full = full.run_contact_load(force, dt)[0]
+    w_half = half.run_contact_load(force, dt)[0]
     assert np.abs(w_half - w_full).max() < 1e-9 * np.abs(w_full).max()
 
 
@@ -136,16 +139,18 @@ def test_half_model_reproduces_full_plate(supports: str) -> None:
 def test_point_impedance_of_the_infinite_plate(thickness: float) -> None:
     """After a short force pulse and before any edge reflection returns, the contact point has
     moved by impulse / Z with Z = 8 sqrt(rho t D_p) (Zener; the Kirchhoff plate's point
-    mobility is real and frequency independent). Mean over 30-100 us, 20 us sin^2 pulse."""
+    mobility is real and frequency independent). Mean over 30-100 us, 20 us sin^2 pulse,
+    through the contact patch (r_c = t) on the locally refined mesh."""
     size = 0.3
-    mesh = plate_mesh((size, size), thickness, (12, 12, 1), (4, 4, 2), size / 2, symmetry=True)
+    mesh = plate_mesh((size, size), thickness, (12, 12, 1), (4, 4, 2), size / 2, symmetry=True,
+                      contact_radius=thickness, contact_refinement=1)
     plate = build_plate(mesh, AL, "opposite_edges")
     dt = 0.9 * 2 / np.sqrt(plate.element_bound)
     n = int(110e-6 / dt)
     t = np.arange(n) * dt
     pulse = np.where(t < 20e-6, np.sin(np.pi * t / 20e-6) ** 2, 0.0)
     impulse = pulse.sum() * dt
-    w = plate.run_point_force(plate.force_share * pulse, dt)[:, 0]
+    w = plate.run_contact_load(pulse, dt)[0]
     tw = np.arange(n + 1) * dt
     window = (tw > 30e-6) & (tw < 100e-6)
     ratio = w[window].mean() / impulse * plate_impedance(thickness, AL)
@@ -161,3 +166,61 @@ def test_lanczos_agrees_with_scipy_on_assembled_matrix() -> None:
     a = s[:, None] * k * s[None, :]
     ref = eigsh(a, k=1, which="LA", return_eigenvectors=False)[0]
     assert plate.max_eigenvalue == pytest.approx(ref, rel=1e-6)
+
+
+@pytest.mark.parametrize("distance", [0.0, 0.002, 0.01, 0.0123, 0.2, 0.457, 0.914])
+@pytest.mark.parametrize("symmetry", [False, True])
+def test_refined_mesh_resolves_the_patch(distance: float, symmetry: bool) -> None:
+    """Local refinement: elements of size 2 r_c / n within 2 r_c of the chain, sizes at most
+    doubling outward, none smaller than the fine size (it sets the stable step), few shapes."""
+    rc, n = 3.18e-3, 2
+    mesh = plate_mesh((0.914, 0.914), 3.18e-3, (16, 16, 1), (4, 4, 2), distance, symmetry, rc, n)
+    fine = 2 * rc / n
+    for edges, centre in ((mesh.x_edges, distance), (mesh.y_edges, 0.457)):
+        h = np.diff(edges)
+        assert h.min() >= fine * (1 - 1e-9)
+        assert np.all(np.maximum(h[1:] / h[:-1], h[:-1] / h[1:]) <= 2.5)
+        mid = 0.5 * (edges[1:] + edges[:-1])
+        near = np.abs(mid - centre) < 2 * rc
+        assert np.all(h[near] <= 2 * fine * (1 + 1e-9))
+        assert h.max() < 0.914 / 16 * 1.5
+    assert mesh.x_edges[-1] == pytest.approx(0.914)
+    assert mesh.y_edges[-1] == pytest.approx(0.457 if symmetry else 0.914)
+    assert len(mesh.shapes[0]) <= 36
+
+
+@pytest.mark.parametrize(("refinement", "distance"), [(0, 0.2), (1, 0.2), (3, 0.2), (2, 0.001)])
+@pytest.mark.parametrize("symmetry", [False, True])
+def test_contact_load_is_the_consistent_patch_load(
+    refinement: int, distance: float, symmetry: bool
+) -> None:
+    """The nodal weights b_a = int N_a p dA integrate every polynomial the elements hold as the
+    pressure bump does: sum b = share, the centroid is the chain's position and the second
+    moment is r_c^2 / 4 (exact for p = (1 - r^2/r_c^2)^2), on a coarse mesh as on a fine one.
+    Near the edge (L = 1 mm < r_c) the patch is cut by the plate's edge and renormalised."""
+    rc = 3.18e-3
+    mesh = plate_mesh((0.3, 0.3), 3.18e-3, (6, 6, 1), (4, 4, 2), distance, symmetry, rc,
+                      refinement)
+    nodes, b = mesh.contact_load
+    share = 0.5 if symmetry else 1.0
+    x, y, z = mesh.nodes[nodes].T
+    assert np.all(z == pytest.approx(3.18e-3))
+    assert b.sum() == pytest.approx(share, rel=1e-12)
+    if distance > rc:
+        assert (b * x).sum() / share == pytest.approx(distance, abs=1e-9 * rc)
+        assert (b * ((x - distance) ** 2 + (y - 0.15) ** 2)).sum() / share == pytest.approx(
+            rc**2 / 4, rel=1e-5)  # 24-point Gauss on a C1 rim: ~1e-6
+        if not symmetry:
+            assert (b * y).sum() == pytest.approx(0.15, abs=1e-9 * rc)
+    else:
+        assert np.all(x >= 0) and (b * x).sum() / share > distance
+    if refinement:
+        assert np.all(b > -0.1 * b.max())  # resolved: nearly a positive quadrature of p
+
+
+def test_point_load_keeps_the_single_node() -> None:
+    """r_c = 0 is the single node under the chain, with the mesh's share of the force."""
+    mesh = plate_mesh((0.3, 0.3), 3.18e-3, (6, 6, 1), (4, 4, 2), 0.1, True)
+    nodes, b = mesh.contact_load
+    assert nodes.tolist() == [mesh.contact_node]
+    assert b.tolist() == [0.5]
