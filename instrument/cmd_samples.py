@@ -5,7 +5,10 @@ with acquisition defects added (white noise at a stated SNR, baseline drift, 12-
 see solitonde.signal.synth.degrade). Shots differ by their noise and by a drop height varied
 +-1 % (the paper's striker spread), so every shot has its own truth. The model's own peaks
 (integration-step resolution, amplitudes above the static sensor reading) go to truth.tsv
-(tab-separated, so that `solitonde analyze data_samples` skips it).
+(tab-separated, so that `solitonde analyze data_samples` skips it). Amplitudes are taken above the
+level the noise-free trace holds before each pulse's foot (signal.accuracy.Truth.from_trace, the
+extractor's own baseline definition): after the incident the chain decompresses and the sensor
+sits below its static reading, and a reflection is measured from where it starts.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import typer
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import simulate
 from solitonde.signal import io as signal_io
+from solitonde.signal.accuracy import Truth
 from solitonde.signal.synth import degrade
 from solitonde.signal.waveform import Waveform
 
@@ -68,8 +72,10 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
                                       "effects.plate_model=infinite", "output.duration=auto"])
             sim = simulate(scene)
             t = sim.truth
-            base = t["static_sensor_N"]
-            reference = t["incident_peak_N"] - base
+            truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
+                                     (t["incident_time_s"], t["incident_peak_N"]),
+                                     (t["reflected_time_s"], t["reflected_peak_N"]))
+            reference = truth.incident_peak_N
             samples = degrade(sim.samples, spec.snr_db, rng, reference, drift=DRIFT, bits=BITS)
             meta = {"shot": shot, "plate_id": "synthetic",
                     "position": scene.plate.distance_to_support,
@@ -77,9 +83,9 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
                     "snr_db": spec.snr_db, "drop_height_m": height}
             waves.append(Waveform(sim.t0, sim.dt, samples, "N", None, meta))
             truth_rows.append({
-                "file": spec.name, "shot": shot, "tof_s": t["tof_s"], "arr": t["arr"],
+                "file": spec.name, "shot": shot, "tof_s": truth.tof_s, "arr": truth.arr,
                 "incident_time_s": t["incident_time_s"], "reflected_time_s": t["reflected_time_s"],
-                "incident_peak_N": reference, "reflected_peak_N": t["reflected_peak_N"] - base,
+                "incident_peak_N": reference, "reflected_peak_N": truth.reflected_peak_N,
                 "snr_db": spec.snr_db, "drop_height_m": height,
                 "sphere_diameter_m": scene.chain.diameter,
                 "plate_thickness_m": scene.plate.thickness, "sample_rate_hz": 1.0 / sim.dt,
