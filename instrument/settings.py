@@ -62,8 +62,10 @@ class Settings:
         All shots of a request together (64 MB as float64 by default); an uploaded file that
         declares more in its header is refused (413) before its data is read.
     max_simulation_cost:
-        Budget for ``POST /v1/simulate`` in particle-steps (integration steps x chain particles,
-        plate degrees of freedom added for plate models that have them).
+        Budget for ``POST /v1/simulate`` in chain particle-steps (integration steps x particles;
+        spectral-element plate dof-steps counted 25 times, see
+        :data:`~solitonde.instrument.routes_compute.PLATE_DOF_WEIGHT`); 5e8 is about one CPU
+        second.
     store_synchronous:
         SQLite ``synchronous`` pragma. ``NORMAL`` (WAL) keeps every committed measurement when the
         process is killed; ``FULL`` also survives power loss at the cost of one fsync per write.

@@ -393,3 +393,15 @@ def test_plot_of_a_volt_shot_draws_the_force(client: TestClient) -> None:
     assert back["samples"] == shot["samples"]
     png = client.get(f"/v1/measurements/{r.json()['id']}/plot.png")
     assert png.status_code == 200 and png.content.startswith(b"\x89PNG")
+
+
+def test_simulate_prices_plate_meshes_before_building_them(client: TestClient) -> None:
+    """A spectral-element plate near the support at the default mesh is priced from its stable
+    step and refused within the default budget; an absurd mesh is refused from the floor of its
+    cost without building it."""
+    near = {"plate": {"distance_to_support": 0.05}, "effects": {"plate_model": "sem"}}
+    r = client.post("/v1/simulate", json={"scene": near})
+    assert r.status_code == 422 and "too expensive" in r.json()["detail"]
+    huge = {"effects": {"plate_model": "sem"}, "sem": {"elements": [1024, 1024, 8]}}
+    r = client.post("/v1/simulate", json={"scene": huge})
+    assert r.status_code == 422 and "too expensive" in r.json()["detail"]
