@@ -25,7 +25,7 @@ from .ingest import (
     waveforms_from_shots,
 )
 from .problems import PROBLEM_MEDIA_TYPE, Problem, ProblemModel, from_pydantic
-from .uploads import FORMATS, declared_values, pick_format
+from .uploads import FORMATS, check_self_contained, declared_values, pick_format
 
 SECURITY_SCHEMES = {
     "APIKeyHeader": {"type": "apiKey", "in": "header", "name": "X-API-Key",
@@ -227,6 +227,7 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
     settings = svc.settings
     path = svc.uploads.write(stream, fmt)
     try:
+        check_self_contained(path, fmt)
         declared = declared_values(path, fmt)
         limit = settings.max_samples_per_request
         if declared is not None and declared > limit:

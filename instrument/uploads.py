@@ -68,6 +68,43 @@ def pick_format(explicit: str | None, filename: str | None) -> str:
                   kind="invalid-input", field="format")
 
 
+def check_self_contained(path: Path, fmt: str) -> None:
+    """Refuse HDF5 files that reach outside themselves.
+
+    HDF5 can store a dataset's bytes in an external file named inside the file, link to objects
+    in other files, or map virtual datasets onto other files: reading such an upload would read
+    files on the server, which is exactly a client-supplied path. Only self-contained files are
+    read.
+    """
+    if fmt != "hdf5":
+        return
+    import h5py
+
+    problems: list[str] = []
+
+    def visit(name: str, link: Any) -> None:
+        if isinstance(link, h5py.ExternalLink):
+            problems.append(f"{name!r} is an external link")
+
+    def visit_obj(name: str, obj: Any) -> None:
+        if isinstance(obj, h5py.Dataset):
+            if obj.external:
+                problems.append(f"{name!r} stores its data in an external file")
+            if obj.is_virtual:
+                problems.append(f"{name!r} is a virtual dataset")
+
+    try:
+        with h5py.File(path, "r") as fh:
+            fh.visititems_links(visit)
+            if not problems:
+                fh.visititems(visit_obj)
+    except Exception:
+        return  # not readable as HDF5 at all: the reader reports it
+    if problems:
+        raise Problem(422, f"file: only self-contained HDF5 files are accepted; {problems[0]}",
+                      kind="invalid-input", field="file")
+
+
 def declared_values(path: Path, fmt: str) -> int | None:
     """How many values the file declares in its largest array, from headers alone.
 

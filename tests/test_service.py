@@ -405,3 +405,26 @@ def test_simulate_prices_plate_meshes_before_building_them(client: TestClient) -
     huge = {"effects": {"plate_model": "sem"}, "sem": {"elements": [1024, 1024, 8]}}
     r = client.post("/v1/simulate", json={"scene": huge})
     assert r.status_code == 422 and "too expensive" in r.json()["detail"]
+
+
+def test_hdf5_upload_that_points_at_server_files_is_refused(client: TestClient,
+                                                          tmp_path: Path) -> None:
+    """An HDF5 upload whose dataset lives in an external file (a path on the server) or that
+    links to another file is refused before anything is read from it."""
+    import h5py
+
+    secret = tmp_path / "secret.bin"
+    np.arange(4000, dtype="<f8").tofile(secret)
+    external = tmp_path / "external.h5"
+    with h5py.File(external, "w") as fh:
+        d = fh.create_dataset("shot", shape=(4000,), dtype="<f8",
+                              external=[(str(secret), 0, 4000 * 8)])
+        d.attrs["dt"] = DT
+    linked = tmp_path / "linked.h5"
+    with h5py.File(linked, "w") as fh:
+        fh["shot"] = h5py.ExternalLink(str(secret), "/data")
+    for path, words in [(external, "external file"), (linked, "external link")]:
+        r = client.post("/v1/measurements", files={"file": (path.name, path.read_bytes())})
+        assert r.status_code == 422, r.text
+        assert r.json()["field"] == "file" and words in r.json()["detail"]
+    assert stored(client) == 0
