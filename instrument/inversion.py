@@ -11,10 +11,10 @@ with s the shot scatter (or the stated defaults :data:`DEFAULT_TOF_REL_STD`,
 :data:`DEFAULT_ARR_STD` when not given; floored at :data:`MIN_TOF_STD_S`, :data:`MIN_ARR_STD`) and
 sigma_model the table's own interpolation error where the cell lies (leave-one-out at each node
 along both axes, scaled to the grid spacing, interpolated like the features): large where TOF and
-ARR oscillate with L near a support, small where they are smooth. A calibration multiplies the model ARR by ``arr_factor`` (experiments lose energy the
-model does not) and adds ``tof_offset_s`` to the model TOF. Sphere sizes multiply their
-likelihoods. Grid points where the model detects no reflection cannot explain a measured one and
-get zero posterior.
+ARR oscillate with L near a support, small where they are smooth. A calibration multiplies the
+model ARR by ``arr_factor`` (experiments lose energy the model does not) and adds ``tof_offset_s``
+to the model TOF. Sphere sizes multiply their likelihoods. Grid points where the model detects no
+reflection cannot explain a measured one and get zero posterior.
 
 Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
 status: when the posterior still carries at least :data:`EDGE_FRACTION` of its peak density at an

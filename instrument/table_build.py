@@ -326,7 +326,8 @@ def _write_plate(fh: h5py.File, result: Mapping[str, Any]) -> int:
 
 
 def git_revision() -> str | None:
-    """The source tree's git commit (with ``+dirty`` when modified), or None."""
+    """The source tree's git commit now (``+dirty`` when modified), or None; a build records it
+    when each session starts, since the tree may change while it runs."""
     root = Path(__file__).resolve().parent.parent
     try:
         rev = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
@@ -352,6 +353,7 @@ def _provenance(fh: h5py.File, sweep: Sweep, runner: str, command: str | None) -
     return {
         "solitonde_version": solitonde_version(),
         "git_revision": git_revision(),
+        "sessions": json.loads(fh.attrs.get("sessions", "[]")),
         "built_at": datetime.now(UTC).isoformat(timespec="seconds"),
         "build_wall_s": float(fh.attrs["build_wall_s"]),
         "point_cpu_s": float(np.nansum(fh["diagnostics"]["wall_s"][...])),
@@ -487,6 +489,12 @@ def build_table(
         with h5py.File(part, "w") as fh:
             _create(fh, sweep)
     with h5py.File(part, "r+") as fh:
+        # the code that computes this session's points (a resumed build may span revisions)
+        sessions = json.loads(fh.attrs.get("sessions", "[]"))
+        sessions.append({"started_at": datetime.now(UTC).isoformat(timespec="seconds"),
+                         "git_revision": git_revision(), "runner": runner,
+                         "points_done_before": int(fh["done"][...].sum())})
+        fh.attrs["sessions"] = json.dumps(sessions)
         tasks = _pending(fh, sweep)
         if max_plates is not None:
             tasks = tasks[:max(0, max_plates)]
