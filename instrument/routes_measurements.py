@@ -73,11 +73,6 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
 
-INLINE_BODY_BYTES = 1 << 20
-"""JSON bodies up to this size are measured on the event loop itself (a few milliseconds for a
-10,000-sample shot). A hop to a worker thread and back costs two thread wake-ups, which on a busy
-machine cost more than the work; larger bodies go to the thread pool so that one big request
-does not hold up the others."""
 
 
 class UploadFields(Strict):
@@ -158,10 +153,9 @@ async def post_measurement(request: Request) -> JSONResponse:
     media = _media_type(request)
     if media == "application/json":
         body = await request.body()
-        if len(body) <= INLINE_BODY_BYTES:
-            result = _ingest_json(svc, body)
-        else:
-            result = await run_in_threadpool(_ingest_json, svc, body)
+        # In a worker thread: the event loop keeps reading other requests (and answering
+        # /healthz) while this one is parsed, measured and waits for the store's writer lock.
+        result = await run_in_threadpool(_ingest_json, svc, body)
     elif media == "multipart/form-data":
         result = await _ingest_upload(svc, request)
     else:
