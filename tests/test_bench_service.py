@@ -19,7 +19,7 @@ from service_support import start_uvicorn, stop_group
 
 
 @pytest.mark.bench
-@pytest.mark.parametrize(("workers", "client"), [(1, "raw"), (2, "raw"), (2, "httpx")])
+@pytest.mark.parametrize(("workers", "client"), [(1, "raw"), (2, "raw"), (3, "raw"), (2, "httpx")])
 def test_bench_post_measurements(tmp_path: Path, workers: int, client: str) -> None:
     """Bounded: 200 warm-up requests, then at most 3000 requests or 20 s per phase."""
     proc, url = start_uvicorn(tmp_path / "bench.sqlite", workers=workers)
