@@ -2,10 +2,54 @@
 
 from __future__ import annotations
 
+import json
+import sys
+from pathlib import Path
+
 import typer
+from rich.console import Console
+from rich.table import Table
+
+
+def accuracy_command(
+    as_json: bool = typer.Option(False, "--json", help="Print the results as JSON."),
+    out: Path | None = typer.Option(None, "--out",
+                                    help="Also write accuracy.csv, accuracy.json and "
+                                         "accuracy_pareto.png here."),
+    quick: bool = typer.Option(False, "--quick",
+                               help="Tiny meshes only (checks the machinery in seconds)."),
+) -> None:
+    """TOF and ARR error against a converged reference, and wall time, per plate model and mesh."""
+    from tqdm import tqdm
+
+    from solitonde.instrument.accuracy import configs, run_bench, table_rows, write_outputs
+    from solitonde.instrument.figures import _clean
+
+    total = 2 * (len(configs(quick)) + 1)
+    with tqdm(total=total, desc="bench accuracy", disable=not sys.stderr.isatty()) as bar:
+        def tick(label: str) -> None:
+            bar.set_postfix_str(label)
+            bar.update(1)
+
+        result = run_bench(quick, tick)
+    if out is not None:
+        write_outputs(result, out)
+    if as_json:
+        typer.echo(json.dumps(_clean(result), indent=2))
+        return
+    table = Table(title=f"What accuracy costs (reference: {result['reference']['config']})")
+    for name in ("config", "scene", "TOF us", "ARR", "TOF err %", "ARR err %", "wall s",
+                 "cached s", "Pareto"):
+        table.add_column(name, justify="left" if name in ("config", "scene") else "right")
+    for row in table_rows(result):
+        table.add_row(*row)
+    console = Console()
+    console.print(table)
+    console.print("recommendation: " + json.dumps(_clean(result["recommendation"]), indent=2))
 
 
 def register(app: typer.Typer) -> None:
     """Add the `bench` command group."""
     group = typer.Typer(help="Benchmarks of the model.", no_args_is_help=True)
+    group.command("accuracy")(accuracy_command)
     app.add_typer(group, name="bench")
