@@ -75,6 +75,14 @@ class Calibration:
                 return float(entry["arr_factor"]), float(entry["tof_offset_s"])
         return self.arr_factor, self.tof_offset_s
 
+    def uncertainty_for(self, diameter_m: float) -> tuple[float, float]:
+        """(arr_factor_std, tof_offset_std_s) for a sphere size; 0 when not stated."""
+        for d, entry in self.per_diameter.items():
+            if abs(d - diameter_m) <= 0.01 * d:
+                return (float(entry.get("arr_factor_std", 0.0)),
+                        float(entry.get("tof_offset_std_s", 0.0)))
+        return 0.0, 0.0
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "arr_factor": self.arr_factor,
@@ -134,6 +142,20 @@ class Calibration:
         return cal
 
 
+def _combine(values: Sequence[float], sigmas: Sequence[float]) -> tuple[float, float, float]:
+    """Inverse-variance mean, its statistical error, and the excess scatter between the values
+    (sample variance beyond the mean statistical variance; 0 for a single value)."""
+    w = [1 / s**2 for s in sigmas]
+    mean = sum(x * wi for x, wi in zip(values, w, strict=True)) / sum(w)
+    stat = 1 / math.sqrt(sum(w))
+    if len(values) < 2:
+        return mean, stat, 0.0
+    plain = sum(values) / len(values)
+    var = sum((x - plain) ** 2 for x in values) / (len(values) - 1)
+    excess = var - sum(s**2 for s in sigmas) / len(sigmas)
+    return mean, stat, math.sqrt(max(0.0, excess))
+
+
 @dataclass(frozen=True)
 class Reference:
     """Shots of one sphere size on a reference plate of known thickness and position."""
@@ -149,7 +171,14 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     Each reference gives ``factor = ARR / ARR_model`` and ``offset = TOF - TOF_model`` with the
     model interpolated from ``table`` at the known (t, L); several references of one size are
     combined with inverse-variance weights (shot scatter over sqrt(n), or the inversion's stated
-    defaults). The global values weigh every size equally.
+    defaults, and the table's interpolation error at the reference). The global values weigh
+    every size equally.
+
+    The stated uncertainty (``arr_factor_std``, ``tof_offset_std_s``, which the inversion adds to
+    its error budget) is the statistical one plus, with two or more references of a size
+    (different plates), the scatter between them beyond their statistical errors (a
+    random-effects estimate, ``*_transfer_*``): how far a factor and offset fitted on one plate
+    carry over to another. One reference cannot show that and states the statistical part only.
     """
     from .inversion import InversionError, predict
 
@@ -159,22 +188,28 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     for ref in references:
         s = ref.summary
         d = float(table.axes["diameter_m"][table.diameter_index(s.diameter_m)])
-        tof_m, arr_m = predict(table, d, ref.thickness_m, ref.distance_m)
+        tof_m, arr_m, tof_sd, arr_sd = predict(table, d, ref.thickness_m, ref.distance_m,
+                                               with_error=True)
         if arr_m <= 0:
             raise InversionError("arr", f"the model ARR at the reference is {arr_m:g}: no factor "
                                  "can be fitted there; use a thicker or closer reference")
         s_tof, s_arr = s.sigmas()
-        by_d.setdefault(d, []).append((s.arr / arr_m, s_arr / arr_m, s.tof_s - tof_m, s_tof))
+        # the reference's own error: its shots, and the table's interpolation error there
+        f = s.arr / arr_m
+        sf = math.hypot(s_arr, f * arr_sd) / arr_m
+        by_d.setdefault(d, []).append((f, sf, s.tof_s - tof_m, math.hypot(s_tof, tof_sd)))
     per: dict[float, dict[str, float]] = {}
     for d, rows in by_d.items():
         f, sf, o, so = (list(c) for c in zip(*rows, strict=True))
-        wf = [1 / x**2 for x in sf]
-        wo = [1 / x**2 for x in so]
+        f_mean, f_stat, f_transfer = _combine(f, sf)
+        o_mean, o_stat, o_transfer = _combine(o, so)
         per[d] = {
-            "arr_factor": sum(a * w for a, w in zip(f, wf, strict=True)) / sum(wf),
-            "arr_factor_std": 1 / math.sqrt(sum(wf)),
-            "tof_offset_s": sum(a * w for a, w in zip(o, wo, strict=True)) / sum(wo),
-            "tof_offset_std_s": 1 / math.sqrt(sum(wo)),
+            "arr_factor": f_mean,
+            "arr_factor_std": math.hypot(f_stat, f_transfer),
+            "arr_factor_transfer_std": f_transfer,
+            "tof_offset_s": o_mean,
+            "tof_offset_std_s": math.hypot(o_stat, o_transfer),
+            "tof_offset_transfer_std_s": o_transfer,
             "n_references": len(rows),
         }
     n = len(per)

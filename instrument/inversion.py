@@ -13,7 +13,8 @@ sigma_model the table's own interpolation error where the cell lies (leave-one-o
 along both axes, scaled to the grid spacing, interpolated like the features): large where TOF and
 ARR oscillate with L near a support, small where they are smooth. A calibration multiplies the
 model ARR by ``arr_factor`` (experiments lose energy the model does not) and adds ``tof_offset_s``
-to the model TOF. Sphere sizes multiply their likelihoods. Grid points where the model detects no
+to the model TOF; its stated uncertainties (``arr_factor_std``, ``tof_offset_std_s``) enter the
+variances. Sphere sizes multiply their likelihoods. Grid points where the model detects no
 reflection cannot explain a measured one and get zero posterior.
 
 Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
@@ -230,8 +231,9 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
 
 
 def predict(table: ModelTable, diameter_m: float, thickness_m: float,
-            distance_m: float) -> tuple[float, float]:
-    """Model (TOF s, ARR) at one (D, t, L) inside the table, interpolated as the inversion does.
+            distance_m: float, *, with_error: bool = False) -> tuple[float, ...]:
+    """Model (TOF s, ARR) at one (D, t, L) inside the table, interpolated as the inversion does;
+    with ``with_error`` also the interpolation error's standard deviations (TOF s, ARR).
 
     Raises
     ------
@@ -250,9 +252,16 @@ def predict(table: ModelTable, diameter_m: float, thickness_m: float,
     ok = table.status[i_d] == STATUS_OK
     if ((wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T)[0, 0]:
         raise InversionError("thickness_m", "the model detects no reflection next to this point")
-    tof = float((wt @ np.where(ok, table.features["tof_s"][i_d], 0.0) @ wl.T)[0, 0])
-    arr = float((wt @ np.where(ok, table.features["arr"][i_d], 0.0) @ wl.T)[0, 0])
-    return tof, arr
+    tof_n = np.where(ok, table.features["tof_s"][i_d], 0.0)
+    arr_n = np.where(ok, table.features["arr"][i_d], 0.0)
+    tof = float((wt @ tof_n @ wl.T)[0, 0])
+    arr = float((wt @ arr_n @ wl.T)[0, 0])
+    if not with_error:
+        return tof, arr
+    ct, cl = np.log(t_nodes), l_nodes
+    tof_sd = math.sqrt(float((wt @ _node_variance(tof_n, ok, ct, cl) @ wl.T)[0, 0]))
+    arr_sd = math.sqrt(float((wt @ _node_variance(arr_n, ok, ct, cl) @ wl.T)[0, 0]))
+    return tof, arr, tof_sd, arr_sd
 
 
 # The estimate -----------------------------------------------------------------------------
@@ -368,10 +377,12 @@ def _misfit(items: Sequence[FeatureSummary], grids: Sequence[FineGrid], cal: Cal
     total = 0.0
     for item, g in zip(items, grids, strict=True):
         factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
         s_tof, s_arr = item.sigmas()
-        total += (item.tof_s - offset - g.tof_s[cell]) ** 2 / (s_tof**2 + g.model_tof_var[cell])
-        total += (item.arr - factor * g.arr[cell]) ** 2 / (s_arr**2
-                                                          + factor**2 * g.model_arr_var[cell])
+        total += (item.tof_s - offset - g.tof_s[cell]) ** 2 / (s_tof**2 + o_std**2
+                                                               + g.model_tof_var[cell])
+        total += (item.arr - factor * g.arr[cell]) ** 2 / (
+            s_arr**2 + factor**2 * g.model_arr_var[cell] + (f_std * g.arr[cell]) ** 2)
     return float(total)
 
 
@@ -408,13 +419,19 @@ def invert(
     r = np.empty_like(chi2)
     for item, g in zip(items, grids, strict=True):
         factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
         s_tof, s_arr = item.sigmas()
-        for model, obs, scale, s2, model_var in (
-            (g.tof_s, item.tof_s - offset, 1.0, s_tof**2, g.model_tof_var),
-            (g.arr, item.arr, factor, s_arr**2, g.model_arr_var),
+        for model, obs, scale, s2, model_var, rel2 in (
+            (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + o_std**2, g.model_tof_var, 0.0),
+            (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
         ):
+            # the calibration's own uncertainty: offset adds, factor scales the model ARR
             np.multiply(model_var, scale * scale, out=var)
             var += s2
+            if rel2:
+                np.multiply(model, model, out=r)
+                r *= rel2
+                var += r
             np.multiply(model, -scale, out=r)
             r += obs
             r *= r
