@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.sparse.linalg import eigsh
@@ -224,3 +226,25 @@ def test_point_load_keeps_the_single_node() -> None:
     nodes, b = mesh.contact_load
     assert nodes.tolist() == [mesh.contact_node]
     assert b.tolist() == [0.5]
+
+
+def test_patch_deflection_converges_where_a_point_force_does_not() -> None:
+    """Refining the elements around the chain (2 r_c / n, n = 1, 2, 3): the deflection under a
+    single-node force keeps growing (3D point load: ~1/r under it, unbounded as h -> 0), the
+    patch-weighted deflection under the patch load stays put (within 0.5 %). Mean deflection
+    over 10-25 us under a 20 us sin^2 force pulse."""
+    rc = 3.18e-3
+    means: dict[str, list[float]] = {"patch": [], "point": []}
+    for n in (1, 2, 3):
+        mesh = plate_mesh((0.12, 0.12), 3.18e-3, (4, 4, 1), (4, 4, 2), 0.06, True, rc, n)
+        for name, m in (("patch", mesh), ("point", replace(mesh, contact_radius=0.0))):
+            plate = build_plate(m, AL, "opposite_edges")
+            dt = 0.9 * 2 / np.sqrt(plate.element_bound)
+            t = np.arange(int(25e-6 / dt) + 1) * dt
+            pulse = np.where(t < 20e-6, np.sin(np.pi * t / 20e-6) ** 2, 0.0)
+            w = plate.run_contact_load(pulse[:-1], dt)[0]
+            means[name].append(float(w[t >= 10e-6].mean()))
+    point, patch = np.array(means["point"]), np.array(means["patch"])
+    assert np.all(point[1:] / point[:-1] > 1.03)  # measured +10 %, +4.7 % (h / 2, h / 1.5)
+    assert point[-1] / point[0] > 1.1
+    assert np.ptp(patch) < 5e-3 * patch.mean()

@@ -58,17 +58,32 @@ def test_half_model_reproduces_full_plate(near_support) -> None:
 
 
 def test_reported_mesh_and_step(near_support) -> None:
-    """The diagnostics name the mesh and a step within the stability limit."""
+    """The diagnostics name the mesh (nominal 8 x 4 half model, refined around the chain to
+    elements of 2 r_c = 2 t, the patch) and a step within the stability limit."""
     d = near_support["sem"].diagnostics
-    assert d["mesh"] == {"elements": [8, 4, 1], "order": [4, 4, 2], "nodes": 33 * 17 * 3,
-                         "dofs": 3 * 33 * 17 * 3, "symmetry": True, "element_shapes": 2}
+    mesh = d["mesh"]
+    ex, ey, ez = mesh["elements"]
+    assert ex > 8 and ey > 4 and ez == 1
+    assert mesh["order"] == [4, 4, 2] and mesh["symmetry"] is True
+    assert mesh["nodes"] == (4 * ex + 1) * (4 * ey + 1) * 3
+    assert mesh["dofs"] == 3 * mesh["nodes"]
+    assert mesh["contact_radius_m"] == pytest.approx(3.18e-3)
+    assert mesh["min_element_m"][:2] == pytest.approx([2 * 3.18e-3] * 2)
+    assert mesh["contact_nodes"] > 9
     assert 0.5 < d["dt_stability_ratio"] <= 0.9
     assert d["chain_dt_s"] <= d["dt_s"]
+    paper = _run("effects.plate_model=sem", "sem.preset=paper", "plate.distance_to_support=0.05",
+                 *COARSE, "output.duration=2e-5").diagnostics["mesh"]
+    assert paper == {"elements": [8, 4, 1], "order": [4, 4, 2], "nodes": 33 * 17 * 3,
+                     "dofs": 3 * 33 * 17 * 3, "symmetry": True, "element_shapes": 2,
+                     "min_element_m": paper["min_element_m"], "contact_radius_m": 0.0,
+                     "contact_nodes": 1}
 
 
 def test_small_spheres_at_the_centre_see_an_infinite_plate() -> None:
     """D = 4.76 mm at the centre of a plate: no reflection returns during contact, so the finite
-    plate gives Zener's infinite-plate result (the plate resolved: 25 mm elements, order 4)."""
+    plate gives Zener's infinite-plate result (the plate resolved: 25 mm elements, order 4, the
+    contact patch r_c = t resolved by local refinement)."""
     common = ["chain.diameter=4.76e-3", "plate.size=[0.3,0.3]", "plate.distance_to_support=0.15"]
     sem = _run("effects.plate_model=sem", "sem.elements=[12,12,1]", *common)
     inf = _run("effects.plate_model=infinite", *common)
