@@ -98,7 +98,7 @@ def _side(avail: float, fine: float, fine_extent: float, nominal: float) -> list
         pos += size
     rest = avail - pos
     if rest > tol:
-        n = max(1, int(round(rest / nominal)))
+        n = max(1, round(rest / nominal))
         if rest / n >= (sizes[-1] if sizes else fine) * (1 - 1e-9) or not sizes:
             sizes.extend([rest / n] * n)
         else:

@@ -302,9 +302,9 @@ def integrate_sem(
     ``h`` is the plate step, ``r`` chain steps per plate step, ``n_sub`` plate steps per sample.
     The contact force acts through the patch (vertical dofs ``ldofs``, weights ``lw`` summing to
     ``share``) and the Hertz spring sees the work-conjugate deflection w = -(lw . up) / share
-    (z up); ``up``, ``vp`` hold the plate's displacement and velocity (in and out). ``share`` is the part of the plate
-    that is modelled (1/2 for a half model on a symmetry plane: it carries half the force and half
-    the energy). Returns (status, samples recorded, final w, plate energy J, dissipated energy J);
+    (z up); ``up``, ``vp`` hold the plate's displacement and velocity (in and out). ``share``
+    is the part of the plate that is modelled (1/2 for a half model on a symmetry plane: it
+    carries half the force and half the energy). Returns (status, samples recorded, final w, plate energy J, dissipated energy J);
     ``energy[k]`` is the full balance (chain + plate + dissipated).
     """
     n = u.size - 1

@@ -64,35 +64,48 @@ def test_support_effect_and_critical_distance() -> None:
     assert settle[2.29e-3] > settle[4.83e-3]
 
 
+def _orders(h: list[float], q: np.ndarray) -> np.ndarray:
+    """Observed orders p = ln(d_k / d_k+1) / ln(h_k / h_k+1) from successive changes d."""
+    d = np.abs(np.diff(q))
+    hh = np.asarray(h, dtype=float)
+    return np.log(d[:-1] / d[1:]) / np.log(hh[1:-1] / hh[2:])
+
+
 def test_convergence_with_order_and_element_count() -> None:
-    """Centre of a 0.3 m plate (t = 3.18 mm, D = 9.53 mm), greens tier. Thickness order: TOF
-    and ARR converge (change below 0.1 % from order 2 to 4). In-plane element count: TOF
-    converges (last change below 0.1 %); ARR keeps creeping up slowly (a point force on a
-    shear-deformable plate has a logarithmic local deflection), bounded here by 5 % per
-    refinement. Prints the observed orders p = ln(d_k / d_k+1) / ln(h_k / h_k+1)."""
-    base = ["effects.plate_model=greens", "plate.size=[0.3,0.3]", "plate.distance_to_support=0.15"]
-    counts = [6, 8, 12, 16, 24]
-    h_rows = [_truth(*base, f"sem.elements=[{n},{n},1]") for n in counts]
-    z_orders = [1, 2, 3, 4]
-    z_rows = [_truth(*base, "sem.elements=[12,12,1]", f"sem.order=[4,4,{p}]") for p in z_orders]
-    print("\nin-plane elements (order 4): n, ARR, TOF ms")
-    for n, (a, f) in zip(counts, h_rows, strict=True):
-        print(f"  {n:3d}  {a:.4f}  {f * 1e3:.5f}")
-    print("thickness order (12 x 12 elements): pz, ARR, TOF ms")
-    for p, (a, f) in zip(z_orders, z_rows, strict=True):
-        print(f"  {p:3d}  {a:.5f}  {f * 1e3:.5f}")
+    """Centre of a 0.3 m plate (t = 3.18 mm, D = 9.53 mm), greens tier, contact patch r_c = t.
+    Nominal in-plane elements 6, 12, 24 (fine elements 2 r_c at the chain), refinement at the
+    chain n = 1, 2, 3 (fine elements 2 r_c / n), thickness order 2, 3: TOF and ARR settle
+    (last change below 0.3 %) and agree with Zener's infinite plate (no reflection returns
+    during contact at the centre). With the single-node force of the paper's model ARR crept up
+    0.220 -> 0.300 over 6 -> 24 elements. The patch radius is physics, not numerics: ARR for
+    r_c = t/4, t/2, t is printed (it falls as r_c grows; see the report)."""
+    t = 3.18e-3
+    base = ["effects.plate_model=greens", "plate.size=[0.3,0.3]",
+            "plate.distance_to_support=0.15", f"sem.contact_radius={t}"]
+    inf_arr, inf_tof = _truth(*base[1:3], "effects.plate_model=infinite")
+    counts = [6, 12, 24]
+    h_rows = np.array([_truth(*base, f"sem.elements=[{n},{n},1]") for n in counts])
+    refine = [1, 2, 3]
+    r_rows = np.array([h_rows[1], *(_truth(*base, "sem.elements=[12,12,1]",
+                                           f"sem.contact_refinement={n}") for n in refine[1:])])
+    z_rows = np.array([h_rows[1], _truth(*base, "sem.elements=[12,12,1]", "sem.order=[4,4,3]")])
+    radii = [t / 4, t / 2]
+    rc_rows = [_truth(*base[:3], "sem.elements=[12,12,1]", f"sem.contact_radius={rc}")
+               for rc in radii]
+    print(f"\ninfinite plate: ARR {inf_arr:.4f}  TOF {inf_tof * 1e3:.5f} ms")
+    for title, keys, rows in (("nominal in-plane elements (r_c = t, n = 1)", counts, h_rows),
+                              ("refinement at the chain n (12 elements)", refine, r_rows),
+                              ("thickness order (12 elements, n = 1)", [2, 3], z_rows)):
+        print(title + ": key, ARR, TOF ms")
+        for k, (a, f) in zip(keys, rows, strict=True):
+            print(f"  {k:3d}  {a:.4f}  {f * 1e3:.5f}")
+    for rc, (a, f) in zip([*radii, t], [*rc_rows, tuple(h_rows[1])], strict=True):
+        print(f"  r_c = {rc * 1e3:.3f} mm: ARR {a:.4f}  TOF {f * 1e3:.5f} ms")
     for name, k in (("ARR", 0), ("TOF", 1)):
-        q = np.array([r[k] for r in h_rows])
-        d = np.abs(np.diff(q))
-        h = 1.0 / np.array(counts, dtype=float)
-        orders = np.log(d[:-1] / d[1:]) / np.log(h[1:-1] / h[2:])
-        print(f"observed order of {name} under h-refinement: {np.round(orders, 2)}")
-        qz = np.array([r[k] for r in z_rows])
-        dz = np.abs(np.diff(qz))
-        print(f"{name} change per thickness order: {dz} (ratios {np.round(dz[:-1] / dz[1:], 1)})")
-        assert dz[-1] < 1e-3 * abs(qz[-1])
-    tof = np.array([r[1] for r in h_rows])
-    arr = np.array([r[0] for r in h_rows])
-    assert abs(tof[-1] / tof[-2] - 1) < 1e-3
-    assert abs(tof[0] / tof[-1] - 1) > 3 * abs(tof[-1] / tof[-2] - 1)
-    assert abs(arr[-1] / arr[-2] - 1) < 0.05
+        print(f"observed order of {name}: elements {_orders([1 / n for n in counts], h_rows[:, k])}"
+              f", refinement {_orders([1 / n for n in refine], r_rows[:, k])}")
+        for rows in (h_rows, r_rows, z_rows):
+            assert abs(rows[-1, k] / rows[-2, k] - 1) < 3e-3
+    assert h_rows[-1, 0] == pytest.approx(inf_arr, rel=0.02)
+    assert h_rows[-1, 1] == pytest.approx(inf_tof, rel=0.005)
+    assert rc_rows[0][0] > rc_rows[1][0] > h_rows[1, 0]
