@@ -305,7 +305,8 @@ def integrate_sem(
     (z up); ``up``, ``vp`` hold the plate's displacement and velocity (in and out). ``share``
     is the part of the plate that is modelled (1/2 for a half model on a symmetry plane: it
     carries half the force and half the energy). Returns (status, samples recorded, final w,
-    plate energy J, dissipated energy J); ``energy[k]`` is the full balance (chain + plate + dissipated).
+    plate energy J, dissipated energy J); ``energy[k]`` is the full balance (chain + plate +
+    dissipated).
     """
     n = u.size - 1
     ndof = up.size
