@@ -7,11 +7,13 @@ import pytest
 
 from solitonde.model.boundary import resolve_plate_model
 from solitonde.model.scene import load_scene
+from solitonde.model.sem_tier import plate_for
 from solitonde.model.simulate import simulate
 from solitonde.model.zener import critical_distance
 
-#: A coarse mesh of the paper's plate: the coupling is tested, not the plate's accuracy.
-COARSE = ["sem.elements=[8,8,1]", "sem.order=[4,4,2]"]
+#: A coarse mesh of the paper's plate: the coupling is tested, not the plate's accuracy (the
+#: patch r_c = t spread over the unrefined elements' nodes; refinement is tested elsewhere).
+COARSE = ["sem.elements=[8,8,1]", "sem.order=[4,4,2]", "sem.contact_refinement=0"]
 
 
 def _run(*overrides: str):
@@ -58,26 +60,24 @@ def test_half_model_reproduces_full_plate(near_support) -> None:
 
 
 def test_reported_mesh_and_step(near_support) -> None:
-    """The diagnostics name the mesh (nominal 8 x 4 half model, refined around the chain to
-    elements of 2 r_c = 2 t, the patch) and a step within the stability limit."""
+    """The diagnostics name the mesh and a step within the stability limit; the default mesh is
+    refined around the chain to elements of 2 r_c = 2 t, the paper preset is not."""
     d = near_support["sem"].diagnostics
-    mesh = d["mesh"]
-    ex, ey, ez = mesh["elements"]
-    assert ex > 8 and ey > 4 and ez == 1
-    assert mesh["order"] == [4, 4, 2] and mesh["symmetry"] is True
-    assert mesh["nodes"] == (4 * ex + 1) * (4 * ey + 1) * 3
-    assert mesh["dofs"] == 3 * mesh["nodes"]
-    assert mesh["contact_radius_m"] == pytest.approx(3.18e-3)
-    assert mesh["min_element_m"][:2] == pytest.approx([2 * 3.18e-3] * 2)
-    assert mesh["contact_nodes"] > 9
+    assert d["mesh"] == {"elements": [8, 4, 1], "order": [4, 4, 2], "nodes": 33 * 17 * 3,
+                         "dofs": 3 * 33 * 17 * 3, "symmetry": True, "element_shapes": 2,
+                         "min_element_m": d["mesh"]["min_element_m"],
+                         "contact_radius_m": pytest.approx(3.18e-3), "contact_nodes": 25}
     assert 0.5 < d["dt_stability_ratio"] <= 0.9
     assert d["chain_dt_s"] <= d["dt_s"]
-    paper = _run("effects.plate_model=sem", "sem.preset=paper", "plate.distance_to_support=0.05",
-                 *COARSE, "output.duration=2e-5").diagnostics["mesh"]
-    assert paper == {"elements": [8, 4, 1], "order": [4, 4, 2], "nodes": 33 * 17 * 3,
-                     "dofs": 3 * 33 * 17 * 3, "symmetry": True, "element_shapes": 2,
-                     "min_element_m": paper["min_element_m"], "contact_radius_m": 0.0,
-                     "contact_nodes": 1}
+    mesh = plate_for(load_scene(None, ["plate.distance_to_support=0.05"])).mesh.describe()
+    ex, ey, ez = mesh["elements"]
+    assert ex > 16 and ey > 8 and ez == 1
+    assert mesh["nodes"] == (4 * ex + 1) * (4 * ey + 1) * 3
+    assert mesh["min_element_m"][:2] == pytest.approx([2 * 3.18e-3] * 2)
+    assert mesh["contact_nodes"] > 9
+    paper = plate_for(load_scene(None, ["sem.preset=paper"])).mesh.describe()
+    assert paper["elements"] == [16, 8, 1] and paper["nodes"] == 65 * 33 * 3
+    assert paper["contact_radius_m"] == 0.0 and paper["contact_nodes"] == 1
 
 
 def test_small_spheres_at_the_centre_see_an_infinite_plate() -> None:
