@@ -102,8 +102,11 @@ def test_convergence_with_order_and_element_count() -> None:
     for rc, (a, f) in zip([*radii, t], [*rc_rows, tuple(h_rows[1])], strict=True):
         print(f"  r_c = {rc * 1e3:.3f} mm: ARR {a:.4f}  TOF {f * 1e3:.5f} ms")
     for name, k in (("ARR", 0), ("TOF", 1)):
+        spread = max(np.ptp(h_rows[:, k]), np.ptp(r_rows[:, k])) / h_rows[-1, k]
         print(f"observed order of {name}: elements {_orders([1 / n for n in counts], h_rows[:, k])}"
-              f", refinement {_orders([1 / n for n in refine], r_rows[:, k])}")
+              f", refinement {_orders([1 / n for n in refine], r_rows[:, k])}; all levels within "
+              f"{spread:.1e} (relative): converged at the coarsest level, the changes are at the "
+              "floor of the pulse measurement, so these orders carry no meaning")
         for rows in (h_rows, r_rows, z_rows):
             assert abs(rows[-1, k] / rows[-2, k] - 1) < 3e-3
     assert h_rows[-1, 0] == pytest.approx(inf_arr, rel=0.02)
