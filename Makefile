@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/solitonde theory
+	$(BIN)/solitonde serve --table data_samples/default_table.h5
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
