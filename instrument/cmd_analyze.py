@@ -69,6 +69,7 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any]) -> list[d
         row["flags"] = d["flags"]
         row["arr_upper_bound"] = _clean(d["arr_upper_bound"])
         row["features"] = feat
+        row["waveform"] = w
         rows.append(row)
     return rows
 
@@ -105,6 +106,23 @@ def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
     tmp.replace(out)
 
 
+def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
+    """One PNG per measured shot, named after its file and shot number."""
+    from .plotting import trace_png
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for r in rows:
+        if "features" not in r:
+            continue
+        w = r["waveform"]
+        name = f"{Path(r['source']).stem}_shot{r['shot'] if r['shot'] is not None else 0}.png"
+        png = trace_png(w.t0, w.dt, w.samples, r["features"].to_dict(), units="N",
+                        title=f"{Path(r['source']).name}, shot {r['shot']}")
+        tmp = folder / f".{name}.tmp"
+        tmp.write_bytes(png)
+        tmp.replace(folder / name)
+
+
 def _fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:
     return "-" if value is None else f"{value * scale:.{digits}g}"
 
@@ -126,6 +144,8 @@ def analyze(
     table: Path | None = typer.Option(None, "--table", help="Model table for --invert."),
     calibration_file: Path | None = typer.Option(None, "--calibration-file", help="Calibration "
                                                  "JSON (solitonde calibrate) for --invert."),
+    plots: Path | None = typer.Option(None, "--plots", help="Folder for one PNG per shot (trace "
+                                      "with the detected pulses marked)."),
 ) -> None:
     """Measure TOF, ARR, SNR and quality flags of every shot; aggregate per position."""
     console = Console(stderr=as_json)
@@ -164,6 +184,8 @@ def analyze(
             errors.append({"source": str(table or "table"), "error": str(exc)})
     if out is not None:
         _write_rows(out, rows)
+    if plots is not None:
+        _write_plots(plots, rows)
     shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
     if as_json:
         json.dump({"shots": shots, "aggregates": aggs, "errors": errors,

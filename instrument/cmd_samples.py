@@ -1,11 +1,12 @@
-"""`solitonde samples`: regenerate the synthetic waveform files in data_samples/.
+"""`solitonde samples`: regenerate the synthetic waveform files in data_samples/waveforms/.
 
 Each file holds shots simulated by the project's own chain model (model.simulate) for one scene,
 with acquisition defects added (white noise at a stated SNR, baseline drift, 12-bit quantisation;
 see solitonde.signal.synth.degrade). Shots differ by their noise and by a drop height varied
 +-1 % (the paper's striker spread), so every shot has its own truth. The model's own peaks
 (integration-step resolution, amplitudes above the static sensor reading) go to truth.tsv
-(tab-separated, so that `solitonde analyze data_samples` skips it). Amplitudes are taken above the
+(tab-separated, so that `solitonde analyze data_samples/waveforms` skips it). Amplitudes are
+taken above the
 level the noise-free trace holds before each pulse's foot (signal.accuracy.Truth.from_trace, the
 extractor's own baseline definition): after the incident the chain decompresses and the sensor
 sits below its static reading, and a reflection is measured from where it starts.
@@ -77,7 +78,8 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
                                      (t["reflected_time_s"], t["reflected_peak_N"]))
             reference = truth.incident_peak_N
             samples = degrade(sim.samples, spec.snr_db, rng, reference, drift=DRIFT, bits=BITS)
-            meta = {"shot": shot, "plate_id": "synthetic",
+            meta = {"shot": shot,
+                    "plate_id": f"synthetic-t{scene.plate.thickness * 1e3:.2f}mm",
                     "position": scene.plate.distance_to_support,
                     "sphere_diameter": scene.chain.diameter, "synthetic": True,
                     "snr_db": spec.snr_db, "drop_height_m": height}
@@ -105,10 +107,10 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
 
 
 def samples(
-    out: Path = typer.Option(Path("data_samples"), "--out", help="Folder to write into."),
+    out: Path = typer.Option(Path("data_samples/waveforms"), "--out", help="Folder to write into."),
     seed: int = typer.Option(20240601, "--seed", help="Noise seed (fixed: reproducible files)."),
 ) -> None:
-    """Regenerate the synthetic sample waveforms and their truth table (data_samples/)."""
+    """Regenerate the synthetic sample waveforms and their truth table (data_samples/waveforms/)."""
     rows = make_samples(out, seed)
     typer.echo(f"wrote {len({r['file'] for r in rows})} files, {len(rows)} shots, truth.tsv "
                f"to {out}")

@@ -11,8 +11,7 @@ import typer
 
 from .settings import DEFAULT_STORE, DEFAULT_TABLE, Settings, SettingsError
 
-SAMPLE_GLOBS = ("data_samples/*.csv", "data_samples/*.npy", "data_samples/*.h5",
-                "data_samples/*.tdms")
+SAMPLE_GLOBS = tuple(f"data_samples/waveforms/*.{ext}" for ext in ("csv", "npy", "h5", "tdms"))
 
 
 def sample_file(root: Path | None = None) -> Path | None:

@@ -103,30 +103,17 @@ def _json_safe(data: Any) -> Any:
 
 
 def write_plot(path: Path, result: SimulationResult, data: dict[str, Any]) -> None:
-    """Sensor trace with the detected incident and reflected pulses marked."""
-    import matplotlib
+    """Sensor trace with the detected incident and reflected pulses marked (PNG)."""
+    from .plotting import trace_png
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4))
-    ax.plot(result.time * 1e3, result.samples, lw=1.0, color="0.2", label="sensor")
-    for name, color in (("incident", "tab:blue"), ("reflected", "tab:red")):
-        t, f = data[f"{name}_time_s"], data[f"{name}_peak_N"]
-        if math.isfinite(t) and math.isfinite(f):
-            ax.plot([t * 1e3], [f], "o", color=color, label=f"{name} {f:.3g} N at {t * 1e3:.4g} ms")
     s = result.scene
-    ax.set_title(
-        f"D = {s.chain.diameter * 1e3:.2f} mm, t = {s.plate.thickness * 1e3:.2f} mm, "
-        f"{result.plate_model}: TOF = {data['tof_s'] * 1e3:.4g} ms, ARR = {data['arr']:.3g}"
-    )
-    ax.set_xlabel("time after impact (ms)")
-    ax.set_ylabel("sensor force (N)")
-    ax.legend(loc="upper right", fontsize="small")
-    fig.tight_layout()
+    title = (f"D = {s.chain.diameter * 1e3:.2f} mm, t = {s.plate.thickness * 1e3:.2f} mm, "
+             f"L = {s.plate.distance_to_support * 1e3:.0f} mm, {result.plate_model}")
+    png = trace_png(result.t0, result.dt, result.samples, data, title=title)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(png)
+    tmp.replace(path)
 
 
 def _table(data: dict[str, Any]) -> Table:

@@ -101,7 +101,9 @@ class _Section(BaseModel):
 class ChainSpec(_Section):
     """The granular chain: N identical spheres standing on the plate."""
 
-    n_particles: Integer = Field(20, ge=1, le=100_000, description="spheres in the chain (striker not counted)")
+    n_particles: Integer = Field(
+        20, ge=1, le=100_000, description="spheres in the chain (striker not counted)"
+    )
     diameter: Number = Field(9.53e-3, gt=0.0, le=1.0, description="sphere diameter D, m")
     material: MaterialName = Field("steel_440c", description="sphere material key")
     sensor_index: Integer = Field(7, ge=1, description="sensor particle, counted from the top, 1-based")

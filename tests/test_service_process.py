@@ -116,7 +116,7 @@ def test_serve_post_read_plot_and_stop(tmp_path: Path, stop_signal: int) -> None
 def _check_against_truth(created: dict) -> None:
     """A bundled sample's features match its truth.tsv row: TOF within one sample period, ARR
     within 2 % (the signal issue's accuracy bar, met at these files' 30-40 dB SNR)."""
-    truth_file = ROOT / "data_samples" / "truth.tsv"
+    truth_file = ROOT / "data_samples" / "waveforms" / "truth.tsv"
     if not truth_file.is_file():
         return
     import pandas as pd

@@ -14,7 +14,7 @@ from solitonde.signal import io
 from solitonde.signal.synth import degrade, pulse_train
 from solitonde.signal.waveform import Waveform
 
-DATA = Path(__file__).resolve().parents[1] / "data_samples"
+DATA = Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"
 
 
 def _files(tmp_path: Path) -> Path:
