@@ -106,7 +106,9 @@ class ChainSpec(_Section):
     )
     diameter: Number = Field(9.53e-3, gt=0.0, le=1.0, description="sphere diameter D, m")
     material: MaterialName = Field("steel_440c", description="sphere material key")
-    sensor_index: Integer = Field(7, ge=1, description="sensor particle, counted from the top, 1-based")
+    sensor_index: Integer = Field(
+        7, ge=1, description="sensor particle, counted from the top, 1-based"
+    )
 
     @model_validator(mode="after")
     def _sensor_inside(self) -> ChainSpec:
@@ -364,7 +366,7 @@ def _describe(error: Mapping[str, Any]) -> str:
 
 
 def parse_value(text: str) -> Any:
-    """Parse a command-line value: JSON first (numbers like 1e-3, true, lists), else YAML, else text."""
+    """Parse a command-line value: JSON first (1e-3, true, lists), else YAML, else plain text."""
     try:
         return json.loads(text)
     except json.JSONDecodeError:
@@ -379,7 +381,7 @@ def parse_value(text: str) -> Any:
 def apply_overrides(
     data: Mapping[str, Any], overrides: Iterable[str] | Mapping[str, Any]
 ) -> dict[str, Any]:
-    """Return a deep copy of ``data`` with ``section.key=value`` overrides applied (not validated)."""
+    """A deep copy of ``data`` with ``section.key=value`` overrides applied (not validated)."""
     result = json.loads(json.dumps(dict(data)))
     items: Iterable[tuple[str, Any]]
     if isinstance(overrides, Mapping):
@@ -415,7 +417,8 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:
-        raise SceneError("scene", f"{path.name} is not valid {path.suffix.lstrip('.') or 'YAML'}: {exc}") from None
+        kind = path.suffix.lstrip(".") or "YAML"
+        raise SceneError("scene", f"{path.name} is not valid {kind}: {exc}") from None
     if data is None:
         return {}
     if not isinstance(data, dict):
