@@ -20,14 +20,20 @@ def reproduce_command(
     cache: Path | None = typer.Option(None, "--cache",
                                       help="Folder of the cached plate responses "
                                            "(default: $SOLITONDE_CACHE/greens or ~/.cache)."),
+    preset: str = typer.Option("paper", "--preset",
+                               help="Plate contact of the distance sweep: 'paper' (single-node "
+                                    "load, as in the paper) or 'resolved' (converged patch)."),
 ) -> None:
     """Regenerate the paper's Figs. 3-10 (PNG + CSV each) and summary.json with the checks."""
     from solitonde.instrument.reproduce import reproduce
 
     console = Console(stderr=True)
+    if preset not in ("paper", "resolved"):
+        console.print(f"[red]error:[/red] --preset: {preset!r} (allowed: paper, resolved)")
+        raise typer.Exit(2)
     try:
         summary = reproduce(out, quick, workers=workers, cache_folder=cache,
-                            progress=sys.stderr.isatty())
+                            progress=sys.stderr.isatty(), preset=preset)
     except (SceneError, SimulationError, OSError) as exc:
         console.print(f"[red]error:[/red] {exc}")
         raise typer.Exit(1) from None
