@@ -64,7 +64,7 @@ def test_dependencies_point_one_way():
 
 
 def test_ruff_is_clean():
-    """The lint configuration in pyproject.toml holds for the whole tree (every ignore explained)."""
+    """The lint configuration in pyproject.toml holds for the whole tree."""
     ruff = Path(sys.executable).with_name("ruff")
     out = subprocess.run([str(ruff), "check", "--output-format", "concise", str(ROOT)],
                          cwd=ROOT, capture_output=True, text=True, timeout=120)
