@@ -15,12 +15,17 @@ SAMPLE_GLOBS = tuple(f"data_samples/waveforms/*.{ext}" for ext in ("csv", "npy",
 
 
 def sample_file(root: Path | None = None) -> Path | None:
-    """A bundled sample waveform file to show in the curl example (CSV preferred)."""
-    root = root or Path.cwd()
-    for pattern in SAMPLE_GLOBS:
-        for path in sorted(root.glob(pattern)):
-            if path.is_file() and "table" not in path.name:
-                return path.relative_to(root)
+    """A bundled sample waveform file to show in the curl example (CSV preferred).
+
+    Relative to the working directory when it holds the samples (the README's `make run`), else
+    the absolute path in the source checkout, so the printed command works from anywhere.
+    """
+    candidates = [root] if root is not None else [Path.cwd(), Path(__file__).resolve().parents[1]]
+    for base in candidates:
+        for pattern in SAMPLE_GLOBS:
+            for path in sorted(base.glob(pattern)):
+                if path.is_file():
+                    return path.relative_to(base) if base == Path.cwd() else path
     return None
 
 
