@@ -22,7 +22,7 @@ from threadpoolctl import threadpool_limits
 from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
 from .mesh import PlateMesh
-from .sem_kernels import apply_stiffness, run_plate_load, run_plate_point_force
+from .sem_kernels import apply_stiffness, run_plate_load
 
 SUPPORTS = ("opposite_edges", "all_edges", "none")
 
@@ -216,8 +216,10 @@ class ElasticPlate:
         dof = self.contact_dof if dof is None else int(dof)
         rec = np.asarray([dof] if record_dofs is None else record_dofs, dtype=np.int64)
         with single_threaded_blas():
-            return run_plate_point_force(np.ascontiguousarray(force, dtype=float), dof, float(dt),
-                                         self.inv_mass, self.edofs, self.offsets, self.kes, rec)
+            _, out = run_plate_load(np.ascontiguousarray(force, dtype=float),
+                                    np.asarray([dof], dtype=np.int64), np.ones(1), float(dt),
+                                    self.inv_mass, self.edofs, self.offsets, self.kes, rec)
+        return out
 
 
     def run_contact_load(self, force: np.ndarray, dt: float,

@@ -70,46 +70,6 @@ def apply_stiffness(
 
 
 @njit(cache=True)
-def run_plate_point_force(
-    force: np.ndarray,
-    dof: int,
-    dt: float,
-    inv_mass: np.ndarray,
-    edofs: np.ndarray,
-    offsets: np.ndarray,
-    kes: np.ndarray,
-    record_dofs: np.ndarray,
-) -> np.ndarray:
-    """Central differences from rest under a force history at one dof; records some dofs.
-
-    u_{n+1} = u_n + dt v_{n+1/2},  v_{n+1/2} = v_{n-1/2} + dt M^-1 (f_n - K u_n),
-    f_n = force[n] e_dof.
-    Returns rec[n, r] = u_n[record_dofs[r]] for n = 0..len(force) (u_0 = 0).
-    """
-    ndof = inv_mass.size
-    nsteps = force.size
-    nrec = record_dofs.size
-    u = np.zeros(ndof)
-    v = np.zeros(ndof)
-    ku = np.zeros(ndof)
-    width = 0
-    for s in range(offsets.size - 1):
-        width = max(width, offsets[s + 1] - offsets[s])
-    buf = np.empty((width, edofs.shape[1]))
-    res = np.empty((width, edofs.shape[1]))
-    rec = np.zeros((nsteps + 1, nrec))
-    for n in range(nsteps):
-        apply_stiffness(u, edofs, offsets, kes, buf, res, ku)
-        ku[dof] -= force[n]
-        for i in range(ndof):
-            v[i] -= dt * inv_mass[i] * ku[i]
-            u[i] += dt * v[i]
-        for r in range(nrec):
-            rec[n + 1, r] = u[record_dofs[r]]
-    return rec
-
-
-@njit(cache=True)
 def run_plate_load(
     force: np.ndarray,
     ldofs: np.ndarray,
@@ -180,7 +140,7 @@ def plate_step(
     res: np.ndarray,
     ku: np.ndarray,
 ) -> None:
-    """One central-difference step of the plate in place (see ``run_plate_point_force``).
+    """One central-difference step of the plate in place (the scheme of ``run_plate_load``).
 
     On return ``ku`` holds K u_n (the old displacement), which the caller may use for energy.
     """
