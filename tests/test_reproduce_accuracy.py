@@ -45,7 +45,7 @@ def test_pareto_front():
 
 def test_recommendation_respects_budgets():
     """REST: cheapest first shot within budget per scene; table: cheapest cached shot on both."""
-    rec = recommend(_frame(ROWS), Config("sem", (48, 48, 1), (4, 4, 2)))
+    rec = recommend(_frame(ROWS), Config("sem", (48, 48, 1), (4, 4, 2), preset="paper"))
     assert rec["rest_simulate"]["centre"]["config"] == "infinite"  # 0.8 % TOF, 9 % ARR
     assert rec["rest_simulate"]["near_support"]["config"] == "sem a"  # dashpot is 17 % off
     assert rec["table_build"]["config"] == "greens b"
