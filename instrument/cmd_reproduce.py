@@ -20,9 +20,10 @@ def reproduce_command(
     cache: Path | None = typer.Option(None, "--cache",
                                       help="Folder of the cached plate responses "
                                            "(default: $SOLITONDE_CACHE/greens or ~/.cache)."),
-    preset: str = typer.Option("paper", "--preset",
-                               help="Plate contact of the distance sweep: 'paper' (single-node "
-                                    "load, as in the paper) or 'resolved' (converged patch)."),
+    preset: str = typer.Option("resolved", "--preset",
+                               help="Plate contact of the distance sweep: 'resolved' (converged "
+                                    "contact patch, the default model) or 'paper' (the paper's "
+                                    "single-node load; faster, not mesh-convergent in ARR)."),
 ) -> None:
     """Regenerate the paper's Figs. 3-10 (PNG + CSV each) and summary.json with the checks."""
     from solitonde.instrument.reproduce import reproduce
