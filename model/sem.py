@@ -2,8 +2,10 @@
 
 Nodes on GLL points and GLL quadrature give a diagonal mass matrix (PHYSICS.md section 9), so
 central differences (Newmark beta = 0, gamma = 1/2) are explicit. The stiffness is never assembled
-for time stepping: one dense element matrix per distinct element shape is applied to all elements
-of that shape in one GEMM (see ``sem_kernels``). Supports clamp all three displacement components
+for time stepping: K u is applied element by element by sum factorisation (1-D GLL derivative
+matrices along each axis of the box elements, see ``sem_kernels``); the dense element matrices,
+one per distinct element shape, remain the reference operator and give the element bound of the
+stable step. Supports clamp all three displacement components
 on whole edge faces; a symmetry plane y = Ly/2 (half model) fixes u_y there.
 """
 
@@ -22,7 +24,7 @@ from threadpoolctl import threadpool_limits
 from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
 from .mesh import PlateMesh
-from .sem_kernels import apply_stiffness, run_plate_load
+from .sem_kernels import dense_operator, run_plate_load, stiffness_product, sumfact_operator
 
 SUPPORTS = ("opposite_edges", "all_edges", "none")
 
@@ -31,9 +33,10 @@ SUPPORTS = ("opposite_edges", "all_edges", "none")
 def single_threaded_blas() -> Iterator[None]:
     """Run the time loops with one BLAS thread.
 
-    The per-step GEMMs are small (a few hundred elements times a 225 x 225 matrix); a second BLAS
-    thread gains little on an idle machine and, when the cores are shared, its spin-waiting can
-    make a run several times slower.
+    The dense reference operator's per-step GEMMs are small (a few hundred elements times a
+    225 x 225 matrix); a second BLAS thread gains little on an idle machine and, when the cores
+    are shared, its spin-waiting can make a run several times slower. (The sum-factorised
+    operator the time loops use calls no BLAS; the limit keeps the two comparable.)
     """
     with threadpool_limits(limits=1, user_api="blas"):
         yield
@@ -90,7 +93,9 @@ class ElasticPlate:
     inv_mass: (n_dofs,) 1/m per dof, 0 on constrained dofs (which then never move).
     edofs: (n_elements, n_edof) element dofs, elements sorted by shape.
     offsets: (n_shapes + 1,) element ranges per shape in ``edofs``.
-    kes: (n_shapes, n_edof, n_edof) element matrices.
+    kes: (n_shapes, n_edof, n_edof) element matrices (reference operator, element bound).
+    operator: the sum-factorised stiffness operator the time loops use
+        (:func:`sem_kernels.sumfact_operator`; read only, safe to share between threads).
     load_dofs, load_weights: the contact patch as vertical dofs and weights b (sum = share), see
         :meth:`PlateMesh.contact_load`: a contact force F acts as F b, the deflection under the
         chain is b . u / share.
@@ -104,6 +109,7 @@ class ElasticPlate:
     edofs: np.ndarray
     offsets: np.ndarray
     kes: np.ndarray
+    operator: tuple
     load_dofs: np.ndarray
     load_weights: np.ndarray
 
@@ -125,18 +131,22 @@ class ElasticPlate:
     def fixed(self) -> np.ndarray:
         return self.inv_mass == 0.0
 
-    def _work(self) -> tuple[np.ndarray, np.ndarray]:
-        width = int(np.max(np.diff(self.offsets)))
-        n = self.edofs.shape[1]
-        return np.empty((width, n)), np.empty((width, n))
+    def dense_operator(self) -> tuple:
+        """The dense-element-matrix operator (the reference), with work arrays of its own."""
+        return dense_operator(self.edofs, self.offsets, self.kes)
 
     def apply_stiffness(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """K u, matrix-free."""
+        """K u, matrix-free (sum factorisation)."""
         if out is None:
             out = np.empty(self.n_dofs)
-        buf, res = self._work()
-        apply_stiffness(np.ascontiguousarray(u, dtype=float), self.edofs, self.offsets, self.kes,
-                        buf, res, out)
+        stiffness_product(self.operator, np.ascontiguousarray(u, dtype=float), out)
+        return out
+
+    def apply_stiffness_dense(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """K u, matrix-free with the dense element matrices (the reference for the above)."""
+        if out is None:
+            out = np.empty(self.n_dofs)
+        stiffness_product(self.dense_operator(), np.ascontiguousarray(u, dtype=float), out)
         return out
 
     def stiffness_csr(self) -> sp.csr_matrix:
@@ -165,12 +175,11 @@ class ElasticPlate:
         """
         free = ~self.fixed
         s = np.sqrt(self.inv_mass)
-        buf, res = self._work()
         out = np.empty(self.n_dofs)
 
         def matvec(x: np.ndarray) -> np.ndarray:
             y = s * np.ravel(x)
-            apply_stiffness(y, self.edofs, self.offsets, self.kes, buf, res, out)
+            stiffness_product(self.operator, y, out)
             return s * out
 
         op = LinearOperator((self.n_dofs, self.n_dofs), matvec=matvec, dtype=float)
@@ -218,7 +227,7 @@ class ElasticPlate:
         with single_threaded_blas():
             _, out = run_plate_load(np.ascontiguousarray(force, dtype=float),
                                     np.asarray([dof], dtype=np.int64), np.ones(1), float(dt),
-                                    self.inv_mass, self.edofs, self.offsets, self.kes, rec)
+                                    self.inv_mass, self.operator, rec)
         return out
 
 
@@ -233,9 +242,24 @@ class ElasticPlate:
         rec = np.asarray([] if record_dofs is None else record_dofs, dtype=np.int64)
         with single_threaded_blas():
             w, out = run_plate_load(np.ascontiguousarray(force, dtype=float), self.load_dofs,
-                                    self.load_weights, float(dt), self.inv_mass, self.edofs,
-                                    self.offsets, self.kes, rec)
+                                    self.load_weights, float(dt), self.inv_mass,
+                                    self.operator, rec)
         return w / self.force_share, out
+
+
+def _sumfact(mesh: PlateMesh, sizes: np.ndarray, material: Material) -> tuple:
+    """Sum-factorised stiffness of ``mesh`` with element sizes ``sizes`` (n_elements, 3).
+
+    The sizes are those of the element's shape (as for the dense matrices), so both operators
+    see the same geometry.
+    """
+    px, py, pz = mesh.order
+    w3 = np.kron(gll_weights(pz), np.kron(gll_weights(py), gll_weights(px)))
+    geom = np.column_stack((2.0 / sizes, np.prod(sizes, axis=1) / 8.0))
+    return sumfact_operator(
+        mesh.connectivity, geom, gll_derivative_matrix(px), gll_derivative_matrix(py),
+        gll_derivative_matrix(pz), w3, np.array([material.lame_lambda, material.shear_modulus]),
+    )
 
 
 def build_plate(
@@ -274,5 +298,6 @@ def build_plate(
     nodes, weights = mesh.contact_load
     return ElasticPlate(mesh, material, supports, node_mass, inv_mass,
                         np.ascontiguousarray(edofs, dtype=np.int64), offsets, kes,
+                        _sumfact(mesh, sizes[shape_id], material),
                         np.ascontiguousarray(3 * nodes + 2, dtype=np.int64),
                         np.ascontiguousarray(weights, dtype=float))

@@ -123,8 +123,8 @@ class SemBoundary(_PlateTier):
                 setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
                 setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
                 setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
-                plate.inv_mass, np.repeat(plate.node_mass, 3), plate.edofs, plate.offsets,
-                plate.kes, plate.load_dofs, plate.load_weights, up, vp, plate.force_share,
+                plate.inv_mass, np.repeat(plate.node_mass, 3), plate.operator, plate.load_dofs,
+                plate.load_weights, up, vp, plate.force_share,
             )
         wall = time.perf_counter() - start
         setup.w = w

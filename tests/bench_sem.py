@@ -6,14 +6,17 @@ nothing here asserts a time. Compilation is kept out of the figures by a warm-up
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
 import pytest
 
+from solitonde.instrument.table_build import default_sweep
 from solitonde.model import greens
 from solitonde.model.scene import load_scene
 from solitonde.model.sem import single_threaded_blas
+from solitonde.model.sem_kernels import run_plate_load, stiffness_product
 from solitonde.model.sem_tier import plate_for
 from solitonde.model.simulate import simulate
 
@@ -36,7 +39,7 @@ def _timed(fn, repeat: int = 1):
 
 @pytest.mark.parametrize("preset", ["paper", "resolved"])
 def test_bench_stiffness_vs_csr(preset: str) -> None:
-    """K u matrix-free (one GEMM per element shape, 1 BLAS thread) vs assembled CSR, full plate."""
+    """K u matrix-free (sum factorisation) vs assembled CSR, full plate."""
     scene = load_scene(None, [*PRESETS[preset], "sem.symmetry=false"])
     plate = plate_for(scene)
     k = plate.stiffness_csr()
@@ -93,3 +96,44 @@ def test_bench_green_function_and_runs() -> None:
     (ps, pg, pn), (rs, rg, rn) = figures["paper"], figures["resolved"]
     print(f"[bench] resolved / paper: sem run {rs / ps:.2f}x, Green's function {rg / pg:.2f}x, "
           f"plate steps {rn / pn:.2f}x")
+
+
+def test_bench_plate_step_sumfact_vs_dense() -> None:
+    """Plate steps of a Green's-function run on the t = 1.5 mm default-table mesh: the time loop
+    with the sum-factorised operator vs the same loop with the dense element matrices (one GEMM
+    per element shape), both with one BLAS thread, timed alternately in the same run."""
+    scene = default_sweep().scene_at(2, 0, 4)
+    plate = plate_for(scene)
+    dt = 0.9 * 2.0 / np.sqrt(plate.element_bound)
+    n = 400
+    force = np.sin(np.linspace(0.0, np.pi, n)) ** 2
+    rec = np.array([plate.contact_dof], dtype=np.int64)
+    ops = {"dense": plate.dense_operator(), "sumfact": plate.operator}
+    u = np.random.default_rng(0).standard_normal(plate.n_dofs)
+    out = np.empty_like(u)
+    best = {name: float("inf") for name in ops}
+    apply = dict(best)
+    runs = {}
+    with single_threaded_blas():
+        for op in ops.values():  # compile (or load from the cache) outside the figures
+            run_plate_load(force[:2], plate.load_dofs, plate.load_weights, dt, plate.inv_mass,
+                           op, rec)
+        for _ in range(3):
+            for name, op in ops.items():
+                t, runs[name] = _timed(lambda op=op: run_plate_load(
+                    force, plate.load_dofs, plate.load_weights, dt, plate.inv_mass, op, rec))
+                best[name] = min(best[name], t / n)
+                t, _ = _timed(lambda op=op: [stiffness_product(op, u, out) for _ in range(50)])
+                apply[name] = min(apply[name], t / 50)
+    w_sf, w_dense = runs["sumfact"][0], runs["dense"][0]
+    assert np.abs(w_sf - w_dense).max() <= 1e-10 * np.abs(w_dense).max()
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"\n[bench] plate step, t = {scene.plate.thickness * 1e3:g} mm table mesh "
+          f"{plate.mesh.elements} order {list(plate.mesh.order)}, {plate.n_dofs} dofs, "
+          f"{len(plate.mesh.shapes[0])} element shapes, {n} steps (load average {load}):")
+    print(f"[bench]   dense (GEMM per shape) {best['dense'] * 1e3:.3f} ms/step, sum-factorised "
+          f"{best['sumfact'] * 1e3:.3f} ms/step, ratio {best['dense'] / best['sumfact']:.2f}x")
+    print(f"[bench]   K u alone: dense {apply['dense'] * 1e3:.3f} ms, sum-factorised "
+          f"{apply['sumfact'] * 1e3:.3f} ms, ratio {apply['dense'] / apply['sumfact']:.2f}x")
+    print(f"[bench]   160,000 steps: dense {best['dense'] * 160_000:.0f} s, sum-factorised "
+          f"{best['sumfact'] * 160_000:.0f} s")
