@@ -67,9 +67,13 @@ from .chain import (
     verlet_step,
 )
 from .contact import hertz_sphere_flat
+from .dopri import integrate_dopri5, state_size
 from .errors import SceneError
 from .leapfrog import integrate_elastic
 from .scene import Scene
+
+#: Plate models that ``solver.integrator = "dopri5"`` can run (the ODE tiers of this module).
+DOPRI5_PLATE_MODELS = ("rigid", "halfspace", "infinite")
 
 # Status codes returned by compiled drivers.
 RUN_OK = 0
@@ -113,11 +117,19 @@ class ChainSetup:
 
 @dataclass(frozen=True)
 class StepPlan:
-    """Time grid: ``n_sub`` steps of ``dt`` between samples, ``n_samples`` samples from t = 0."""
+    """Time grid: ``n_sub`` steps of ``dt`` between samples, ``n_samples`` samples from t = 0.
+
+    ``integrator`` "dopri5" (plate models in ``DOPRI5_PLATE_MODELS``) integrates
+    adaptively to ``rtol`` instead (:mod:`~solitonde.model.dopri`; ``dt`` is then the sample
+    interval, ``n_sub`` 1) within ``max_steps`` attempted steps.
+    """
 
     dt: float
     n_sub: int
     n_samples: int
+    integrator: str = "verlet"
+    rtol: float = 1e-6
+    max_steps: int = 20_000_000
 
     @property
     def steps(self) -> int:
@@ -185,6 +197,8 @@ class ZenerDashpot(BottomBoundary):
 
 
 def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
+    if plan.integrator == "dopri5":
+        return _run_dopri5(setup, plan, inv_z)
     u0 = setup.u.copy()
     peaks = new_peak_tracker()
     start = time.perf_counter()
@@ -197,6 +211,38 @@ def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
     wall = time.perf_counter() - start
     setup.w = w
     return ChainRun(status, done, plate_work, dissipated, peaks, wall)
+
+
+def _run_dopri5(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
+    """The same tiers with the adaptive Dormand-Prince driver (:mod:`~solitonde.model.dopri`).
+
+    Error scales (``atol = rtol x scale``): the striker's dynamic Hertz overlap for positions and
+    the plate deflection, its impact velocity for velocities, its kinetic energy for the plate
+    work and the dissipated energy.
+    """
+    n = setup.u.size - 1
+    v_imp = max(float(np.abs(setup.v).max()), 1e-9)
+    e_kin = 0.5 * setup.m * v_imp**2
+    overlap = (2.5 * e_kin / setup.a_s) ** 0.4
+    scale = np.empty(state_size(n))
+    scale[: n + 1] = overlap
+    scale[n + 1: 2 * n + 2] = v_imp
+    scale[2 * n + 2] = overlap
+    scale[2 * n + 3:] = e_kin
+    u0 = setup.u.copy()
+    peaks = new_peak_tracker()
+    start = time.perf_counter()
+    status, done, w, plate_work, dissipated, accepted, rejected, nfev = integrate_dopri5(
+        setup.u, setup.v, setup.w, u0, setup.m, setup.g, setup.a_s, setup.a_b, inv_z,
+        setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_samples, plan.rtol, scale,
+        plan.max_steps, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
+        setup.f_trace, setup.w_trace, peaks,
+    )
+    wall = time.perf_counter() - start
+    setup.w = w
+    return ChainRun(status, done, plate_work, dissipated, peaks, wall, extra={
+        "steps_accepted": accepted, "steps_rejected": rejected, "rhs_evaluations": nfev,
+    })
 
 
 @njit(cache=True)

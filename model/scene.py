@@ -1,8 +1,9 @@
 """The scene: one validated description of an experiment (PHYSICS.md section 1 as defaults).
 
-A scene has five sections: ``chain``, ``striker``, ``plate``, ``effects`` and ``output``. It is
-loaded from YAML or JSON, overridden with dotted keys (``plate.thickness=3.18e-3``) and validated
-in one place; every bad input raises :class:`SceneError` naming the field and what is allowed.
+A scene has the sections ``chain``, ``striker``, ``plate``, ``effects``, ``output`` (and the
+optional ``sem`` and ``solver``). It is loaded from YAML or JSON, overridden with dotted keys
+(``plate.thickness=3.18e-3``) and validated in one place; every bad input raises
+:class:`SceneError` naming the field and what is allowed.
 """
 
 from __future__ import annotations
@@ -249,6 +250,20 @@ class SemSpec(_Section):
         return self
 
 
+class SolverSpec(_Section):
+    """How the chain is integrated (plate models ``rigid``, ``halfspace``, ``infinite``)."""
+
+    integrator: Literal["verlet", "dopri5"] = Field(
+        "verlet", description="'verlet': velocity Verlet on a fixed step (the default); "
+        "'dopri5': adaptive Dormand-Prince 5(4) with dense output, to the tolerance rtol",
+    )
+    rtol: Number = Field(
+        1e-8, ge=1e-12, le=1e-2,
+        description="relative tolerance of dopri5 (absolute: rtol x each component's typical "
+        "magnitude); ignored by verlet",
+    )
+
+
 class Scene(_Section):
     """A complete experiment. Defaults are the paper's setup (D = 9.53 mm, t = 3.18 mm, centre)."""
 
@@ -258,6 +273,7 @@ class Scene(_Section):
     effects: EffectsSpec = Field(default_factory=EffectsSpec)
     output: OutputSpec = Field(default_factory=OutputSpec)
     sem: SemSpec = Field(default_factory=SemSpec)
+    solver: SolverSpec = Field(default_factory=SolverSpec)
 
     # Derived physical quantities -------------------------------------------------------------
     @property

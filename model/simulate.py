@@ -16,9 +16,19 @@ from typing import Any
 
 import numpy as np
 
-from .boundary import RUN_OK, BottomBoundary, ChainSetup, StepPlan, make_boundary
+from .boundary import (
+    DOPRI5_PLATE_MODELS,
+    RUN_OK,
+    BottomBoundary,
+    ChainRun,
+    ChainSetup,
+    StepPlan,
+    make_boundary,
+    resolve_plate_model,
+)
 from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T
-from .errors import SimulationError
+from .dopri import RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
+from .errors import SceneError, SimulationError
 from .scene import STANDARD_GRAVITY, Scene
 
 #: Verlet steps per period of the stiffest chain oscillation (see :func:`choose_time_step`).
@@ -171,6 +181,22 @@ def auto_duration(scene: Scene) -> float:
     return incident + 1.25 * tof + 2.0 * (5.0 * d / speed)
 
 
+def _failure(run: ChainRun, plan: StepPlan, plate_model: str) -> str:
+    """The SimulationError message for a run that did not finish (status code of the driver)."""
+    where = f"after {run.samples_done} of {plan.n_samples} samples"
+    if plan.integrator == "dopri5":
+        setting = f"dopri5, rtol {plan.rtol:.3g}, plate model {plate_model}"
+        if run.status == RUN_STEP_BUDGET:
+            return (f"step_budget_exceeded: {setting} needed more than {plan.max_steps:,} steps "
+                    f"({where}); raise solver.rtol or the budget, or shorten output.duration")
+        if run.status == RUN_STEP_TOO_SMALL:
+            return (f"step_too_small: {setting}: the step size fell below 1e-14 of the duration "
+                    f"({where}); raise solver.rtol")
+        return f"nonfinite: the run produced non-finite values {where} ({setting})"
+    return (f"nonfinite: the run produced non-finite values after {run.samples_done} samples "
+            f"(dt = {plan.dt:.3g} s, plate model {plate_model})")
+
+
 def simulate(
     scene: Scene,
     *,
@@ -188,6 +214,17 @@ def simulate(
         non-finite values.
     """
     started = time.perf_counter()
+    solver = scene.solver
+    adaptive = solver.integrator == "dopri5"
+    if adaptive:
+        name, reason = resolve_plate_model(scene)  # before a plate tier builds its mesh
+        if name not in DOPRI5_PLATE_MODELS:
+            raise SceneError(
+                "solver.integrator",
+                f"dopri5 cannot run plate model {name!r} ({reason})",
+                allowed=f"verlet with every plate model; dopri5 with "
+                        f"{', '.join(DOPRI5_PLATE_MODELS)}",
+            )
     boundary = make_boundary(scene)
     n = scene.chain.n_particles
     m = scene.sphere_mass
@@ -197,11 +234,15 @@ def simulate(
 
     auto = scene.output.duration == "auto"
     duration = auto_duration(scene) if auto else float(scene.output.duration)
-    dt, n_sub = choose_time_step(scene, boundary, steps_per_period)
+    if adaptive:
+        # The step adapts to rtol; samples come from the dense output, not from steps.
+        dt, n_sub = 1.0 / scene.output.sample_rate, 1
+    else:
+        dt, n_sub = choose_time_step(scene, boundary, steps_per_period)
     interval = dt * n_sub
     n_samples = math.ceil(duration / interval * (1.0 - 1e-12)) + 1
     steps = (n_samples - 1) * n_sub
-    if steps > max_steps or n_samples > max_samples:
+    if (steps > max_steps and not adaptive) or n_samples > max_samples:
         raise SimulationError(
             f"step_budget_exceeded: output.duration of {duration:.4g} s needs {steps:,} steps of "
             f"{dt:.3g} s and {n_samples:,} samples (budget: {max_steps:,} steps, "
@@ -219,12 +260,14 @@ def simulate(
         u_trace=np.empty((rows, n + 1)), v_trace=np.empty((rows, n + 1)),
         f_trace=np.empty((rows, n + 1)), w_trace=np.empty(rows),
     )
-    run = boundary.integrate(setup, StepPlan(dt, n_sub, n_samples))
+    plan = StepPlan(dt, n_sub, n_samples, integrator=solver.integrator, rtol=solver.rtol,
+                    max_steps=max_steps)
+    run = boundary.integrate(setup, plan)
     if run.status != RUN_OK:
-        raise SimulationError(
-            f"nonfinite: the run produced non-finite values after {run.samples_done} samples "
-            f"(dt = {dt:.3g} s, plate model {boundary.name})"
-        )
+        raise SimulationError(_failure(run, plan, boundary.name))
+    if adaptive:
+        steps = int(run.extra["steps_accepted"])
+        dt = interval * (n_samples - 1) / max(steps, 1)
 
     # Relative to the energy in play: the striker's, or what left the chain if that is more
     # (with gravity a chain that keeps sinking into an infinite plate feeds it without end).
@@ -256,6 +299,8 @@ def simulate(
         "energy_scale_J": e_scale,
         "plate_work_J": run.plate_work,
         "dissipated_J": run.dissipated,
+        "integrator": solver.integrator,
+        **({"rtol": solver.rtol} if adaptive else {}),
         "steps": steps,
         "dt_s": dt,
         "duration_s": interval * (n_samples - 1),

@@ -1,0 +1,523 @@
+"""Adaptive Dormand-Prince 5(4) driver for the chain on a wall or a Zener dashpot (``dopri5``).
+
+The same equations as :func:`solitonde.model.boundary.integrate_dashpot` (PHYSICS.md sections 2,
+3 and 5), written as one first-order system and integrated with the explicit Runge-Kutta pair of
+Dormand and Prince (J. Comp. Appl. Math. 6, 19, 1980) in the form of Hairer's DOPRI5 (Hairer,
+Norsett, Wanner, *Solving ODEs I*, 2nd ed., section II.5): FSAL, a PI step-size controller and the
+4th-order continuous extension ("dense output") that fills the sample grid. It is the method of
+scipy's ``solve_ivp(method="RK45")`` and MATLAB's ode45 (the paper's integrator), compiled.
+
+State vector ``y`` (length 2 (N + 1) + 3)::
+
+    y[0 : N+1]        u, downward displacements of particles 0..N (0 = striker), m
+    y[N+1 : 2N+2]     v, velocities, m/s
+    y[2N+2]           w, the plate's top surface under the chain, m (stays 0 on a wall)
+    y[2N+3]           W, work done on the plate, J:  W' = F_b w'
+    y[2N+4]           D, energy dissipated in the contacts, J:  D' = dissipated power
+
+with ``u_i' = v_i``, ``v_i' = g + (F_{i-1} - F_i) / m`` (F_{-1} = 0, F_N = F_b),
+``F_b = A_b [u_N - w]_+^(3/2)``, ``w' = (F_b - F_static) / Z`` (``inv_z = 1 / Z``, 0 for a wall)
+and the sphere contacts elastic Hertz or, with ``tau > 0``, Kuwabara-Kono
+``F = [A d^(3/2) + (3/2) A tau d^(1/2) d']_+`` as in :mod:`solitonde.model.chain`. Carrying W and D
+as components makes the energy balance (chain energy + W + D) a by-product of the same solve.
+
+Error control is scipy's: the RMS over the components of ``err_i / (atol_i + rtol max(|y_i|,
+|y_i new|))`` with ``atol_i = rtol x scale_i`` (the caller's typical magnitude of component i), so
+``rtol`` is the one accuracy knob.
+
+Outputs per sample come from the dense output of the step that contains the sample time: the
+sensor reading, the energy balance and (optionally) the particle fields. Peaks: the sampled
+readings go through :func:`solitonde.model.chain.track_peaks` (which sorts incident from
+reflected around the bottom-force maximum), and the three peaks it finds (incident, reflected,
+bottom) are then refined on the dense output itself by a golden-section search over the two
+sample intervals around each, so the peak truth carries the interpolant's accuracy, not the
+sample grid's.
+"""
+
+from __future__ import annotations
+
+from math import sqrt
+
+import numpy as np
+from numba import njit
+
+from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T, hertz, track_peaks
+
+RUN_OK = 0
+RUN_NONFINITE = 1
+RUN_STEP_BUDGET = 2
+RUN_STEP_TOO_SMALL = 3
+
+# Dormand-Prince 5(4) tableau (Hairer's DOPRI5 constants).
+C2, C3, C4, C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
+A21 = 1.0 / 5.0
+A31, A32 = 3.0 / 40.0, 9.0 / 40.0
+A41, A42, A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
+A51, A52, A53, A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
+A61, A62, A63 = 9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0
+A64, A65 = 49.0 / 176.0, -5103.0 / 18656.0
+A71, A73, A74 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0
+A75, A76 = -2187.0 / 6784.0, 11.0 / 84.0
+E1, E3, E4 = 71.0 / 57600.0, -71.0 / 16695.0, 71.0 / 1920.0
+E5, E6, E7 = -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0
+D1, D3, D4 = -12715105075.0 / 11282082432.0, 87487479700.0 / 32700410799.0, \
+    -10690763975.0 / 1880347072.0
+D5, D6, D7 = 701980252875.0 / 199316789632.0, -1453857185.0 / 822651844.0, \
+    69997945.0 / 29380423.0
+
+# Step-size control (Hairer's defaults for DOPRI5).
+SAFETY = 0.9
+FAC_MIN = 0.2  # the step shrinks at most 5-fold ...
+FAC_MAX = 10.0  # ... and grows at most 10-fold per step
+BETA = 0.04  # PI stabilisation
+EXPO = 0.2 - 0.75 * BETA
+
+#: Floating-point licence of the kernels: reassociation (vectorised sums) and fused multiply-add,
+#: but not "no NaN/inf", so the finiteness checks stay meaningful.
+FASTMATH = {"reassoc", "contract", "nsz"}
+
+# Components whose dense output the peak refinement keeps per step.
+_TRACK = 8
+
+
+def state_size(n: int) -> int:
+    """Length of the state vector for a chain of particles 0..n."""
+    return 2 * (n + 1) + 3
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _rhs(
+    y: np.ndarray, n: int, inv_m: float, g: float, a_s: float, a_b: float, inv_z: float,
+    f_static: float, tau: float, f: np.ndarray, dy: np.ndarray,
+) -> None:
+    """dy = y'(y); ``f`` (len n) receives the sphere contact forces as scratch."""
+    np1 = n + 1
+    power = 0.0
+    if tau > 0.0:
+        for j in range(n):
+            d = y[j] - y[j + 1]
+            if d > 0.0:
+                sd = sqrt(d)
+                el = a_s * d * sd
+                rate = y[np1 + j] - y[np1 + j + 1]
+                total = el + 1.5 * a_s * tau * sd * rate
+                if total < 0.0:
+                    total = 0.0
+                f[j] = total
+                power += (total - el) * rate
+            else:
+                f[j] = 0.0
+    else:
+        for j in range(n):
+            d = y[j] - y[j + 1]
+            d = d if d > 0.0 else 0.0
+            f[j] = a_s * d * sqrt(d)
+    db = y[n] - y[2 * np1]
+    db = db if db > 0.0 else 0.0
+    f_b = a_b * db * sqrt(db)
+    for i in range(np1):
+        dy[i] = y[np1 + i]
+    if n == 0:
+        dy[np1] = g - f_b * inv_m
+    else:
+        dy[np1] = g - f[0] * inv_m
+        for i in range(1, n):
+            dy[np1 + i] = g + (f[i - 1] - f[i]) * inv_m
+        dy[np1 + n] = g + (f[n - 1] - f_b) * inv_m
+    w_dot = (f_b - f_static) * inv_z
+    dy[2 * np1] = w_dot
+    dy[2 * np1 + 1] = f_b * w_dot
+    dy[2 * np1 + 2] = power
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _observe(
+    y: np.ndarray, u0: np.ndarray, n: int, m: float, g: float, a_s: float, a_b: float,
+    tau: float, sensor: int, f: np.ndarray,
+) -> tuple[float, float, float]:
+    """(sensor reading N, bottom force N, energy balance J) of state ``y``; ``f`` gets the
+    sphere contact forces (damped ones when ``tau > 0``, as the sensor feels them)."""
+    np1 = n + 1
+    kin = 0.0
+    grav = 0.0
+    for i in range(np1):
+        vi = y[np1 + i]
+        kin += vi * vi
+        grav += y[i] - u0[i]
+    pot = 0.0
+    if tau > 0.0:
+        for j in range(n):
+            d = y[j] - y[j + 1]
+            if d > 0.0:
+                sd = sqrt(d)
+                el = a_s * d * sd
+                pot += d * el
+                total = el + 1.5 * a_s * tau * sd * (y[np1 + j] - y[np1 + j + 1])
+                f[j] = total if total > 0.0 else 0.0
+            else:
+                f[j] = 0.0
+    else:
+        for j in range(n):
+            d = y[j] - y[j + 1]
+            d = d if d > 0.0 else 0.0
+            el = a_s * d * sqrt(d)
+            f[j] = el
+            pot += d * el
+    db = y[n] - y[2 * np1]
+    db = db if db > 0.0 else 0.0
+    f_b = a_b * db * sqrt(db)
+    pot += db * f_b
+    below = f[sensor] if sensor < n else f_b
+    reading = 0.5 * (f[sensor - 1] + below)
+    balance = 0.5 * m * kin + 0.4 * pot - m * g * grav + y[2 * np1 + 1] + y[2 * np1 + 2]
+    return reading, f_b, balance
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _dense(rc: np.ndarray, theta: float, out: np.ndarray) -> None:
+    """out = the continuous extension at ``theta`` in [0, 1] of the step whose coefficients are
+    ``rc`` (5 x M, Hairer's rcont1..5)."""
+    t1 = 1.0 - theta
+    for i in range(out.size):
+        out[i] = rc[0, i] + theta * (rc[1, i] + t1 * (rc[2, i] + theta * (rc[3, i]
+                                                                          + t1 * rc[4, i])))
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _rms(e: np.ndarray, y0: np.ndarray, y1: np.ndarray, atol: np.ndarray, rtol: float) -> float:
+    """RMS of e_i / (atol_i + rtol max(|y0_i|, |y1_i|))."""
+    s = 0.0
+    for i in range(e.size):
+        sc = atol[i] + rtol * max(abs(y0[i]), abs(y1[i]))
+        r = e[i] / sc
+        s += r * r
+    return sqrt(s / e.size)
+
+
+@njit(cache=True)
+def _tracked_value(
+    which: int, t: float, hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray,
+    n_hist: int, n: int, a_s: float, a_b: float, tau: float, sensor: int,
+) -> float:
+    """Sensor reading (``which`` 0) or bottom force (1) at time t from the kept dense output.
+
+    ``hist_c[k]`` holds rcont1..5 of step k for the components u[s-1], u[s], u[s+1], u[N], w,
+    v[s-1], v[s], v[s+1] (indices clipped to the chain), in that order.
+    """
+    lo, hi = 0, n_hist - 1
+    while lo < hi:  # last step starting at or before t
+        mid = (lo + hi + 1) // 2
+        if hist_t[mid] <= t:
+            lo = mid
+        else:
+            hi = mid - 1
+    theta = (t - hist_t[lo]) / hist_h[lo]
+    theta = min(max(theta, 0.0), 1.0)
+    t1 = 1.0 - theta
+    vals = np.empty(_TRACK)
+    rc = hist_c[lo]
+    for i in range(_TRACK):
+        vals[i] = rc[0, i] + theta * (rc[1, i] + t1 * (rc[2, i] + theta * (rc[3, i]
+                                                                           + t1 * rc[4, i])))
+    f_b = hertz(a_b, vals[3] - vals[4])
+    if which == 1:
+        return f_b
+    forces = np.empty(2)
+    for c in range(2):
+        if c == 1 and sensor == n:
+            forces[c] = f_b
+            continue
+        d = vals[c] - vals[c + 1]
+        if d > 0.0:
+            sd = sqrt(d)
+            total = a_s * d * sd
+            if tau > 0.0:
+                total += 1.5 * a_s * tau * sd * (vals[5 + c] - vals[6 + c])
+            forces[c] = total if total > 0.0 else 0.0
+        else:
+            forces[c] = 0.0
+    return 0.5 * (forces[0] + forces[1])
+
+
+@njit(cache=True)
+def _refine_peak(
+    which: int, t_guess: float, width: float, t_max: float, hist_t: np.ndarray,
+    hist_h: np.ndarray, hist_c: np.ndarray, n_hist: int, n: int, a_s: float, a_b: float,
+    tau: float, sensor: int,
+) -> tuple[float, float]:
+    """(time, value) of the maximum of the tracked quantity within ``t_guess +- width``."""
+    a = max(t_guess - width, 0.0)
+    b = min(t_guess + width, t_max)
+    r = 0.5 * (sqrt(5.0) - 1.0)
+    x1 = b - r * (b - a)
+    x2 = a + r * (b - a)
+    f1 = _tracked_value(which, x1, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau, sensor)
+    f2 = _tracked_value(which, x2, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau, sensor)
+    for _ in range(60):  # bracket shrinks to 0.618^60 ~ 3e-13 of the start
+        if f1 >= f2:
+            b, x2, f2 = x2, x1, f1
+            x1 = b - r * (b - a)
+            f1 = _tracked_value(which, x1, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau,
+                                sensor)
+        else:
+            a, x1, f1 = x1, x2, f2
+            x2 = a + r * (b - a)
+            f2 = _tracked_value(which, x2, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau,
+                                sensor)
+    if f1 >= f2:
+        return x1, f1
+    return x2, f2
+
+
+@njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
+def integrate_dopri5(
+    u: np.ndarray,
+    v: np.ndarray,
+    w: float,
+    u0: np.ndarray,
+    m: float,
+    g: float,
+    a_s: float,
+    a_b: float,
+    inv_z: float,
+    f_static: float,
+    tau: float,
+    sensor: int,
+    interval: float,
+    n_samples: int,
+    rtol: float,
+    scale: np.ndarray,
+    max_steps: int,
+    samples: np.ndarray,
+    energy: np.ndarray,
+    u_trace: np.ndarray,
+    v_trace: np.ndarray,
+    f_trace: np.ndarray,
+    w_trace: np.ndarray,
+    pk: np.ndarray,
+) -> tuple[int, int, float, float, float, int, int, int]:
+    """Integrate chain + plate from t = 0 to (n_samples - 1) x interval with DOPRI5.
+
+    Arguments as :func:`solitonde.model.boundary.integrate_dashpot` (``interval``: the sample
+    interval), plus ``rtol``, ``scale`` (typical magnitude of each state component, len
+    2 (N + 1) + 3; ``atol = rtol x scale``) and ``max_steps`` (attempted steps). ``u``, ``v`` are
+    left at the final state; ``pk`` gets the peaks (dense-output refined, see the module
+    docstring).
+
+    Returns (status, samples recorded, final w, work done on the plate J, dissipated energy J,
+    accepted steps, rejected steps, right-hand-side evaluations).
+    """
+    n = u.size - 1
+    np1 = n + 1
+    size = 2 * np1 + 3
+    inv_m = 1.0 / m
+    traces = u_trace.shape[0] > 0
+    t_end = (n_samples - 1) * interval
+    atol = rtol * scale
+
+    y = np.empty(size)
+    y[:np1] = u
+    y[np1:2 * np1] = v
+    y[2 * np1] = w
+    y[2 * np1 + 1] = 0.0
+    y[2 * np1 + 2] = 0.0
+    y1 = np.empty(size)
+    ys = np.empty(size)
+    k = np.empty((7, size))
+    rc = np.empty((5, size))
+    e = np.empty(size)
+    f = np.empty(max(n, 1))
+    track_idx = np.empty(_TRACK, dtype=np.int64)
+    below = min(sensor + 1, n)
+    track_idx[0] = sensor - 1
+    track_idx[1] = sensor
+    track_idx[2] = below
+    track_idx[3] = n
+    track_idx[4] = 2 * np1
+    track_idx[5] = np1 + sensor - 1
+    track_idx[6] = np1 + sensor
+    track_idx[7] = np1 + below
+    cap = 256
+    hist_t = np.empty(cap)
+    hist_h = np.empty(cap)
+    hist_c = np.empty((cap, 5, _TRACK))
+    n_hist = 0
+
+    nfev = 0
+    _rhs(y, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[0])
+    nfev += 1
+
+    # Sample 0 is the initial state.
+    reading, f_b, balance = _observe(y, u0, n, m, g, a_s, a_b, tau, sensor, f)
+    samples[0] = reading
+    energy[0] = balance
+    if traces:
+        for i in range(np1):
+            u_trace[0, i] = y[i]
+            v_trace[0, i] = y[np1 + i]
+        for j in range(n):
+            f_trace[0, j] = f[j]
+        f_trace[0, n] = f_b
+        w_trace[0] = y[2 * np1]
+    if not (np.isfinite(reading) and np.isfinite(balance)):
+        return RUN_NONFINITE, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev
+    if n_samples == 1:
+        pk[PK_BOT_F] = f_b
+        pk[PK_BOT_T] = 0.0
+        return RUN_OK, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev
+
+    # Initial step (Hairer's HINIT, RMS norms as scipy's select_initial_step).
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(size):
+        sc = atol[i] + rtol * abs(y[i])
+        d0 += (y[i] / sc) ** 2
+        d1 += (k[0, i] / sc) ** 2
+    d0 = sqrt(d0 / size)
+    d1 = sqrt(d1 / size)
+    h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h = min(h, t_end)
+    for i in range(size):
+        y1[i] = y[i] + h * k[0, i]
+    _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[1])
+    nfev += 1
+    d2 = 0.0
+    for i in range(size):
+        sc = atol[i] + rtol * abs(y[i])
+        d2 += ((k[1, i] - k[0, i]) / sc) ** 2
+    d2 = sqrt(d2 / size) / h
+    h1 = max(1e-6, h * 1e-3) if d1 <= 1e-15 and d2 <= 1e-15 else (0.01 / max(d1, d2)) ** 0.2
+    h = min(100.0 * h, h1, t_end)
+
+    t = 0.0
+    next_k = 1
+    accepted = 0
+    rejected = 0
+    fac_old = 1e-4
+    last_rejected = False
+    h_min = 1e-14 * t_end
+    while next_k < n_samples:
+        if accepted + rejected >= max_steps:
+            return (RUN_STEP_BUDGET, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
+                    accepted, rejected, nfev)
+        if h < h_min:
+            return (RUN_STEP_TOO_SMALL, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
+                    accepted, rejected, nfev)
+        last = t + h >= t_end * (1.0 - 1e-13)
+        if last:
+            h = t_end - t
+        for i in range(size):
+            y1[i] = y[i] + h * A21 * k[0, i]
+        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[1])
+        for i in range(size):
+            y1[i] = y[i] + h * (A31 * k[0, i] + A32 * k[1, i])
+        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[2])
+        for i in range(size):
+            y1[i] = y[i] + h * (A41 * k[0, i] + A42 * k[1, i] + A43 * k[2, i])
+        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[3])
+        for i in range(size):
+            y1[i] = y[i] + h * (A51 * k[0, i] + A52 * k[1, i] + A53 * k[2, i] + A54 * k[3, i])
+        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[4])
+        for i in range(size):
+            y1[i] = y[i] + h * (A61 * k[0, i] + A62 * k[1, i] + A63 * k[2, i] + A64 * k[3, i]
+                                + A65 * k[4, i])
+        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[5])
+        for i in range(size):
+            y1[i] = y[i] + h * (A71 * k[0, i] + A73 * k[2, i] + A74 * k[3, i] + A75 * k[4, i]
+                                + A76 * k[5, i])
+        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k[6])
+        nfev += 6
+        for i in range(size):
+            e[i] = h * (E1 * k[0, i] + E3 * k[2, i] + E4 * k[3, i] + E5 * k[4, i]
+                        + E6 * k[5, i] + E7 * k[6, i])
+        err = _rms(e, y, y1, atol, rtol)
+        if not np.isfinite(err):
+            return (RUN_NONFINITE, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
+                    accepted, rejected, nfev)
+        fac11 = err**EXPO
+        if err > 1.0:
+            rejected += 1
+            last_rejected = True
+            h = h / min(1.0 / FAC_MIN, fac11 / SAFETY)
+            continue
+
+        # Accepted: dense output coefficients of [t, t + h] (Hairer's CONTD5).
+        for i in range(size):
+            dy = y1[i] - y[i]
+            bspl = h * k[0, i] - dy
+            rc[0, i] = y[i]
+            rc[1, i] = dy
+            rc[2, i] = bspl
+            rc[3, i] = dy - h * k[6, i] - bspl
+            rc[4, i] = h * (D1 * k[0, i] + D3 * k[2, i] + D4 * k[3, i] + D5 * k[4, i]
+                            + D6 * k[5, i] + D7 * k[6, i])
+        if n_hist == cap:
+            cap *= 2
+            grown_t = np.empty(cap)
+            grown_h = np.empty(cap)
+            grown_c = np.empty((cap, 5, _TRACK))
+            grown_t[:n_hist] = hist_t[:n_hist]
+            grown_h[:n_hist] = hist_h[:n_hist]
+            grown_c[:n_hist] = hist_c[:n_hist]
+            hist_t, hist_h, hist_c = grown_t, grown_h, grown_c
+        hist_t[n_hist] = t
+        hist_h[n_hist] = h
+        for c in range(_TRACK):
+            for p in range(5):
+                hist_c[n_hist, p, c] = rc[p, track_idx[c]]
+        n_hist += 1
+
+        t_new = t_end if last else t + h
+        while next_k < n_samples and (next_k * interval <= t_new or (last and next_k ==
+                                                                      n_samples - 1)):
+            theta = 1.0 if next_k == n_samples - 1 and last else (next_k * interval - t) / h
+            _dense(rc, theta, ys)
+            reading, f_b, balance = _observe(ys, u0, n, m, g, a_s, a_b, tau, sensor, f)
+            samples[next_k] = reading
+            energy[next_k] = balance
+            if traces:
+                for i in range(np1):
+                    u_trace[next_k, i] = ys[i]
+                    v_trace[next_k, i] = ys[np1 + i]
+                for j in range(n):
+                    f_trace[next_k, j] = f[j]
+                f_trace[next_k, n] = f_b
+                w_trace[next_k] = ys[2 * np1]
+            if not (np.isfinite(reading) and np.isfinite(balance)):
+                return (RUN_NONFINITE, next_k + 1, ys[2 * np1], ys[2 * np1 + 1], ys[2 * np1 + 2],
+                        accepted + 1, rejected, nfev)
+            track_peaks(pk, next_k * interval, interval, reading, f_b)
+            next_k += 1
+
+        accepted += 1
+        # PI controller; no growth right after a rejection.
+        fac = fac11 / fac_old**BETA
+        fac = max(1.0 / FAC_MAX, min(1.0 / FAC_MIN, fac / SAFETY))
+        h_new = h / fac
+        if last_rejected:
+            h_new = min(h_new, h)
+        fac_old = max(err, 1e-4)
+        last_rejected = False
+        for i in range(size):
+            y[i] = y1[i]
+            k[0, i] = k[6, i]
+        t = t_new
+        h = h_new
+
+    for i in range(np1):
+        u[i] = y[i]
+        v[i] = y[np1 + i]
+    if not pk[PK_BOT_F] >= 0.0:
+        return (RUN_NONFINITE, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted,
+                rejected, nfev)
+    # Refine the three peaks on the dense output (each within one sample interval of the
+    # parabola through its samples).
+    for slot_f, slot_t, which in ((PK_INC_F, PK_INC_T, 0), (PK_REF_F, PK_REF_T, 0),
+                                  (PK_BOT_F, PK_BOT_T, 1)):
+        if np.isfinite(pk[slot_t]):
+            tp, fp = _refine_peak(which, pk[slot_t], interval, t_end, hist_t, hist_h, hist_c,
+                                  n_hist, n, a_s, a_b, tau, sensor)
+            pk[slot_t] = tp
+            pk[slot_f] = fp
+    return (RUN_OK, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted, rejected,
+            nfev)
