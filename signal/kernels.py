@@ -10,7 +10,10 @@ arrays into objects.
 from __future__ import annotations
 
 import numpy as np
+from llvmlite import ir
 from numba import njit
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 MAX_FIT_POINTS = 64
 """A longer fit window is block-averaged down to this (the pulse is smooth on that scale)."""
@@ -46,13 +49,70 @@ HEAD = 10
 PULSE = 11
 
 
+def _fp_extremum(name: str) -> object:
+    """``llvm.maxnum``/``llvm.minnum`` with fast-math flags: a max or min reduction written with it
+    vectorises (numba's ``max`` does not). Exact for finite input, so the order is free."""
+
+    @intrinsic
+    def extremum(typingctx, a, b):  # typing context and operand types, as numba passes them
+        def codegen(context, builder, signature, args):
+            double = ir.DoubleType()
+            fn = cgutils.get_or_insert_function(
+                builder.module, ir.FunctionType(double, [double, double]), f"llvm.{name}.f64"
+            )
+            return builder.call(fn, args, fastmath=("fast",))
+
+        return types.float64(types.float64, types.float64), codegen
+
+    return extremum
+
+
+_fmax = _fp_extremum("maxnum")
+_fmin = _fp_extremum("minnum")
+
+
 @njit(cache=True)
-def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
-    """Centred moving average over 2h+1 samples by a running (prefix) sum; shrinks at the ends."""
-    n = x.size
+def vmax(a: np.ndarray) -> float:
+    """Largest value of a non-empty finite array (vectorised; equals ``a.max()``)."""
+    m = a[0]
+    for i in range(a.size):
+        m = _fmax(m, a[i])
+    return m
+
+
+@njit(cache=True)
+def vmin(a: np.ndarray) -> float:
+    """Smallest value of a non-empty finite array (vectorised; equals ``a.min()``)."""
+    m = a[0]
+    for i in range(a.size):
+        m = _fmin(m, a[i])
+    return m
+
+
+@njit(cache=True)
+def vargmax(a: np.ndarray) -> int:
+    """Index of the first largest value, as ``np.argmax`` (vectorised maximum, then a scan)."""
+    m = vmax(a)
+    i = 0
+    while a[i] != m:
+        i += 1
+    return i
+
+
+@njit(cache=True)
+def prefix_sum(x: np.ndarray) -> np.ndarray:
+    """``c[0] = 0``, ``c[i + 1] = c[i] + x[i]``: the running sum every moving average here uses."""
+    c = np.empty(x.size + 1)
     c[0] = 0.0
-    for i in range(n):
+    for i in range(x.size):
         c[i + 1] = c[i] + x[i]
+    return c
+
+
+@njit(cache=True)
+def _box_from_prefix(c: np.ndarray, h: int, out: np.ndarray) -> None:
+    """Centred moving average over 2h+1 samples from the running sum ``c``; shrinks at the ends."""
+    n = out.size
     inv = 1.0 / (2 * h + 1)
     for i in range(min(h, n)):
         hi = min(n, i + h + 1)
@@ -62,6 +122,16 @@ def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
     for i in range(max(n - h, h), n):
         lo = i - h
         out[i] = (c[n] - c[lo]) / (n - lo)
+
+
+@njit(cache=True)
+def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
+    """Centred moving average over 2h+1 samples by a running (prefix) sum; shrinks at the ends."""
+    n = x.size
+    c[0] = 0.0
+    for i in range(n):
+        c[i + 1] = c[i] + x[i]
+    _box_from_prefix(c, h, out)
 
 
 @njit(cache=True)
@@ -86,6 +156,28 @@ def triangle(x: np.ndarray, h: int) -> np.ndarray:
     mid = np.empty(x.size)
     _box_into(x, h, c, mid)
     _box_into(mid, h, c, out)
+    return out
+
+
+@njit(cache=True)
+def triangle_prefix(x: np.ndarray, c: np.ndarray, h: int, sign: float) -> np.ndarray:
+    """``triangle(sign * x, h)`` from ``c = prefix_sum(x)``, bit for bit, with ``sign`` = +-1.
+
+    Negation commutes with rounding, so the running sum of ``-x`` is ``-c`` and every smoothed
+    value just changes sign: one running sum of the record serves every width and polarity.
+    """
+    n = x.size
+    out = np.empty(n)
+    if h < 1:
+        for i in range(n):
+            out[i] = sign * x[i]
+        return out
+    mid = np.empty(n)
+    _box_from_prefix(c, h, mid)
+    if sign < 0:
+        for i in range(n):
+            mid[i] = -mid[i]
+    _box_into(mid, h, np.empty(n + 1), out)
     return out
 
 
@@ -197,36 +289,47 @@ def valley(v: np.ndarray, a: int, b: int) -> int:
 
 
 @njit(cache=True)
-def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndarray, int]:
+def quadratic_fit(
+    x: np.ndarray, mask: np.ndarray, degree: int, ramp: np.ndarray
+) -> tuple[np.ndarray, int]:
     """Least-squares polynomial of ``degree`` (0-2) in u = i / n through the masked-in samples.
 
-    Returns the coefficients (c0, c1, c2) (unused ones zero) and the number of samples used.
-    Fewer than three samples, or a singular system, give a constant.
+    ``ramp`` holds u = i / n (:func:`unit_ramp`). Returns the coefficients (c0, c1, c2) (unused
+    ones zero) and the number of samples used. Fewer than three samples, or a singular system,
+    give a constant.
     """
     n = x.size
-    m = np.zeros((3, 3))
-    rhs = np.zeros(3)
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    r0 = 0.0
+    r1 = 0.0
+    r2 = 0.0
     count = 0
     for i in range(n):
         if mask[i]:
-            u = i / n
+            u = ramp[i]
             p2 = u * u
-            m[0, 0] += 1.0
-            m[0, 1] += u
-            m[0, 2] += p2
-            m[1, 2] += u * p2
-            m[2, 2] += p2 * p2
-            rhs[0] += x[i]
-            rhs[1] += u * x[i]
-            rhs[2] += p2 * x[i]
+            xi = x[i]
+            s1 += u
+            s2 += p2
+            s3 += u * p2
+            s4 += p2 * p2
+            r0 += xi
+            r1 += u * xi
+            r2 += p2 * xi
             count += 1
     coef = np.zeros(3)
     if count == 0:
         return coef, 0
-    m[1, 0] = m[0, 1]
-    m[1, 1] = m[0, 2]
-    m[2, 0] = m[0, 2]
-    m[2, 1] = m[1, 2]
+    m = np.empty((3, 3))
+    m[0, 0] = float(count)
+    m[0, 1] = m[1, 0] = s1
+    m[0, 2] = m[1, 1] = m[2, 0] = s2
+    m[1, 2] = m[2, 1] = s3
+    m[2, 2] = s4
+    rhs = np.array([r0, r1, r2])
     k = degree + 1
     if count < 3:
         k = 1
@@ -239,12 +342,11 @@ def quadratic_fit(x: np.ndarray, mask: np.ndarray, degree: int) -> tuple[np.ndar
 
 
 @njit(cache=True)
-def poly_eval(coef: np.ndarray, n: int) -> np.ndarray:
-    """c0 + c1 u + c2 u^2 at u = i / n for i in 0..n-1."""
+def unit_ramp(n: int) -> np.ndarray:
+    """u = i / n for i in 0..n-1: the abscissa of the slow-trend polynomial."""
     out = np.empty(n)
     for i in range(n):
-        u = i / n
-        out[i] = coef[0] + u * (coef[1] + u * coef[2])
+        out[i] = i / n
     return out
 
 
@@ -422,9 +524,7 @@ def _onset_pretrigger(s1: np.ndarray, ref: float) -> int:
     as a margin. Returns 0 when the record starts inside that rise (no pre-trigger exists).
     """
     n = s1.size
-    big = 0.0
-    for i in range(n):
-        big = max(big, s1[i] - ref)
+    big = max(0.0, vmax(s1) - ref)  # rounding is monotonic: max(s1[i] - ref) = max(s1) - ref
     if big <= 0:
         return max(MIN_PRETRIGGER, n // 10)
     cross = 0
@@ -468,6 +568,15 @@ def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: floa
 
 
 @njit(cache=True)
+def _count(mask: np.ndarray, lo: int, hi: int) -> int:
+    """How many of ``mask[lo:hi]`` are set (clipped to the array)."""
+    count = 0
+    for i in range(max(lo, 0), min(hi, mask.size)):
+        count += mask[i]
+    return count
+
+
+@njit(cache=True)
 def _fwhm(v: np.ndarray, peak: int, lo: int, hi: int) -> int:
     a, b = pulse_extent(v, peak, 0.5 * v[peak], lo, hi)
     return b - a + 1
@@ -476,7 +585,7 @@ def _fwhm(v: np.ndarray, peak: int, lo: int, hi: int) -> int:
 @njit(cache=True)
 def _peaks(v: np.ndarray, sigma_s: float, thr_sigma: float, min_ratio: float
            ) -> tuple[np.ndarray, float]:
-    largest = v.max()
+    largest = vmax(v)
     thr = max(thr_sigma * sigma_s, min_ratio * largest)
     return find_peaks_hysteresis(v, thr, thr), thr
 
@@ -515,6 +624,7 @@ def analyze(
     skew: float,
     free_r: bool,
     max_iter: int,
+    ramp: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Detect and measure every pulse of one shot.
 
@@ -538,6 +648,9 @@ def analyze(
         the later ones (travelling back up the chain) ``-skew``.
     max_iter:
         Levenberg-Marquardt iterations per pulse.
+    ramp:
+        :func:`unit_ramp` of ``x.size`` (made here when its size differs), so that callers with
+        many shots of one length divide once.
 
     Returns
     -------
@@ -550,21 +663,21 @@ def analyze(
     # Polarity, from the lightly smoothed trace against the record's median.
     step = max(1, n // 1024)
     ref = np.median(x[::step])
-    s1 = triangle(x, 2)
+    csum = prefix_sum(x)
+    s1 = triangle_prefix(x, csum, 2, 1.0)
     sign = sign_in
     if sign == 0.0:
-        sign = 1.0 if s1.max() - ref >= ref - s1.min() else -1.0
+        sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
     y = x * sign
     s1 *= sign
     ref *= sign
     head[H_SIGN] = sign
+    ymax = vmax(y)
 
     n_pre = n_pre_in if n_pre_in > 0 else _onset_pretrigger(s1, ref)
     if n_pre == 0:
         head[H_EARLY] = 1.0
-    span = 0.0
-    for i in range(n):
-        span = max(span, abs(y[i] - ref))
+    span = max(0.0, ymax - ref, ref - vmin(y))  # = max |y[i] - ref| (monotonic rounding)
     floor = NOISE_FLOOR * max(span, 1e-300)
 
     base, sigma = _level_noise(y, n_pre, ref, floor)
@@ -572,15 +685,15 @@ def analyze(
 
     # Smoother width: a sixth of the largest pulse's FWHM (a cheap stand-in for a matched filter).
     h = h_in if h_in >= 0 else 2
-    s = s1 if h == 2 else triangle(y, h)
+    s = s1 if h == 2 else triangle_prefix(x, csum, h, sign)
     v = s - line
     if h_in < 0:
         for _ in range(3):
-            hn = max(1, _fwhm(v, int(np.argmax(v)), 0, n) // 6)
+            hn = max(1, _fwhm(v, vargmax(v), 0, n) // 6)
             if 2 * hn <= 3 * h and 3 * hn >= 2 * h:
                 break
             h = hn
-            s = triangle(y, h)
+            s = triangle_prefix(x, csum, h, sign)
             for i in range(n):
                 v[i] = s[i] - line[i]
     sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
@@ -621,25 +734,19 @@ def analyze(
         for j in range(peaks.size):
             reach = int(2.0 * min(widths[j], cap)) + 2 * h + 2
             quiet[max(0, peaks[j] - reach) : min(n, peaks[j] + reach + 1)] = False
-        count_pre = 0
-        count_post = 0
-        late = False
-        middle = False
-        for i in range(n):
-            if quiet[i]:
-                if i < n_pre:
-                    count_pre += 1
-                else:
-                    count_post += 1
-                if i >= 2 * n // 3:
-                    late = True
-                elif i >= n // 3:
-                    middle = True
+        count_pre = _count(quiet, 0, n_pre)
+        count_post = _count(quiet, n_pre, n)
+        late = _count(quiet, 2 * n // 3, n) > 0
+        middle = _count(quiet, n // 3, 2 * n // 3) > 0
         if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
             break
-        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1)
-        line = poly_eval(coef, n)
+        if ramp.size != n:
+            ramp = unit_ramp(n)
+        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1, ramp)
+        c0, c1, c2 = coef[0], coef[1], coef[2]
         for i in range(n):
+            u = ramp[i]
+            line[i] = c0 + u * (c1 + u * c2)
             v[i] = s[i] - line[i]
         before = peaks
         peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
@@ -725,17 +832,14 @@ def analyze(
         row[P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
     # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
-    after = 0.0
-    for i in range(min(n, int(peaks[0] + FOOT * widths[0]) + 1), n):
-        after = max(after, v[i])
+    first = min(n, int(peaks[0] + FOOT * widths[0]) + 1)
+    after = max(0.0, vmax(v[first:])) if first < n else 0.0
     head[H_UPPER] = max(thr, after) / max(out[0, P_AMP], 1e-300)
 
     # Clipping: the record's top value repeats over more than a twentieth of the incident's width.
-    ymax = y.max()
-    tol = 1e-9 * max(abs(ymax), 1e-300)
+    top = ymax - 1e-9 * max(abs(ymax), 1e-300)
     count = 0
     for i in range(n):
-        if y[i] >= ymax - tol:
-            count += 1
+        count += y[i] >= top
     head[H_SATURATED] = 1.0 if count >= max(3.0, 0.05 * out[0, P_WIDTH]) else 0.0
     return head, out
