@@ -46,6 +46,36 @@ class ShotBase(Strict):
     metadata: ShotMetadata = Field(default_factory=ShotMetadata)
 
 
+BINARY_MEDIA_TYPE = "application/octet-stream"
+BINARY_DTYPES = {"float32": "<f4", "float64": "<f8"}
+"""``dtype`` values of a binary shot and the little-endian numpy types they name."""
+
+
+class BinaryShotParams(Strict):
+    """Query parameters of a binary shot: the body is the samples, these say what they are.
+
+    The acquisition PC's own buffer (little-endian float32 or float64, no header) is posted as
+    it is; nothing is parsed from text. Same limits and meanings as the JSON shot's keys.
+    """
+
+    # Query values arrive as text: numbers are parsed from it (still no NaN, no unknown keys).
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
+
+    dtype: Literal["float32", "float64"] = Field(
+        ..., description="little-endian IEEE 754 samples, no header: float32 or float64")
+    dt: float = Field(..., gt=0, le=1.0, description="sample period, s")
+    t0: float = Field(0.0, ge=-1e3, le=1e3, description="time of the first sample, s")
+    units: Literal["N", "V"] = Field("N", description="N (force) or V (sensor voltage)")
+    calibration: float | None = Field(
+        None, description="sensor sensitivity, N/V (required when units are V; not zero)")
+    plate_id: str | None = Field(None, max_length=200, description="plate identifier")
+    position: str | None = Field(None, max_length=200,
+                                 description="measurement position label on the plate")
+    sphere_diameter: float | None = Field(None, gt=0, le=1.0,
+                                          description="chain sphere diameter D, m")
+    shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
+
+
 def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type[Strict]]:
     """The shot and measurement request models with the service's limits built in."""
     shot = create_model(
@@ -89,7 +119,7 @@ class MeasurementOut(BaseModel):
     plate_id: str | None
     position: str | None
     n_shots: int
-    source: str = Field(description="'json' or 'upload:<format>'")
+    source: str = Field(description="'json', 'binary' or 'upload:<format>'")
     shots: list[ShotOut]
     aggregates: list[dict[str, Any]] = Field(
         description="per sphere diameter: mean, std and count of TOF and ARR, outliers reported")

@@ -2,7 +2,9 @@
 
 The POST route reads the raw body and validates it with pydantic's JSON parser directly (one
 pass, no intermediate Python objects), which is what keeps a 10,000-sample shot in the low
-milliseconds; the request schemas are added to the OpenAPI document by the app factory.
+milliseconds; the request schemas are added to the OpenAPI document by the app factory. A shot
+can also come as its raw samples (``application/octet-stream``, float32 or float64, with ``dt``
+and the metadata in the query), which skips text parsing altogether.
 """
 
 from __future__ import annotations
@@ -11,17 +13,30 @@ import hmac
 import io
 from typing import Annotated, Any
 
+import anyio.to_thread
+import numpy as np
 from fastapi import APIRouter, Depends, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from pydantic import ConfigDict, Field, ValidationError
 
-from .api_models import MeasurementOut, MeasurementPage, Strict
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.waveform import Waveform
+
+from .api_models import (
+    BINARY_DTYPES,
+    BINARY_MEDIA_TYPE,
+    BinaryShotParams,
+    MeasurementOut,
+    MeasurementPage,
+    Strict,
+)
 from .ingest import (
     check_counts,
     measure_and_store,
     measurement_dict,
     read_file,
+    waveform_error,
     waveforms_from_shots,
 )
 from .problems import PROBLEM_MEDIA_TYPE, Problem, ProblemModel, from_pydantic
@@ -104,6 +119,16 @@ _READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "group", "
                    "dataset")
 
 
+def binary_parameters() -> list[dict[str, Any]]:
+    """OpenAPI query parameters of a binary shot (only read with an octet-stream body)."""
+    schema = BinaryShotParams.model_json_schema()
+    required = set(schema.get("required", []))
+    return [{"name": name, "in": "query", "required": name in required,
+             "description": f"binary shots only: {prop.get('description', name)}",
+             "schema": {k: v for k, v in prop.items() if k not in ("title", "description")}}
+            for name, prop in schema["properties"].items()]
+
+
 def upload_schema() -> dict[str, Any]:
     """OpenAPI schema of the multipart body: a file plus :class:`UploadFields`."""
     schema = UploadFields.model_json_schema(ref_template="#/components/schemas/{model}")
@@ -133,16 +158,21 @@ def require_json(request: Request) -> None:
     status_code=201,
     response_model=MeasurementOut,
     responses=ERRORS,
-    summary="Post one or more shots (JSON) or a waveform file (multipart)",
+    summary="Post one or more shots (JSON), one shot's raw samples (binary) or a waveform file "
+            "(multipart)",
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": {"$ref": "#/components/schemas/MeasurementIn"}},
+        BINARY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}},
         "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MeasurementUpload"}},
-    }}},
+    }}, "parameters": binary_parameters()},
 )
 async def post_measurement(request: Request) -> JSONResponse:
     """Measure TOF and ARR on every shot, aggregate per sphere size, estimate, store.
 
     JSON body: ``{"shots": [{"t0", "dt", "samples", "units", "calibration", "metadata"}]}``.
+    Binary body (``application/octet-stream``): one shot's samples as little-endian float32 or
+    float64 without a header; ``dtype`` and ``dt`` (and optionally ``t0``, ``units``,
+    ``calibration``, ``plate_id``, ``position``, ``sphere_diameter``, ``shot``) in the query.
     Multipart: a ``file`` field (CSV, NPY, NPZ, HDF5, TDMS) and optional metadata fields; the file
     is written to a private temporary file the server names. All shots of a request share
     ``plate_id`` and ``position``. Returns 201 with the stored measurement and its id.
@@ -155,13 +185,19 @@ async def post_measurement(request: Request) -> JSONResponse:
         body = await request.body()
         # In a worker thread: the event loop keeps reading other requests (and answering
         # /healthz) while this one is parsed, measured and waits for the store's writer lock.
-        result = await run_in_threadpool(_ingest_json, svc, body)
+        result = await anyio.to_thread.run_sync(_ingest_json, svc, body,
+                                                limiter=svc.ingest_lane)
+    elif media == BINARY_MEDIA_TYPE:
+        body = await request.body()
+        query = request.query_params.multi_items()
+        result = await anyio.to_thread.run_sync(_ingest_binary, svc, body, query,
+                                                limiter=svc.ingest_lane)
     elif media == "multipart/form-data":
         result = await _ingest_upload(svc, request)
     else:
         raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
-                      "application/json, multipart/form-data)", kind="unsupported-media-type",
-                      field="content-type")
+                      f"application/json, {BINARY_MEDIA_TYPE}, multipart/form-data)",
+                      kind="unsupported-media-type", field="content-type")
     return JSONResponse(result, status_code=201,
                         headers={"Location": f"/v1/measurements/{result['id']}"})
 
@@ -177,6 +213,40 @@ def _ingest_json(svc: Any, body: bytes) -> dict[str, Any]:
     waveforms = waveforms_from_shots(request.shots, request.metadata)
     check_counts(waveforms, svc.settings, "shots")
     return measure_and_store(waveforms, svc.store, svc.estimator, "json", "shots")
+
+
+def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]]) -> dict[str, Any]:
+    """One shot from its raw little-endian samples; what they are comes from the query."""
+    seen: set[str] = set()
+    for name, _ in query:
+        if name in seen:
+            raise Problem(422, f"{name}: given more than once", kind="invalid-input", field=name)
+        seen.add(name)
+    try:
+        params = BinaryShotParams.model_validate(dict(query))
+    except ValidationError as exc:
+        raise from_pydantic(exc, BinaryShotParams) from None
+    dtype = np.dtype(BINARY_DTYPES[params.dtype])
+    if not body:
+        raise Problem(422, f"body: empty; send the samples as little-endian {params.dtype}",
+                      kind="invalid-input", field="body")
+    if len(body) % dtype.itemsize:
+        raise Problem(422, f"body: {len(body):,} bytes is not a whole number of {params.dtype} "
+                      f"samples ({dtype.itemsize} bytes each)", kind="invalid-input",
+                      field="body")
+    n = len(body) // dtype.itemsize
+    limit = min(svc.settings.max_samples_per_shot, svc.settings.max_samples_per_request)
+    if n > limit:
+        raise Problem(422, f"samples: {n:,} samples; at most {limit:,} per shot", kind="limit",
+                      field="samples")
+    meta = {k: getattr(params, k) for k in ("plate_id", "position", "sphere_diameter", "shot")
+            if getattr(params, k) is not None}
+    try:
+        waveform = Waveform(t0=params.t0, dt=params.dt, samples=np.frombuffer(body, dtype),
+                            units=params.units, calibration=params.calibration, metadata=meta)
+    except WaveformError as exc:
+        raise waveform_error(exc, "") from None
+    return measure_and_store([waveform], svc.store, svc.estimator, "binary", "")
 
 
 async def _ingest_upload(svc: Any, request: Request) -> dict[str, Any]:
@@ -201,8 +271,9 @@ async def _ingest_upload(svc: Any, request: Request) -> dict[str, Any]:
         except ValidationError as exc:
             raise from_pydantic(exc, UploadFields) from None
         fmt = pick_format(opts.format, upload.filename)
-        return await run_in_threadpool(_ingest_file, svc, upload.file, fmt, opts,
-                                       client_name(upload.filename))
+        return await anyio.to_thread.run_sync(_ingest_file, svc, upload.file, fmt, opts,
+                                              client_name(upload.filename),
+                                              limiter=svc.ingest_lane)
     finally:
         await form.close()
 

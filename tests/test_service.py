@@ -331,7 +331,11 @@ def test_openapi_states_the_limits(tmp_path: Path) -> None:
     shot = schema["components"]["schemas"]["ShotIn"]["properties"]["samples"]
     assert shot["maxItems"] == 12_345
     content = schema["paths"]["/v1/measurements"]["post"]["requestBody"]["content"]
-    assert set(content) == {"application/json", "multipart/form-data"}
+    assert set(content) == {"application/json", "application/octet-stream",
+                            "multipart/form-data"}
+    params = {p["name"]: p for p in schema["paths"]["/v1/measurements"]["post"]["parameters"]}
+    assert params["dt"]["required"] and params["dtype"]["schema"]["enum"] == ["float32",
+                                                                             "float64"]
     assert "12,345 samples per shot" in schema["info"]["description"]
 
 
@@ -427,4 +431,66 @@ def test_hdf5_upload_that_points_at_server_files_is_refused(client: TestClient,
         r = client.post("/v1/measurements", files={"file": (path.name, path.read_bytes())})
         assert r.status_code == 422, r.text
         assert r.json()["field"] == "file" and words in r.json()["detail"]
+    assert stored(client) == 0
+
+
+BINARY = "application/octet-stream"
+QUERY = "dtype=float32&dt=5e-7&plate_id=P1&position=A1&sphere_diameter=0.00953"
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_binary_shot_measures_like_json_and_is_stored_bit_for_bit(client: TestClient,
+                                                                 dtype: str) -> None:
+    """Raw little-endian samples with dt in the query: the same features as the JSON shot."""
+    x = shot_samples(0).astype("<f4" if dtype == "float32" else "<f8")
+    r = client.post(f"/v1/measurements?{QUERY.replace('float32', dtype)}&shot=3",
+                    content=x.tobytes(), headers={"content-type": BINARY})
+    assert r.status_code == 201, r.text
+    out = r.json()
+    assert out["source"] == "binary" and out["plate_id"] == "P1" and out["position"] == "A1"
+    assert out["shots"][0]["metadata"]["shot"] == 3 and out["shots"][0]["n_samples"] == x.size
+    as_json = client.post("/v1/measurements", json={"shots": [
+        {**shot_json(0), "samples": x.astype(float).tolist()}]}).json()
+    assert out["shots"][0]["features"] == as_json["shots"][0]["features"]
+    back = client.get(f"/v1/measurements/{out['id']}/shots/0").json()
+    assert np.array_equal(np.array(back["samples"]), x.astype(float))
+    assert back["dt"] == DT
+
+
+_F32 = shot_samples(0).astype("<f4").tobytes()
+_NAN = np.r_[shot_samples(0)[:100], np.nan, shot_samples(0)[101:]].tobytes()
+BAD_BINARY = [
+    # (case, query, body, field)
+    ("no dtype", "dt=5e-7", _F32, "dtype"),
+    ("unknown dtype", "dtype=int16&dt=5e-7", _F32, "dtype"),
+    ("no dt", "dtype=float32", _F32, "dt"),
+    ("negative dt", "dtype=float32&dt=-5e-7", _F32, "dt"),
+    ("NaN dt", "dtype=float32&dt=nan", _F32, "dt"),
+    ("dt twice", "dtype=float32&dt=5e-7&dt=1e-6", _F32, "dt"),
+    ("unknown parameter", "dtype=float32&dt=5e-7&gain=2", _F32, "gain"),
+    ("empty body", "dtype=float32&dt=5e-7", b"", "body"),
+    ("partial sample", "dtype=float32&dt=5e-7", _F32[:-1], "body"),
+    ("NaN sample", "dtype=float64&dt=5e-7", _NAN, "samples"),
+    ("too few samples", "dtype=float32&dt=5e-7", _F32[:40], "samples"),
+    ("too many samples", "dtype=float64&dt=5e-7", bytes(8 * 50_001), "samples"),
+    ("volts without calibration", "dtype=float32&dt=5e-7&units=V", _F32, "calibration"),
+    ("zero calibration", "dtype=float32&dt=5e-7&calibration=0", _F32, "calibration"),
+    ("negative sphere diameter", "dtype=float32&dt=5e-7&sphere_diameter=-1", _F32,
+     "sphere_diameter"),
+    ("noise only, no pulse", "dtype=float64&dt=5e-7",
+     np.random.default_rng(0).normal(0, 1, 4000).tobytes(), "samples"),
+]
+
+
+@pytest.mark.parametrize(("case", "query", "body", "field"), BAD_BINARY,
+                         ids=[c[0] for c in BAD_BINARY])
+def test_bad_binary_shot_gets_a_problem_and_stores_nothing(client: TestClient, case: str,
+                                                           query: str, body: bytes,
+                                                           field: str) -> None:
+    """Each bad binary shot: 422 naming the query parameter or the body; the store stays empty."""
+    r = client.post(f"/v1/measurements?{query}", content=body, headers={"content-type": BINARY})
+    assert r.status_code == 422, r.text
+    assert r.headers["content-type"] == PROBLEM
+    problem = r.json()
+    assert problem["field"] == field and problem["detail"].startswith(field)
     assert stored(client) == 0
