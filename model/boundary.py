@@ -67,7 +67,7 @@ from .chain import (
     verlet_step,
 )
 from .contact import hertz_sphere_flat
-from .dopri import integrate_dopri5, state_size
+from .dopri import integrate_dopri5
 from .errors import SceneError
 from .leapfrog import integrate_elastic
 from .scene import Scene
@@ -214,27 +214,13 @@ def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
 
 
 def _run_dopri5(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
-    """The same tiers with the adaptive Dormand-Prince driver (:mod:`~solitonde.model.dopri`).
-
-    Error scales (``atol = rtol x scale``): the striker's dynamic Hertz overlap for positions and
-    the plate deflection, its impact velocity for velocities, its kinetic energy for the plate
-    work and the dissipated energy.
-    """
-    n = setup.u.size - 1
-    v_imp = max(float(np.abs(setup.v).max()), 1e-9)
-    e_kin = 0.5 * setup.m * v_imp**2
-    overlap = (2.5 * e_kin / setup.a_s) ** 0.4
-    scale = np.empty(state_size(n))
-    scale[: n + 1] = overlap
-    scale[n + 1: 2 * n + 2] = v_imp
-    scale[2 * n + 2] = overlap
-    scale[2 * n + 3:] = e_kin
+    """The same tiers with the adaptive Dormand-Prince driver (:mod:`~solitonde.model.dopri`)."""
     u0 = setup.u.copy()
     peaks = new_peak_tracker()
     start = time.perf_counter()
     status, done, w, plate_work, dissipated, accepted, rejected, nfev = integrate_dopri5(
         setup.u, setup.v, setup.w, u0, setup.m, setup.g, setup.a_s, setup.a_b, inv_z,
-        setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_samples, plan.rtol, scale,
+        setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_samples, plan.rtol,
         plan.max_steps, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
         setup.f_trace, setup.w_trace, peaks,
     )
