@@ -117,8 +117,13 @@ def _box_from_prefix(c: np.ndarray, h: int, out: np.ndarray) -> None:
     for i in range(min(h, n)):
         hi = min(n, i + h + 1)
         out[i] = c[hi] / hi
-    for i in range(h, n - h):
-        out[i] = (c[i + h + 1] - c[i - h]) * inv
+    m = n - 2 * h
+    if m > 0:  # out[i] = (c[i + h + 1] - c[i - h]) * inv, on views so the loop vectorises
+        upper = c[2 * h + 1 : 2 * h + 1 + m]
+        lower = c[:m]
+        mid = out[h : h + m]
+        for k in range(m):
+            mid[k] = (upper[k] - lower[k]) * inv
     for i in range(max(n - h, h), n):
         lo = i - h
         out[i] = (c[n] - c[lo]) / (n - lo)
