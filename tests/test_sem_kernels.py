@@ -10,6 +10,7 @@ from solitonde.model.materials import MATERIALS
 from solitonde.model.mesh import plate_mesh
 from solitonde.model.sem import build_plate, element_stiffness
 from solitonde.model.sem_kernels import (
+    SUMFACT_SPECIALISED,
     run_plate_load,
     stiffness_product,
     sumfact_operator,
@@ -40,10 +41,13 @@ def test_sumfact_equals_dense_on_graded_refined_mesh(order: tuple, symmetry: boo
         assert _relative(plate.apply_stiffness(u), plate.apply_stiffness_dense(u)) < 1e-12
 
 
-@pytest.mark.parametrize("order", [(4, 4, 2), (2, 3, 4), (8, 1, 2)])
-def test_sumfact_rebuilds_the_element_matrix_of_a_non_cubic_box(order: tuple) -> None:
+@pytest.mark.parametrize(("order", "own_kernel"), [
+    ((4, 4, 2), True), ((4, 4, 3), True), ((2, 3, 4), False), ((8, 1, 2), False)])
+def test_sumfact_rebuilds_the_element_matrix_of_a_non_cubic_box(order: tuple,
+                                                                own_kernel: bool) -> None:
     """On one box of 3 x 0.5 x 0.2 mm, K applied to the unit vectors is ``element_stiffness``
-    (dof 3 * node + component, local nodes x fastest) entry by entry, to 1e-12 of max |K|."""
+    (dof 3 * node + component, local nodes x fastest) entry by entry, to 1e-12 of max |K|;
+    both the kernels specialised for one order and the general one."""
     size = (3e-3, 0.5e-3, 0.2e-3)
     px, py, pz = order
     nloc = (px + 1) * (py + 1) * (pz + 1)
@@ -52,6 +56,7 @@ def test_sumfact_rebuilds_the_element_matrix_of_a_non_cubic_box(order: tuple) ->
     op = sumfact_operator(np.arange(nloc)[None, :], geom, gll_derivative_matrix(px),
                           gll_derivative_matrix(py), gll_derivative_matrix(pz), w3,
                           np.array([AL.lame_lambda, AL.shear_modulus]))
+    assert (order in SUMFACT_SPECIALISED) == own_kernel
     eye = np.eye(3 * nloc)
     k = np.empty_like(eye)
     for col in range(3 * nloc):
@@ -63,7 +68,8 @@ def test_sumfact_rebuilds_the_element_matrix_of_a_non_cubic_box(order: tuple) ->
 
 def test_time_loop_gives_the_same_run_with_either_operator() -> None:
     """run_plate_load compiled for the sum-factorised and for the dense operator: the same
-    displacement history (to round-off growth over 300 steps of 0.9 of the stable step)."""
+    displacement history to round-off growth over 300 steps of 0.9 of the stable step (about
+    2e-13 of the peak here)."""
     mesh = plate_mesh((0.12, 0.1), 3e-3, (4, 3, 1), (4, 4, 2), contact_x=0.05,
                       contact_radius=3e-3, contact_refinement=1)
     plate = build_plate(mesh, AL, "opposite_edges")
@@ -74,8 +80,8 @@ def test_time_loop_gives_the_same_run_with_either_operator() -> None:
             for op in (plate.operator, plate.dense_operator())]
     (w_sf, rec_sf), (w_dense, rec_dense) = runs
     assert np.abs(w_dense).max() > 0.0
-    assert _relative(w_sf, w_dense) < 1e-10
-    assert _relative(rec_sf, rec_dense) < 1e-10
+    assert _relative(w_sf, w_dense) < 1e-11
+    assert _relative(rec_sf, rec_dense) < 1e-11
 
 
 def test_bad_operators_are_refused() -> None:
