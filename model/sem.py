@@ -5,8 +5,8 @@ central differences (Newmark beta = 0, gamma = 1/2) are explicit. The stiffness 
 for time stepping: K u is applied element by element by sum factorisation (1-D GLL derivative
 matrices along each axis of the box elements, see ``sem_kernels``); the dense element matrices,
 one per distinct element shape, remain the reference operator and give the element bound of the
-stable step. Supports clamp all three displacement components
-on whole edge faces; a symmetry plane y = Ly/2 (half model) fixes u_y there.
+stable step. Supports clamp all three displacement components on whole edge faces; a symmetry
+plane y = Ly/2 (half model) fixes u_y there.
 """
 
 from __future__ import annotations
