@@ -440,9 +440,10 @@ def nearest_edge_distance(scene: Scene) -> float:
     return float(min(x, lx - x, ly / 2.0))
 
 
-def make_boundary(scene: Scene) -> BottomBoundary:
-    """Build the bottom boundary of a scene, resolving ``auto``."""
-    name, reason = resolve_plate_model(scene)
+def make_boundary(scene: Scene, resolved: tuple[str, str] | None = None) -> BottomBoundary:
+    """Build the bottom boundary of a scene, resolving ``auto`` (unless ``resolved`` already
+    holds :func:`resolve_plate_model`'s answer)."""
+    name, reason = resolved if resolved is not None else resolve_plate_model(scene)
     factory = TIERS.get(name)
     if factory is None:
         raise SceneError(

@@ -216,8 +216,10 @@ def simulate(
     started = time.perf_counter()
     solver = scene.solver
     adaptive = solver.integrator == "dopri5"
+    resolved = None
     if adaptive:
-        name, reason = resolve_plate_model(scene)  # before a plate tier builds its mesh
+        resolved = resolve_plate_model(scene)  # before a plate tier builds its mesh
+        name, reason = resolved
         if name not in DOPRI5_PLATE_MODELS:
             raise SceneError(
                 "solver.integrator",
@@ -225,7 +227,7 @@ def simulate(
                 allowed=f"verlet with every plate model; dopri5 with "
                         f"{', '.join(DOPRI5_PLATE_MODELS)}",
             )
-    boundary = make_boundary(scene)
+    boundary = make_boundary(scene, resolved)
     n = scene.chain.n_particles
     m = scene.sphere_mass
     g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
