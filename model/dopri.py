@@ -248,30 +248,33 @@ def _tracked_value(
             hi = mid - 1
     theta = (t - hist_t[lo]) / hist_h[lo]
     theta = min(max(theta, 0.0), 1.0)
-    t1 = 1.0 - theta
-    vals = np.empty(_TRACK)
     rc = hist_c[lo]
-    for i in range(_TRACK):
-        vals[i] = rc[0, i] + theta * (rc[1, i] + t1 * (rc[2, i] + theta * (rc[3, i]
-                                                                           + t1 * rc[4, i])))
-    f_b = hertz(a_b, vals[3] - vals[4])
+    f_b = hertz(a_b, _at(rc, 3, theta) - _at(rc, 4, theta))
     if which == 1:
         return f_b
-    forces = np.empty(2)
-    for c in range(2):
-        if c == 1 and sensor == n:
-            forces[c] = f_b
-            continue
-        d = vals[c] - vals[c + 1]
-        if d > 0.0:
-            sd = sqrt(d)
-            total = a_s * d * sd
-            if tau > 0.0:
-                total += 1.5 * a_s * tau * sd * (vals[5 + c] - vals[6 + c])
-            forces[c] = total if total > 0.0 else 0.0
-        else:
-            forces[c] = 0.0
-    return 0.5 * (forces[0] + forces[1])
+    above = _contact_at(rc, 0, theta, a_s, tau)
+    below = f_b if sensor == n else _contact_at(rc, 1, theta, a_s, tau)
+    return 0.5 * (above + below)
+
+
+@njit(cache=True)
+def _at(rc: np.ndarray, i: int, theta: float) -> float:
+    """Component i of the continuous extension with coefficients ``rc`` (5 x M) at theta."""
+    t1 = 1.0 - theta
+    return rc[0, i] + theta * (rc[1, i] + t1 * (rc[2, i] + theta * (rc[3, i] + t1 * rc[4, i])))
+
+
+@njit(cache=True)
+def _contact_at(rc: np.ndarray, c: int, theta: float, a_s: float, tau: float) -> float:
+    """Force of the sensor's contact c (0 above, 1 below) from the kept components at theta."""
+    d = _at(rc, c, theta) - _at(rc, c + 1, theta)
+    if d <= 0.0:
+        return 0.0
+    sd = sqrt(d)
+    total = a_s * d * sd
+    if tau > 0.0:
+        total += 1.5 * a_s * tau * sd * (_at(rc, 5 + c, theta) - _at(rc, 6 + c, theta))
+    return total if total > 0.0 else 0.0
 
 
 @njit(cache=True)
