@@ -196,7 +196,8 @@ class Detection:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
 
-def _lowpass(x: np.ndarray, dt: float, cutoff: float) -> np.ndarray:
+def lowpass(x: np.ndarray, dt: float, cutoff: float) -> np.ndarray:
+    """Zero-phase 4th-order Butterworth low-pass of ``x``, the cut-off checked below Nyquist."""
     from scipy.signal import butter, sosfiltfilt
 
     nyquist = 0.5 / dt
@@ -217,8 +218,31 @@ def _ramp(n: int) -> np.ndarray:
     return ramp
 
 
-def _snr_db(amplitude: float, noise: float) -> float:
+def snr_db(amplitude: float, noise: float) -> float:
+    """``20 log10(amplitude / noise)``, the SNR convention of :mod:`solitonde.signal.synth`."""
     return 20.0 * math.log10(max(amplitude, 1e-300) / noise)
+
+
+def kernel_args(opts: DetectOptions, n: int, dt: float) -> tuple[Any, ...]:
+    """The arguments :func:`solitonde.signal.kernels.analyze` takes after the samples, for
+    ``n``-sample records at period ``dt``; raises if ``pretrigger_s`` does not fit the record."""
+    n_pre = -1
+    if opts.pretrigger_s is not None:
+        n_pre = int(opts.pretrigger_s / dt)
+        if not MIN_PRETRIGGER <= n_pre <= n - MIN_PRETRIGGER:
+            raise WaveformError(
+                "pretrigger_s",
+                f"{opts.pretrigger_s:g} s is {n_pre} samples of a {n}-sample record",
+                f"{MIN_PRETRIGGER} samples to the record length minus {MIN_PRETRIGGER}",
+            )
+    sign = {"auto": 0.0, "positive": 1.0, "negative": -1.0}[opts.polarity]
+    free_r = opts.shape_exponent is None
+    return (
+        sign, n_pre, -1 if opts.smooth_samples is None else opts.smooth_samples,
+        opts.threshold_sigma, opts.min_ratio, opts.fit_fraction,
+        SHAPE_EXPONENT if free_r else opts.shape_exponent, opts.shape_skew, free_r, MAX_ITER,
+        _ramp(n),
+    )
 
 
 def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: Any) -> Detection:
@@ -240,27 +264,10 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     x = waveform.force
     dt = waveform.dt
     t0 = waveform.t0
-    n = x.size
     if opts.lowpass_hz is not None:
-        x = _lowpass(x, dt, opts.lowpass_hz)
-    n_pre = -1
-    if opts.pretrigger_s is not None:
-        n_pre = int(opts.pretrigger_s / dt)
-        if not MIN_PRETRIGGER <= n_pre <= n - MIN_PRETRIGGER:
-            raise WaveformError(
-                "pretrigger_s",
-                f"{opts.pretrigger_s:g} s is {n_pre} samples of a {n}-sample record",
-                f"{MIN_PRETRIGGER} samples to the record length minus {MIN_PRETRIGGER}",
-            )
-    sign = {"auto": 0.0, "positive": 1.0, "negative": -1.0}[opts.polarity]
-    free_r = opts.shape_exponent is None
-    head, rows = K.analyze(
-        np.ascontiguousarray(x, dtype=np.float64), sign, n_pre,
-        -1 if opts.smooth_samples is None else opts.smooth_samples,
-        opts.threshold_sigma, opts.min_ratio, opts.fit_fraction,
-        SHAPE_EXPONENT if free_r else opts.shape_exponent, opts.shape_skew, free_r, MAX_ITER,
-        _ramp(n),
-    )
+        x = lowpass(x, dt, opts.lowpass_hz)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    head, rows = K.analyze(x, *kernel_args(opts, x.size, dt))
     sign = head[K.H_SIGN]
     inverted = sign < 0
     flags: set[str] = set()
@@ -289,7 +296,7 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
             time_s=t0 + float(row[K.P_TIME]) * dt, peak_N=amp,
             baseline_N=float(sign * row[K.P_BASE]), width_s=float(row[K.P_WIDTH]) * dt,
             onset_s=t0 + float(row[K.P_ONSET]) * dt, end_s=t0 + float(row[K.P_END]) * dt,
-            snr_db=_snr_db(amp, noise), index=int(row[K.P_INDEX]),
+            snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
             method="parabola" if row[K.P_METHOD] else "template",
         ))
     incident = pulses[0]

@@ -1,0 +1,222 @@
+"""Features of many shots of one length at once: a 2-D array in, one array per feature out.
+
+For an acquisition PC or a directory of files: the samples are validated in one vectorised pass,
+and one numba call (:func:`solitonde.signal.kernels.analyze_batch`) runs the same per-shot kernel
+as :func:`solitonde.signal.features.extract` over every row, on numba's threads. No Python object
+is made per shot, so the cost is the kernel's. :meth:`FeatureTable.features` gives one shot's
+:class:`~solitonde.signal.features.Features`, equal field for field to what ``extract`` returns
+for that shot (tests/test_signal_batch.py holds them together).
+"""
+
+from __future__ import annotations
+
+import math
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import kernels as K
+from .errors import WaveformError
+from .features import Features
+from .pulses import FLAGS, DetectOptions, kernel_args, lowpass
+from .waveform import MIN_SAMPLES, UNITS
+
+FLAG_BITS = {name: 1 << k for k, name in enumerate(FLAGS)}
+"""Bit of each quality flag in :attr:`FeatureTable.flags`."""
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureTable:
+    """Per-shot features of a batch, one array per field, NaN where a shot has no such value.
+
+    ``detected`` is false for a shot without any pulse (``extract`` raises for it); ``flags`` is a
+    bit mask (:data:`FLAG_BITS`); ``secondary_times_s`` and ``secondary_ratios`` are
+    ``(shots, max_secondary)``, NaN past each shot's count.
+    """
+
+    detected: np.ndarray
+    tof_s: np.ndarray
+    arr: np.ndarray
+    incident_time_s: np.ndarray
+    reflected_time_s: np.ndarray
+    incident_peak_N: np.ndarray
+    reflected_peak_N: np.ndarray
+    snr_db: np.ndarray
+    flags: np.ndarray
+    arr_upper_bound: np.ndarray
+    secondary_times_s: np.ndarray
+    secondary_ratios: np.ndarray
+    baseline_N: np.ndarray
+    noise_N: np.ndarray
+    n_pulses: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.detected.size)
+
+    def flag_names(self, i: int) -> list[str]:
+        """Names of the flags of shot ``i``, in :data:`~solitonde.signal.pulses.FLAGS` order."""
+        mask = int(self.flags[i])
+        return [name for name, bit in FLAG_BITS.items() if mask & bit]
+
+    def features(self, i: int) -> Features | None:
+        """Shot ``i`` as :class:`Features` (``None`` when it holds no pulse)."""
+        if not self.detected[i]:
+            return None
+
+        def opt(value: float) -> float | None:
+            return None if math.isnan(value) else float(value)
+
+        times = self.secondary_times_s[i]
+        count = int(np.count_nonzero(~np.isnan(times)))
+        return Features(
+            tof_s=opt(self.tof_s[i]),
+            arr=opt(self.arr[i]),
+            incident_time_s=float(self.incident_time_s[i]),
+            reflected_time_s=opt(self.reflected_time_s[i]),
+            incident_peak_N=float(self.incident_peak_N[i]),
+            reflected_peak_N=opt(self.reflected_peak_N[i]),
+            snr_db=float(self.snr_db[i]),
+            flags=self.flag_names(i),
+            arr_upper_bound=opt(self.arr_upper_bound[i]),
+            secondary_times_s=[float(t) for t in times[:count]],
+            secondary_ratios=[float(r) for r in self.secondary_ratios[i, :count]],
+            baseline_N=float(self.baseline_N[i]),
+            noise_N=float(self.noise_N[i]),
+        )
+
+    def to_features(self) -> list[Features | None]:
+        """Every shot as :class:`Features` (``None`` for a shot without any pulse)."""
+        return [self.features(i) for i in range(len(self))]
+
+
+def check_batch(samples: Any) -> np.ndarray:
+    """``samples`` as a C-contiguous ``(shots, n)`` float64 array (no copy when it already is
+    one), checked in one pass: at least one shot, :data:`MIN_SAMPLES` per shot, all finite."""
+    try:
+        x = np.ascontiguousarray(samples, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise WaveformError("samples", f"not numeric data ({exc})") from None
+    if x.ndim != 2 or x.shape[0] == 0:
+        raise WaveformError("samples", f"got shape {x.shape}", "a 2-D array, one shot per row")
+    if x.shape[1] < MIN_SAMPLES:
+        raise WaveformError("samples", f"too few samples per shot ({x.shape[1]})",
+                            f"at least {MIN_SAMPLES} samples per shot")
+    if not np.isfinite(x).all():
+        shot, sample = np.argwhere(~np.isfinite(x))[0]
+        raise WaveformError("samples", f"contains NaN or inf (first at shot {shot}, sample "
+                            f"{sample}: {x[shot, sample]})", "finite numbers")
+    return x
+
+
+def _number(name: str, value: Any, positive: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise WaveformError(name, f"expected a number, got {value!r}")
+    number = float(value)
+    if not math.isfinite(number) or (positive and number <= 0):
+        raise WaveformError(name, f"got {number}", "a positive finite number" if positive
+                            else "a finite number")
+    return number
+
+
+def extract_batch(
+    samples: Any,
+    dt: float,
+    t0: float = 0.0,
+    units: str = "N",
+    calibration: float | None = None,
+    threads: int = 1,
+    **options: Any,
+) -> FeatureTable:
+    """TOF, ARR, SNR and flags of every shot in ``samples`` (one shot per row, all of period
+    ``dt`` s, starting at ``t0`` s); ``options`` are :class:`DetectOptions` fields.
+
+    Volts (``units="V"``) are turned into newtons with ``calibration`` (N/V), as a
+    :class:`~solitonde.signal.waveform.Waveform` does. ``threads`` > 1 splits the shots into
+    that many blocks run side by side (the kernel runs without the GIL); the features do not
+    depend on it.
+    """
+    x = check_batch(samples)
+    dt = _number("dt", dt, positive=True)
+    t0 = _number("t0", t0)
+    if units not in UNITS:
+        raise WaveformError("units", f"unknown units {units!r}", "'N' or 'V'")
+    if units == "V":
+        if calibration is None:
+            raise WaveformError("calibration", "samples are in volts but no calibration was given",
+                                "sensor sensitivity in N/V")
+        cal = _number("calibration", calibration)
+        if cal == 0:
+            raise WaveformError("calibration", "must not be zero", "sensitivity in N/V, != 0")
+        x = x * cal
+    opts = DetectOptions.from_kwargs(options)
+    if opts.lowpass_hz is not None:
+        x = np.stack([lowpass(row, dt, opts.lowpass_hz) for row in x])
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise WaveformError("threads", f"got {threads!r}", "a positive integer")
+    args = (*kernel_args(opts, x.shape[1], dt), 2 + opts.max_secondary)
+    if threads == 1 or x.shape[0] == 1:
+        parts = [K.analyze_batch(x, *args)]
+    else:
+        blocks = np.array_split(x, min(threads, x.shape[0]))
+        with ThreadPoolExecutor(len(blocks)) as pool:
+            parts = list(pool.map(lambda block: K.analyze_batch(block, *args), blocks))
+    heads, rows, counts, truncated = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
+    return _table(heads, rows, counts, truncated, t0, dt, opts)
+
+
+def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, truncated: np.ndarray,
+           t0: float, dt: float, opts: DetectOptions) -> FeatureTable:
+    """The arrays of :func:`analyze_batch` as features, with the flag logic of
+    :func:`solitonde.signal.pulses.detect` done on whole columns."""
+    nan = np.nan
+    sign = heads[:, K.H_SIGN]
+    noise = heads[:, K.H_SIGMA]
+    detected = counts > 0
+    has_ref = counts > 1
+    times = t0 + rows[:, :, K.P_TIME] * dt
+    amps = rows[:, :, K.P_AMP]
+    inc_t, inc_a = times[:, 0], amps[:, 0]
+    ref_t = np.where(has_ref, times[:, 1], nan)
+    ref_a = np.where(has_ref, amps[:, 1], nan)
+    snr = np.array([20.0 * math.log10(max(a, 1e-300) / s) for a, s in zip(amps[:, 0], noise,
+                                                                         strict=True)])
+    ref_snr = np.array([20.0 * math.log10(max(a, 1e-300) / s) for a, s in zip(amps[:, 1], noise,
+                                                                             strict=True)])
+    n_sec = np.clip(counts - 2, 0, opts.max_secondary)
+    sec = np.arange(opts.max_secondary)[None, :] < n_sec[:, None]
+    sec_t = np.where(sec, times[:, 2:], nan)
+    sec_r = np.where(sec, amps[:, 2:] / np.where(detected, inc_a, 1.0)[:, None], nan)
+
+    merged = rows[:, :, K.P_MERGED] != 0
+    overlapping = has_ref & (merged[:, 0] | ((counts > 2) & merged[:, 1]))
+    low_snr = np.where(has_ref, ref_snr, snr) < opts.low_snr_db
+    raised = {
+        "no_reflection": detected & ~has_ref,
+        "saturated": detected & (heads[:, K.H_SATURATED] != 0),
+        "low_snr": detected & low_snr,
+        "overlapping": overlapping,
+        "truncated": (heads[:, K.H_EARLY] != 0) | truncated,
+        "inverted_polarity": sign < 0,
+    }
+    flags = np.zeros(sign.size, dtype=np.uint8)
+    for name, where in raised.items():
+        flags |= np.where(where, FLAG_BITS[name], 0).astype(np.uint8)
+    return FeatureTable(
+        detected=detected,
+        tof_s=np.where(has_ref, ref_t - inc_t, nan),
+        arr=np.where(has_ref, ref_a / np.where(detected, inc_a, 1.0), nan),
+        incident_time_s=np.where(detected, inc_t, nan),
+        reflected_time_s=ref_t,
+        incident_peak_N=np.where(detected, inc_a, nan),
+        reflected_peak_N=ref_a,
+        snr_db=np.where(detected, snr, nan),
+        flags=flags,
+        arr_upper_bound=np.where(detected & ~has_ref, heads[:, K.H_UPPER], nan),
+        secondary_times_s=sec_t,
+        secondary_ratios=sec_r,
+        baseline_N=np.where(detected, sign * rows[:, 0, K.P_BASE], nan),
+        noise_N=noise,
+        n_pulses=counts,
+    )
