@@ -2,10 +2,12 @@
 
 Prints requests per second and p50/p99 latency for ``POST /v1/measurements`` with one
 10,000-sample shot per request (the acquisition-PC pattern), and the same for ``GET /healthz`` as
-a same-run baseline of what the server and the client cost without any work.
+a same-run baseline of what the server and the client cost without any work. The shot goes as
+JSON (default) or as its raw float32 samples (``--body binary``, ``application/octet-stream``).
 
     .venv/bin/python tests/load_service.py                      # starts its own server
     .venv/bin/python tests/load_service.py --workers 2 --requests 4000
+    .venv/bin/python tests/load_service.py --workers 2 --client raw --body binary
     .venv/bin/python tests/load_service.py --url http://127.0.0.1:8000
 
 Bounded: stops after ``--requests`` requests or ``--duration`` seconds, whichever comes first.
@@ -24,7 +26,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from urllib.parse import urlparse
+from urllib.parse import urlencode, urlparse
 
 import httpx
 import numpy as np
@@ -53,6 +55,18 @@ def synthetic_shot(n: int = 10_000, dt: float = 5e-7, seed: int = 0) -> dict:
     return {"t0": 0.0, "dt": dt, "samples": [round(float(v), 4) for v in y], "units": "N",
             "metadata": {"plate_id": "load", "position": "P1", "sphere_diameter": 9.53e-3,
                          "shot": 0}}
+
+
+def shot_request(n: int = 10_000, body: str = "json") -> tuple[str, bytes, str]:
+    """(path, body, content type) of one synthetic shot sent as JSON or as raw float32."""
+    shot = synthetic_shot(n)
+    if body == "json":
+        return "/v1/measurements", json.dumps({"shots": [shot]}).encode(), "application/json"
+    meta = shot["metadata"]
+    query = urlencode({"dtype": "float32", "dt": shot["dt"], "t0": shot["t0"],
+                       "units": shot["units"], **meta})
+    samples = np.asarray(shot["samples"], dtype="<f4")  # an acquisition PC's float32 buffer
+    return f"/v1/measurements?{query}", samples.tobytes(), "application/octet-stream"
 
 
 def free_port() -> int:
@@ -162,19 +176,20 @@ class RawClient:
 
 async def run_load(url: str, path: str, body: bytes | None, concurrency: int, requests: int,
                    duration: float, headers: dict[str, str] | None = None,
-                   client_kind: str = "httpx") -> dict:
+                   client_kind: str = "httpx", content_type: str = "application/json") -> dict:
     """Fire ``requests`` requests (or for ``duration`` s) from ``concurrency`` clients."""
     host = urlparse(url).hostname
     if host not in LOOPBACK:
         raise SystemExit(f"refusing to load {host}: loopback only ({', '.join(LOOPBACK)})")
     if client_kind == "raw":
-        return await _run_raw(url, path, body, concurrency, requests, duration, headers or {})
+        return await _run_raw(url, path, body, concurrency, requests, duration, headers or {},
+                              content_type)
     latencies: list[float] = []
     statuses: dict[int, int] = {}
     errors = 0
     issued = 0
     limits = httpx.Limits(max_connections=concurrency, max_keepalive_connections=concurrency)
-    hdrs = {"content-type": "application/json", **(headers or {})}
+    hdrs = {"content-type": content_type, **(headers or {})}
     async with httpx.AsyncClient(base_url=url, limits=limits, timeout=30.0) as client:
         start = time.perf_counter()
         stop_at = start + duration
@@ -201,14 +216,15 @@ async def run_load(url: str, path: str, body: bytes | None, concurrency: int, re
 
 
 async def _run_raw(url: str, path: str, body: bytes | None, concurrency: int, requests: int,
-                   duration: float, headers: dict[str, str]) -> dict:
+                   duration: float, headers: dict[str, str],
+                   content_type: str = "application/json") -> dict:
     latencies: list[float] = []
     statuses: dict[int, int] = {}
     errors = 0
     issued = 0
     hdrs = dict(headers)
     if body is not None:
-        hdrs["Content-Type"] = "application/json"
+        hdrs["Content-Type"] = content_type
     clients = [RawClient(url) for _ in range(concurrency)]
     start = time.perf_counter()
     stop_at = start + duration
@@ -275,17 +291,18 @@ def measure(url: str, args: argparse.Namespace, server_pgid: int | None = None) 
     With ``server_pgid`` (a server started in its own session), also the server's CPU time per
     measurement request and the client's own.
     """
-    body = json.dumps({"shots": [synthetic_shot(args.samples)]}).encode()
+    body_kind = getattr(args, "body", "json")
+    path, body, ctype = shot_request(args.samples, body_kind)
     headers = {"X-API-Key": args.api_key} if args.api_key else None
     kind = args.client
-    asyncio.run(run_load(url, "/v1/measurements", body, args.concurrency, args.warmup, 30.0,
-                         headers, kind))
+    asyncio.run(run_load(url, path, body, args.concurrency, args.warmup, 30.0, headers, kind,
+                         ctype))
     base = asyncio.run(run_load(url, "/healthz", None, args.concurrency, args.requests,
                                 args.duration, headers, kind))
     cpu0 = group_cpu_seconds(server_pgid) if server_pgid else None
     own0 = os.times()
-    load = asyncio.run(run_load(url, "/v1/measurements", body, args.concurrency, args.requests,
-                                args.duration, headers, kind))
+    load = asyncio.run(run_load(url, path, body, args.concurrency, args.requests,
+                                args.duration, headers, kind, ctype))
     own1 = os.times()
     n = max(load["requests"], 1)
     load["client_cpu_ms"] = (own1.user - own0.user + own1.system - own0.system) / n * 1e3
@@ -294,7 +311,7 @@ def measure(url: str, args: argparse.Namespace, server_pgid: int | None = None) 
         load["server_cpu_ms"] = (cpu1 - cpu0) / n * 1e3 if cpu1 is not None else None
     load["loadavg_1min"] = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
     return {"baseline": base, "measurements": load, "body_bytes": len(body),
-            "samples": args.samples, "workers": args.workers, "client": kind}
+            "body": body_kind, "samples": args.samples, "workers": args.workers, "client": kind}
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -308,6 +325,8 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--samples", type=int, default=10_000)
     p.add_argument("--client", choices=("httpx", "raw"), default="httpx",
                    help="httpx.AsyncClient, or a minimal asyncio HTTP/1.1 client (less CPU)")
+    p.add_argument("--body", choices=("json", "binary"), default="json",
+                   help="the shot as JSON, or as raw float32 samples (application/octet-stream)")
     p.add_argument("--api-key", default=os.environ.get("SOLITONDE_API_KEY"))
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     args = p.parse_args(argv)
@@ -328,8 +347,9 @@ def main(argv: list[str] | None = None) -> dict:
             proc.wait(timeout=30)
         if tmp is not None:
             tmp.cleanup()
+    what = "JSON" if args.body == "json" else "float32, application/octet-stream"
     print(f"POST /v1/measurements, one {args.samples:,}-sample shot ({result['body_bytes']:,} "
-          f"bytes of JSON), {args.concurrency} concurrent clients ({args.client}), "
+          f"bytes of {what}), {args.concurrency} concurrent clients ({args.client}), "
           f"{args.workers} worker(s), {os.cpu_count()} cores")
     print(report(result["baseline"], "GET /healthz (baseline)"))
     print(report(result["measurements"], "POST /v1/measurements"))

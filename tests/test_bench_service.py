@@ -1,8 +1,9 @@
 """Benchmark: POST /v1/measurements throughput and latency under 16 concurrent clients.
 
 Run with ``.venv/bin/python -m pytest -m bench -s tests/test_bench_service.py``. Prints, per
-worker count and client, requests per second and p50/p99 latency for one 10,000-sample shot per
-request, with GET /healthz at the same concurrency as the same-run baseline (ratio printed).
+worker count, client and body (JSON, or raw float32 samples), requests per second and p50/p99
+latency for one 10,000-sample shot per request, with GET /healthz at the same concurrency as the
+same-run baseline (ratio printed).
 Targets from the issue: at least 300 req/s and p99 at most 50 ms on 2 cores.
 """
 
@@ -19,18 +20,22 @@ from service_support import start_uvicorn, stop_group
 
 
 @pytest.mark.bench
-@pytest.mark.parametrize(("workers", "client"), [(1, "raw"), (2, "raw"), (3, "raw"), (2, "httpx")])
-def test_bench_post_measurements(tmp_path: Path, workers: int, client: str) -> None:
+@pytest.mark.parametrize(("workers", "client", "body"), [
+    (1, "raw", "json"), (2, "raw", "json"), (3, "raw", "json"), (2, "httpx", "json"),
+    (1, "raw", "binary"), (2, "raw", "binary"),
+])
+def test_bench_post_measurements(tmp_path: Path, workers: int, client: str, body: str) -> None:
     """Bounded: 200 warm-up requests, then at most 3000 requests or 20 s per phase."""
     proc, url = start_uvicorn(tmp_path / "bench.sqlite", workers=workers)
     try:
         args = argparse.Namespace(samples=10_000, concurrency=16, requests=3000, duration=20.0,
-                                  warmup=200, api_key=None, client=client, workers=workers)
+                                  warmup=200, api_key=None, client=client, workers=workers,
+                                  body=body)
         result = measure(url, args, proc.pid)
     finally:
         stop_group(proc, signal.SIGINT)
     base, load = result["baseline"], result["measurements"]
-    print(f"\n{workers} worker(s), {client} client, {os.cpu_count()} cores, "
+    print(f"\n{workers} worker(s), {client} client, {body} body, {os.cpu_count()} cores, "
           f"{result['body_bytes']:,} bytes per request")
     print(report(base, "GET /healthz (baseline)"))
     print(report(load, "POST /v1/measurements"))
