@@ -218,16 +218,18 @@ def _run_dopri5(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
     u0 = setup.u.copy()
     peaks = new_peak_tracker()
     start = time.perf_counter()
-    status, done, w, plate_work, dissipated, accepted, rejected, nfev = integrate_dopri5(
+    out = integrate_dopri5(
         setup.u, setup.v, setup.w, u0, setup.m, setup.g, setup.a_s, setup.a_b, inv_z,
         setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_samples, plan.rtol,
         plan.max_steps, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
         setup.f_trace, setup.w_trace, peaks,
     )
     wall = time.perf_counter() - start
+    status, done, w, plate_work, dissipated, accepted, rejected, nfev, deviation = out
     setup.w = w
     return ChainRun(status, done, plate_work, dissipated, peaks, wall, extra={
         "steps_accepted": accepted, "steps_rejected": rejected, "rhs_evaluations": nfev,
+        "energy_deviation_step_ends_J": deviation,
     })
 
 

@@ -26,7 +26,12 @@ Error control is scipy's: the RMS over the components of ``err_i / (atol_i + rto
 ``rtol`` is the one accuracy knob.
 
 Outputs per sample come from the dense output of the step that contains the sample time: the
-sensor reading, the energy balance and (optionally) the particle fields. Peaks: the sampled
+sensor reading (from the few particles it involves: the sensor, its neighbours, the bottom
+particle and the plate) and, when traces are on, every particle field. The energy balance (chain
+energy as :func:`solitonde.model.chain.chain_energy`, plus the plate work W and the dissipated
+energy D) is computed from the integrator's own state at every accepted step end, not from the
+interpolant: energy at samples is interpolated between step ends (linearly in time); energy_drift
+is measured at step ends (the driver returns the largest deviation there). Peaks: the sampled
 readings go through :func:`solitonde.model.chain.track_peaks` (which sorts incident from
 reflected around the bottom-force maximum), and the three peaks it finds (incident, reflected,
 bottom) are then refined on the dense output itself by a golden-section search over the two
@@ -41,7 +46,17 @@ from math import sqrt
 import numpy as np
 from numba import njit
 
-from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T, hertz, track_peaks
+from .chain import (
+    PK_BOT_F,
+    PK_BOT_T,
+    PK_INC_F,
+    PK_INC_T,
+    PK_REF_F,
+    PK_REF_T,
+    chain_energy,
+    hertz,
+    track_peaks,
+)
 
 RUN_OK = 0
 RUN_NONFINITE = 1
@@ -129,52 +144,97 @@ def _rhs(
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def _sample_block(
-    p: np.ndarray, th: np.ndarray, cnt: int, k0: int, u0: np.ndarray, n: int, m: float,
-    g: float, a_s: float, a_b: float, tau: float, sensor: int, scratch: np.ndarray,
-    samples: np.ndarray, energy: np.ndarray, u_trace: np.ndarray, v_trace: np.ndarray,
-    f_trace: np.ndarray, w_trace: np.ndarray,
-) -> None:
-    """Samples k0 .. k0 + cnt - 1 at step fractions ``th[:cnt]`` from one step's dense output.
+def _poly(p: np.ndarray, i: int, x: float) -> float:
+    """Component i of the dense output ``p`` (5 x M, powers of theta) at theta = x."""
+    return p[0, i] + x * (p[1, i] + x * (p[2, i] + x * (p[3, i] + x * p[4, i])))
 
-    ``p`` (5 x M) is the continuous extension in powers of theta. The samples of one step are
-    evaluated together, particle by particle, so that the inner loops run over samples (they
-    vectorise, and the energy sums need no horizontal reductions). Fills the sensor reading, the
-    energy balance (chain energy as :func:`solitonde.model.chain.chain_energy`, plus the plate work
-    and the dissipated energy), the traces when on, and ``scratch[9, :cnt]`` with the
-    bottom force for the peak tracker. ``scratch`` is (10, >= cnt) work space.
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _contact(a_s: float, tau: float, d: float, rate: float) -> float:
+    """Sphere contact force at overlap d and closing rate d' (elastic Hertz when tau = 0)."""
+    if d <= 0.0:
+        return 0.0
+    sd = sqrt(d)
+    total = a_s * d * sd
+    if tau > 0.0:
+        total += 1.5 * a_s * tau * sd * rate
+        total = total if total > 0.0 else 0.0
+    return total
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _sample_sensor(
+    p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
+    tau: float, sensor: int, samples: np.ndarray, f_bot: np.ndarray,
+) -> None:
+    """Sensor readings of samples k0 .. k0 + cnt - 1 at step fractions ``th[:cnt]``.
+
+    Evaluates only what a reading needs (traces off): the positions of particles sensor - 1,
+    sensor, sensor + 1 (the bottom contact instead when the sensor is particle N), u[N] and w
+    for the bottom force (into ``f_bot[:cnt]``, for the peak tracker), and the velocities of the
+    sensor's neighbours only when the contacts are damped (tau > 0).
     """
     np1 = n + 1
-    traces = u_trace.shape[0] > 0
-    u_cur, u_prev, v_cur, v_prev = scratch[0], scratch[1], scratch[2], scratch[3]
-    kin, grav, pot, force, f_up = scratch[4], scratch[5], scratch[6], scratch[7], scratch[8]
-    f_bot = scratch[9]
+    iw = 2 * np1
+    up = sensor - 1
+    last = sensor == n
+    damped = tau > 0.0
     for s in range(cnt):
-        kin[s] = 0.0
-        grav[s] = 0.0
-        pot[s] = 0.0
+        x = th[s]
+        db = _poly(p, n, x) - _poly(p, iw, x)
+        db = db if db > 0.0 else 0.0
+        fb = a_b * db * sqrt(db)
+        u_up = _poly(p, up, x)
+        u_mid = _poly(p, sensor, x)
+        rate_up = 0.0
+        if damped:
+            v_mid = _poly(p, np1 + sensor, x)
+            rate_up = _poly(p, np1 + up, x) - v_mid
+        above = _contact(a_s, tau, u_up - u_mid, rate_up)
+        if last:
+            below = fb
+        else:
+            rate_dn = 0.0
+            if damped:
+                rate_dn = v_mid - _poly(p, np1 + sensor + 1, x)
+            below = _contact(a_s, tau, u_mid - _poly(p, sensor + 1, x), rate_dn)
+        samples[k0 + s] = 0.5 * (above + below)
+        f_bot[s] = fb
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+def _sample_block(
+    p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
+    tau: float, sensor: int, scratch: np.ndarray, samples: np.ndarray, u_trace: np.ndarray,
+    v_trace: np.ndarray, f_trace: np.ndarray, w_trace: np.ndarray,
+) -> None:
+    """Samples k0 .. k0 + cnt - 1 with every particle field (traces on), from one step's dense
+    output ``p`` (5 x M, powers of theta) at step fractions ``th[:cnt]``.
+
+    The samples of one step are evaluated together, particle by particle, so that the inner
+    loops run over samples (they vectorise). Fills the sensor reading, the traces and
+    ``scratch[9, :cnt]`` with the bottom force for the peak tracker. ``scratch`` is (10, >= cnt)
+    work space.
+    """
+    np1 = n + 1
+    u_cur, u_prev, v_cur, v_prev = scratch[0], scratch[1], scratch[2], scratch[3]
+    force, f_up, f_bot = scratch[7], scratch[8], scratch[9]
+    for s in range(cnt):
         f_up[s] = 0.0
     for i in range(np1):
         a0, a1, a2, a3, a4 = p[0, i], p[1, i], p[2, i], p[3, i], p[4, i]
         b0, b1, b2, b3, b4 = p[0, np1 + i], p[1, np1 + i], p[2, np1 + i], p[3, np1 + i], \
             p[4, np1 + i]
-        ref = u0[i]
         for s in range(cnt):
             x = th[s]
-            ui = a0 + x * (a1 + x * (a2 + x * (a3 + x * a4)))
-            vi = b0 + x * (b1 + x * (b2 + x * (b3 + x * b4)))
-            u_cur[s] = ui
-            v_cur[s] = vi
-            kin[s] += vi * vi
-            grav[s] += ui - ref
+            u_cur[s] = a0 + x * (a1 + x * (a2 + x * (a3 + x * a4)))
+            v_cur[s] = b0 + x * (b1 + x * (b2 + x * (b3 + x * b4)))
         if i > 0:
             j = i - 1
             for s in range(cnt):
                 d = u_prev[s] - u_cur[s]
                 d = d if d > 0.0 else 0.0
-                el = a_s * d * sqrt(d)
-                pot[s] += d * el
-                force[s] = el
+                force[s] = a_s * d * sqrt(d)
             if tau > 0.0:
                 for s in range(cnt):
                     d = u_prev[s] - u_cur[s]
@@ -188,34 +248,33 @@ def _sample_block(
             elif j == sensor:
                 for s in range(cnt):
                     f_up[s] += force[s]
-            if traces:
-                for s in range(cnt):
-                    f_trace[k0 + s, j] = force[s]
-        if traces:
             for s in range(cnt):
-                u_trace[k0 + s, i] = u_cur[s]
-                v_trace[k0 + s, i] = v_cur[s]
+                f_trace[k0 + s, j] = force[s]
+        for s in range(cnt):
+            u_trace[k0 + s, i] = u_cur[s]
+            v_trace[k0 + s, i] = v_cur[s]
         u_cur, u_prev = u_prev, u_cur
         v_cur, v_prev = v_prev, v_cur
     iw = 2 * np1
     for s in range(cnt):
-        x = th[s]
-        w = p[0, iw] + x * (p[1, iw] + x * (p[2, iw] + x * (p[3, iw] + x * p[4, iw])))
-        work = p[0, iw + 1] + x * (p[1, iw + 1] + x * (p[2, iw + 1] + x * (p[3, iw + 1]
-                                                                           + x * p[4, iw + 1])))
-        lost = p[0, iw + 2] + x * (p[1, iw + 2] + x * (p[2, iw + 2] + x * (p[3, iw + 2]
-                                                                           + x * p[4, iw + 2])))
+        w = _poly(p, iw, th[s])
         db = u_prev[s] - w
         db = db if db > 0.0 else 0.0
         fb = a_b * db * sqrt(db)
         f_bot[s] = fb
         reading = f_up[s] + fb if sensor == n else f_up[s]
         samples[k0 + s] = 0.5 * reading
-        energy[k0 + s] = (0.5 * m * kin[s] + 0.4 * (pot[s] + db * fb) - m * g * grav[s]
-                          + work + lost)
-        if traces:
-            f_trace[k0 + s, n] = fb
-            w_trace[k0 + s] = w
+        f_trace[k0 + s, n] = fb
+        w_trace[k0 + s] = w
+
+
+@njit(cache=True)
+def _balance(y: np.ndarray, n: int, u0: np.ndarray, m: float, g: float, a_s: float,
+             a_b: float) -> float:
+    """Energy balance of state ``y``: chain energy (as chain_energy) + plate work + dissipated."""
+    np1 = n + 1
+    return (chain_energy(y[:np1], y[np1:2 * np1], u0, y[2 * np1], m, g, a_s, a_b)
+            + y[2 * np1 + 1] + y[2 * np1 + 2])
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -332,7 +391,7 @@ def integrate_dopri5(
     f_trace: np.ndarray,
     w_trace: np.ndarray,
     pk: np.ndarray,
-) -> tuple[int, int, float, float, float, int, int, int]:
+) -> tuple[int, int, float, float, float, int, int, int, float]:
     """Integrate chain + plate from t = 0 to (n_samples - 1) x interval with DOPRI5.
 
     Arguments as :func:`solitonde.model.boundary.integrate_dashpot` (``interval``: the sample
@@ -344,13 +403,22 @@ def integrate_dopri5(
     positions and the plate deflection, the impact velocity (the largest initial speed) for
     velocities, and the striker's kinetic energy E for the plate work and dissipated energy.
 
+    ``energy`` is the balance (chain energy + plate work + dissipated) computed from the
+    integrator's state at the accepted step ends; energy at samples is interpolated between step
+    ends (linearly in time), and the largest deviation from the start is measured at the step
+    ends themselves (the last value returned). Traces (``u_trace`` with rows) evaluate every
+    particle at every sample; without them a sample evaluates only the sensor's neighbours, the
+    bottom particle and the plate.
+
     Returns (status, samples recorded, final w, work done on the plate J, dissipated energy J,
-    accepted steps, rejected steps, right-hand-side evaluations).
+    accepted steps, rejected steps, right-hand-side evaluations, largest |balance - start| over
+    the step ends J).
     """
     n = u.size - 1
     np1 = n + 1
     size = 2 * np1 + 3
     inv_m = 1.0 / m
+    traces = u_trace.shape[0] > 0
     t_end = (n_samples - 1) * interval
     v_imp = 1e-9
     for i in range(np1):
@@ -374,7 +442,8 @@ def integrate_dopri5(
     rc = np.empty((5, size))
     pw = np.empty((5, size))
     th = np.empty(_BLOCK)
-    scratch = np.empty((10, _BLOCK))
+    scratch = np.empty((10 if traces else 1, _BLOCK))
+    f_bot = scratch[scratch.shape[0] - 1]
     e = np.empty(size)
     f = np.empty(max(n, 1))
     track_idx = np.empty(_TRACK, dtype=np.int64)
@@ -403,14 +472,21 @@ def integrate_dopri5(
         for j in range(1, 5):
             pw[j, i] = 0.0
     th[0] = 0.0
-    _sample_block(pw, th, 1, 0, u0, n, m, g, a_s, a_b, tau, sensor, scratch, samples, energy,
-                  u_trace, v_trace, f_trace, w_trace)
-    if not (np.isfinite(samples[0]) and np.isfinite(energy[0])):
-        return RUN_NONFINITE, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev
+    if traces:
+        _sample_block(pw, th, 1, 0, n, a_s, a_b, tau, sensor, scratch, samples, u_trace,
+                      v_trace, f_trace, w_trace)
+    else:
+        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, tau, sensor, samples, f_bot)
+    e_start = _balance(y, n, u0, m, g, a_s, a_b)
+    energy[0] = e_start
+    e_prev = e_start
+    deviation = 0.0
+    if not (np.isfinite(samples[0]) and np.isfinite(e_start)):
+        return RUN_NONFINITE, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
     if n_samples == 1:
-        pk[PK_BOT_F] = scratch[9, 0]
+        pk[PK_BOT_F] = f_bot[0]
         pk[PK_BOT_T] = 0.0
-        return RUN_OK, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev
+        return RUN_OK, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
 
     # Initial step (Hairer's HINIT, RMS norms as scipy's select_initial_step).
     d0 = 0.0
@@ -445,10 +521,10 @@ def integrate_dopri5(
     while next_k < n_samples:
         if accepted + rejected >= max_steps:
             return (RUN_STEP_BUDGET, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
-                    accepted, rejected, nfev)
+                    accepted, rejected, nfev, deviation)
         if h < h_min:
             return (RUN_STEP_TOO_SMALL, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
-                    accepted, rejected, nfev)
+                    accepted, rejected, nfev, deviation)
         last = t + h >= t_end * (1.0 - 1e-13)
         if last:
             h = t_end - t
@@ -479,7 +555,7 @@ def integrate_dopri5(
         err = _rms(e, y, y1, atol, rtol)
         if not np.isfinite(err):
             return (RUN_NONFINITE, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
-                    accepted, rejected, nfev)
+                    accepted, rejected, nfev, deviation)
         fac11 = err**EXPO
         if err > 1.0:
             rejected += 1
@@ -514,6 +590,11 @@ def integrate_dopri5(
         n_hist += 1
 
         t_new = t_end if last else t + h
+        e_new = _balance(y1, n, u0, m, g, a_s, a_b)
+        if not np.isfinite(e_new):
+            return (RUN_NONFINITE, next_k, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
+                    accepted + 1, rejected, nfev, deviation)
+        deviation = max(deviation, abs(e_new - e_start))
         # The samples in (t, t + h], in blocks of at most _BLOCK.
         stop = next_k
         while stop < n_samples and (stop * interval <= t_new or (last and stop ==
@@ -531,14 +612,18 @@ def integrate_dopri5(
             for c in range(cnt):
                 kk = next_k + c
                 th[c] = 1.0 if (last and kk == n_samples - 1) else (kk * interval - t) / h
-            _sample_block(pw, th, cnt, next_k, u0, n, m, g, a_s, a_b, tau, sensor, scratch,
-                          samples, energy, u_trace, v_trace, f_trace, w_trace)
+            if traces:
+                _sample_block(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, scratch, samples,
+                              u_trace, v_trace, f_trace, w_trace)
+            else:
+                _sample_sensor(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, samples, f_bot)
             for c in range(cnt):
                 kk = next_k + c
-                if not (np.isfinite(samples[kk]) and np.isfinite(energy[kk])):
+                energy[kk] = (1.0 - th[c]) * e_prev + th[c] * e_new
+                if not np.isfinite(samples[kk]):
                     return (RUN_NONFINITE, kk + 1, y1[2 * np1], y1[2 * np1 + 1],
-                            y1[2 * np1 + 2], accepted + 1, rejected, nfev)
-                track_peaks(pk, kk * interval, interval, samples[kk], scratch[9, c])
+                            y1[2 * np1 + 2], accepted + 1, rejected, nfev, deviation)
+                track_peaks(pk, kk * interval, interval, samples[kk], f_bot[c])
             next_k += cnt
 
         accepted += 1
@@ -555,13 +640,14 @@ def integrate_dopri5(
             k[0, i] = k[6, i]
         t = t_new
         h = h_new
+        e_prev = e_new
 
     for i in range(np1):
         u[i] = y[i]
         v[i] = y[np1 + i]
     if not pk[PK_BOT_F] >= 0.0:
         return (RUN_NONFINITE, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted,
-                rejected, nfev)
+                rejected, nfev, deviation)
     # Refine the three peaks on the dense output (each within one sample interval of the
     # parabola through its samples).
     for slot_f, slot_t, which in ((PK_INC_F, PK_INC_T, 0), (PK_REF_F, PK_REF_T, 0),
@@ -572,4 +658,4 @@ def integrate_dopri5(
             pk[slot_t] = tp
             pk[slot_f] = fp
     return (RUN_OK, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted, rejected,
-            nfev)
+            nfev, deviation)
