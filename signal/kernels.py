@@ -104,8 +104,10 @@ def prefix_sum(x: np.ndarray) -> np.ndarray:
     """``c[0] = 0``, ``c[i + 1] = c[i] + x[i]``: the running sum every moving average here uses."""
     c = np.empty(x.size + 1)
     c[0] = 0.0
+    acc = 0.0  # the sum stays in a register: no store-to-load round trip on the chain
     for i in range(x.size):
-        c[i + 1] = c[i] + x[i]
+        acc += x[i]
+        c[i + 1] = acc
     return c
 
 
@@ -134,8 +136,10 @@ def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
     """Centred moving average over 2h+1 samples by a running (prefix) sum; shrinks at the ends."""
     n = x.size
     c[0] = 0.0
+    acc = 0.0
     for i in range(n):
-        c[i + 1] = c[i] + x[i]
+        acc += x[i]
+        c[i + 1] = acc
     _box_from_prefix(c, h, out)
 
 
@@ -162,6 +166,48 @@ def triangle(x: np.ndarray, h: int) -> np.ndarray:
     _box_into(x, h, c, mid)
     _box_into(mid, h, c, out)
     return out
+
+
+@njit(cache=True)
+def prefix_and_triangle(x: np.ndarray, h: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(prefix_sum(x), triangle(x, h))``, bit for bit, with the two running sums in one loop.
+
+    A running sum is a chain of dependent additions; two independent chains side by side cost
+    about what one does. The first box's value at ``j`` is ready once the first sum reaches
+    ``j + h + 1``, so the second sum trails the first by ``h + 1`` samples.
+    """
+    n = x.size
+    if h < 1 or n <= 2 * h:
+        c = prefix_sum(x)
+        return c, triangle_prefix(x, c, h, 1.0)
+    c = np.empty(n + 1)
+    c2 = np.empty(n + 1)
+    c[0] = 0.0
+    c2[0] = 0.0
+    inv = 1.0 / (2 * h + 1)
+    acc = 0.0
+    acc2 = 0.0
+    for i in range(h):
+        acc += x[i]
+        c[i + 1] = acc
+    for i in range(h, 2 * h):  # box values that shrink at the start
+        acc += x[i]
+        c[i + 1] = acc
+        acc2 += acc / (i + 1)
+        c2[i - h + 1] = acc2
+    lower = c[: n - 2 * h]
+    for k in range(n - 2 * h):  # sample i = k + 2h; box value at j = k + h
+        acc += x[k + 2 * h]
+        c[k + 2 * h + 1] = acc
+        acc2 += (acc - lower[k]) * inv
+        c2[k + h + 1] = acc2
+    for j in range(n - h, n):  # and at the end
+        lo = j - h
+        acc2 += (acc - c[lo]) / (n - lo)
+        c2[j + 1] = acc2
+    out = np.empty(n)
+    _box_from_prefix(c2, h, out)
+    return c, out
 
 
 @njit(cache=True)
@@ -668,8 +714,7 @@ def analyze(
     # Polarity, from the lightly smoothed trace against the record's median.
     step = max(1, n // 1024)
     ref = np.median(x[::step])
-    csum = prefix_sum(x)
-    s1 = triangle_prefix(x, csum, 2, 1.0)
+    csum, s1 = prefix_and_triangle(x, 2)
     sign = sign_in
     if sign == 0.0:
         sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0

@@ -267,36 +267,35 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     if opts.lowpass_hz is not None:
         x = lowpass(x, dt, opts.lowpass_hz)
     x = np.ascontiguousarray(x, dtype=np.float64)
-    head, rows = K.analyze(x, *kernel_args(opts, x.size, dt))
+    head_array, rows_array = K.analyze(x, *kernel_args(opts, x.size, dt))
+    head = head_array.tolist()  # Python floats: cheaper to read one by one than numpy scalars
+    rows = rows_array.tolist()
     sign = head[K.H_SIGN]
-    inverted = sign < 0
     flags: set[str] = set()
     notes: list[str] = []
-    if inverted:
+    if sign < 0:
         flags.add("inverted_polarity")
-    noise = float(head[K.H_SIGMA])
-    thr = float(head[K.H_THR])
-    common = {"noise_N": noise, "threshold_N": thr, "pretrigger_samples": int(head[K.H_NPRE]),
-              "smooth_samples": int(head[K.H_SMOOTH])}
+    noise = head[K.H_SIGMA]
+    common = {"noise_N": noise, "threshold_N": head[K.H_THR],
+              "pretrigger_samples": int(head[K.H_NPRE]), "smooth_samples": int(head[K.H_SMOOTH])}
     if head[K.H_EARLY]:
         flags.add("truncated")
         notes.append("the incident pulse starts before a pre-trigger segment could be taken")
-    if rows.shape[0] == 0:
+    if not rows:
         return Detection(
-            baseline_N=float(sign * head[K.H_BASE]), pulses=(), incident=None, reflected=None,
+            baseline_N=sign * head[K.H_BASE], pulses=(), incident=None, reflected=None,
             secondary=(), flags=_ordered(flags), notes=(*notes, "no pulse rises above the noise"),
             **common,
         )
     pulses = []
     for row in rows:
-        amp = float(row[K.P_AMP])
+        amp = row[K.P_AMP]
         if row[K.P_TRUNC]:
             flags.add("truncated")
         pulses.append(Pulse(
-            time_s=t0 + float(row[K.P_TIME]) * dt, peak_N=amp,
-            baseline_N=float(sign * row[K.P_BASE]), width_s=float(row[K.P_WIDTH]) * dt,
-            onset_s=t0 + float(row[K.P_ONSET]) * dt, end_s=t0 + float(row[K.P_END]) * dt,
-            snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
+            time_s=t0 + row[K.P_TIME] * dt, peak_N=amp, baseline_N=sign * row[K.P_BASE],
+            width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
+            end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
             method="parabola" if row[K.P_METHOD] else "template",
         ))
     incident = pulses[0]
@@ -307,12 +306,12 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     upper = None
     if reflected is None:
         flags.add("no_reflection")
-        upper = float(head[K.H_UPPER])
-    elif rows[0, K.P_MERGED]:
+        upper = head[K.H_UPPER]
+    elif rows[0][K.P_MERGED]:
         flags.add("overlapping")
-    if reflected is not None and len(pulses) > 2 and rows[1, K.P_MERGED]:
+    if reflected is not None and len(pulses) > 2 and rows[1][K.P_MERGED]:
         flags.add("overlapping")
-    if reflected is not None and not rows[1, K.P_LEVEL]:
+    if reflected is not None and not rows[1][K.P_LEVEL]:
         notes.append("no quiet samples before the reflection: its baseline is the slow trend")
     check = reflected if reflected is not None else incident
     if check.snr_db < opts.low_snr_db:
