@@ -276,6 +276,10 @@ def detrended_mad(x: np.ndarray) -> float:
     return np.median(r)
 
 
+SKIP_BLOCK = 16
+"""Samples the peak search tests at once before walking them one by one."""
+
+
 @njit(cache=True)
 def find_peaks_hysteresis(v: np.ndarray, thr: float, delta: float) -> np.ndarray:
     """Indices of peaks of ``v`` that rise above ``thr`` and stand out by ``delta`` on both sides.
@@ -290,27 +294,45 @@ def find_peaks_hysteresis(v: np.ndarray, thr: float, delta: float) -> np.ndarray
     seeking_max = True
     cur = v[0]
     icur = 0
-    for i in range(1, n):
-        x = v[i]
-        if seeking_max:
-            if x > cur:
-                cur = x
-                icur = i
-            elif x < cur - delta:
-                if cur > thr:
-                    out[k] = icur
-                    k += 1
-                    seeking_max = False
-                cur = x
-                icur = i
-        else:
-            if x < cur:
-                cur = x
-                icur = i
-            elif x > cur + delta:
-                seeking_max = True
-                cur = x
-                icur = i
+    i = 1
+    while i < n:
+        # A block in which no sample makes a new extreme or leaves the hysteresis band changes
+        # nothing: skip it on its (vectorised) max and min, else walk it sample by sample. Most of
+        # a smoothed record is such blocks.
+        stop = min(i + SKIP_BLOCK, n)
+        if stop - i == SKIP_BLOCK:
+            block = v[i:stop]
+            hi = vmax(block)
+            lo = vmin(block)
+            if seeking_max:
+                unchanged = hi <= cur and lo >= cur - delta
+            else:
+                unchanged = lo >= cur and hi <= cur + delta
+            if unchanged:
+                i = stop
+                continue
+        for j in range(i, stop):
+            x = v[j]
+            if seeking_max:
+                if x > cur:
+                    cur = x
+                    icur = j
+                elif x < cur - delta:
+                    if cur > thr:
+                        out[k] = icur
+                        k += 1
+                        seeking_max = False
+                    cur = x
+                    icur = j
+            else:
+                if x < cur:
+                    cur = x
+                    icur = j
+                elif x > cur + delta:
+                    seeking_max = True
+                    cur = x
+                    icur = j
+        i = stop
     if seeking_max and cur > thr:
         out[k] = icur
         k += 1

@@ -1,0 +1,90 @@
+"""The fast building blocks of signal.kernels give exactly what the plain formulas give.
+
+Detection results are kept bit for bit by the speed-ups (vectorised extrema, one running sum
+shared by every smoother, two running sums in one loop, the peak search skipping quiet blocks),
+so each is checked here for equality, not closeness, against the straightforward version.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from solitonde.signal import kernels as K
+
+
+def _peaks_reference(v: np.ndarray, thr: float, delta: float) -> list[int]:
+    """Billauer's peakdet with a floor, one sample at a time (what find_peaks_hysteresis does)."""
+    out, seeking_max, cur, icur = [], True, v[0], 0
+    for i in range(1, v.size):
+        x = v[i]
+        if seeking_max:
+            if x > cur:
+                cur, icur = x, i
+            elif x < cur - delta:
+                if cur > thr:
+                    out.append(icur)
+                    seeking_max = False
+                cur, icur = x, i
+        elif x < cur:
+            cur, icur = x, i
+        elif x > cur + delta:
+            seeking_max, cur, icur = True, x, i
+    if seeking_max and cur > thr:
+        out.append(icur)
+    return out
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 64, 1001])
+def test_extrema_equal_numpy(n):
+    rng = np.random.default_rng(n)
+    for x in (rng.normal(size=n), np.round(rng.normal(size=n)), np.full(n, -3.0)):
+        assert K.vmax(x) == x.max()
+        assert K.vmin(x) == x.min()
+        assert K.vargmax(x) == int(np.argmax(x))  # first of equal maxima, as numpy
+
+
+@pytest.mark.parametrize("n", [40, 41, 333, 5000])
+@pytest.mark.parametrize("h", [0, 1, 2, 7, 20, 45])
+def test_shared_running_sum_smoothers_equal_triangle(n, h):
+    x = np.cumsum(np.random.default_rng(n + h).normal(size=n)) + 1e3
+    c, s = K.prefix_and_triangle(x, h)
+    np.testing.assert_array_equal(c, K.prefix_sum(x))
+    np.testing.assert_array_equal(c[1:], np.cumsum(x))
+    np.testing.assert_array_equal(s, K.triangle(x, h))
+    np.testing.assert_array_equal(K.triangle_prefix(x, c, h, 1.0), K.triangle(x, h))
+    np.testing.assert_array_equal(K.triangle_prefix(x, c, h, -1.0), K.triangle(-x, h))
+
+
+def test_triangle_is_the_moving_average_twice():
+    x = np.random.default_rng(3).normal(size=300)
+    h = 4
+    box = np.convolve(x, np.ones(2 * h + 1) / (2 * h + 1), mode="same")
+    twice = np.convolve(box, np.ones(2 * h + 1) / (2 * h + 1), mode="same")
+    inner = slice(2 * h, x.size - 2 * h)  # away from the shrinking ends
+    np.testing.assert_allclose(K.triangle(x, h)[inner], twice[inner], rtol=0, atol=1e-13)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_peak_search_with_block_skipping_equals_the_sample_walk(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(20, 4000))
+    v = K.triangle(np.cumsum(rng.normal(size=n)), int(rng.integers(0, 30)))
+    if seed % 2:
+        v = np.round(v)  # ties at the band edges
+    for thr, delta in ((0.0, 0.5), (np.median(v), 2.0), (v.max() - 1.0, 5.0)):
+        assert K.find_peaks_hysteresis(v, thr, delta).tolist() == _peaks_reference(v, thr, delta)
+
+
+def test_trend_fit_is_least_squares_on_the_quiet_samples():
+    n = 2000
+    rng = np.random.default_rng(7)
+    ramp = K.unit_ramp(n)
+    np.testing.assert_array_equal(ramp, np.arange(n) / n)
+    y = 3.0 - 2.0 * ramp + 5.0 * ramp**2 + rng.normal(0, 0.01, n)
+    mask = np.ones(n, dtype=np.bool_)
+    mask[300:700] = False
+    coef, count = K.quadratic_fit(y, mask, 2, ramp)
+    expected = np.polynomial.polynomial.polyfit(ramp[mask], y[mask], 2)
+    assert count == mask.sum()
+    np.testing.assert_allclose(coef, expected, rtol=1e-9, atol=1e-11)
