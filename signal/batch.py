@@ -103,8 +103,9 @@ def check_batch(samples: Any) -> np.ndarray:
     if x.shape[1] < MIN_SAMPLES:
         raise WaveformError("samples", f"too few samples per shot ({x.shape[1]})",
                             f"at least {MIN_SAMPLES} samples per shot")
-    if not np.isfinite(x).all():
-        shot, sample = np.argwhere(~np.isfinite(x))[0]
+    bad = K.first_nonfinite(x)
+    if bad >= 0:
+        shot, sample = divmod(bad, x.shape[1])
         raise WaveformError("samples", f"contains NaN or inf (first at shot {shot}, sample "
                             f"{sample}: {x[shot, sample]})", "finite numbers")
     return x
@@ -156,6 +157,8 @@ def extract_batch(
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise WaveformError("threads", f"got {threads!r}", "a positive integer")
     args = (*kernel_args(opts, x.shape[1], dt), 2 + opts.max_secondary)
+    x = x.view()
+    x.setflags(write=False)  # rows then have the type of a Waveform's samples: one compiled kernel
     if threads == 1 or x.shape[0] == 1:
         parts = [K.analyze_batch(x, *args)]
     else:

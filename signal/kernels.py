@@ -99,6 +99,28 @@ def vargmax(a: np.ndarray) -> int:
     return i
 
 
+EXPONENT_BITS = np.uint64(0x7FF0000000000000)
+
+
+@njit(cache=True)
+def first_nonfinite(x: np.ndarray) -> int:
+    """Flat index of the first NaN or inf in a C-contiguous float64 array, or -1.
+
+    An IEEE double is NaN or inf exactly when its exponent bits are all set; counting those is
+    integer work the compiler vectorises, so a clean array costs one fast pass.
+    """
+    bits = x.reshape(x.size).view(np.uint64)
+    count = 0
+    for i in range(bits.size):
+        count += (bits[i] & EXPONENT_BITS) == EXPONENT_BITS
+    if count == 0:
+        return -1
+    i = 0
+    while (bits[i] & EXPONENT_BITS) != EXPONENT_BITS:
+        i += 1
+    return i
+
+
 @njit(cache=True)
 def prefix_sum(x: np.ndarray) -> np.ndarray:
     """``c[0] = 0``, ``c[i + 1] = c[i] + x[i]``: the running sum every moving average here uses."""

@@ -86,7 +86,7 @@ def test_throughput():
     extract_many(shots[:5])  # compile / load numba caches outside the timing
     extract_batch(block[:5], DT)
     ours = _rate(lambda lo, hi: extract_many(shots[lo:hi]), SHOTS)
-    batch = _rate(lambda lo, hi: extract_batch(block[lo:hi], DT), SHOTS)
+    batch = _rate(lambda lo, hi: extract_batch(block[lo:hi], DT), SHOTS, chunk=20)
     kernel = _rate(kernel_only, SHOTS)
     base = _rate(lambda lo, hi: [scipy_pipeline(w, sos) for w in shots[lo:hi]], SHOTS)
     feats = extract_many(shots[:50])

@@ -88,3 +88,14 @@ def test_trend_fit_is_least_squares_on_the_quiet_samples():
     expected = np.polynomial.polynomial.polyfit(ramp[mask], y[mask], 2)
     assert count == mask.sum()
     np.testing.assert_allclose(coef, expected, rtol=1e-9, atol=1e-11)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_first_nonfinite_finds_the_first_bad_sample(bad):
+    x = np.random.default_rng(1).normal(size=(5, 200))
+    x[0, :3] = (1.7e308, -1.7e308, 5e-324)  # extreme but finite
+    assert K.first_nonfinite(x) == -1
+    x[3, 17] = bad
+    x[4, 2] = bad
+    assert K.first_nonfinite(x) == 3 * 200 + 17
+    assert K.first_nonfinite(x[3]) == 17
