@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WaveformError
+from .kernels import first_nonfinite
 
 UNITS = ("N", "V")
 MIN_SAMPLES = 32
@@ -52,9 +53,8 @@ def check_samples(samples: Any, name: str = "samples") -> np.ndarray:
         raise WaveformError(
             name, f"too few samples ({array.size})", f"at least {MIN_SAMPLES} samples per shot"
         )
-    finite = np.isfinite(array)
-    if not finite.all():
-        bad = int(np.flatnonzero(~finite)[0])
+    bad = first_nonfinite(array)
+    if bad >= 0:
         raise WaveformError(
             name, f"contains NaN or inf (first at sample {bad}: {array[bad]})", "finite numbers"
         )
