@@ -34,10 +34,11 @@ log = logging.getLogger("solitonde.instrument")
 INGEST_THREADS = 1
 """Worker threads per process that parse, measure and store posted shots (one FIFO lane).
 
-The ingest holds the GIL most of the time, so more threads add no throughput; they share the
-interpreter by 5 ms switch slices in no particular order, which lets some requests wait behind
-several later ones (a p99 of 3x the median measured at 16 clients). One lane serves the
-requests in arrival order; the event loop still reads bodies and answers ``/healthz`` meanwhile.
+The ingest holds the GIL most of the time, so more threads add no throughput: they only share
+the interpreter in 5 ms switch slices in no particular order, so a request can wait behind
+later ones. One lane serves them in arrival order (equal shots wait about equally long) and
+costs less switching; the event loop still reads bodies and answers ``/healthz`` meanwhile.
+Uploaded files get a lane of their own (:attr:`Service.upload_lane`).
 """
 
 try:
@@ -57,7 +58,9 @@ class Service:
     shot_model: type[Strict]
     measurement_model: type[Strict]
     ingest_lane: Any = None
-    """``anyio.CapacityLimiter`` the measurement ingest runs under (made in the lifespan)."""
+    """``anyio.CapacityLimiter`` the JSON and binary ingest runs under (made in the lifespan)."""
+    upload_lane: Any = None
+    """The same for uploaded files, which can take seconds: shots never queue behind them."""
 
     def close(self) -> None:
         self.store.close()
@@ -136,7 +139,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         if not estimator.loaded:
             log.warning("serving without estimates: %s", estimator.reason)
         svc = Service(settings, store, estimator, UploadDir(), shot_model, measurement_model,
-                      anyio.CapacityLimiter(INGEST_THREADS))
+                      anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS))
         app.state.service = svc
         # Everything loaded so far (numpy, pandas, matplotlib, the table: ~170k objects) lives
         # as long as the process; a full collection walks all of it (50-150 ms measured), a

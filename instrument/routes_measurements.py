@@ -273,7 +273,7 @@ async def _ingest_upload(svc: Any, request: Request) -> dict[str, Any]:
         fmt = pick_format(opts.format, upload.filename)
         return await anyio.to_thread.run_sync(_ingest_file, svc, upload.file, fmt, opts,
                                               client_name(upload.filename),
-                                              limiter=svc.ingest_lane)
+                                              limiter=svc.upload_lane)
     finally:
         await form.close()
 
