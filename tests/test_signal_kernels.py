@@ -99,3 +99,19 @@ def test_first_nonfinite_finds_the_first_bad_sample(bad):
     x[4, 2] = bad
     assert K.first_nonfinite(x) == 3 * 200 + 17
     assert K.first_nonfinite(x[3]) == 17
+
+
+def test_analyze_makes_its_own_ramp_when_given_none_of_the_right_size():
+    from solitonde.signal.pulses import DetectOptions, kernel_args
+    from solitonde.signal.synth import degrade, pulse_train
+
+    n, dt = 3000, 1e-7
+    x = pulse_train(n, dt, [(40e-6, 30.0, 30e-6), (200e-6, 14.0, 32e-6)])
+    x = degrade(x, 30.0, np.random.default_rng(4), 30.0, drift=0.05)
+    args = kernel_args(DetectOptions(), n, dt)
+    head, rows = K.analyze(x, *args)
+    for ramp in (np.empty(0), K.unit_ramp(n - 1)):
+        other_head, other_rows = K.analyze(x, *args[:-1], ramp)
+        np.testing.assert_array_equal(other_head, head)
+        np.testing.assert_array_equal(other_rows, rows)
+    assert rows.shape[0] == 2
