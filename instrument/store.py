@@ -133,7 +133,12 @@ class Store:
     writers and WAL lets readers run beside them.
     """
 
-    CHECKPOINT_INTERVAL_S = 0.5
+    CHECKPOINT_INTERVAL_S = 0.1
+    """Under sustained writes the WAL restarts only when it reaches :attr:`AUTOCHECKPOINT_PAGES`
+    and the writer that crosses it checkpoints the frames not yet copied, with two fsyncs,
+    while every other writer waits (the only commits over 20 ms measured: one per ~1,300
+    measurements, none without checkpoints). Checkpointing every 0.1 s instead of 0.5 s leaves
+    it fewer frames: those stalls measured 22-45 ms instead of 31-96 ms, no more often."""
     AUTOCHECKPOINT_PAGES = 16384
     """Safety net: SQLite checkpoints itself in the writer once the WAL reaches 64 MiB."""
 
