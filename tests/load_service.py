@@ -231,9 +231,10 @@ async def _run_raw(url: str, path: str, body: bytes | None, concurrency: int, re
     if body is not None:
         hdrs["Content-Type"] = content_type
     clients = [RawClient(url) for _ in range(concurrency)]
-    # Connections opened one after another, before the clock starts, as clients that come up
-    # at different times would: a burst of 16 simultaneous connects is accepted mostly by one
-    # uvicorn worker (1/15 and 2/14 splits measured), which then serves 15 clients alone.
+    # Connections opened one after another before the clock starts, as clients that come up at
+    # different times would; TCP setup stays out of the latencies. Which uvicorn worker accepts
+    # each is the kernel's choice: a burst of 16 simultaneous connects went mostly to one of two
+    # workers (2/14 splits seen), one after another they spread better, though not always.
     for c in clients:
         await c.connect()
     start = time.perf_counter()
