@@ -14,6 +14,7 @@ from solitonde.instrument.cli import build_app
 from solitonde.instrument.reproduce import (
     DIAMETERS_M,
     PLATES_M,
+    check_critical_distance,
     scene_for,
     settled_distance,
     spearman,
@@ -111,6 +112,25 @@ def test_settled_distance_definition():
     assert settled_distance(x, [1.0] * 5) == 0.0
     assert math.isnan(settled_distance(x, [1.0, 1.0, 1.0, 1.5, 1.0]))
     assert math.isnan(settled_distance(x, [1.0, math.nan, 1.0, 1.0, 1.0]))
+
+
+def test_critical_distance_check_scores_plates_with_a_reflection():
+    """Ordering is required where D/t <= 5; beyond it (ARR near 0) plates are listed, not scored."""
+    def frame(values):
+        return pd.DataFrame([{"diameter_m": d, "thickness_m": t, "critical_distance_m": lc}
+                             for d, t, lc in values])
+    ordered = [(9.53e-3, 2.29e-3, 0.04), (9.53e-3, 3.18e-3, 0.025), (9.53e-3, 4.83e-3, 0.019)]
+    beyond = [(19.05e-3, 2.29e-3, 0.25), (19.05e-3, 3.18e-3, math.nan),
+              (19.05e-3, 4.83e-3, 0.066)]
+    check = check_critical_distance(frame(ordered + beyond))
+    assert check["passed"]
+    assert [p["d_over_t"] > 5 for p in check["per_diameter"]["19.05 mm"]["not_scored"]] == [True,
+                                                                                           True]
+    swapped = [(9.53e-3, 2.29e-3, 0.02), (9.53e-3, 3.18e-3, 0.025), (9.53e-3, 4.83e-3, 0.019)]
+    assert not check_critical_distance(frame(swapped))["passed"]
+    undefined = [(9.53e-3, 2.29e-3, math.nan), (9.53e-3, 3.18e-3, 0.025)]
+    assert not check_critical_distance(frame(undefined))["passed"]
+    assert not check_critical_distance(frame(beyond[:2]))["passed"]  # nothing left to score
 
 
 @pytest.mark.parametrize("diameter", DIAMETERS_M)
