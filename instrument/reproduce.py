@@ -341,24 +341,26 @@ def check_critical_distance(crit: pd.DataFrame) -> dict[str, Any]:
 
     Plates with D/t > :data:`REFLECTION_D_OVER_T` are reported under ``not_scored`` with their
     values: their far-field "reflection" is at the detection floor (the paper's ARR near 0) and
-    the TOF read from it wanders, so a settling distance means nothing there.
+    the TOF read from it wanders, so a settling distance means nothing there. A sphere size with
+    fewer than two scored plates cannot show an ordering: it is reported with ``passed: null``
+    and does not count; the check needs at least one size that does.
     """
     per_d = {}
     for d, g in crit.groupby("diameter_m"):
         g = g.sort_values("thickness_m")
         scored = g[d / g["thickness_m"] <= REFLECTION_D_OVER_T]
         lc = scored["critical_distance_m"].to_numpy()
+        ordered = bool(np.all(np.isfinite(lc)) and np.all(np.diff(lc) < 0))
         per_d[f"{d * 1e3:.2f} mm"] = {
             "thickness_m": scored["thickness_m"].tolist(), "critical_distance_m": lc.tolist(),
             "not_scored": [
                 {"thickness_m": float(r.thickness_m), "d_over_t": float(d / r.thickness_m),
                  "critical_distance_m": float(r.critical_distance_m)}
                 for r in g[d / g["thickness_m"] > REFLECTION_D_OVER_T].itertuples()],
-            "passed": bool(np.all(np.isfinite(lc)) and np.all(np.diff(lc) < 0)),
+            "passed": ordered if lc.size >= 2 else None,
         }
-    scored_plates = sum(len(v["thickness_m"]) for v in per_d.values())
-    passed = scored_plates > 0 and all(v["passed"] for v in per_d.values())
-    return {"passed": bool(passed),
+    tested = [v["passed"] for v in per_d.values() if v["passed"] is not None]
+    return {"passed": bool(tested) and all(tested),
             "tolerance": SETTLE_TOLERANCE, "d_over_t_limit": REFLECTION_D_OVER_T,
             "per_diameter": per_d}
 

@@ -124,6 +124,7 @@ def test_critical_distance_check_scores_plates_with_a_reflection():
               (19.05e-3, 4.83e-3, 0.066)]
     check = check_critical_distance(frame(ordered + beyond))
     assert check["passed"]
+    assert check["per_diameter"]["19.05 mm"]["passed"] is None  # one scored plate: no ordering
     assert [p["d_over_t"] > 5 for p in check["per_diameter"]["19.05 mm"]["not_scored"]] == [True,
                                                                                            True]
     swapped = [(9.53e-3, 2.29e-3, 0.02), (9.53e-3, 3.18e-3, 0.025), (9.53e-3, 4.83e-3, 0.019)]
@@ -131,6 +132,7 @@ def test_critical_distance_check_scores_plates_with_a_reflection():
     undefined = [(9.53e-3, 2.29e-3, math.nan), (9.53e-3, 3.18e-3, 0.025)]
     assert not check_critical_distance(frame(undefined))["passed"]
     assert not check_critical_distance(frame(beyond[:2]))["passed"]  # nothing left to score
+    assert not check_critical_distance(frame(beyond))["passed"]  # one plate: nothing tested
 
 
 @pytest.mark.parametrize("diameter", DIAMETERS_M)
