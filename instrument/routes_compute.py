@@ -86,8 +86,9 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
     ``budget``, so pricing an absurd mesh is itself cheap.
     """
     from solitonde.model.boundary import StepPlan, make_boundary, resolve_plate_model
-    from solitonde.model.simulate import auto_duration, choose_time_step
+    from solitonde.model.simulate import auto_duration, check_solver, choose_time_step
 
+    check_solver(scene)  # SceneError (422) before any mesh is built
     plate_model, _ = resolve_plate_model(scene)
     duration = (auto_duration(scene) if scene.output.duration == "auto"
                 else float(scene.output.duration))
@@ -110,8 +111,11 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
         chain_steps = plate_steps * r
         plate_dofs = int(plate.n_dofs)
     cost = float(chain_steps) * particles + PLATE_DOF_WEIGHT * float(plate_steps) * plate_dofs
+    # dopri5 adapts its step (far fewer than verlet's): verlet's count bounds its cost above.
+    estimate = ("upper bound (verlet step counts)" if scene.solver.integrator == "dopri5"
+                else "exact step counts")
     return {**out, "steps": int(max(chain_steps, plate_steps)), "dof": particles + plate_dofs,
-            "cost": cost, "estimate": "exact step counts"}
+            "cost": cost, "estimate": estimate}
 
 
 def _sem_dofs(scene: Any) -> int:

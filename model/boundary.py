@@ -128,7 +128,7 @@ class StepPlan:
     n_sub: int
     n_samples: int
     integrator: str = "verlet"
-    rtol: float = 1e-6
+    rtol: float = 1e-8  # SolverSpec.rtol's default
     max_steps: int = 20_000_000
 
     @property

@@ -198,6 +198,24 @@ def _failure(run: ChainRun, plan: StepPlan, plate_model: str) -> str:
             f"(dt = {plan.dt:.3g} s, plate model {plate_model})")
 
 
+def check_solver(scene: Scene) -> tuple[str, str] | None:
+    """Refuse a solver that cannot run the scene's plate model, before any mesh is built.
+
+    Returns the resolved (plate model, reason) for ``dopri5`` (to be reused), None for verlet.
+    """
+    if scene.solver.integrator != "dopri5":
+        return None
+    name, reason = resolve_plate_model(scene)
+    if name not in DOPRI5_PLATE_MODELS:
+        raise SceneError(
+            "solver.integrator",
+            f"dopri5 cannot run plate model {name!r} ({reason})",
+            allowed=f"verlet with every plate model; dopri5 with "
+                    f"{', '.join(DOPRI5_PLATE_MODELS)}",
+        )
+    return name, reason
+
+
 def simulate(
     scene: Scene,
     *,
@@ -217,17 +235,7 @@ def simulate(
     started = time.perf_counter()
     solver = scene.solver
     adaptive = solver.integrator == "dopri5"
-    resolved = None
-    if adaptive:
-        resolved = resolve_plate_model(scene)  # before a plate tier builds its mesh
-        name, reason = resolved
-        if name not in DOPRI5_PLATE_MODELS:
-            raise SceneError(
-                "solver.integrator",
-                f"dopri5 cannot run plate model {name!r} ({reason})",
-                allowed=f"verlet with every plate model; dopri5 with "
-                        f"{', '.join(DOPRI5_PLATE_MODELS)}",
-            )
+    resolved = check_solver(scene)
     boundary = make_boundary(scene, resolved)
     n = scene.chain.n_particles
     m = scene.sphere_mass

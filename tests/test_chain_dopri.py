@@ -196,7 +196,7 @@ def test_energy_is_interpolated_between_step_ends():
     kinks = np.abs(np.diff(r.energy, 2)) > 1e-12 * scale
     assert np.count_nonzero(kinks) <= 2 * d["steps_accepted"]
     deviation = np.abs(r.energy - r.energy[0]) / scale
-    assert d["energy_drift"] >= deviation.max()
+    assert d["energy_drift"] >= deviation.max() * (1 - 1e-12)  # lerp rounding at a maximum
     assert d["energy_drift"] == pytest.approx(deviation.max(), rel=0.1)  # samples near step ends
     assert d["energy_error_final"] == deviation[-1]
 

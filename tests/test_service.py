@@ -409,6 +409,21 @@ def test_simulate_prices_plate_meshes_before_building_them(client: TestClient) -
     huge = {"effects": {"plate_model": "sem"}, "sem": {"elements": [1024, 1024, 8]}}
     r = client.post("/v1/simulate", json={"scene": huge})
     assert r.status_code == 422 and "too expensive" in r.json()["detail"]
+    dopri_sem = {"effects": {"plate_model": "sem"}, "solver": {"integrator": "dopri5"},
+                 "sem": {"elements": [1024, 1024, 8]}}
+    r = client.post("/v1/simulate", json={"scene": dopri_sem})
+    assert r.status_code == 422 and r.json()["field"] == "scene.solver.integrator"
+
+
+def test_simulate_dopri5_on_the_dashpot(client: TestClient) -> None:
+    """The adaptive integrator runs through the service, priced by verlet's step count."""
+    r = client.post("/v1/simulate", json={"scene": {"solver": {"integrator": "dopri5"},
+                                                    "effects": {"plate_model": "infinite"}}})
+    assert r.status_code == 200, r.text
+    out = r.json()
+    assert out["features"]["tof_s"] == pytest.approx(out["diagnostics"]["truth"]["tof_s"],
+                                                     abs=2 * out["dt"])
+    assert out["cost"]["estimate"].startswith("upper bound")
 
 
 def test_hdf5_upload_that_points_at_server_files_is_refused(client: TestClient,
