@@ -51,29 +51,29 @@ BINARY_DTYPES = {"float32": "<f4", "float64": "<f8"}
 """``dtype`` values of a binary shot and the little-endian numpy types they name."""
 
 
-class BinaryShotParams(Strict):
-    """Query parameters of a binary shot: the body is the samples, these say what they are.
-
-    The acquisition PC's own buffer (little-endian float32 or float64, no header) is posted as
-    it is; nothing is parsed from text. Same limits and meanings as the JSON shot's keys.
-    """
-
+class _QueryParams(Strict):
     # Query values arrive as text: numbers are parsed from it (still no NaN, no unknown keys).
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
 
-    dtype: Literal["float32", "float64"] = Field(
-        ..., description="little-endian IEEE 754 samples, no header: float32 or float64")
-    dt: float = Field(..., gt=0, le=1.0, description="sample period, s")
-    t0: float = Field(0.0, ge=-1e3, le=1e3, description="time of the first sample, s")
-    units: Literal["N", "V"] = Field("N", description="N (force) or V (sensor voltage)")
-    calibration: float | None = Field(
-        None, description="sensor sensitivity, N/V (required when units are V; not zero)")
-    plate_id: str | None = Field(None, max_length=200, description="plate identifier")
-    position: str | None = Field(None, max_length=200,
-                                 description="measurement position label on the plate")
-    sphere_diameter: float | None = Field(None, gt=0, le=1.0,
-                                          description="chain sphere diameter D, m")
-    shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
+
+_SHOT_QUERY_KEYS = ("dt", "t0", "units", "calibration")
+_METADATA_QUERY_KEYS = ("plate_id", "position", "sphere_diameter", "shot")
+
+BinaryShotParams = create_model(
+    "BinaryShotParams",
+    __base__=_QueryParams,
+    __doc__="Query parameters of a binary shot: the body is the samples, these say what they "
+            "are.\n\nThe acquisition PC's own buffer (little-endian float32 or float64, no "
+            "header) is posted as it is; nothing is parsed from text. The other keys are the JSON "
+            "shot's (and its metadata's), with the same limits and meanings.",
+    dtype=(Literal["float32", "float64"],
+           Field(..., description="little-endian IEEE 754 samples, no header: float32 or "
+                                  "float64")),
+    **{k: (ShotBase.model_fields[k].annotation, ShotBase.model_fields[k])
+       for k in _SHOT_QUERY_KEYS},
+    **{k: (ShotMetadata.model_fields[k].annotation, ShotMetadata.model_fields[k])
+       for k in _METADATA_QUERY_KEYS},
+)
 
 
 def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type[Strict]]:

@@ -120,11 +120,17 @@ _READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "group", "
 
 
 def binary_parameters() -> list[dict[str, Any]]:
-    """OpenAPI query parameters of a binary shot (only read with an octet-stream body)."""
+    """OpenAPI query parameters of a binary shot (only read with an octet-stream body).
+
+    OpenAPI parameters belong to the whole operation, so none is marked required there (a JSON
+    or multipart request must not send any); ``dtype`` and ``dt`` are required for binary
+    bodies, which the descriptions say and the route enforces.
+    """
     schema = BinaryShotParams.model_json_schema()
     required = set(schema.get("required", []))
-    return [{"name": name, "in": "query", "required": name in required,
-             "description": f"binary shots only: {prop.get('description', name)}",
+    return [{"name": name, "in": "query", "required": False,
+             "description": (f"binary shots only{', required' if name in required else ''}: "
+                             f"{prop.get('description', name)}"),
              "schema": {k: v for k, v in prop.items() if k not in ("title", "description")}}
             for name, prop in schema["properties"].items()]
 
@@ -181,6 +187,11 @@ async def post_measurement(request: Request) -> JSONResponse:
 
     svc = service(request)
     media = _media_type(request)
+    if media in ("application/json", "multipart/form-data") and request.query_params:
+        name = next(iter(request.query_params))
+        raise Problem(422, f"{name}: query parameters describe a binary ({BINARY_MEDIA_TYPE}) "
+                      "body only; a JSON shot carries them in the body, an upload in form "
+                      "fields", kind="invalid-input", field=name)
     if media == "application/json":
         body = await request.body()
         # In a worker thread: the event loop keeps reading other requests (and answering

@@ -334,8 +334,11 @@ def test_openapi_states_the_limits(tmp_path: Path) -> None:
     assert set(content) == {"application/json", "application/octet-stream",
                             "multipart/form-data"}
     params = {p["name"]: p for p in schema["paths"]["/v1/measurements"]["post"]["parameters"]}
-    assert params["dt"]["required"] and params["dtype"]["schema"]["enum"] == ["float32",
-                                                                             "float64"]
+    # Parameters belong to the whole operation (JSON bodies must not send them): none is
+    # "required" there; the description says which ones a binary body needs.
+    assert not any(p["required"] for p in params.values())
+    assert params["dt"]["description"].startswith("binary shots only, required")
+    assert params["dtype"]["schema"]["enum"] == ["float32", "float64"]
     assert "12,345 samples per shot" in schema["info"]["description"]
 
 
@@ -508,4 +511,13 @@ def test_bad_binary_shot_gets_a_problem_and_stores_nothing(client: TestClient, c
     assert r.headers["content-type"] == PROBLEM
     problem = r.json()
     assert problem["field"] == field and problem["detail"].startswith(field)
+    assert stored(client) == 0
+
+
+def test_query_parameters_with_a_json_body_are_refused(client: TestClient) -> None:
+    """Binary-shot query parameters sent with a JSON body would be silently ignored: 422 instead,
+    naming the parameter, and nothing stored."""
+    body = {"shots": [{"dt": 5e-7, "samples": [0.0] * 200}]}
+    r = client.post("/v1/measurements?dt=1e-6", json=body)
+    assert r.status_code == 422 and r.json()["field"] == "dt"
     assert stored(client) == 0
