@@ -2,10 +2,12 @@
 
 For an acquisition PC or a directory of files: the samples are validated in one vectorised pass,
 and one numba call (:func:`solitonde.signal.kernels.analyze_batch`) runs the same per-shot kernel
-as :func:`solitonde.signal.features.extract` over every row, on numba's threads. No Python object
-is made per shot, so the cost is the kernel's. :meth:`FeatureTable.features` gives one shot's
-:class:`~solitonde.signal.features.Features`, equal field for field to what ``extract`` returns
-for that shot (tests/test_signal_batch.py holds them together).
+as :func:`solitonde.signal.features.extract` over every row, on numba's threads. No Features
+object is made per shot (only the SNR is finished in Python, to match ``extract`` bit for bit),
+so the cost is the kernel's. The command line does not use it yet (``solitonde analyze`` reads
+one file at a time); it is the library entry point for arrays. :meth:`FeatureTable.features`
+gives one shot's :class:`~solitonde.signal.features.Features`, equal field for field to what
+``extract`` returns for that shot (tests/test_signal_batch.py holds them together).
 """
 
 from __future__ import annotations
