@@ -24,7 +24,9 @@ end of the table that is not a physical limit, the data do not bound the paramet
 L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
 bound (``ci95 = [lower, null]``, the 5 % quantile), no MAP or median: the table's end is not an
 estimate. A measurement no table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range``
-with no numbers at all.
+with no numbers at all. With several sphere sizes, when all together are out of range but the
+others are not once one size is left out, that answer is given, with the size left out named
+(``excluded_diameters_m``, ``reason``): one disagreeing channel does not void the others.
 """
 
 from __future__ import annotations
@@ -309,6 +311,7 @@ class Estimate:
             "n_terms": self.n_terms,
             "reason": self.reason,
             "inputs": [vars(i).copy() for i in self.inputs],
+            "excluded_diameters_m": list(self.extra.get("excluded_diameters_m", [])),
             "calibration": None if self.calibration is None else self.calibration.to_dict(),
         }
         if posterior and self.posterior is not None:
@@ -411,6 +414,34 @@ def invert(
         raise InversionError("inputs", "give a non-empty list of per-sphere-size summaries")
     items = [FeatureSummary.from_any(i) for i in inputs]
     cal = Calibration.from_any(calibration)
+    est = _invert_items(table, items, cal, return_posterior)
+    if not est.out_of_range or len(items) < 2:
+        return est
+    # One sphere size may disagree with the others and the table (e.g. a large sphere on a thin
+    # plate whose "reflection" is a train at the detection floor): leave each out in turn and
+    # keep the best in-range answer of the others, saying which size was left out and why.
+    kept: list[tuple[float, int, Estimate]] = []
+    for skip in range(len(items)):
+        rest = items[:skip] + items[skip + 1:]
+        trial = _invert_items(table, rest, cal, return_posterior)
+        if not trial.out_of_range:
+            tail = float(chi2_dist.sf(trial.chi2_min, trial.n_terms))
+            kept.append((tail, skip, trial))
+    if not kept:
+        return est
+    _, skip, best = max(kept, key=lambda k: k[0])
+    left_out = items[skip]
+    best.reason = (f"sphere size D = {left_out.diameter_m * 1e3:.2f} mm left out: with it no "
+                   f"table point explains the measurement ({est.reason}); the other sizes agree "
+                   "with the table")
+    best.extra["excluded_diameters_m"] = [left_out.diameter_m]
+    best.inputs = items
+    return best
+
+
+def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibration | None,
+                  return_posterior: bool) -> Estimate:
+    """The grid posterior of :func:`invert` for exactly these sphere sizes."""
     grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
     # -2 log likelihood, up to a constant: sum of r^2 / var + log var (the variance differs from
     # cell to cell through the model error, so its log-determinant matters)

@@ -139,6 +139,22 @@ def test_out_of_range_measurement_has_no_numbers(table: ModelTable) -> None:
     assert est.thickness_m.median is None and est.reason
 
 
+def test_one_disagreeing_size_is_left_out_and_named(table: ModelTable) -> None:
+    """Two sizes where one cannot be explained: the other's answer, with the size named; both
+    impossible: still out_of_range."""
+    good, bad = summaries(3.0e-3, 0.05)
+    bad = FeatureSummary(bad.diameter_m, 5.0 * bad.tof_s, bad.arr, bad.tof_std_s, 0.01, 5)
+    est = invert(table, [good, bad])
+    alone = invert(table, [good])
+    assert est.thickness_m.status == "constrained"
+    assert est.thickness_m.median == pytest.approx(alone.thickness_m.median, rel=1e-12)
+    assert est.to_dict()["excluded_diameters_m"] == [bad.diameter_m]
+    assert f"D = {bad.diameter_m * 1e3:.2f} mm left out" in est.reason
+    worse = FeatureSummary(good.diameter_m, 5.0 * good.tof_s, good.arr, good.tof_std_s, 0.01, 5)
+    assert invert(table, [worse, bad]).out_of_range
+    assert invert(table, summaries(3.0e-3, 0.05)).to_dict()["excluded_diameters_m"] == []
+
+
 def test_unknown_diameter_is_an_error(table: ModelTable) -> None:
     with pytest.raises(TableError, match="diameter_m"):
         invert(table, [FeatureSummary(7e-3, 1e-4, 0.5)])
