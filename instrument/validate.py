@@ -259,7 +259,11 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         est = invert(table, inputs, calibration)
         t_est, l_est = est.thickness_m, est.distance_m
         true_l = m["distance_m"]
-        sep = separations(table, inputs, m["thickness_m"], true_l, calibration)
+        # What the data the inversion used can tell: a size it left out as disagreeing with the
+        # others (see :func:`invert`) does not count towards the expected status either.
+        excluded = est.extra.get("excluded_diameters_m", [])
+        used = [i for i in inputs if i.diameter_m not in excluded]
+        sep = separations(table, used, m["thickness_m"], true_l, calibration)
         phys = bool(l_axis[0] <= 0.0)
         # a slice (the other parameter at its true value) misses joint (t, L) degeneracies, the
         # profile flags every one however little posterior mass it carries: both are answers
@@ -270,7 +274,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         exp_lp = expected_statuses(sep["distance_m"], lower_physical=phys)
         exp_t, exp_l = exp_ts | exp_tp, exp_ls | exp_lp
         row.update(
-            thickness=t_est.to_dict(), distance=l_est.to_dict(),
+            thickness=t_est.to_dict(), distance=l_est.to_dict(), excluded_diameters_m=excluded,
             separations={k: v.tolist() for k, v in sep.items()},
             expected_thickness_status=sorted(exp_t), expected_distance_status=sorted(exp_l),
             status_ok=t_est.status in exp_t and l_est.status in exp_l,
