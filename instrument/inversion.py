@@ -14,8 +14,11 @@ along both axes, scaled to the grid spacing, interpolated like the features): la
 ARR oscillate with L near a support, small where they are smooth. A calibration multiplies the
 model ARR by ``arr_factor`` (experiments lose energy the model does not) and adds ``tof_offset_s``
 to the model TOF; its stated uncertainties (``arr_factor_std``, ``tof_offset_std_s``) enter the
-variances. Sphere sizes multiply their likelihoods. Grid points where the model detects no
-reflection cannot explain a measured one and get zero posterior.
+variances. Beyond D/t = 5, where the paper finds ARR near 0 and the model's "reflection" is a
+train at the detection floor whose features wander between table positions, the model error
+also holds 10 % of TOF and the whole ARR (:data:`FLOOR_TOF_REL_STD`, :data:`FLOOR_ARR_REL_STD`),
+so such a size weighs little there. Sphere sizes multiply their likelihoods. Grid points where the
+model detects no reflection cannot explain a measured one and get zero posterior.
 
 Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
 status: when the posterior still carries at least :data:`EDGE_FRACTION` of its peak density at an
@@ -56,6 +59,14 @@ EDGE_FRACTION = 0.2
 there (the data do not bound the parameter on that side)."""
 OUT_OF_RANGE_TAIL = 1e-6
 """Tail probability of the best chi^2 beyond which no table point explains the data."""
+REFLECTION_D_OVER_T = 5.0
+"""Above this D/t the paper finds ARR near 0: the model's "reflection" is a train at the
+detection floor whose features wander from one table position to the next (TOF by ~10 %)."""
+FLOOR_TOF_REL_STD = 0.1
+FLOOR_ARR_REL_STD = 1.0
+"""Model uncertainty at table nodes beyond :data:`REFLECTION_D_OVER_T`: TOF known to 10 %, ARR
+only as "small" (its own size), so such a size barely weighs there instead of pinning (t, L) to
+a wandering value."""
 FINE_THICKNESS_POINTS = 121
 FINE_DISTANCE_STEP_M = 0.0025
 PARAMETERS = ("thickness_m", "distance_m")
@@ -216,6 +227,8 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
     arr = np.where(ok, table.features["arr"][i_d], 0.0)
     bad = (~ok).astype(float)
+    diameter = float(table.axes["diameter_m"][i_d])
+    floor = (diameter / t_nodes > REFLECTION_D_OVER_T).astype(float)[:, None]
     touched = (wt > 1e-12).astype(float) @ bad @ (wl > 1e-12).astype(float).T
     grid = FineGrid(
         diameter_m=float(table.axes["diameter_m"][i_d]),
@@ -225,8 +238,10 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
         arr=wt @ arr @ wl.T,
         valid=touched == 0,
         penalty=np.where(touched == 0, 0.0, np.inf),
-        model_tof_var=wt @ _node_variance(tof, ok, np.log(t_nodes), l_nodes) @ wl.T,
-        model_arr_var=wt @ _node_variance(arr, ok, np.log(t_nodes), l_nodes) @ wl.T,
+        model_tof_var=wt @ (_node_variance(tof, ok, np.log(t_nodes), l_nodes)
+                            + floor * (FLOOR_TOF_REL_STD * tof) ** 2) @ wl.T,
+        model_arr_var=wt @ (_node_variance(arr, ok, np.log(t_nodes), l_nodes)
+                            + floor * (FLOOR_ARR_REL_STD * arr) ** 2) @ wl.T,
     )
     table._cache[key] = grid
     return grid

@@ -155,6 +155,23 @@ def test_one_disagreeing_size_is_left_out_and_named(table: ModelTable) -> None:
     assert invert(table, summaries(3.0e-3, 0.05)).to_dict()["excluded_diameters_m"] == []
 
 
+def test_floor_level_reflections_carry_a_wide_model_error(table: ModelTable) -> None:
+    """Beyond D/t = 5 (the paper's ARR-near-0 limit) a size's features weigh little: TOF known to
+    10 %, ARR only to its own size; below it only the interpolation error counts."""
+    g = fine_grid(table, 1)  # D = 10 mm: D/t from 6.7 (t = 1.5 mm) down to 1.7
+    floor_nodes = THICKNESS[DIAMETERS[1] / THICKNESS > 5.0]
+    assert floor_nodes.size >= 2
+    beyond = g.thickness_m <= floor_nodes.max() * (1 + 1e-9)  # between nodes it interpolates
+    first_within = THICKNESS[DIAMETERS[1] / THICKNESS <= 5.0].min()
+    within = g.thickness_m >= first_within * (1 - 1e-9)
+    tof_std = np.sqrt(g.model_tof_var)
+    arr_std = np.sqrt(g.model_arr_var)
+    assert np.all(tof_std[beyond] >= 0.1 * g.tof_s[beyond] * 0.999)
+    assert np.all(arr_std[beyond] >= g.arr[beyond] * 0.999)
+    assert np.all(tof_std[within] < 0.02 * g.tof_s[within])
+    assert np.all(fine_grid(table, 0).thickness_m[0] * 5.0 > DIAMETERS[0])  # 5 mm: none beyond
+
+
 def test_unknown_diameter_is_an_error(table: ModelTable) -> None:
     with pytest.raises(TableError, match="diameter_m"):
         invert(table, [FeatureSummary(7e-3, 1e-4, 0.5)])
