@@ -375,31 +375,6 @@ def patch_deflection(up: np.ndarray, ldofs: np.ndarray, lw: np.ndarray, share: f
     return -acc / share
 
 
-@njit(cache=True)
-def plate_step(
-    u: np.ndarray,
-    v: np.ndarray,
-    force: float,
-    dof: int,
-    dt: float,
-    inv_mass: np.ndarray,
-    op: tuple,
-    ku: np.ndarray,
-) -> None:
-    """One central-difference step of the plate in place (the scheme of ``run_plate_load``).
-
-    On return ``ku`` holds K u_n (the old displacement), which the caller may use for energy.
-    """
-    stiffness_product(op, u, ku)
-    ndof = u.size
-    for i in range(ndof):
-        f = -ku[i]
-        if i == dof:
-            f += force
-        v[i] += dt * inv_mass[i] * f
-        u[i] += dt * v[i]
-
-
 # Coupled chain + plate ----------------------------------------------------------------------
 # Velocity Verlet for the plate (= central differences) with its own step h, the chain sub-cycled
 # r times per plate step with the chain module's verlet_step: kick the plate by h/2 with the
