@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from .boundary import (
     DOPRI5_PLATE_MODELS,
@@ -84,23 +85,20 @@ class SimulationResult:
         return self.t0 + self.dt * np.arange(self.samples.size)
 
 
-def static_overlaps(n: int, m: float, g: float, a_s: float, a_b: float) -> tuple[np.ndarray, float]:
-    """Static overlaps: contact j (below particle j, j = 1..N-1) carries j m g; the plate N m g.
-
-    Returns (overlaps of contacts 0..N-1 with contact 0 the open striker contact, plate overlap).
-    """
-    j = np.arange(n, dtype=np.float64)
-    deltas = (j * m * g / a_s) ** (2.0 / 3.0)
-    return deltas, (n * m * g / a_b) ** (2.0 / 3.0)
-
-
+@njit(cache=True)
 def initial_state(
     n: int, m: float, g: float, a_s: float, a_b: float, v_imp: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and velocities of striker + N particles at the instant of impact (w = 0)."""
-    deltas, delta_b = static_overlaps(n, m, g, a_s, a_b)
-    # u[N] = delta_b, u[j] = u[j + 1] + deltas[j]: a running sum from the bottom, in that order.
-    u = np.cumsum(np.concatenate(([delta_b], deltas[::-1])))[::-1].copy()
+    """Positions and velocities of striker + N particles at the instant of impact (w = 0).
+
+    Static equilibrium: contact j (below particle j, j = 1..N-1) carries j m g, the plate N m g;
+    the striker (particle 0) just touches particle 1. ``u[N]`` is the plate overlap and
+    ``u[j] = u[j + 1] + delta_j`` going up.
+    """
+    u = np.empty(n + 1)
+    u[n] = (n * m * g / a_b) ** (2.0 / 3.0)
+    for j in range(n - 1, -1, -1):
+        u[j] = u[j + 1] + (j * m * g / a_s) ** (2.0 / 3.0)
     v = np.zeros(n + 1)
     v[0] = v_imp
     return u, v
@@ -166,18 +164,23 @@ def auto_duration(scene: Scene) -> float:
     (Eq. 15) assembled from zener's own functions with its tabulated restitution, which costs
     microseconds instead of an ODE solve per run.
     """
+    return _auto_duration(scene, scene.sphere_mass, scene.a_s, scene.a_p, scene.plate_impedance)
+
+
+def _auto_duration(scene: Scene, m: float, a_s: float, a_p: float, z: float) -> float:
+    """:func:`auto_duration` with the scene's derived constants already at hand."""
     from . import zener
 
-    m, d = scene.sphere_mass, scene.chain.diameter
-    v_in = zener.incident_velocity(scene)
-    e, tau_c = zener.restitution_and_contact_time_one(zener.inelasticity(scene))
+    d = scene.chain.diameter
+    v_in = zener.CHATTERJEE_RATIO * scene.impact_velocity
+    e, tau_c = zener.restitution_and_contact_time_one(zener.inelasticity_from(m, a_p, v_in, z))
     # e -> 0 sends Eq. 15's reflected trip to infinity; below e = 0.01 the reflection carries
     # ARR < 0.4 % and the record ends when a wave at 1 % of v_in would be back.
     e_floor = max(e, 0.01)
-    speed = zener.solitary_wave_speed(d, scene.a_s, m, v_in)
+    speed = zener.solitary_wave_speed(d, a_s, m, v_in)
     trip = zener.travel_diameters(scene) * d
-    tof = (trip / speed + trip / zener.solitary_wave_speed(d, scene.a_s, m, e_floor * v_in)
-           + tau_c * zener.time_scale(m, scene.a_p, v_in))
+    tof = (trip / speed + trip / zener.solitary_wave_speed(d, a_s, m, e_floor * v_in)
+           + tau_c * zener.time_scale(m, a_p, v_in))
     incident = (scene.chain.sensor_index + 1) * d / speed
     return incident + 1.25 * tof + 2.0 * (5.0 * d / speed)
 
@@ -239,12 +242,14 @@ def simulate(
     boundary = make_boundary(scene, resolved)
     n = scene.chain.n_particles
     m = scene.sphere_mass
+    a_s = scene.a_s
     g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
     v_imp = scene.impact_velocity
     tau = scene.effects.damping if scene.effects.dissipation else 0.0
 
     auto = scene.output.duration == "auto"
-    duration = auto_duration(scene) if auto else float(scene.output.duration)
+    duration = (_auto_duration(scene, m, a_s, scene.a_p, scene.plate_impedance) if auto
+                else float(scene.output.duration))
     if adaptive:
         # The step adapts to rtol; samples come from the dense output, not from steps.
         dt, n_sub = 1.0 / scene.output.sample_rate, 1
@@ -261,11 +266,11 @@ def simulate(
             f"raise the budget"
         )
 
-    u, v = initial_state(n, m, g, scene.a_s, boundary.a_bottom, v_imp)
+    u, v = initial_state(n, m, g, a_s, boundary.a_bottom, v_imp)
     traces_on = scene.output.traces
     rows = n_samples if traces_on else 0
     setup = ChainSetup(
-        u=u, v=v, w=0.0, m=m, g=g, a_s=scene.a_s, a_b=boundary.a_bottom,
+        u=u, v=v, w=0.0, m=m, g=g, a_s=a_s, a_b=boundary.a_bottom,
         f_static=n * m * g, tau=tau, sensor=scene.chain.sensor_index,
         samples=np.empty(n_samples), energy=np.empty(n_samples),
         u_trace=np.empty((rows, n + 1)), v_trace=np.empty((rows, n + 1)),
@@ -292,17 +297,18 @@ def simulate(
         deviation = np.abs(balance - balance[0])
         drift, final = deviation.max(), deviation[-1]
     static_sensor = (scene.chain.sensor_index - 0.5) * m * g
-    pk = run.peaks
-    inc_f, ref_f = float(pk[PK_INC_F]), float(pk[PK_REF_F])
+    pk = run.peaks.tolist()
+    inc_f, ref_f = pk[PK_INC_F], pk[PK_REF_F]
     rise_inc, rise_ref = inc_f - static_sensor, ref_f - static_sensor
     # Undefined when the sensor cannot tell the pulses apart (e.g. it is the last particle).
-    valid = np.isfinite(rise_inc) and np.isfinite(rise_ref) and rise_inc > 0.0 and rise_ref > 0.0
+    valid = (math.isfinite(rise_inc) and math.isfinite(rise_ref) and rise_inc > 0.0
+             and rise_ref > 0.0)
     arr = rise_ref / rise_inc if valid else math.nan
     truth = {
         "incident_time_s": float(pk[PK_INC_T]),
-        "incident_peak_N": inc_f if np.isfinite(inc_f) else math.nan,
+        "incident_peak_N": inc_f if math.isfinite(inc_f) else math.nan,
         "reflected_time_s": float(pk[PK_REF_T]),
-        "reflected_peak_N": ref_f if np.isfinite(ref_f) else math.nan,
+        "reflected_peak_N": ref_f if math.isfinite(ref_f) else math.nan,
         "tof_s": float(pk[PK_REF_T] - pk[PK_INC_T]) if valid else math.nan,
         "arr": float(arr),
         "static_sensor_N": static_sensor,
