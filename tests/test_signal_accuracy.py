@@ -1,6 +1,6 @@
 """TOF and ARR against the chain model's own truth at 40, 20 and 10 dB SNR, with drift and 12 bits.
 
-Traces: model.simulate for D = 9.53 mm on a 4.83 mm plate (ARR 0.55), sampled at 50 MHz and
+Traces: model.simulate for D = 9.53 mm on a 4.83 mm plate (ARR 0.55), sampled at 30 MHz and
 re-acquired at the scene's default 2 MHz with random sub-sample offsets. Truth: the model's peaks
 at integration-step resolution, amplitudes above the level before each pulse's foot
 (Truth.from_trace, the extractor's own baseline definition).
@@ -15,7 +15,7 @@ import pytest
 
 from solitonde.signal.accuracy import Truth, format_table, study
 
-FINE_RATE = 50e6
+FINE_RATE = 30e6  # divisible by every studied rate: 1, 2, 2.5, 3 and 5 MHz
 RATE = 2e6
 
 
@@ -38,12 +38,14 @@ def test_20db_criteria():
     """At 20 dB (drift 2 %, 12 bits): median |TOF error| < 1 sample at 2 MHz; median |ARR error|
     < 2 % at 5 MHz; both medians within 15 % of the Cramer-Rao bound.
 
-    Both criteria at one rate, or on the 95th percentile, are out of reach of any unbiased
+    Both criteria at 2 MHz, or on the 95th percentile, are out of reach of any unbiased
     estimator: the reflected pulse (ARR 0.55) is at 14.8 dB, and the Cramer-Rao bound for this
     pulse shape (amplitude, time and width unknown) puts the median |ARR error| at 2.2 % at 2 MHz
-    (p95 6.5 %) and the median |TOF error| at 1.3 samples at 5 MHz (p95 3.7); the timing spread in
-    sample periods grows as the root of the rate. The slow study prints the full table with the
-    bound beside every figure for 1, 2 and 5 MHz.
+    (p95 6.5 %; 2.0 % even with the reflection's width tied to the incident's by ARR^(-1/6)) and
+    the median |TOF error| at 1.3 samples at 5 MHz (p95 3.7); the timing spread in sample periods
+    grows as the root of the rate, the ARR spread falls as its inverse root, so both medians sit
+    under their limits only between about 2.5 and 3 MHz, right at the bound. The slow study
+    prints the full table with the bound beside every figure for 1, 2, 2.5, 3 and 5 MHz.
     """
     fine, dt, truth = model_trace()
     (row2,) = study(fine, dt, truth, 2e6, [20.0], trials=200, seed=1)
@@ -56,6 +58,8 @@ def test_20db_criteria():
     for row in (row2, row5):
         assert row["tof_err_median_samples"] < 1.15 * 0.674 * row["crb_tof_samples"]
         assert row["arr_err_median_rel"] < 1.15 * 0.674 * row["crb_arr_rel"]
+        # Tying the reflection's width to the incident's fixes one parameter: a smaller bound.
+        assert row["crb_arr_rel_width_tied"] < row["crb_arr_rel"]
 
 
 def test_noise_free_bias_is_small():
@@ -68,7 +72,7 @@ def test_noise_free_bias_is_small():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("rate", [1e6, 2e6, 5e6])
+@pytest.mark.parametrize("rate", [1e6, 2e6, 2.5e6, 3e6, 5e6])
 def test_accuracy_table(rate):
     """The accuracy table (run with -m slow -s): 400 shots per SNR."""
     fine, dt, truth = model_trace()
