@@ -167,12 +167,12 @@ def extract_batch(
         blocks = np.array_split(x, min(threads, x.shape[0]))
         with ThreadPoolExecutor(len(blocks)) as pool:
             parts = list(pool.map(lambda block: K.analyze_batch(block, *args), blocks))
-    heads, rows, counts, truncated = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-    return _table(heads, rows, counts, truncated, t0, dt, opts)
+    heads, rows, counts = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
+    return _table(heads, rows, counts, t0, dt, opts)
 
 
-def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, truncated: np.ndarray,
-           t0: float, dt: float, opts: DetectOptions) -> FeatureTable:
+def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, dt: float,
+           opts: DetectOptions) -> FeatureTable:
     """The arrays of :func:`analyze_batch` as features, with the flag logic of
     :func:`solitonde.signal.pulses.detect` done on whole columns."""
     nan = np.nan
@@ -195,6 +195,7 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, truncated: n
     sec_r = np.where(sec, amps[:, 2:] / np.where(detected, inc_a, 1.0)[:, None], nan)
 
     merged = rows[:, :, K.P_MERGED] != 0
+    cut = rows[:, :, K.P_TRUNC] != 0  # only the incident and the reflection count
     overlapping = has_ref & (merged[:, 0] | ((counts > 2) & merged[:, 1]))
     low_snr = np.where(has_ref, ref_snr, snr) < opts.low_snr_db
     raised = {
@@ -202,7 +203,7 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, truncated: n
         "saturated": detected & (heads[:, K.H_SATURATED] != 0),
         "low_snr": detected & low_snr,
         "overlapping": overlapping,
-        "truncated": (heads[:, K.H_EARLY] != 0) | truncated,
+        "truncated": (heads[:, K.H_EARLY] != 0) | (detected & cut[:, 0]) | (has_ref & cut[:, 1]),
         "inverted_polarity": sign < 0,
     }
     flags = np.zeros(sign.size, dtype=np.uint8)

@@ -954,27 +954,22 @@ def analyze_batch(
     max_iter: int,
     ramp: np.ndarray,
     keep: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`analyze` of every row of ``x`` (one shot per row), without the GIL (callers split
     the rows over threads).
 
     Returns ``heads[i, H_*]``, the first ``keep`` pulse rows of each shot ``pulses[i, j, P_*]``
-    (zero past its count), the count of pulses of each shot, and whether any of them (kept or
-    not) is truncated.
+    (zero past its count) and the count of pulses of each shot.
     """
     m = x.shape[0]
     heads = np.zeros((m, HEAD))
     pulses = np.zeros((m, keep, PULSE))
     counts = np.zeros(m, dtype=np.int64)
-    truncated = np.zeros(m, dtype=np.bool_)
     for i in range(m):
         head, rows = analyze(x[i], sign_in, n_pre_in, h_in, thr_sigma, min_ratio, fit_fraction,
                              shape_r, skew, free_r, max_iter, ramp)
         heads[i] = head
         counts[i] = rows.shape[0]
-        for j in range(rows.shape[0]):
-            if j < keep:
-                pulses[i, j] = rows[j]
-            if rows[j, P_TRUNC]:
-                truncated[i] = True
-    return heads, pulses, counts, truncated
+        for j in range(min(rows.shape[0], keep)):
+            pulses[i, j] = rows[j]
+    return heads, pulses, counts

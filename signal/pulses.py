@@ -288,16 +288,23 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
             **common,
         )
     pulses = []
-    for row in rows:
+    cut_secondary = False
+    for k, row in enumerate(rows):
         amp = row[K.P_AMP]
         if row[K.P_TRUNC]:
-            flags.add("truncated")
+            # The shot is truncated when a measured pulse is; a cut secondary is only noted.
+            if k < 2:
+                flags.add("truncated")
+            else:
+                cut_secondary = True
         pulses.append(Pulse(
             time_s=t0 + row[K.P_TIME] * dt, peak_N=amp, baseline_N=sign * row[K.P_BASE],
             width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
             end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
             method="parabola" if row[K.P_METHOD] else "template",
         ))
+    if cut_secondary:
+        notes.append("a secondary pulse runs past the end of the record (TOF and ARR are whole)")
     incident = pulses[0]
     reflected = pulses[1] if len(pulses) > 1 else None
     secondary = tuple(pulses[2 : 2 + opts.max_secondary])

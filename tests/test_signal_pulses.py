@@ -107,6 +107,20 @@ def test_truncated():
     assert "truncated" in extract(early).flags
 
 
+def test_cut_secondary_is_noted_not_flagged():
+    """A secondary pulse cut by the record end leaves TOF and ARR whole: a note, no flag; the
+    batch path agrees."""
+    from solitonde.signal.batch import extract_batch
+
+    w = shot([(150e-6, 30.0, 80e-6), (550e-6, 15.0, 80e-6), (1190e-6, 10.0, 80e-6)])
+    det = detect(w, shape_skew=0.0)
+    assert len(det.pulses) == 3 and "truncated" not in det.flags
+    assert any("secondary pulse runs past the end" in note for note in det.notes)
+    f = extract(w, shape_skew=0.0)
+    assert f.arr == pytest.approx(0.5, rel=5e-3)
+    assert extract_batch(w.samples[None, :], DT, shape_skew=0.0).to_features() == [f]
+
+
 def test_overlapping():
     """A reflection arriving before the incident has decayed is flagged overlapping."""
     f = extract(shot([(150e-6, 30.0, 80e-6), (200e-6, 20.0, 80e-6)]))
