@@ -32,10 +32,12 @@ router = APIRouter(tags=["compute"], dependencies=[AUTH])
 
 _SIMULATIONS = anyio.CapacityLimiter(1)
 
-PLATE_DOF_WEIGHT = 25.0
-"""One spectral-element degree of freedom advanced one step costs about as much as 25 chain
-particles advanced one step (measured: ~7e8 particle-steps/s for the chain kernel, ~2.6e7
-dof-steps/s for the SEM plate, one core), so plate work is counted in chain-equivalent units."""
+PLATE_DOF_WEIGHT = 4.0
+"""One spectral-element degree of freedom advanced one step costs about as much as 4 chain
+particles advanced one step, so plate work is counted in chain-equivalent units. Measured on one
+idle core: the chain (Verlet, default scene) ~3.5e8 particle-steps/s; the coupled SEM plate with
+the sum-factorised stiffness ~9e7 dof-steps/s (default mesh, 14,400 to 52,728 steps). The dense
+stiffness this weight was first set for ran ~2.6e7 dof-steps/s (weight 25)."""
 
 
 def _json_body(model: Any) -> dict[str, Any]:
@@ -81,7 +83,7 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
     Uses the model's own rules (:func:`~solitonde.model.simulate.choose_time_step`,
     :func:`~solitonde.model.simulate.auto_duration`, and for the spectral-element plate tiers
     their stable step). ``cost = chain steps x (particles + 1) + w x plate steps x plate dofs``
-    with ``w`` = :data:`PLATE_DOF_WEIGHT`, in chain particle-steps (about 7e8 per CPU second).
+    with ``w`` = :data:`PLATE_DOF_WEIGHT`, in chain particle-steps (about 3.5e8 per CPU second).
     A plate mesh is only built once a floor of its cost (one plate step per sample) fits the
     ``budget``, so pricing an absurd mesh is itself cheap.
     """

@@ -63,9 +63,9 @@ class Settings:
         declares more in its header is refused (413) before its data is read.
     max_simulation_cost:
         Budget for ``POST /v1/simulate`` in chain particle-steps (integration steps x particles;
-        spectral-element plate dof-steps counted 25 times, see
-        :data:`~solitonde.instrument.routes_compute.PLATE_DOF_WEIGHT`); 5e8 is about one CPU
-        second.
+        spectral-element plate dof-steps counted 4 times, see
+        :data:`~solitonde.instrument.routes_compute.PLATE_DOF_WEIGHT`); 5e8 is about 1.5 CPU
+        seconds.
     store_synchronous:
         SQLite ``synchronous`` pragma. ``NORMAL`` (WAL) keeps every committed measurement when the
         process is killed; ``FULL`` also survives power loss at the cost of one fsync per write.

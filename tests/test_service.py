@@ -407,8 +407,13 @@ def test_simulate_prices_plate_meshes_before_building_them(client: TestClient) -
     step and refused within the default budget; an absurd mesh is refused from the floor of its
     cost without building it."""
     near = {"plate": {"distance_to_support": 0.05}, "effects": {"plate_model": "sem"}}
-    r = client.post("/v1/simulate", json={"scene": near})
+    r = client.post("/v1/simulate", json={"scene": near})  # ~4 s of CPU
     assert r.status_code == 422 and "too expensive" in r.json()["detail"]
+    short = {"plate": {"thickness": 4.83e-3}, "effects": {"plate_model": "sem"},
+             "output": {"duration": 3e-4}}  # ~0.6 s of CPU: within the budget
+    r = client.post("/v1/simulate", json={"scene": short})
+    assert r.status_code == 200, r.text
+    assert r.json()["cost"]["cost"] <= client.app.state.settings.max_simulation_cost
     huge = {"effects": {"plate_model": "sem"}, "sem": {"elements": [1024, 1024, 8]}}
     r = client.post("/v1/simulate", json={"scene": huge})
     assert r.status_code == 422 and "too expensive" in r.json()["detail"]
