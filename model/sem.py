@@ -31,12 +31,13 @@ SUPPORTS = ("opposite_edges", "all_edges", "none")
 
 @contextmanager
 def single_threaded_blas() -> Iterator[None]:
-    """Run the time loops with one BLAS thread.
+    """Run a compiled loop that calls BLAS (the dense reference operator's GEMMs, the Green's
+    function convolution's dot products) with one BLAS thread.
 
-    The dense reference operator's per-step GEMMs are small (a few hundred elements times a
-    225 x 225 matrix); a second BLAS thread gains little on an idle machine and, when the cores
-    are shared, its spin-waiting can make a run several times slower. (The sum-factorised
-    operator the time loops use calls no BLAS; the limit keeps the two comparable.)
+    Those calls are small; a second BLAS thread gains little on an idle machine and, when the
+    cores are shared, its spin-waiting can make a run several times slower. The sum-factorised
+    operator the plate time loops use calls no BLAS, so they run without it (entering the limit
+    costs about 0.4 ms).
     """
     with threadpool_limits(limits=1, user_api="blas"):
         yield
@@ -224,10 +225,9 @@ class ElasticPlate:
         """
         dof = self.contact_dof if dof is None else int(dof)
         rec = np.asarray([dof] if record_dofs is None else record_dofs, dtype=np.int64)
-        with single_threaded_blas():
-            _, out = run_plate_load(np.ascontiguousarray(force, dtype=float),
-                                    np.asarray([dof], dtype=np.int64), np.ones(1), float(dt),
-                                    self.inv_mass, self.operator, rec)
+        _, out = run_plate_load(np.ascontiguousarray(force, dtype=float),
+                                np.asarray([dof], dtype=np.int64), np.ones(1), float(dt),
+                                self.inv_mass, self.operator, rec)
         return out
 
 
@@ -240,10 +240,8 @@ class ElasticPlate:
         and rec[n, r] = u_n[record_dofs[r]] (empty without ``record_dofs``), n = 0..len(force).
         """
         rec = np.asarray([] if record_dofs is None else record_dofs, dtype=np.int64)
-        with single_threaded_blas():
-            w, out = run_plate_load(np.ascontiguousarray(force, dtype=float), self.load_dofs,
-                                    self.load_weights, float(dt), self.inv_mass,
-                                    self.operator, rec)
+        w, out = run_plate_load(np.ascontiguousarray(force, dtype=float), self.load_dofs,
+                                self.load_weights, float(dt), self.inv_mass, self.operator, rec)
         return w / self.force_share, out
 
 

@@ -118,14 +118,13 @@ class SemBoundary(_PlateTier):
         peaks = new_peak_tracker()
         h, r, per_sample = self.steps(plan)
         start = time.perf_counter()
-        with single_threaded_blas():
-            status, done, w, e_plate, dissipated = integrate_sem(
-                setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
-                setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
-                setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
-                plate.inv_mass, np.repeat(plate.node_mass, 3), plate.operator, plate.load_dofs,
-                plate.load_weights, up, vp, plate.force_share,
-            )
+        status, done, w, e_plate, dissipated = integrate_sem(
+            setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
+            setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
+            setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
+            plate.inv_mass, np.repeat(plate.node_mass, 3), plate.operator, plate.load_dofs,
+            plate.load_weights, up, vp, plate.force_share,
+        )
         wall = time.perf_counter() - start
         setup.w = w
         extra = self._extra(h, r, per_sample, plan)
