@@ -23,7 +23,7 @@ from . import kernels as K
 from .errors import WaveformError
 from .features import Features
 from .pulses import FLAGS, DetectOptions, kernel_args, lowpass
-from .waveform import MIN_SAMPLES, UNITS
+from .waveform import MIN_SAMPLES, UNITS, invalid_sample
 
 FLAG_BITS = {name: 1 << k for k, name in enumerate(FLAGS)}
 """Bit of each quality flag in :attr:`FeatureTable.flags`."""
@@ -105,11 +105,12 @@ def check_batch(samples: Any) -> np.ndarray:
     if x.shape[1] < MIN_SAMPLES:
         raise WaveformError("samples", f"too few samples per shot ({x.shape[1]})",
                             f"at least {MIN_SAMPLES} samples per shot")
-    bad = K.first_nonfinite(x)
+    bad = K.first_invalid(x)
     if bad >= 0:
         shot, sample = divmod(bad, x.shape[1])
-        raise WaveformError("samples", f"contains NaN or inf (first at shot {shot}, sample "
-                            f"{sample}: {x[shot, sample]})", "finite numbers")
+        raise WaveformError("samples", f"{invalid_sample(x[shot, sample])} at shot {shot}, "
+                            f"sample {sample}",
+                            f"finite numbers of magnitude at most {K.MAX_ABS_SAMPLE:g}")
     return x
 
 

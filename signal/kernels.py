@@ -99,24 +99,32 @@ def vargmax(a: np.ndarray) -> int:
     return i
 
 
-EXPONENT_BITS = np.uint64(0x7FF0000000000000)
+MAX_ABS_SAMPLE = 1e12
+"""Largest sample magnitude a shot may hold (N or V; raw ADC counts fit too): far beyond any
+sensor, and far below where the kernel's running sums over a record would overflow to inf and
+turn indices into NaN (1e305 did)."""
+
+ABS_BITS = np.uint64(0x7FFFFFFFFFFFFFFF)
+LIMIT_BITS = np.float64(MAX_ABS_SAMPLE).view(np.uint64)
 
 
 @njit(cache=True)
-def first_nonfinite(x: np.ndarray) -> int:
-    """Flat index of the first NaN or inf in a C-contiguous float64 array, or -1.
+def first_invalid(x: np.ndarray) -> int:
+    """Flat index of the first sample of a C-contiguous float64 array that is NaN, inf or larger
+    in magnitude than :data:`MAX_ABS_SAMPLE`, or -1.
 
-    An IEEE double is NaN or inf exactly when its exponent bits are all set; counting those is
+    Non-negative IEEE doubles order as their bit patterns, and NaN and inf lie above every finite
+    number: one unsigned comparison of the bits without the sign tests all three. Counting is
     integer work the compiler vectorises, so a clean array costs one fast pass.
     """
     bits = x.reshape(x.size).view(np.uint64)
     count = 0
     for i in range(bits.size):
-        count += (bits[i] & EXPONENT_BITS) == EXPONENT_BITS
+        count += (bits[i] & ABS_BITS) > LIMIT_BITS
     if count == 0:
         return -1
     i = 0
-    while (bits[i] & EXPONENT_BITS) != EXPONENT_BITS:
+    while (bits[i] & ABS_BITS) <= LIMIT_BITS:
         i += 1
     return i
 

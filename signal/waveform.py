@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WaveformError
-from .kernels import first_nonfinite
+from .kernels import MAX_ABS_SAMPLE, first_invalid
 
 UNITS = ("N", "V")
 MIN_SAMPLES = 32
@@ -53,12 +53,18 @@ def check_samples(samples: Any, name: str = "samples") -> np.ndarray:
         raise WaveformError(
             name, f"too few samples ({array.size})", f"at least {MIN_SAMPLES} samples per shot"
         )
-    bad = first_nonfinite(array)
+    bad = first_invalid(array)
     if bad >= 0:
-        raise WaveformError(
-            name, f"contains NaN or inf (first at sample {bad}: {array[bad]})", "finite numbers"
-        )
+        raise WaveformError(name, f"{invalid_sample(array[bad])} at sample {bad}",
+                            f"finite numbers of magnitude at most {MAX_ABS_SAMPLE:g}")
     return array
+
+
+def invalid_sample(value: float) -> str:
+    """What is wrong with a sample :func:`~solitonde.signal.kernels.first_invalid` found."""
+    if not np.isfinite(value):
+        return f"contains NaN or inf ({value})"
+    return f"a value of magnitude beyond {MAX_ABS_SAMPLE:g} ({value:g})"
 
 
 def uniform_grid(time: Any, name: str = "time") -> tuple[float, float]:

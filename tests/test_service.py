@@ -145,6 +145,12 @@ def _with_nan() -> str:
     return json.dumps({"shots": [shot]})  # Python writes the non-standard literal NaN
 
 
+def _with_huge() -> str:
+    shot = shot_json()
+    shot["samples"][100] = 1e305  # finite, but its running sums overflowed the kernel (crash)
+    return json.dumps({"shots": [shot]})
+
+
 def _with_meta(**meta: object) -> str:
     shot = shot_json()
     shot["metadata"].update(meta)
@@ -154,6 +160,7 @@ def _with_meta(**meta: object) -> str:
 BAD_INPUTS = [
     # (case, body, content type, status, field)
     ("nan sample", _with_nan(), "application/json", 422, "shots.0.samples.100"),
+    ("huge sample", _with_huge(), "application/json", 422, "shots.0.samples"),
     ("infinite dt", _body().replace('"dt": 5e-07', '"dt": Infinity'), "application/json", 422,
      "shots.0.dt"),
     ("empty samples", _body(samples=[]), "application/json", 422, "shots.0.samples"),
@@ -482,6 +489,7 @@ def test_binary_shot_measures_like_json_and_is_stored_bit_for_bit(client: TestCl
 
 _F32 = shot_samples(0).astype("<f4").tobytes()
 _NAN = np.r_[shot_samples(0)[:100], np.nan, shot_samples(0)[101:]].tobytes()
+_HUGE = np.r_[shot_samples(0)[:100], 1e305, shot_samples(0)[101:]].tobytes()
 BAD_BINARY = [
     # (case, query, body, field)
     ("no dtype", "dt=5e-7", _F32, "dtype"),
@@ -494,6 +502,7 @@ BAD_BINARY = [
     ("empty body", "dtype=float32&dt=5e-7", b"", "body"),
     ("partial sample", "dtype=float32&dt=5e-7", _F32[:-1], "body"),
     ("NaN sample", "dtype=float64&dt=5e-7", _NAN, "samples"),
+    ("huge sample", "dtype=float64&dt=5e-7", _HUGE, "samples"),
     ("too few samples", "dtype=float32&dt=5e-7", _F32[:40], "samples"),
     ("too many samples", "dtype=float64&dt=5e-7", bytes(8 * 50_001), "samples"),
     ("volts without calibration", "dtype=float32&dt=5e-7&units=V", _F32, "calibration"),

@@ -90,15 +90,32 @@ def test_trend_fit_is_least_squares_on_the_quiet_samples():
     np.testing.assert_allclose(coef, expected, rtol=1e-9, atol=1e-11)
 
 
-@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
-def test_first_nonfinite_finds_the_first_bad_sample(bad):
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, 1.0000001e12, -1.7e308])
+def test_first_invalid_finds_the_first_bad_sample(bad):
     x = np.random.default_rng(1).normal(size=(5, 200))
-    x[0, :3] = (1.7e308, -1.7e308, 5e-324)  # extreme but finite
-    assert K.first_nonfinite(x) == -1
+    x[0, :4] = (1e12, -1e12, 5e-324, -0.0)  # extreme but allowed
+    assert K.first_invalid(x) == -1
     x[3, 17] = bad
     x[4, 2] = bad
-    assert K.first_nonfinite(x) == 3 * 200 + 17
-    assert K.first_nonfinite(x[3]) == 17
+    assert K.first_invalid(x) == 3 * 200 + 17
+    assert K.first_invalid(x[3]) == 17
+
+
+def test_huge_samples_are_refused_not_crashing_the_kernel():
+    """Sums of 1e305-sized samples overflow inside the kernel (it crashed): refused up front,
+    one shot at a time and in a batch, naming the sample."""
+    from solitonde.signal.batch import extract_batch
+    from solitonde.signal.errors import WaveformError
+    from solitonde.signal.waveform import Waveform
+
+    x = np.r_[np.zeros(2000), np.full(2000, 1e305)]
+    with pytest.raises(WaveformError, match=r"samples: a value of magnitude beyond 1e\+12 .* "
+                                            r"at sample 2000"):
+        Waveform(0.0, 5e-7, x)
+    with pytest.raises(WaveformError, match="shot 1, sample 2000"):
+        extract_batch(np.stack([np.zeros(4000), x]), 5e-7)
+    with pytest.raises(WaveformError, match="NaN or inf"):
+        Waveform(0.0, 5e-7, np.r_[x[:100], np.nan])
 
 
 def test_analyze_makes_its_own_ramp_when_given_none_of_the_right_size():
