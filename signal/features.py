@@ -159,11 +159,27 @@ class Aggregate:
 
 
 def _modified_z(values: np.ndarray) -> np.ndarray:
-    med = np.median(values)
-    mad = np.median(np.abs(values - med))
-    if mad == 0:
-        return np.zeros_like(values)
-    return 0.6745 * np.abs(values - med) / mad
+    """Iglewicz-Hoaglin modified z-scores ``0.6745 |x - median| / MAD`` over the finite values.
+
+    When more than half the values are equal the MAD is 0; the score then uses the mean absolute
+    deviation, ``|x - median| / (1.253314 MeanAD)`` (their recommendation), so a lone outlier
+    among identical values is still caught. All values equal: every score 0. A non-finite value
+    scores inf.
+    """
+    finite = np.isfinite(values)
+    z = np.full(values.shape, np.inf)
+    if not finite.any():
+        return z
+    x = values[finite]
+    med = np.median(x)
+    dev = np.abs(x - med)
+    mad = np.median(dev)
+    if mad > 0:
+        z[finite] = 0.6745 * dev / mad
+    else:
+        mean_ad = dev.mean()
+        z[finite] = dev / (1.253314 * mean_ad) if mean_ad > 0 else 0.0
+    return z
 
 
 def aggregate(
@@ -189,9 +205,12 @@ def aggregate(
             for i, zi, vi in zip(with_ref, z, values, strict=True):
                 if zi > outlier_z and i not in dropped:
                     dropped.add(i)
+                    finite = bool(np.isfinite(vi))
                     rejected.append({
-                        "index": i, "feature": name, "value": float(vi),
-                        "modified_z": float(zi), "reason": f"modified z-score > {outlier_z:g}",
+                        "index": i, "feature": name, "value": float(vi) if finite else None,
+                        "modified_z": float(zi) if finite else None,
+                        "reason": (f"modified z-score > {outlier_z:g}" if finite
+                                   else "not a finite number"),
                     })
     kept = [i for i in range(n) if i not in dropped]
     stats: dict[str, Stat] = {}

@@ -182,3 +182,24 @@ def test_aggregate_reports_outliers():
     assert agg.to_dict()["rejected"][0]["feature"] == "tof_s"
     off = aggregate(feats, outlier_z=None)
     assert off["tof_s"].count == 7 and off.rejected == []
+
+
+def test_aggregate_outliers_among_identical_values_and_non_finite():
+    """More than half the shots equal (MAD 0): a lone outlier is still rejected (mean absolute
+    deviation fallback); all equal: nothing rejected; a non-finite value is rejected and says so,
+    and the report stays JSON-safe."""
+    import json
+
+    from solitonde.signal.features import Features
+
+    def f(tof: float, arr: float) -> Features:
+        return Features(tof, arr, 1e-4, 1e-4 + tof, 100.0, 100.0 * arr, 40.0, [])
+
+    agg = aggregate([f(5e-4, 0.5)] * 4 + [f(9e-4, 0.9)])
+    assert [(r["index"], r["feature"]) for r in agg.rejected] == [(4, "tof_s")]
+    assert agg["tof_s"].mean == pytest.approx(5e-4) and agg["tof_s"].count == 4
+    assert aggregate([f(5e-4, 0.5)] * 5).rejected == []
+    bad = aggregate([f(5e-4 + 1e-7 * k, 0.5) for k in range(5)] + [f(float("nan"), 0.5)])
+    assert bad.rejected == [{"index": 5, "feature": "tof_s", "value": None, "modified_z": None,
+                             "reason": "not a finite number"}]
+    json.dumps(bad.to_dict(), allow_nan=False)
