@@ -160,7 +160,12 @@ def simulate_command(
     except SimulationError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=1) from None
-    waveform = to_waveform(result)
+    try:
+        waveform = to_waveform(result)
+    except WaveformError as exc:  # e.g. fewer samples than a shot needs
+        typer.echo(f"error: output.sample_rate / output.duration: the simulated trace cannot be "
+                   f"measured: {exc}", err=True)
+        raise typer.Exit(code=2) from None
     features: Features | None = None
     feature_error = None
     try:

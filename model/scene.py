@@ -430,6 +430,12 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise SceneError("scene", f"cannot read scene file {str(path)!r}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(
+            "scene",
+            f"scene file {str(path)!r} is not UTF-8 text ({exc.reason} at byte {exc.start})",
+            allowed="a YAML or JSON file in UTF-8",
+        ) from None
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:

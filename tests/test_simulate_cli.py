@@ -50,3 +50,16 @@ def test_bad_input_and_impossible_request(runner):
     res = runner.invoke(build_app(), ["simulate", "--set", "output.duration=100"])
     assert res.exit_code == 1
     assert "step_budget_exceeded" in res.output
+
+
+def test_unmeasurable_trace_and_non_utf8_scene(runner, tmp_path):
+    """A legal scene whose record is too short to measure, and a scene file that is not UTF-8
+    text, each get an error naming what to change (exit 2), not a traceback."""
+    res = runner.invoke(build_app(), ["simulate", "--set", "output.sample_rate=2e4", "--json"])
+    assert res.exit_code == 2 and isinstance(res.exception, SystemExit)
+    assert "output.sample_rate" in res.output and "too few samples" in res.output
+    scene = tmp_path / "notepad.yaml"
+    scene.write_bytes("chain:\n  n_particles: 20\n".encode("utf-16"))
+    res = runner.invoke(build_app(), ["simulate", str(scene)])
+    assert res.exit_code == 2 and isinstance(res.exception, SystemExit)
+    assert "not UTF-8 text" in res.output
