@@ -106,10 +106,15 @@ def check_self_contained(path: Path, fmt: str) -> None:
 
 
 def declared_values(path: Path, fmt: str) -> int | None:
-    """How many values the file declares in its largest array, from headers alone.
+    """How many values the file declares in all the arrays the reader decodes, from headers alone.
 
-    Returns ``None`` for formats without a size header (CSV, whose size the body limit bounds).
-    A file too broken to size is left to the reader, which reports it properly.
+    The readers decode every dataset of an HDF5 file, every channel of a TDMS file and the arrays
+    of an NPZ archive, so the count is their sum: a limit on the largest array alone lets a small
+    compressed file of many arrays just under it through. A value is counted per 8 bytes of its
+    element (an HDF5 array type or a long fixed-width string is several), since the readers
+    decode each element whole. Returns ``None`` for formats without a size header (CSV, whose
+    size the body limit bounds). A file too broken to size is left to the reader, which reports
+    it properly.
     """
     try:
         if fmt == "npy":
@@ -117,40 +122,45 @@ def declared_values(path: Path, fmt: str) -> int | None:
                 return _npy_values(fh)
         if fmt == "npz":
             with zipfile.ZipFile(path) as zf:
-                sizes = [_npy_values(zf.open(name)) for name in zf.namelist()
-                         if name.endswith(".npy")]
-            return max(sizes, default=0)
+                return sum(_npy_values(zf.open(name)) for name in zf.namelist()
+                           if name.endswith(".npy"))
         if fmt == "hdf5":
             return _hdf5_values(path)
         if fmt == "tdms":
             from nptdms import TdmsFile
 
-            meta = TdmsFile.read_metadata(path)
-            return max((len(ch) for g in meta.groups() for ch in g.channels()), default=0)
+            meta = TdmsFile.read_metadata(path)  # TdmsFile.read decodes every channel
+            return sum(len(ch) for g in meta.groups() for ch in g.channels())
     except Exception:
         return None
     return None
 
 
+def _values(shape: tuple[int, ...] | None, dtype: np.dtype) -> int:
+    """Values of an array of ``shape`` and ``dtype``, one per 8 bytes of each element."""
+    count = int(np.prod(shape, dtype=np.int64)) if shape else 1
+    return count * max(1, -(-int(dtype.itemsize) // 8))
+
+
 def _npy_values(fh: BinaryIO) -> int:
     version = np.lib.format.read_magic(fh)
     if version == (1, 0):
-        shape, _, _ = np.lib.format.read_array_header_1_0(fh)
+        shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
     else:
-        shape, _, _ = np.lib.format.read_array_header_2_0(fh)
-    return int(np.prod(shape, dtype=np.int64)) if shape else 1
+        shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    return _values(shape, np.dtype(dtype))
 
 
 def _hdf5_values(path: Path) -> int:
     import h5py
 
-    largest = 0
+    total = 0
 
     def visit(_name: str, obj: Any) -> None:
-        nonlocal largest
+        nonlocal total
         if isinstance(obj, h5py.Dataset) and obj.shape is not None:
-            largest = max(largest, int(np.prod(obj.shape, dtype=np.int64)) if obj.shape else 1)
+            total += _values(obj.shape, obj.dtype)
 
     with h5py.File(path, "r") as fh:
-        fh.visititems(visit)
-    return largest
+        fh.visititems(visit)  # the objects the reader visits, each once
+    return total
