@@ -189,6 +189,20 @@ BAD_INPUTS = [
      "shots.0.calibration"),
     ("negative sphere diameter", _with_meta(sphere_diameter=-0.01), "application/json", 422,
      "shots.0.metadata.sphere_diameter"),
+    # metadata.extra may not stand in for a validated field (it bypassed the checks)
+    ("extra sphere diameter as text", _with_meta(extra={"sphere_diameter": "abc"}),
+     "application/json", 422, "shots.0.metadata.extra.sphere_diameter"),
+    ("extra negative sphere diameter", _with_meta(extra={"sphere_diameter": -5.0}),
+     "application/json", 422, "shots.0.metadata.extra.sphere_diameter"),
+    ("extra null plate_id", _with_meta(extra={"plate_id": None}), "application/json", 422,
+     "shots.0.metadata.extra.plate_id"),
+    ("extra shot", _with_meta(extra={"shot": "x"}), "application/json", 422,
+     "shots.0.metadata.extra.shot"),
+    ("extra source", _with_meta(extra={"source": "x.h5"}), "application/json", 422,
+     "shots.0.metadata.extra.source"),
+    ("top-level extra position",
+     json.dumps({"shots": [shot_json()], "metadata": {"extra": {"position": "B7"}}}),
+     "application/json", 422, "metadata.extra.position"),
     ("noise only, no pulse", _body(samples=np.random.default_rng(0).normal(0, 1, 4000).tolist()),
      "application/json", 422, "shots.0.samples"),
     ("two positions in one request",
@@ -250,6 +264,114 @@ def test_compressed_upload_declaring_1e8_samples_is_refused(tmp_path: Path) -> N
         assert r.status_code == 413, r.text
         assert r.json()["field"] == "file" and "100,000,000" in r.json()["detail"]
         assert client.app.state.service.store.count() == 0
+
+
+def test_extra_keeps_free_keys_and_names_the_field_to_use(client: TestClient) -> None:
+    """Free-form extra keys are stored as given; a field's own name in extra is refused with a
+    detail that says where it belongs, and the stored measurement is unchanged."""
+    shot = shot_json()
+    shot["metadata"]["extra"] = {"operator": "bob", "gain_db": 20, "note": None}
+    r = client.post("/v1/measurements", json={"shots": [shot]})
+    assert r.status_code == 201, r.text
+    meta = r.json()["shots"][0]["metadata"]
+    assert meta["operator"] == "bob" and meta["gain_db"] == 20 and meta["note"] is None
+    assert meta["sphere_diameter"] == 9.53e-3 and meta["plate_id"] == "P1"
+    shot["metadata"]["extra"] = {"operator": "bob", "sphere_diameter": -5.0}
+    r = client.post("/v1/measurements", json={"shots": [shot]})
+    assert r.status_code == 422
+    assert "must be given as the field shots.0.metadata.sphere_diameter" in r.json()["detail"]
+    assert stored(client) == 1
+    (item,) = client.get("/v1/measurements").json()["items"]
+    assert item["plate_id"] == "P1" and item["aggregates"][0]["sphere_diameter"] == 9.53e-3
+
+
+@pytest.mark.parametrize("value", ["abc", -5.0, 2.0, True])
+def test_upload_file_metadata_sphere_diameter_is_checked(client: TestClient, tmp_path: Path,
+                                                         value: object) -> None:
+    """A file's own sphere_diameter attribute is metadata like a JSON shot's and gets the same
+    check (text was a 500, a negative one was stored); a form field overrides it."""
+    import h5py
+
+    path = tmp_path / "shot.h5"
+    with h5py.File(path, "w") as fh:
+        ds = fh.create_dataset("shot", data=shot_samples(0))
+        ds.attrs["dt"] = DT
+        ds.attrs["sphere_diameter"] = value
+    r = client.post("/v1/measurements", files={"file": ("shot.h5", path.read_bytes())})
+    assert r.status_code == 422, r.text
+    assert r.json()["field"] == "file.shots.0.metadata.sphere_diameter"
+    assert stored(client) == 0
+    r = client.post("/v1/measurements", files={"file": ("shot.h5", path.read_bytes())},
+                    data={"sphere_diameter": "0.00953"})
+    assert r.status_code == 201, r.text
+    assert r.json()["shots"][0]["metadata"]["sphere_diameter"] == 0.00953
+
+
+def _many_hdf5_datasets(path: Path, count: int, n: int) -> None:
+    import h5py
+
+    with h5py.File(path, "w") as fh:
+        for i in range(count):
+            ds = fh.create_dataset(f"s{i}", data=np.zeros(n), compression="gzip")
+            ds.attrs["dt"] = DT
+
+
+def _hdf5_array_elements(path: Path, count: int, n: int) -> None:
+    import h5py
+
+    with h5py.File(path, "w") as fh:  # `count` elements, each itself n float64 values
+        ds = fh.create_dataset("s", shape=(count,), dtype=np.dtype((np.float64, (n,))),
+                               compression="gzip")
+        ds.attrs["dt"] = DT
+
+
+def _npz_long_metadata(path: Path, count: int, n: int) -> None:
+    text = "x" * (2 * count * n)  # 4-byte characters: count * n values of 8 bytes
+    np.savez_compressed(path, samples=np.zeros(n), dt=np.float64(DT), metadata=np.str_(text))
+
+
+def _many_tdms_channels(path: Path, count: int, n: int) -> None:
+    from nptdms import ChannelObject, TdmsWriter
+
+    with TdmsWriter(str(path)) as writer:
+        writer.write_segment([ChannelObject("shots", f"c{i}", np.zeros(n), properties={
+            "wf_increment": DT, "wf_start_offset": 0.0}) for i in range(count)])
+
+
+SIZE_BOMBS = [("hdf5 datasets", "bomb.h5", _many_hdf5_datasets),
+              ("hdf5 array elements", "bomb.h5", _hdf5_array_elements),
+              ("npz metadata string", "bomb.npz", _npz_long_metadata),
+              ("tdms channels", "bomb.tdms", _many_tdms_channels)]
+
+
+@pytest.mark.parametrize(("case", "name", "build"), SIZE_BOMBS, ids=[c[0] for c in SIZE_BOMBS])
+def test_upload_of_many_arrays_is_sized_by_their_sum(tmp_path: Path, monkeypatch, case: str,
+                                                     name: str, build) -> None:
+    """Five arrays each within the per-shot limit but over the request limit together: 413 from
+    the headers, the reader never runs (it decoded everything before); one array is read."""
+    from solitonde.instrument import routes_measurements
+
+    calls: list[str] = []
+    real = routes_measurements.read_file
+
+    def spy(path, fmt, options):
+        calls.append(fmt)
+        return real(path, fmt, options)
+
+    monkeypatch.setattr(routes_measurements, "read_file", spy)
+    n = 100_000
+    bomb, single = tmp_path / name, tmp_path / f"single-{name}"
+    build(bomb, 5, n)
+    build(single, 1, n)
+    with make_client(tmp_path, max_samples_per_shot=n, max_samples_per_request=3 * n) as client:
+        r = client.post("/v1/measurements", files={"file": (name, bomb.read_bytes())})
+        assert r.status_code == 413, r.text
+        problem = r.json()
+        assert problem["field"] == "file" and "at most 300,000 per request" in problem["detail"]
+        assert calls == [] and stored(client) == 0
+        r = client.post("/v1/measurements", files={"file": (name, single.read_bytes())})
+        assert r.status_code != 413 and len(calls) == 1, r.text  # zeros: no pulse, a 422
+        assert stored(client) == 0
 
 
 def test_upload_problems_name_the_field(client: TestClient) -> None:
