@@ -31,7 +31,8 @@ class ShotMetadata(Strict):
                                           description="chain sphere diameter D, m")
     shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
     extra: dict[str, SCALAR] = Field(default_factory=dict, max_length=50,
-                                     description="free-form key/value pairs, kept as given")
+                                     description="free-form key/value pairs, kept as given; "
+                                                 "not the fields above, nor 'source' (a 422)")
 
 
 class ShotBase(Strict):
