@@ -3,30 +3,54 @@
 ``read(path, format=None, **options) -> list[Waveform]`` (one per shot) and
 ``write(path, waveforms, format=None, **options)``. The format comes from the extension; an
 extension that could be several formats (``.txt``, ``.dat``) or none needs an explicit
-``format=``, never a guess. Layouts:
+``format=``, never a guess. Every reader takes the options
+
+``sample_rate=`` (Hz) or ``dt=`` (s)
+    The sample period of data without a time axis. Data with their own time axis (a time column,
+    a ``dt``/``sample_rate`` attribute or comment, ``wf_increment``) keep it; an option that
+    disagrees with it by more than 1 % of a period is an error naming the option.
+``t0=`` (s)
+    Time of the first sample; an explicit value wins over the file's.
+``units=`` (``"N"`` or ``"V"``)
+    Units of data that do not state them (default N). A file that states its units keeps them;
+    an option that contradicts them is an error naming ``units``.
+``calibration=`` (N/V)
+    Sensor sensitivity for data in volts (it wins over the file's own). Giving one for a file
+    whose data are all in newtons is an error naming ``calibration``.
+
+plus ``dataset=`` (HDF5) and ``group=``, ``channel=`` (TDMS); :data:`READER_OPTIONS` lists them.
+An unknown option is an error naming it. A file a parser cannot read raises
+:class:`~.errors.WaveformError` (field ``file`` unless a field is known), never the parser's
+own exception. Metadata identifiers (``plate_id``, ``position``, ``shot`` labels) stay text;
+``sphere_diameter``, ``t0``, ``dt``, ``sample_rate`` and ``calibration`` must be numbers; other
+text values are decoded only when they are JSON objects, lists, booleans or null. Layouts:
 
 csv
-    Optional leading ``# key: value`` comment lines (metadata; values that parse as JSON are
-    decoded, e.g. ``# scene: {...}``), then a header ``time_s,force_N`` (more force columns = more
-    shots; ``voltage_V`` columns need ``calibration=``). A single column of samples without a time
-    column needs ``sample_rate=`` (Hz); ``t0=`` defaults to 0.
+    UTF-8 text (a byte-order mark is allowed). Optional leading ``# key: value`` comment lines
+    (metadata; ``# dt:``, ``# sample_rate:``, ``# t0:``, ``# calibration:`` are used as such),
+    then a header ``time_s,force_N`` (more force columns = more shots; ``voltage_V`` columns need
+    a calibration). A header-less table whose first column is a uniform, increasing ramp is
+    ``time, force...``; otherwise every column is a shot. Without a time column the sample
+    period comes from the comments or ``sample_rate=``; ``t0`` defaults to 0.
 npy
-    2-D ``(n_samples, 1 + shots)`` with time in column 0; or, with ``sample_rate=``, samples only
-    (1-D, or one shot per row).
+    2-D ``(n_samples, 1 + shots)`` with a uniform time axis in column 0; otherwise samples only
+    (1-D, or one shot per row), which need ``sample_rate=``.
 npz
-    ``samples`` (1-D or one shot per row) with ``dt`` or ``sample_rate``, optional ``t0``,
-    ``units``, ``calibration`` and ``metadata`` (a JSON string: an object, or a list of objects
-    with one per shot).
+    ``samples`` (1-D or one shot per row) with ``dt`` or ``sample_rate`` (or the option), optional
+    ``t0``, ``units``, ``calibration`` and ``metadata`` (a JSON string: an object, or a list of
+    objects with one per shot).
 hdf5
     Every dataset (or those under ``dataset=``, a path to a dataset or group) is a shot, or one
     shot per row when 2-D; attributes ``dt`` or ``sample_rate``, optional ``t0``, ``units``,
     ``calibration``; all other attributes become metadata.
 tdms
     Channels with the NI waveform properties ``wf_increment`` and ``wf_start_offset``; select with
-    ``group=`` and ``channel=`` (a name or a list); ``unit_string`` gives the units, other
-    properties become metadata.
+    ``group=`` and ``channel=`` (a name or a list); ``unit_string`` gives the units (``N``,
+    ``Newtons``, ``V``, ``Volts``), other properties become metadata.
 json
-    ``{"t0", "dt", "samples", "units", "calibration", "metadata"}`` or ``{"shots": [...]}``.
+    The REST service's shot ``{"t0", "dt", "samples", "units", "calibration", "metadata"}`` (with
+    ``metadata`` holding ``plate_id``, ``position``, ``sphere_diameter``, ``shot`` and ``extra``;
+    a flat metadata object is read too), a list of them, or ``{"shots": [...]}``.
 """
 
 from __future__ import annotations
@@ -41,7 +65,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WaveformError
-from .waveform import UNITS, Waveform, _jsonable, check_samples, uniform_grid
+from .waveform import MIN_SAMPLES, UNIFORM_TOLERANCE, UNITS, Waveform, _jsonable, uniform_grid
 
 FORMATS = ("csv", "npy", "npz", "hdf5", "tdms", "json")
 EXTENSIONS = {
@@ -55,6 +79,32 @@ EXTENSIONS = {
     ".json": "json",
 }
 AMBIGUOUS = (".txt", ".dat", ".asc", ".tsv")
+_COMMON_OPTIONS = ("sample_rate", "dt", "t0", "units", "calibration")
+READER_OPTIONS: dict[str, tuple[str, ...]] = {
+    "csv": _COMMON_OPTIONS, "npy": _COMMON_OPTIONS, "npz": _COMMON_OPTIONS,
+    "hdf5": (*_COMMON_OPTIONS, "dataset"), "tdms": (*_COMMON_OPTIONS, "group", "channel"),
+    "json": _COMMON_OPTIONS,
+}
+"""The options each reader accepts (see the module docstring)."""
+
+IDENTIFIERS = ("plate_id", "position")
+"""Metadata that label things: kept as text, never read as numbers (``007`` is not 7)."""
+NUMERIC_METADATA = ("sphere_diameter", "t0", "dt", "sample_rate", "calibration", "wf_increment",
+                    "wf_start_offset")
+"""Metadata that must be numbers; a file holding anything else there is refused."""
+UNIT_NAMES = {"n": "N", "newton": "N", "newtons": "N", "v": "V", "volt": "V", "volts": "V"}
+"""Unit spellings found in files (TDMS ``unit_string``, attributes), case-insensitive."""
+
+
+class OptionNeeded(WaveformError):
+    """The data need an option the caller did not give: ``sample_rate`` (no time axis) or
+    ``calibration`` (samples in volts without one). ``option`` names it; ``field`` may carry a
+    path prefix (``shots[2].calibration``)."""
+
+    def __init__(self, option: str, message: str, allowed: str | None = None,
+                 field: str | None = None) -> None:
+        super().__init__(field or option, message, allowed)
+        self.option = option
 
 
 def detect_format(path: str | Path, format: str | None = None) -> str:
@@ -82,25 +132,39 @@ def detect_format(path: str | Path, format: str | None = None) -> str:
 def read(path: str | Path, format: str | None = None, **options: Any) -> list[Waveform]:
     """Read every shot in ``path``; ``options`` depend on the format (see the module docstring).
 
-    Every shot gets ``metadata["source"]`` (the file name) and ``metadata["shot"]`` (its index in
-    the file) unless the file names them.
+    Options given as ``None`` are ignored. Every shot gets ``metadata["source"]`` (the file name)
+    and ``metadata["shot"]`` (its index in the file) unless the file names them.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    WaveformError
+        For an unknown option, and for anything wrong with the file: a parser's own exception
+        (bad JSON, bad text encoding, a malformed table or array) becomes one naming ``file``.
     """
     path = Path(path)
     fmt = detect_format(path, format)
     if not path.exists():
         raise FileNotFoundError(f"no such file: {path}")
-    reader = _READERS[fmt]
+    given = {k: v for k, v in options.items() if v is not None}
+    allowed = READER_OPTIONS[fmt]
+    for key in given:
+        if key not in allowed:
+            raise WaveformError(key, f"not an option of the {fmt} reader", ", ".join(allowed))
     try:
-        waves = reader(path, **options)
-    except TypeError as exc:
-        if "unexpected keyword" in str(exc):
-            raise WaveformError("options", f"{fmt} reader: {exc}") from None
+        waves = _READERS[fmt](path, **given)
+    except WaveformError:
         raise
+    except Exception as exc:  # a malformed file broke a parser: the file's error, not a crash
+        raise WaveformError(
+            "file", f"{path.name} cannot be read as {fmt} ({type(exc).__name__}: {exc})"
+        ) from exc
     if not waves:
         raise WaveformError("samples", f"{path.name} holds no shots")
     out = []
     for i, w in enumerate(waves):
-        meta = {"source": path.name, "shot": i, **w.metadata}
+        meta = _identifiers_as_text({"source": path.name, "shot": i, **w.metadata})
         out.append(w.with_metadata(**meta))
     return out
 
@@ -129,39 +193,36 @@ def write(
 # --- shared helpers ---------------------------------------------------------------------------
 
 
-def _units_of(label: str) -> str:
-    """Units from a column label such as ``force_N`` or ``voltage_V``."""
-    suffix = label.rsplit("_", 1)[-1] if "_" in label else ""
-    if suffix not in UNITS:
-        raise WaveformError(
-            "units", f"column {label!r} does not end in a known unit", "a '_N' or '_V' suffix"
-        )
-    return suffix
+def _identifiers_as_text(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """``plate_id`` and ``position`` as text (a file may store them as numbers)."""
+    out = dict(meta)
+    for key in IDENTIFIERS:
+        if out.get(key) is not None and not isinstance(out[key], str):
+            out[key] = str(out[key])
+    return out
 
 
-def _dt_from(options: Mapping[str, Any], where: str) -> float:
-    if options.get("dt") is not None:
-        return float(options["dt"])
-    rate = options.get("sample_rate")
-    if rate is None:
-        raise WaveformError(
-            "sample_rate", f"{where} has no time column; give the sample rate",
-            "sample_rate= in Hz (or dt= in s)",
-        )
-    rate = float(rate)
-    if not np.isfinite(rate) or rate <= 0:
-        raise WaveformError("sample_rate", f"must be positive, got {rate}", "Hz > 0")
-    return 1.0 / rate
+def _decode(value: Any, key: str | None = None) -> Any:
+    """Metadata value ``key`` from a file as Python: bytes to str, numpy to Python.
 
-
-def _decode(value: Any) -> Any:
-    """Metadata value from a file: bytes to str, numpy scalars to Python, JSON text decoded."""
-    if isinstance(value, bytes):
-        value = value.decode("utf-8", "replace")
-    if isinstance(value, np.generic):
-        value = value.item()
+    Identifiers stay text; numeric keys must be one number; other text is decoded only when it
+    is a JSON object, list, boolean or null (``# scene: {...}``), so labels keep their digits.
+    """
     if isinstance(value, np.ndarray):
         value = value.tolist()
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, bytes):
+        value = value.decode("utf-8", "replace")
+    if key in IDENTIFIERS or key == "shot":
+        return value.strip() if isinstance(value, str) else value
+    if key in NUMERIC_METADATA:
+        if isinstance(value, bool) or not isinstance(value, str | int | float):
+            raise WaveformError(key, f"expected one number, got {value!r}")
+        try:
+            return float(value)
+        except ValueError:
+            raise WaveformError(key, f"expected a number, got {value!r}") from None
     if isinstance(value, str):
         text = value.strip()
         if text[:1] in "{[" or text in ("true", "false", "null"):
@@ -169,13 +230,103 @@ def _decode(value: Any) -> Any:
                 return json.loads(text)
             except ValueError:
                 return value
-        try:
-            number = float(text)
-        except ValueError:
-            return value
-        return int(number) if number.is_integer() and "." not in text and "e" not in text.lower() \
-            else number
     return value
+
+
+def _units(stated: Any, option: str | None, where: str) -> str:
+    """Units of the data: the file's (``stated``, any spelling in :data:`UNIT_NAMES`), else the
+    ``units=`` option, else N; an option contradicting the file is an error."""
+    if option is not None and option not in UNITS:
+        raise WaveformError("units", f"unknown units {option!r}", "'N' or 'V'")
+    if stated is None or (isinstance(stated, str) and not stated.strip()):
+        return option or "N"
+    unit = UNIT_NAMES.get(str(stated).strip().lower())
+    if unit is None:
+        raise WaveformError("units", f"{where}: unknown units {stated!r}",
+                            "N (Newtons) or V (Volts)")
+    if option is not None and option != unit:
+        raise WaveformError("units", f"{where}: the file says its data are in {unit}, not "
+                            f"{option}", f"units='{unit}' or no units= option")
+    return unit
+
+
+def _positive(name: str, value: Any) -> float:
+    number = float(value)
+    if not np.isfinite(number) or number <= 0:
+        raise WaveformError(name, f"must be positive and finite, got {value!r}",
+                            "Hz > 0" if name == "sample_rate" else "s > 0")
+    return number
+
+
+def _own_dt(dt: Any, sample_rate: Any) -> float | None:
+    """The sample period a file states (``dt`` or ``sample_rate``), or None."""
+    if dt is not None:
+        return _positive("dt", dt)
+    if sample_rate is not None:
+        return 1.0 / _positive("sample_rate", sample_rate)
+    return None
+
+
+def _step(own: float | None, sample_rate: float | None, dt: float | None, where: str,
+          hint: str = "sample_rate= in Hz (or dt= in s)") -> float:
+    """The sample period: the file's own (an option must agree with it), else the option's."""
+    given = _own_dt(dt, sample_rate)
+    if own is None:
+        if given is None:
+            raise OptionNeeded("sample_rate", f"{where} has no time axis; give the sample rate",
+                               hint)
+        return given
+    if given is not None and abs(given - own) > UNIFORM_TOLERANCE * own:
+        name = "dt" if dt is not None else "sample_rate"
+        raise WaveformError(
+            name, f"{where} has its own time axis (dt = {own:.6g} s, {1 / own:.6g} Hz); "
+            f"{name}= says dt = {given:.6g} s ({1 / given:.6g} Hz)",
+            "the file's own rate, or no option",
+        )
+    return own
+
+
+def _shots(parts: list[tuple[float, float, Any, str, Any, dict[str, Any]]],
+           calibration: float | None, where: str, prefix: str | None = None) -> list[Waveform]:
+    """Waveforms from ``(t0, dt, samples, units, own calibration, metadata)`` tuples.
+
+    ``calibration=`` applies to the shots in volts (over their own); a file with none in volts
+    refuses it, and a shot in volts with no calibration at all raises :class:`OptionNeeded`.
+    With ``prefix``, a shot's error names ``prefix[i].field``.
+    """
+    if calibration is not None and not any(p[3] == "V" for p in parts):
+        raise WaveformError("calibration", f"{where}: the data are in newtons; a calibration "
+                            "(N/V) converts volts only", "no calibration for data in N")
+    out = []
+    for i, (t0, dt, samples, units, own_cal, meta) in enumerate(parts):
+        cal = calibration if calibration is not None and units == "V" else own_cal
+        try:
+            if units == "V" and cal is None:
+                raise OptionNeeded("calibration", f"{where}: samples are in volts but no "
+                                   "calibration was given", "calibration= sensor sensitivity "
+                                   "in N/V")
+            out.append(Waveform(t0, dt, samples, units, cal, meta))
+        except WaveformError as exc:
+            if prefix is None:
+                raise
+            raise _prefixed(exc, f"{prefix}[{i}]") from None
+    return out
+
+
+def _float_array(data: Any, name: str) -> np.ndarray:
+    """Real numeric data as float64; text, objects and complex numbers are refused."""
+    array = np.asarray(data)
+    if array.dtype.kind not in "biuf":
+        raise WaveformError(name, f"not real numbers (dtype {array.dtype})", "integer or float")
+    return array.astype(np.float64)
+
+
+def _is_time_axis(column: np.ndarray) -> bool:
+    try:
+        uniform_grid(column)
+    except WaveformError:
+        return False
+    return True
 
 
 def _rows(array: np.ndarray, name: str) -> list[np.ndarray]:
@@ -188,27 +339,39 @@ def _rows(array: np.ndarray, name: str) -> list[np.ndarray]:
 
 # --- CSV ----------------------------------------------------------------------------------------
 
+_TIME_LABELS = ("time_s", "time", "t_s", "t")
+
 
 def _read_csv(
-    path: Path, sample_rate: float | None = None, dt: float | None = None, t0: float = 0.0,
-    calibration: float | None = None, units: str | None = None,
+    path: Path, sample_rate: float | None = None, dt: float | None = None,
+    t0: float | None = None, units: str | None = None, calibration: float | None = None,
 ) -> list[Waveform]:
+    import io as _io
+
     import pandas as pd
 
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise WaveformError("file", f"{path.name}: not UTF-8 text (byte {exc.object[exc.start]:#x}"
+                            f" at offset {exc.start})", "UTF-8 or ASCII text") from None
     meta: dict[str, Any] = {}
     skip = 0
-    with path.open("r", encoding="utf-8") as fh:
-        for line in fh:
-            if not line.startswith("#"):
-                break
-            skip += 1
-            key, sep, value = line[1:].partition(":")
-            if sep and key.strip():
-                meta[key.strip()] = _decode(value.strip())
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        skip += 1
+        key, sep, value = line[1:].partition(":")
+        if sep and key.strip():
+            meta[key.strip()] = _decode(value.strip(), key.strip())
     try:
-        frame = pd.read_csv(path, skiprows=skip, header=None, dtype=str, skip_blank_lines=True)
+        frame = pd.read_csv(_io.StringIO(text), skiprows=skip, header=None, dtype=str,
+                            skip_blank_lines=True)
     except pd.errors.EmptyDataError:
         raise WaveformError("samples", f"{path.name}: empty, no samples") from None
+    except pd.errors.ParserError as exc:
+        raise WaveformError("file", f"{path.name}: not a table of comma-separated columns "
+                            f"({exc})") from None
     first = [str(c).strip() for c in frame.iloc[0]]
     has_header = any(_not_number(c) for c in first)
     labels = first if has_header else None
@@ -219,31 +382,48 @@ def _read_csv(
         data = body.apply(pd.to_numeric, errors="raise").to_numpy(dtype=np.float64)
     except (ValueError, TypeError) as exc:
         raise WaveformError("samples", f"{path.name}: non-numeric value ({exc})") from None
-    options = {"sample_rate": sample_rate, "dt": dt}
-    if labels is not None and labels[0].lower() in ("time_s", "time", "t_s", "t"):
+    file_t0, file_dt, file_rate = (meta.pop(k, None) for k in ("t0", "dt", "sample_rate"))
+    if labels is not None and labels[0].lower() in _TIME_LABELS:
         if data.shape[1] < 2:
             raise WaveformError("channel", f"{path.name}: a time column but no sample column",
                                 "time_s,force_N")
-        time = data[:, 0]
-        _t0, _dt = uniform_grid(time)
+        own_t0, own = uniform_grid(data[:, 0])
         columns = [(labels[j], data[:, j]) for j in range(1, data.shape[1])]
+    elif labels is None and data.shape[1] >= 2 and _is_time_axis(data[:, 0]):
+        own_t0, own = uniform_grid(data[:, 0])  # header-less "time, force...": no shot is a ramp
+        columns = [(None, data[:, j]) for j in range(1, data.shape[1])]
     else:
-        _dt = _dt_from(options, f"{path.name}")
-        _t0 = float(meta.pop("t0", t0)) if "t0" in meta else float(t0)
-        names = labels if labels is not None else [f"force_{units or 'N'}"] * data.shape[1]
+        own_t0 = 0.0 if file_t0 is None else file_t0
+        own = _own_dt(file_dt, file_rate)
+        names = labels if labels is not None else [None] * data.shape[1]
         columns = [(names[j], data[:, j]) for j in range(data.shape[1])]
-    for key in ("t0", "dt", "sample_rate"):
-        meta.pop(key, None)
-    cal = calibration if calibration is not None else meta.pop("calibration", None)
-    out = []
+    step = _step(own, sample_rate, dt, path.name)
+    start = own_t0 if t0 is None else t0
+    own_cal = meta.pop("calibration", None)
+    parts = []
     for j, (label, column) in enumerate(columns):
-        u = units or _units_of(label)
+        if label is None:
+            unit = _units(None, units, path.name)
+        else:
+            suffix = label.rsplit("_", 1)[-1] if "_" in label else ""
+            unit = _units(suffix, units, f"{path.name} column {label!r}") if suffix in UNITS \
+                else (units or _units_of(label))
         m = dict(meta)
         if len(columns) > 1:
-            m.setdefault("channel", label)
+            m.setdefault("channel", label if label is not None else f"column_{j + 1}")
             m["shot"] = j
-        out.append(Waveform(_t0, _dt, check_samples(column), u, cal, m))
-    return out
+        parts.append((start, step, column, unit, own_cal, m))
+    return _shots(parts, calibration, path.name)
+
+
+def _units_of(label: str) -> str:
+    """Units from a column label such as ``force_N`` or ``voltage_V``."""
+    suffix = label.rsplit("_", 1)[-1] if "_" in label else ""
+    if suffix not in UNITS:
+        raise WaveformError(
+            "units", f"column {label!r} does not end in a known unit", "a '_N' or '_V' suffix"
+        )
+    return suffix
 
 
 def _not_number(text: str) -> bool:
@@ -278,22 +458,27 @@ def _write_csv(path: Path, waves: list[Waveform]) -> None:
 
 
 def _read_npy(
-    path: Path, sample_rate: float | None = None, dt: float | None = None, t0: float = 0.0,
-    units: str = "N", calibration: float | None = None,
+    path: Path, sample_rate: float | None = None, dt: float | None = None,
+    t0: float | None = None, units: str | None = None, calibration: float | None = None,
 ) -> list[Waveform]:
-    array = np.load(path, allow_pickle=False)
-    if sample_rate is not None or dt is not None:
-        step = _dt_from({"sample_rate": sample_rate, "dt": dt}, path.name)
-        return [Waveform(t0, step, check_samples(r), units, calibration)
-                for r in _rows(np.asarray(array, dtype=np.float64), "samples")]
-    if array.ndim != 2 or array.shape[1] < 2:
-        raise WaveformError(
-            "sample_rate", f"{path.name}: shape {array.shape} has no time column",
-            "a 2-D array (n_samples, 1 + shots) with time in column 0, or sample_rate=",
-        )
-    t_0, step = uniform_grid(array[:, 0])
-    return [Waveform(t_0, step, check_samples(array[:, j]), units, calibration, {"shot": j - 1})
-            for j in range(1, array.shape[1])]
+    array = _float_array(np.load(path, allow_pickle=False), "samples")
+    unit = _units(None, units, path.name)
+    if array.ndim == 2 and array.shape[0] >= MIN_SAMPLES and array.shape[1] >= 2 \
+            and _is_time_axis(array[:, 0]):
+        own_t0, own = uniform_grid(array[:, 0])
+        step = _step(own, sample_rate, dt, path.name)
+        start = own_t0 if t0 is None else t0
+        parts = [(start, step, array[:, j], unit, None, {"shot": j - 1})
+                 for j in range(1, array.shape[1])]
+        return _shots(parts, calibration, path.name)
+    if sample_rate is None and dt is None and array.ndim == 2 and array.shape[1] >= 2 \
+            and array.shape[0] >= MIN_SAMPLES:
+        uniform_grid(array[:, 0])  # raises, naming what is wrong with the would-be time column
+    step = _step(None, sample_rate, dt, f"{path.name} (shape {array.shape})",
+                 "a 2-D array (n_samples, 1 + shots) with time in column 0, or sample_rate=")
+    start = 0.0 if t0 is None else t0
+    parts = [(start, step, r, unit, None, {}) for r in _rows(array, "samples")]
+    return _shots(parts, calibration, path.name)
 
 
 def _write_npy(path: Path, waves: list[Waveform]) -> None:
@@ -306,25 +491,36 @@ def _write_npy(path: Path, waves: list[Waveform]) -> None:
         np.save(fh, table)
 
 
-def _read_npz(path: Path, **options: Any) -> list[Waveform]:
+def _read_npz(
+    path: Path, sample_rate: float | None = None, dt: float | None = None,
+    t0: float | None = None, units: str | None = None, calibration: float | None = None,
+) -> list[Waveform]:
     with np.load(path, allow_pickle=False) as data:
         if "samples" not in data:
             raise WaveformError("samples", f"{path.name}: no 'samples' array",
                                 f"keys samples, dt or sample_rate; found {sorted(data.files)}")
-        samples = np.asarray(data["samples"], dtype=np.float64)
-        found = {k: data[k].item() for k in ("dt", "sample_rate", "t0", "calibration")
+        samples = _float_array(data["samples"], "samples")
+        found = {k: _decode(data[k], k) for k in ("dt", "sample_rate", "t0", "calibration")
                  if k in data}
-        units = str(data["units"]) if "units" in data else options.get("units", "N")
-        meta_text = str(data["metadata"]) if "metadata" in data else "{}"
-    merged = {**found, **{k: v for k, v in options.items() if v is not None}}
-    step = _dt_from(merged, path.name)
-    meta = json.loads(meta_text)
+        stated = _decode(data["units"]) if "units" in data else None
+        meta_text = _decode(data["metadata"]) if "metadata" in data else {}
+    step = _step(_own_dt(found.get("dt"), found.get("sample_rate")), sample_rate, dt, path.name)
+    start = found.get("t0", 0.0) if t0 is None else t0
+    unit = _units(stated, units, path.name)
+    try:
+        meta = json.loads(meta_text) if isinstance(meta_text, str) else meta_text
+    except ValueError:
+        raise WaveformError("metadata", f"{path.name}: not valid JSON ({meta_text[:80]!r})",
+                            "a JSON object, or a list of one object per shot") from None
+    meta = {} if meta is None else meta
     rows = _rows(samples, "samples")
     metas = meta if isinstance(meta, list) else [meta] * len(rows)
-    if len(metas) != len(rows):
-        raise WaveformError("metadata", f"{len(metas)} metadata entries for {len(rows)} shots")
-    return [Waveform(float(merged.get("t0", 0.0)), step, check_samples(r), units,
-                     merged.get("calibration"), dict(m)) for r, m in zip(rows, metas, strict=True)]
+    if len(metas) != len(rows) or not all(isinstance(m, dict) for m in metas):
+        raise WaveformError("metadata", f"{path.name}: {meta_text!r} for {len(rows)} shots",
+                            "a JSON object, or a list of one object per shot")
+    parts = [(start, step, r, unit, found.get("calibration"), m)
+             for r, m in zip(rows, metas, strict=True)]
+    return _shots(parts, calibration, path.name)
 
 
 def _write_npz(path: Path, waves: list[Waveform]) -> None:
@@ -346,10 +542,14 @@ def _write_npz(path: Path, waves: list[Waveform]) -> None:
 _HDF_KEYS = ("dt", "sample_rate", "t0", "units", "calibration")
 
 
-def _read_hdf5(path: Path, dataset: str | None = None, **options: Any) -> list[Waveform]:
+def _read_hdf5(
+    path: Path, dataset: str | None = None, sample_rate: float | None = None,
+    dt: float | None = None, t0: float | None = None, units: str | None = None,
+    calibration: float | None = None,
+) -> list[Waveform]:
     import h5py
 
-    out: list[Waveform] = []
+    parts: list[tuple[float, float, Any, str, Any, dict[str, Any]]] = []
     with h5py.File(path, "r") as fh:
         root = fh
         if dataset is not None:
@@ -366,21 +566,21 @@ def _read_hdf5(path: Path, dataset: str | None = None, **options: Any) -> list[W
             root.visititems(lambda _n, obj: items.append(obj)
                             if isinstance(obj, h5py.Dataset) else None)
         for ds in items:
-            attrs = {k: _decode(v) for k, v in ds.attrs.items()}
-            merged = {**{k: attrs.get(k) for k in _HDF_KEYS if k in attrs},
-                      **{k: v for k, v in options.items() if v is not None}}
-            step = _dt_from(merged, f"{path.name}:{ds.name}")
+            where = f"{path.name}:{ds.name}"
+            attrs = {k: _decode(v, k) for k, v in ds.attrs.items()}
+            step = _step(_own_dt(attrs.get("dt"), attrs.get("sample_rate")), sample_rate, dt,
+                         where)
+            start = attrs.get("t0", 0.0) if t0 is None else t0
+            unit = _units(attrs.get("units"), units, where)
             meta = {k: v for k, v in attrs.items() if k not in _HDF_KEYS}
             meta.setdefault("dataset", ds.name)
-            rows = _rows(np.asarray(ds[()], dtype=np.float64), f"samples[{ds.name}]")
+            rows = _rows(_float_array(ds[()], f"samples[{ds.name}]"), f"samples[{ds.name}]")
             for j, r in enumerate(rows):
                 m = dict(meta)
                 if len(rows) > 1:
                     m["row"] = j
-                out.append(Waveform(float(merged.get("t0", 0.0)), step,
-                                    check_samples(r),
-                                    str(merged.get("units", "N")), merged.get("calibration"), m))
-    return out
+                parts.append((start, step, r, unit, attrs.get("calibration"), m))
+    return _shots(parts, calibration, path.name)
 
 
 def _write_hdf5(path: Path, waves: list[Waveform], group: str = "shots") -> None:
@@ -413,7 +613,8 @@ def _as_list(value: str | Iterable[str] | None) -> list[str] | None:
 
 def _read_tdms(
     path: Path, group: str | None = None, channel: str | Sequence[str] | None = None,
-    calibration: float | None = None,
+    sample_rate: float | None = None, dt: float | None = None, t0: float | None = None,
+    units: str | None = None, calibration: float | None = None,
 ) -> list[Waveform]:
     from nptdms import TdmsFile
 
@@ -424,7 +625,7 @@ def _read_tdms(
                             ", ".join(groups) or "(no groups)")
     chosen = [groups[group]] if group is not None else list(groups.values())
     wanted = _as_list(channel)
-    out = []
+    parts: list[tuple[float, float, Any, str, Any, dict[str, Any]]] = []
     for g in chosen:
         names = [c.name for c in g.channels()]
         if wanted is not None:
@@ -435,23 +636,24 @@ def _read_tdms(
         for ch in g.channels():
             if wanted is not None and ch.name not in wanted:
                 continue
-            props = {k: _decode(v) for k, v in ch.properties.items()}
+            where = f"{path.name}:{g.name}/{ch.name}"
+            props = {k: _decode(v, k) for k, v in ch.properties.items()}
             if "wf_increment" not in props:
                 if wanted is not None:
                     raise WaveformError("dt", f"channel {g.name}/{ch.name} has no wf_increment",
                                         "NI waveform channels (wf_increment, wf_start_offset)")
                 continue
-            unit = str(props.pop("unit_string", "N")) or "N"
-            cal = calibration if calibration is not None else props.pop("calibration", None)
-            t0 = float(props.pop("wf_start_offset", 0.0))
-            step = float(props.pop("wf_increment"))
+            unit = _units(props.pop("unit_string", None), units, where)
+            own_cal = props.pop("calibration", None)
+            start = float(props.pop("wf_start_offset", 0.0))
+            step = _step(_positive("dt", props.pop("wf_increment")), sample_rate, dt, where)
             meta = {k: v for k, v in props.items() if not k.startswith(("wf_", "NI_"))}
             meta.update(group=g.name, channel=ch.name)
-            out.append(Waveform(t0, step, check_samples(ch[:]), unit, cal,
-                                meta))
-    if wanted is not None and not out:
+            parts.append((start if t0 is None else t0, step, _float_array(ch[:], "samples"),
+                          unit, own_cal, meta))
+    if wanted is not None and not parts:
         raise WaveformError("channel", f"none of {wanted} found in {path.name}")
-    return out
+    return _shots(parts, calibration, path.name)
 
 
 def _write_tdms(path: Path, waves: list[Waveform], group: str = "shots") -> None:
@@ -478,11 +680,19 @@ def _write_tdms(path: Path, waves: list[Waveform], group: str = "shots") -> None
 # --- JSON ---
 
 
-def from_json(body: Any) -> list[Waveform]:
-    """Shots from the REST service's JSON shape (a shot object, a list, or ``{"shots": [...]}``)."""
+def from_json(
+    body: Any, sample_rate: float | None = None, dt: float | None = None,
+    t0: float | None = None, units: str | None = None, calibration: float | None = None,
+) -> list[Waveform]:
+    """Shots from the REST service's JSON shape (a shot object, a list, or ``{"shots": [...]}``).
+
+    Metadata is the service's (``plate_id``, ``position``, ``sphere_diameter``, ``shot`` and
+    free-form ``extra``, merged into one mapping as the service does) or a flat mapping. The
+    options mean what they mean for files (see the module docstring).
+    """
     if isinstance(body, Mapping) and "shots" in body:
         shots = body["shots"]
-        common = body.get("metadata") or {}
+        common = _flat_metadata(body.get("metadata"), "metadata")
         if not isinstance(shots, list):
             raise WaveformError("shots", "must be a list of shot objects")
     elif isinstance(body, list):
@@ -491,23 +701,49 @@ def from_json(body: Any) -> list[Waveform]:
         shots, common = [body], {}
     else:
         raise WaveformError("body", f"expected an object or a list, got {type(body).__name__}")
-    out = []
+    parts = []
     for i, shot in enumerate(shots):
         where = f"shots[{i}]"
         if not isinstance(shot, Mapping):
             raise WaveformError(where, "must be an object with t0, dt, samples")
         if "samples" not in shot:
             raise WaveformError(f"{where}.samples", "missing", "a list of numbers")
-        if "dt" not in shot and "sample_rate" not in shot:
-            raise WaveformError(f"{where}.dt", "missing (no dt nor sample_rate)", "dt in s > 0")
-        step = shot["dt"] if "dt" in shot else 1.0 / float(shot["sample_rate"])
-        meta = {**common, **(shot.get("metadata") or {})}
         try:
-            out.append(Waveform(shot.get("t0", 0.0), step, shot["samples"],
-                                shot.get("units", "N"), shot.get("calibration"), meta))
+            own = _own_dt(shot.get("dt"), shot.get("sample_rate"))
+            if own is None and sample_rate is None and dt is None:
+                raise WaveformError("dt", "missing (no dt nor sample_rate)", "dt in s > 0")
+            step = _step(own, sample_rate, dt, where)
+            meta = {**common, **_flat_metadata(shot.get("metadata"), "metadata")}
+            parts.append((shot.get("t0", 0.0) if t0 is None else t0, step,
+                          _float_array(shot["samples"], "samples"),
+                          _units(shot.get("units"), units, where), shot.get("calibration"),
+                          _identifiers_as_text(meta)))
         except WaveformError as exc:
-            raise WaveformError(f"{where}.{exc.field}", exc.message, exc.allowed) from None
-    return out
+            raise _prefixed(exc, where) from None
+        except (TypeError, ValueError) as exc:
+            raise WaveformError(where, f"not a valid shot ({exc})") from None
+    return _shots(parts, calibration, "body", prefix="shots")
+
+
+def _prefixed(exc: WaveformError, where: str) -> WaveformError:
+    field = f"{where}.{exc.field}"
+    if isinstance(exc, OptionNeeded):
+        return OptionNeeded(exc.option, exc.message, exc.allowed, field=field)
+    return WaveformError(field, exc.message, exc.allowed)
+
+
+def _flat_metadata(metadata: Any, where: str) -> dict[str, Any]:
+    """The service's metadata (schema keys plus ``extra``) or a flat mapping, as one mapping."""
+    if metadata is None:
+        return {}
+    if not isinstance(metadata, Mapping):
+        raise WaveformError(where, f"must be an object, got {type(metadata).__name__}")
+    flat = {k: v for k, v in metadata.items() if k != "extra"}
+    extra = metadata.get("extra") or {}
+    if not isinstance(extra, Mapping):
+        raise WaveformError(f"{where}.extra", "must be an object of key/value pairs")
+    flat.update({str(k): _decode(v, str(k)) for k, v in extra.items()})
+    return flat
 
 
 def to_json(waves: Sequence[Waveform]) -> dict[str, Any]:
@@ -515,12 +751,12 @@ def to_json(waves: Sequence[Waveform]) -> dict[str, Any]:
     return {"shots": [w.to_dict() for w in waves]}
 
 
-def _read_json(path: Path) -> list[Waveform]:
+def _read_json(path: Path, **options: Any) -> list[Waveform]:
     try:
-        body = json.loads(path.read_text(encoding="utf-8"))
-    except ValueError as exc:
-        raise WaveformError("body", f"{path.name}: not valid JSON ({exc})") from None
-    return from_json(body)
+        body = json.loads(path.read_bytes().decode("utf-8-sig"))
+    except ValueError as exc:  # UnicodeDecodeError and JSONDecodeError are ValueErrors
+        raise WaveformError("file", f"{path.name}: not valid UTF-8 JSON ({exc})") from None
+    return from_json(body, **options)
 
 
 def _write_json(path: Path, waves: list[Waveform]) -> None:

@@ -6,6 +6,7 @@ Construction validates everything once, so detection code can trust what it rece
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -210,15 +211,62 @@ class Waveform:
         return Waveform(self.t0, self.dt, self.samples, self.units, self.calibration, meta)
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON shape the REST service accepts (see :func:`solitonde.signal.io.from_json`)."""
+        """The shot as the REST service accepts it (``POST /v1/measurements``, one of ``shots``).
+
+        The service's metadata keys are typed as its schema types them (``plate_id`` and
+        ``position`` as text, ``sphere_diameter`` as a number, ``shot`` as a whole number >= 0);
+        every other entry (``channel``, ``snr_db``, ...) goes under ``metadata.extra`` as a
+        scalar, with lists and mappings as JSON text. The service reserves ``source`` and
+        ``shot`` there, so ``source`` travels as ``extra.source_file`` and a shot label that is
+        not a whole number as ``extra.shot_label``. :func:`solitonde.signal.io.from_json` reads
+        it back.
+        """
+        meta: dict[str, Any] = {}
+        extra: dict[str, Any] = {}
+        for key, value in self.metadata.items():
+            value = _jsonable(value)
+            if key in ("plate_id", "position"):
+                if value is not None:
+                    meta[key] = str(value)
+            elif key == "sphere_diameter":
+                if value is not None:
+                    meta[key] = _finite_float("metadata.sphere_diameter", value)
+            elif key == "shot" and isinstance(value, int) and not isinstance(value, bool) \
+                    and 0 <= value <= MAX_SHOT:
+                meta[key] = value
+            elif key in EXTRA_RENAMED:
+                extra.setdefault(EXTRA_RENAMED[key], _scalar(value))
+            else:
+                extra[str(key)] = _scalar(value)
+        if len(extra) > MAX_EXTRA:
+            raise WaveformError("metadata.extra", f"{len(extra)} free-form entries",
+                                f"at most {MAX_EXTRA} (the service's limit)")
+        meta["extra"] = extra
         return {
             "t0": self.t0,
             "dt": self.dt,
             "samples": self.samples.tolist(),
             "units": self.units,
             "calibration": self.calibration,
-            "metadata": _jsonable(self.metadata),
+            "metadata": meta,
         }
+
+
+MAX_SHOT = 2**31
+"""Largest shot number the service's schema accepts as ``metadata.shot``."""
+EXTRA_RENAMED = {"source": "source_file", "shot": "shot_label"}
+"""Names under ``metadata.extra`` of the entries the service reserves there."""
+MAX_EXTRA = 50
+"""Most free-form metadata entries the service accepts (``metadata.extra``)."""
+
+
+def _scalar(value: Any) -> Any:
+    """A free-form metadata value as a JSON scalar the service keeps as given."""
+    if value is None or isinstance(value, str | bool | int):
+        return value
+    if isinstance(value, float):
+        return value if np.isfinite(value) else str(value)
+    return json.dumps(value, allow_nan=True, default=str)
 
 
 def _jsonable(value: Any) -> Any:

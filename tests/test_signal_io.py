@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -40,7 +41,7 @@ def test_round_trip(tmp_path, ext):
         assert b.metadata["source"] == path.name
         if ext != "npy":
             assert b.metadata["plate_id"] == "P1"
-            assert b.metadata["position"] == pytest.approx(0.1)
+            assert b.metadata["position"] == "0.1"  # an identifier: text in every format
         if ext in ("csv", "npz", "json", "h5", "tdms"):
             assert b.metadata["scene"] == {"plate": {"thickness": 3.18e-3}}
     assert [w.metadata["shot"] for w in back] == [0, 1]
@@ -201,3 +202,144 @@ def test_npy_layouts(tmp_path):
     assert io.read(path, sample_rate=2e6)[0].dt == pytest.approx(5e-7)
     np.save(path, np.ones((3, 100)))
     assert len(io.read(path, sample_rate=2e6)) == 3
+
+
+# --- review fixes: malformed files, options, units, identifiers, the service's JSON shape -------
+
+def _csv_rows(n: int = 400) -> str:
+    t = DT * np.arange(n)
+    x = pulse_train(n, DT, [(50e-6, 100.0, 15e-6), (120e-6, 50.0, 15e-6)])
+    return "\n".join(f"{a:.9g},{b:.9g}" for a, b in zip(t, x, strict=True)) + "\n"
+
+
+def test_malformed_files_raise_waveform_error_naming_the_field(tmp_path):
+    """Parser failures (BOM + comment, Latin-1, bad JSON, JSON lists as metadata, array-valued
+    attributes, object arrays) are WaveformErrors naming the field, never TypeError & co."""
+    import h5py
+
+    x = pulse_train(400, DT, [(50e-6, 100.0, 15e-6)])
+    (tmp_path / "bom.csv").write_text("\ufeff# plate_id: P1\ntime_s,force_N\n" + _csv_rows(),
+                                      encoding="utf-8")
+    (w,) = io.read(tmp_path / "bom.csv")  # a byte-order mark is read, not a parse error
+    assert w.metadata["plate_id"] == "P1"
+    (tmp_path / "lat.csv").write_bytes(b"# operator: J\xfcrgen\ntime_s,force_N\n"
+                                       + _csv_rows().encode())
+    (tmp_path / "bad.json").write_text("{not json")
+    np.savez(tmp_path / "list.npz", samples=x, dt=DT, metadata=json.dumps([1]))
+    np.save(tmp_path / "obj.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
+    with h5py.File(tmp_path / "attr.h5", "w") as fh:
+        fh["x"] = x
+        fh["x"].attrs["dt"] = [DT, DT]
+    cases = {"lat.csv": "file", "bad.json": "file", "list.npz": "metadata", "obj.npy": "file",
+             "attr.h5": "dt"}
+    for name, field in cases.items():
+        with pytest.raises(WaveformError) as err:
+            io.read(tmp_path / name)
+        assert err.value.field == field, (name, str(err.value))
+
+
+def test_options_apply_only_where_they_fit(tmp_path):
+    """sample_rate must agree with a file's own time axis; a 2-D NPY with a time column keeps
+    its layout when sample_rate is given; calibration for data in N is an error; TDMS and JSON
+    accept the common options; an unknown option is named with the allowed ones."""
+    shots = _shots(2)
+    npy = io.write(tmp_path / "s.npy", shots)
+    back = io.read(npy, sample_rate=1 / DT)
+    assert len(back) == 2 and back[0].n == shots[0].n
+    with pytest.raises(WaveformError) as err:
+        io.read(npy, sample_rate=1e6)
+    assert err.value.field == "sample_rate"
+    for ext in ("tdms", "json", "csv", "h5", "npz"):
+        path = io.write(tmp_path / f"s.{ext}", shots)
+        assert len(io.read(path, sample_rate=1 / DT, units="N")) == 2
+        with pytest.raises(WaveformError) as err:
+            io.read(path, calibration=100.0)
+        assert err.value.field == "calibration", ext
+    with pytest.raises(WaveformError) as err:
+        io.read(tmp_path / "s.npz", sample_rte=1e6)
+    assert err.value.field == "sample_rte" and "sample_rate" in err.value.allowed
+    with pytest.raises(WaveformError) as err:
+        io.read(tmp_path / "s.h5", chanel="x")
+    assert err.value.field == "chanel" and "dataset" in err.value.allowed
+
+
+def test_units_option_and_tdms_unit_names(tmp_path):
+    """units= says what unlabelled data are in; a file's own units win and a contradiction is
+    an error; TDMS 'Volts' / 'Newtons' map to V / N."""
+    from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+    x = pulse_train(400, DT, [(50e-6, 1.0, 15e-6)])
+    np.save(tmp_path / "v.npy", x)
+    (w,) = io.read(tmp_path / "v.npy", sample_rate=1 / DT, units="V", calibration=200.0)
+    assert w.units == "V" and np.allclose(w.force, 200.0 * x)
+    with pytest.raises(WaveformError) as err:
+        io.read(tmp_path / "v.npy", sample_rate=1 / DT, units="V")
+    assert err.value.field == "calibration"
+    path = tmp_path / "u.tdms"
+    with TdmsWriter(str(path)) as writer:
+        props = {"wf_increment": DT, "wf_start_offset": 0.0}
+        writer.write_segment([RootObject(), GroupObject("g"),
+                              ChannelObject("g", "a", x, {**props, "unit_string": "Volts"}),
+                              ChannelObject("g", "b", x, {**props, "unit_string": "Newtons"})])
+    a, b = io.read(path, calibration=50.0)
+    assert (a.units, a.calibration, b.units) == ("V", 50.0, "N")
+    with pytest.raises(WaveformError) as err:
+        io.read(path, channel="b", units="V")
+    assert err.value.field == "units"
+
+
+def test_identifiers_stay_text_and_numbers_stay_numbers(tmp_path):
+    """`# plate_id: 007` and `# position: 1.50` keep their digits; sphere_diameter is a number;
+    a non-numeric sphere_diameter is refused."""
+    path = tmp_path / "id.csv"
+    path.write_text("# plate_id: 007\n# position: 1.50\n# sphere_diameter: 0.00953\n"
+                    "# synthetic: true\ntime_s,force_N\n" + _csv_rows())
+    (w,) = io.read(path)
+    assert w.metadata["plate_id"] == "007" and w.metadata["position"] == "1.50"
+    assert w.metadata["sphere_diameter"] == pytest.approx(0.00953)
+    assert w.metadata["synthetic"] is True
+    path.write_text("# sphere_diameter: big\ntime_s,force_N\n" + _csv_rows())
+    with pytest.raises(WaveformError) as err:
+        io.read(path)
+    assert err.value.field == "sphere_diameter"
+
+
+def test_csv_comments_and_headerless_time_column(tmp_path):
+    """An explicit t0 beats `# t0:`; `# sample_rate:` serves a file without a time column; a
+    header-less (time, force) table is one shot with that time axis, not two shots."""
+    x = pulse_train(400, DT, [(50e-6, 100.0, 15e-6)])
+    path = tmp_path / "c.csv"
+    path.write_text("# sample_rate: 2e6\n# t0: 1e-3\nforce_N\n"
+                    + "\n".join(f"{v:.9g}" for v in x) + "\n")
+    (w,) = io.read(path)
+    assert w.dt == pytest.approx(5e-7) and w.t0 == pytest.approx(1e-3)
+    assert io.read(path, t0=5.0)[0].t0 == 5.0
+    path.write_text(_csv_rows())
+    (w,) = io.read(path)
+    assert w.dt == pytest.approx(DT) and w.samples.max() > 50.0
+
+
+def test_to_json_is_what_the_service_accepts(tmp_path):
+    """read -> to_json -> POST /v1/measurements is a 201; the stored metadata keeps the
+    identifiers as text and the extras; from_json reads the shape back."""
+    from fastapi.testclient import TestClient
+
+    from solitonde.instrument.app import build_app
+    from solitonde.instrument.settings import Settings
+
+    data = (Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"
+            / "synthetic_D9.53_t4.83_snr40.csv")
+    shots = io.read(data)
+    body = io.to_json(shots)
+    meta = body["shots"][0]["metadata"]
+    assert meta["position"] == "0.457" and meta["extra"]["source_file"] == data.name
+    back = io.from_json(json.loads(json.dumps(body)))
+    assert back[0].metadata["position"] == "0.457"
+    assert back[0].metadata["snr_db"] == shots[0].metadata["snr_db"]
+    settings = Settings(store_path=tmp_path / "store.sqlite", table_path=None)
+    with TestClient(build_app(settings)) as client:
+        r = client.post("/v1/measurements", json=body)
+        assert r.status_code == 201, r.text
+        stored = r.json()
+        assert stored["position"] == "0.457" and stored["n_shots"] == len(shots)
+        assert stored["shots"][0]["metadata"]["channel"] == "force_N"
