@@ -1,8 +1,14 @@
 """`solitonde analyze`: TOF, ARR, SNR and flags for every shot in waveform files or folders.
 
-One row per shot, an aggregate per position (plate, position, sphere diameter). A file that
-fails is reported with its error and the others go on; the exit code says whether all succeeded
-(0 all, 1 some failed, 2 usage).
+One row per shot, an aggregate per position (plate, position, sphere diameter); a file that names
+neither plate nor position is a position of its own. A file that fails, for whatever reason, is
+reported with its error and the others go on; the exit code says whether all succeeded (0 all,
+1 some failed or nothing to analyse, 2 usage).
+
+The global reader options apply where they make sense: ``--sample-rate`` gives the rate of data
+without a time axis and must agree with any file's own; ``--units`` says what data that do not
+state their units are in, and must agree with any file that does; ``--calibration`` converts the
+files in volts that carry no calibration (a run in which no file used it reports that).
 """
 
 from __future__ import annotations
@@ -21,20 +27,32 @@ from rich.table import Table
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import FEATURES, aggregate, extract_many
+from solitonde.signal.waveform import UNITS
 
 OUT_SUFFIXES = (".csv", ".parquet")
 ROW_KEYS = ("source", "shot", *FEATURES, "flags", "arr_upper_bound", "plate_id", "position",
             "sphere_diameter", "error")
 
 
-def collect(paths: Iterable[Path]) -> tuple[list[Path], list[dict[str, Any]]]:
-    """Files to analyse (folders searched recursively for known extensions) and missing paths."""
+def collect(paths: Iterable[Path], fmt: str | None = None
+            ) -> tuple[list[Path], list[dict[str, Any]]]:
+    """Files to analyse and the paths that gave none (missing, or a folder with no files).
+
+    Folders are searched recursively: for the known extensions, or, with ``fmt`` given, every
+    regular file whose name does not start with a dot.
+    """
     files: list[Path] = []
     missing: list[dict[str, Any]] = []
     for p in paths:
         if p.is_dir():
-            files.extend(sorted(f for f in p.rglob("*")
-                                if f.is_file() and f.suffix.lower() in signal_io.EXTENSIONS))
+            found = sorted(f for f in p.rglob("*") if f.is_file() and (
+                not f.name.startswith(".") if fmt is not None
+                else f.suffix.lower() in signal_io.EXTENSIONS))
+            if not found:
+                what = ("no files" if fmt is not None else "no files with the extensions " +
+                        ", ".join(sorted(signal_io.EXTENSIONS)) + " (use --format for others)")
+                missing.append({"source": str(p), "error": f"{p}: {what}"})
+            files.extend(found)
         elif p.exists():
             files.append(p)
         else:
@@ -48,9 +66,28 @@ def _clean(value: Any) -> Any:
     return value
 
 
-def analyse_file(path: Path, fmt: str | None, options: dict[str, Any]) -> list[dict[str, Any]]:
-    """One row per shot of ``path``; raises on a file that cannot be read."""
-    waves = signal_io.read(path, format=fmt, **options)
+def read_file(path: Path, fmt: str | None, options: dict[str, Any],
+              calibration: float | None = None) -> tuple[list[Any], bool]:
+    """The shots of ``path`` and whether ``calibration`` was used.
+
+    Only the options the file's reader accepts are passed; ``calibration`` only when the file
+    holds volts without a calibration of its own.
+    """
+    accepted = signal_io.READER_OPTIONS[signal_io.detect_format(path, fmt)]
+    opts = {k: v for k, v in options.items() if k in accepted and v is not None}
+    try:
+        return signal_io.read(path, format=fmt, **opts), False
+    except signal_io.OptionNeeded as exc:
+        if exc.option != "calibration" or calibration is None or "calibration" not in accepted:
+            raise
+    return signal_io.read(path, format=fmt, **opts, calibration=calibration), True
+
+
+def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
+                 calibration: float | None = None) -> tuple[list[dict[str, Any]], bool]:
+    """One row per shot of ``path`` and whether ``calibration`` was used; raises on a file that
+    cannot be read."""
+    waves, used = read_file(path, fmt, options, calibration)
     rows = []
     for w in waves:
         meta = w.metadata
@@ -71,23 +108,30 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any]) -> list[d
         row["features"] = feat
         row["waveform"] = w
         rows.append(row)
-    return rows
+    return rows, used
 
 
 def aggregates(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Aggregate per (plate_id, position, sphere_diameter) over the shots that were measured."""
-    groups: dict[tuple[Any, Any, Any], list[Any]] = {}
+    """Aggregate per (plate_id, position, sphere_diameter) over the shots that were measured.
+
+    Shots whose file names neither plate nor position are aggregated per file (``source`` is
+    then set), never pooled with other files' shots: nothing says they are one position.
+    """
+    groups: dict[tuple[Any, Any, Any, Any], list[Any]] = {}
     for r in rows:
         if "features" in r:
-            key = (r.get("plate_id"), r.get("position"), r.get("sphere_diameter"))
+            plate, position = r.get("plate_id"), r.get("position")
+            source = r["source"] if plate is None and position is None else None
+            key = (plate, position, r.get("sphere_diameter"), source)
             groups.setdefault(key, []).append(r)
     out = []
-    for (plate, position, diameter), members in groups.items():
+    for (plate, position, diameter, source), members in groups.items():
         agg = aggregate([m["features"] for m in members]).to_dict()
         for rej in agg["rejected"]:
             m = members[rej["index"]]
             rej.update(source=m["source"], shot=m["shot"])
-        out.append({"plate_id": plate, "position": position, "sphere_diameter": diameter, **agg})
+        out.append({"plate_id": plate, "position": position, "sphere_diameter": diameter,
+                    "source": source, **agg})
     return out
 
 
@@ -135,10 +179,12 @@ def analyze(
                                     ".parquet file."),
     as_json: bool = typer.Option(False, "--json", help="Print shots, aggregates and errors as "
                                  "JSON."),
-    sample_rate: float | None = typer.Option(None, "--sample-rate", help="Hz, for files without a "
-                                             "time axis."),
+    sample_rate: float | None = typer.Option(None, "--sample-rate", help="Hz, for data without a "
+                                             "time axis (a file's own time axis must agree)."),
     calibration: float | None = typer.Option(None, "--calibration", help="N/V, for files in "
-                                             "volts."),
+                                             "volts that carry no calibration."),
+    units: str | None = typer.Option(None, "--units", help="N or V, for data that do not state "
+                                     "their units (a file that states them must agree)."),
     invert: bool = typer.Option(False, "--invert", help="Also estimate thickness and distance "
                                 "to support per position (sphere sizes combined)."),
     table: Path | None = typer.Option(None, "--table", help="Model table for --invert."),
@@ -158,18 +204,27 @@ def analyze(
         except WaveformError as exc:
             console.print(f"[red]--format: {exc}[/red]")
             raise typer.Exit(code=2) from None
-    options = {k: v for k, v in (("sample_rate", sample_rate), ("calibration", calibration))
-               if v is not None}
-    paths, errors = collect(files)
+    if units is not None and units not in UNITS:
+        console.print(f"[red]--units: {units!r} is not N or V[/red]")
+        raise typer.Exit(code=2)
+    options = {"sample_rate": sample_rate, "units": units}
+    paths, errors = collect(files, fmt)
+    calibration_used = False
     rows: list[dict[str, Any]] = []
     from tqdm import tqdm
 
     for path in tqdm(paths, desc="analyze", unit="file", file=sys.stderr,
                      disable=len(paths) < 5 or not sys.stderr.isatty()):
         try:
-            rows.extend(analyse_file(path, fmt, options))
-        except (WaveformError, OSError, ValueError, KeyError) as exc:
+            file_rows, used = analyse_file(path, fmt, options, calibration)
+        except Exception as exc:  # any broken file is its own error; Ctrl-C still stops the run
             errors.append({"source": str(path), "error": f"{type(exc).__name__}: {exc}"})
+            continue
+        rows.extend(file_rows)
+        calibration_used = calibration_used or used
+    if calibration is not None and paths and not calibration_used:
+        errors.append({"source": "--calibration", "error": "calibration: no file holds volts "
+                       "without a calibration of its own; --calibration was not used"})
     for r in rows:
         if "error" in r:
             errors.append({"source": r["source"], "shot": r["shot"], "error": r["error"]})
@@ -223,7 +278,8 @@ def _print(console: Console, rows: list[dict[str, Any]], aggs: list[dict[str, An
         agg_table.add_column(col)
     for a in aggs:
         tof, arr = a["tof_s"], a["arr"]
-        agg_table.add_row(str(a["plate_id"]), str(a["position"]), str(a["sphere_diameter"]),
+        position = a["position"] if a.get("source") is None else f"(file {Path(a['source']).name})"
+        agg_table.add_row(str(a["plate_id"]), str(position), str(a["sphere_diameter"]),
                           str(a["n_shots"]), _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3),
                           _fmt(arr["mean"]), _fmt(arr["std"], 1, 3), str(len(a["rejected"])))
     console.print(agg_table)

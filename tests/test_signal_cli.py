@@ -84,3 +84,96 @@ def test_data_samples_match_their_truth():
         dt = 1.0 / float(t["sample_rate_hz"])
         assert abs(s["tof_s"] - float(t["tof_s"])) < 2 * dt
         assert abs(s["arr"] - float(t["arr"])) < 0.02
+
+
+def _pulses(amplitude: float = 30.0) -> np.ndarray:
+    return pulse_train(1800, 5e-7, [(150e-6, amplitude, 80e-6), (650e-6, amplitude / 2, 85e-6)])
+
+
+def test_any_broken_file_is_its_own_error(tmp_path):
+    """Files that made readers leak TypeError, pandas or JSON errors are each reported; the
+    good file is still analysed; exit 1."""
+    import h5py
+
+    root = _files(tmp_path)
+    np.savez(root / "meta.npz", samples=_pulses(), dt=5e-7, metadata=json.dumps([1]))
+    with h5py.File(root / "attr.h5", "w") as fh:
+        fh["x"] = _pulses()
+        fh["x"].attrs["dt"] = [5e-7, 5e-7]
+    (root / "bom.csv").write_bytes(b"\xef\xbb\xbf# a: 1\n\xef\xbb\xbftime_s,force_N\n1,2\n")
+    (root / "j.json").write_text("{")
+    (root / "lat.csv").write_bytes(b"# op: J\xfcrgen\ntime_s,force_N\n0,1\n")
+    names = ["meta.npz", "attr.h5", "bom.csv", "j.json", "lat.csv"]
+    result = CliRunner().invoke(build_app(), ["analyze", str(root / "a.csv"),
+                                              *(str(root / n) for n in names), "--json"])
+    assert result.exit_code == 1, result.output
+    body = json.loads(result.stdout)
+    assert len(body["shots"]) == 3
+    failed = {Path(e["source"]).name for e in body["errors"]}
+    assert failed == set(names)
+
+
+def test_global_options_only_where_they_fit(tmp_path):
+    """--sample-rate and --calibration do not break files that carry their own time axis or are
+    in newtons (TDMS, JSON, CSV, HDF5); --calibration converts the files in volts; --units
+    contradicting a file's own units is that file's error; a calibration no file used is
+    reported."""
+    root = _files(tmp_path)
+    io.write(root / "t.tdms", io.read(root / "a.csv"))
+    io.write(root / "j.json", io.read(root / "a.csv"))
+    np.savez(root / "volts.npz", samples=_pulses(0.15), dt=5e-7, units="V")  # x 200 N/V = 30 N
+    np.save(root / "raw.npy", _pulses())  # newtons, no time axis
+    args = ["analyze", str(root), "--sample-rate", "2e6", "--calibration", "200", "--json"]
+    result = CliRunner().invoke(build_app(), args)
+    assert result.exit_code == 0, result.output
+    body = json.loads(result.stdout)
+    assert len(body["shots"]) == 14 and body["errors"] == []
+    volts = [s for s in body["shots"] if s["source"].endswith("volts.npz")]
+    assert abs(volts[0]["incident_peak_N"] - 30.0) < 2.0
+    body = json.loads(CliRunner().invoke(build_app(), [*args, "--units", "V"]).stdout)
+    assert {Path(e["source"]).name for e in body["errors"]} == {"a.csv", "b.h5", "t.tdms",
+                                                                "j.json"}
+    assert all("units" in e["error"] for e in body["errors"])  # they say N, --units says V
+    result = CliRunner().invoke(build_app(), ["analyze", str(root / "a.csv"), "--calibration",
+                                              "200", "--json"])
+    assert result.exit_code == 1
+    assert json.loads(result.stdout)["errors"][0]["source"] == "--calibration"
+
+
+def test_files_without_position_are_not_pooled(tmp_path):
+    """Two files that name neither plate nor position aggregate apart; identifiers keep their
+    digits (007 vs 7 are two plates)."""
+    for name, amp in (("plateA.npy", 30.0), ("plateB.npy", 60.0)):
+        t = 5e-7 * np.arange(1800)
+        np.save(tmp_path / name, np.column_stack([t, _pulses(amp), _pulses(amp)]))
+    result = CliRunner().invoke(build_app(), ["analyze", str(tmp_path), "--json"])
+    assert result.exit_code == 0, result.output
+    aggs = json.loads(result.stdout)["aggregates"]
+    assert len(aggs) == 2 and {Path(a["source"]).name for a in aggs} == {"plateA.npy",
+                                                                          "plateB.npy"}
+    assert all(a["n_shots"] == 2 for a in aggs)
+    ids = tmp_path / "ids"
+    ids.mkdir()
+    w = io.read(tmp_path / "plateA.npy")[0]
+    io.write(ids / "a.csv", [w.with_metadata(plate_id="007", position="1.50")])
+    io.write(ids / "b.csv", [w.with_metadata(plate_id="7", position="1.5")])
+    aggs = json.loads(CliRunner().invoke(build_app(), ["analyze", str(ids), "--json"]).stdout)[
+        "aggregates"]
+    assert sorted((a["plate_id"], a["position"]) for a in aggs) == [("007", "1.50"), ("7", "1.5")]
+
+
+def test_format_takes_every_file_and_empty_selection_is_named(tmp_path):
+    """With --format, a folder's .txt files are read; a folder with nothing to read is an error
+    that names it."""
+    shots = io.read(_files(tmp_path) / "a.csv")
+    txt = tmp_path / "txt"
+    txt.mkdir()
+    io.write(txt / "s.txt", shots, format="csv")
+    result = CliRunner().invoke(build_app(), ["analyze", str(txt), "--format", "csv", "--json"])
+    assert result.exit_code == 0, result.output
+    assert len(json.loads(result.stdout)["shots"]) == 3
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    result = CliRunner().invoke(build_app(), ["analyze", str(empty), "--json"])
+    assert result.exit_code == 1
+    assert str(empty) in json.loads(result.stdout)["errors"][0]["error"]
