@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping
-from math import sqrt
+from math import isfinite, sqrt
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -25,17 +25,33 @@ STANDARD_GRAVITY = 9.80665  # m/s^2
 
 PLATE_MODELS = ("rigid", "halfspace", "infinite", "sem", "greens", "auto")
 SUPPORTS = ("opposite_edges", "all_edges", "none")
+MAX_PLATE_SIZE = 100.0  # m, per in-plane side; beyond it no mesh or Green's function is sane
+
+
+def _finite(value: float) -> float:
+    """Refuse NaN and infinity: no scene quantity is meaningful there, and a NaN passes every
+    ``gt``/``le`` bound unnoticed while an infinity reaches the solvers (huge meshes, endless
+    loops). The one check every float field of the scene goes through."""
+    if not isfinite(value):
+        raise ValueError(f"must be a finite number, got {value!r}")
+    return value
 
 
 def _number(value: Any) -> Any:
-    """Accept ints, floats and numeric strings; refuse booleans (pydantic would read True as 1)."""
+    """Accept finite ints, floats and numeric strings; refuse booleans (pydantic would read True
+    as 1), NaN and infinity."""
     if isinstance(value, bool):
         raise ValueError("expected a number, got a boolean")
     if isinstance(value, str):
         try:
-            return float(value)
+            value = float(value)
         except ValueError:
             raise ValueError(f"expected a number, got {value!r}") from None
+    if isinstance(value, int | float):
+        try:
+            return _finite(float(value))
+        except OverflowError:
+            raise ValueError(f"must be a finite number, got {value!r}") from None
     return value
 
 
@@ -61,10 +77,10 @@ def _duration(value: Any) -> Any:
         raise ValueError(f"must be 'auto' or a positive number of seconds, got {value!r}")
     try:
         seconds = float(value)
-    except ValueError:
+    except (ValueError, OverflowError):
         raise ValueError(f"must be 'auto' or a positive number of seconds, got {value!r}") from None
-    if not seconds > 0:
-        raise ValueError(f"must be 'auto' or a positive number of seconds, got {value!r}")
+    if not (isfinite(seconds) and seconds > 0):
+        raise ValueError(f"must be 'auto' or a positive finite number of seconds, got {value!r}")
     return seconds
 
 
@@ -76,14 +92,23 @@ def _contact_radius(value: Any) -> Any:
         raise ValueError(message)
     try:
         radius = float(value)
-    except ValueError:
+    except (ValueError, OverflowError):
         raise ValueError(message) from None
-    if not 0.0 <= radius <= 0.05:
+    if not (isfinite(radius) and 0.0 <= radius <= 0.05):
         raise ValueError(message)
     return radius
 
 
+def _plate_side(value: Any) -> Any:
+    """A plate side: a finite number (the range is checked with the whole plate)."""
+    try:
+        return _number(value)
+    except ValueError as exc:
+        raise ValueError(f"{exc} (allowed: 0 < size <= {MAX_PLATE_SIZE:g} m per side)") from None
+
+
 Number = Annotated[float, BeforeValidator(_number)]
+PlateSide = Annotated[float, BeforeValidator(_plate_side)]
 Integer = Annotated[int, BeforeValidator(_integer)]
 MaterialName = Annotated[str, BeforeValidator(_material_name)]
 
@@ -146,7 +171,7 @@ class PlateSpec(_Section):
     """The plate: thickness, in-plane size, material, clamped supports, chain position."""
 
     thickness: Number = Field(3.18e-3, gt=0.0, le=1.0, description="plate thickness t, m")
-    size: tuple[Number, Number] = Field(
+    size: tuple[PlateSide, PlateSide] = Field(
         (0.914, 0.914), description="in-plane size (along the centre line, across), m"
     )
     material: MaterialName = Field("al_6061", description="plate material key")
@@ -159,9 +184,10 @@ class PlateSpec(_Section):
 
     @model_validator(mode="after")
     def _geometry(self) -> PlateSpec:
-        lx, ly = self.size
-        if lx <= 0 or ly <= 0:
-            raise _fail("size", f"must be positive in both directions, got {list(self.size)}")
+        lx = self.size[0]
+        if not all(0.0 < s <= MAX_PLATE_SIZE for s in self.size):
+            raise _fail("size", f"each side must be positive and finite, 0 < size <= "
+                        f"{MAX_PLATE_SIZE:g} m, got {list(self.size)}")
         if self.distance_to_support > lx:
             raise _fail(
                 "distance_to_support",

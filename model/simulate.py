@@ -256,12 +256,14 @@ def simulate(
     else:
         dt, n_sub = choose_time_step(scene, boundary, steps_per_period)
     interval = dt * n_sub
-    n_samples = math.ceil(duration / interval * (1.0 - 1e-12)) + 1
+    intervals = duration / interval * (1.0 - 1e-12)
+    # a huge finite duration overflows to inf here: refuse it before math.ceil would
+    n_samples = math.ceil(intervals) + 1 if intervals <= max_samples else math.inf
     steps = (n_samples - 1) * n_sub
     if (steps > max_steps and not adaptive) or n_samples > max_samples:
         raise SimulationError(
-            f"step_budget_exceeded: output.duration of {duration:.4g} s needs {steps:,} steps of "
-            f"{dt:.3g} s and {n_samples:,} samples (budget: {max_steps:,} steps, "
+            f"step_budget_exceeded: output.duration of {duration:.4g} s needs {steps:,.0f} "
+            f"steps of {dt:.3g} s and {n_samples:,.0f} samples (budget: {max_steps:,} steps, "
             f"{max_samples:,} samples); shorten output.duration, lower output.sample_rate or "
             f"raise the budget"
         )

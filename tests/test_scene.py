@@ -131,3 +131,59 @@ def test_any_non_positive_or_non_numeric_size_is_refused_naming_the_field(value,
     with pytest.raises(SceneError) as info:
         scene_from_dict({section: {key: value}})
     assert info.value.field == field
+
+
+NAN, INF = float("nan"), float("inf")
+# every float field of the scene, with a value that is otherwise in range
+FLOAT_FIELDS = [
+    "chain.diameter", "striker.drop_height", "striker.velocity", "plate.thickness",
+    "plate.distance_to_support", "effects.damping", "output.sample_rate", "output.duration",
+    "sem.step_factor", "sem.auto_margin", "sem.contact_radius", "solver.rtol",
+]
+
+
+@pytest.mark.parametrize("value", [NAN, INF, -INF, "NaN", "inf", 10**400])
+@pytest.mark.parametrize("field", FLOAT_FIELDS)
+def test_non_finite_floats_are_refused_naming_the_field(field, value):
+    """NaN passes every bound check and infinity reaches the solvers: both are refused."""
+    section, key = field.split(".")
+    with pytest.raises(SceneError) as info:
+        scene_from_dict({section: {key: value}})
+    assert info.value.field == field
+    assert "finite" in str(info.value) or "auto" in str(info.value)
+
+
+@pytest.mark.parametrize("size", [[NAN, 1.0], [1.0, INF], [1e400, 1.0], ["nan", 1.0]])
+def test_non_finite_plate_size_is_refused_with_the_range(size):
+    with pytest.raises(SceneError) as info:
+        load_scene(None, [f"plate.size={json.dumps(size)}", "effects.plate_model=sem",
+                          "plate.distance_to_support=0.05"])
+    assert info.value.field.startswith("plate.size")
+    assert "0 < size <= 100 m" in str(info.value)
+
+
+@pytest.mark.parametrize("size", [[100.5, 1.0], [1.0, 1e6], [0.0, 1.0], [1.0, -2.0]])
+def test_plate_size_outside_the_range_is_refused(size):
+    with pytest.raises(SceneError) as info:
+        scene_from_dict({"plate": {"size": size, "distance_to_support": 0.05}})
+    assert info.value.field == "plate.size"
+    assert "0 < size <= 100 m" in str(info.value)
+
+
+def test_plate_size_at_the_limit_is_accepted():
+    assert scene_from_dict({"plate": {"size": [100, 0.5]}}).plate.size == (100.0, 0.5)
+
+
+def test_infinite_duration_override_is_a_scene_error():
+    with pytest.raises(SceneError) as info:
+        load_scene(None, ["output.duration=Infinity"])
+    assert info.value.field == "output.duration"
+
+
+def test_huge_finite_duration_is_a_budget_error_not_an_overflow():
+    """1e308 s over a 1e-8 s step overflows the sample count to inf; that is over budget."""
+    from solitonde.model.errors import SimulationError
+    from solitonde.model.simulate import simulate
+
+    with pytest.raises(SimulationError, match="step_budget_exceeded"):
+        simulate(scene_from_dict({"output": {"duration": 1e308}}))
