@@ -14,6 +14,7 @@ as JSON (written to a temporary name, then renamed).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -53,6 +54,32 @@ def _finite(name: str, value: Any) -> float:
     if not math.isfinite(v):
         raise CalibrationError(name, f"must be finite, got {value!r}")
     return v
+
+
+def _nonnegative(name: str, value: Any) -> float:
+    v = _finite(name, value)
+    if v < 0:
+        raise CalibrationError(name, f"must be >= 0, got {value!r}")
+    return v
+
+
+def _count(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not (
+            math.isfinite(value) and float(value).is_integer() and value >= 1):
+        raise CalibrationError(name, f"must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+# what a per-diameter entry may hold (as fit_calibration writes it), each with its check
+_PER_DIAMETER_KEYS: dict[str, Any] = {
+    "arr_factor": _positive,
+    "arr_factor_std": _nonnegative,
+    "arr_factor_transfer_std": _nonnegative,
+    "tof_offset_s": _finite,
+    "tof_offset_std_s": _nonnegative,
+    "tof_offset_transfer_std_s": _nonnegative,
+    "n_references": _count,
+}
 
 
 @dataclass(frozen=True)
@@ -104,27 +131,63 @@ class Calibration:
         if extra:
             raise CalibrationError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
         per: dict[float, dict[str, float]] = {}
-        for i, entry in enumerate(data.get("per_diameter") or []):
+        entries = data.get("per_diameter") or []
+        if not isinstance(entries, Sequence) or isinstance(entries, str):
+            raise CalibrationError("per_diameter", f"expected a list of entries, got "
+                                   f"{type(entries).__name__}")
+        for i, entry in enumerate(entries):
+            where = f"per_diameter[{i}]"
             if not isinstance(entry, Mapping) or "diameter_m" not in entry:
-                raise CalibrationError(f"per_diameter[{i}]", "needs diameter_m, arr_factor, "
-                                       "tof_offset_s")
-            d = _positive(f"per_diameter[{i}].diameter_m", entry["diameter_m"])
-            rest = {k: float(v) for k, v in entry.items() if k != "diameter_m" and v is not None}
-            rest["arr_factor"] = _positive(f"per_diameter[{i}].arr_factor",
-                                           entry.get("arr_factor", 1.0))
-            rest["tof_offset_s"] = _finite(f"per_diameter[{i}].tof_offset_s",
-                                           entry.get("tof_offset_s", 0.0))
+                raise CalibrationError(where, "needs diameter_m, arr_factor, tof_offset_s")
+            d = _positive(f"{where}.diameter_m", entry["diameter_m"])
+            for key in entry:
+                if key != "diameter_m" and key not in _PER_DIAMETER_KEYS:
+                    raise CalibrationError(f"{where}.{key}", "unknown key (allowed: "
+                                           f"{['diameter_m', *_PER_DIAMETER_KEYS]})")
+            rest: dict[str, float] = {
+                key: check(f"{where}.{key}", entry[key])
+                for key, check in _PER_DIAMETER_KEYS.items() if entry.get(key) is not None}
+            rest.setdefault("arr_factor", 1.0)
+            rest.setdefault("tof_offset_s", 0.0)
+            for other in per:
+                if abs(other - d) <= 0.01 * other:
+                    raise CalibrationError(f"{where}.diameter_m", f"{d!r} m is listed twice "
+                                           f"(within 1 % of {other!r} m)")
             per[d] = rest
         return cls(_positive("arr_factor", data.get("arr_factor", 1.0)),
                    _finite("tof_offset_s", data.get("tof_offset_s", 0.0)), per,
                    data.get("reference"))
 
     def save(self, path: str | Path) -> Path:
+        """Write as JSON through a temporary file that is renamed over ``path``.
+
+        Raises
+        ------
+        CalibrationError
+            (field ``path``) When ``path`` is a directory or cannot be written; the temporary
+            file is removed again.
+        """
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        if path.is_dir():
+            raise CalibrationError("path", f"{str(path)!r} is a directory; give the name of "
+                                   "the JSON file to write")
         tmp = path.with_name(f".{path.name}.tmp")
-        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-        os.replace(tmp, path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):
+            raise CalibrationError("path", f"cannot write {str(path)!r}: "
+                                   f"{str(path.parent)!r} is not a folder") from None
+        except OSError as exc:
+            raise CalibrationError("path", f"cannot write {str(path)!r}: "
+                                   f"{exc.strerror or exc}") from None
+        try:
+            tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+            os.replace(tmp, path)
+        except OSError as exc:
+            with contextlib.suppress(OSError):  # absent, or its folder is not one
+                tmp.unlink(missing_ok=True)
+            raise CalibrationError("path", f"cannot write {str(path)!r}: "
+                                   f"{exc.strerror or exc}") from None
         return path
 
     @classmethod
@@ -185,6 +248,7 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     if not references:
         raise CalibrationError("references", "need at least one reference measurement")
     by_d: dict[float, list[tuple[float, float, float, float]]] = {}
+    measured: dict[float, list[float]] = {}
     for ref in references:
         s = ref.summary
         d = float(table.axes["diameter_m"][table.diameter_index(s.diameter_m)])
@@ -198,11 +262,21 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
         f = s.arr / arr_m
         sf = math.hypot(s_arr, f * arr_sd) / arr_m
         by_d.setdefault(d, []).append((f, sf, s.tof_s - tof_m, math.hypot(s_tof, tof_sd)))
+        measured.setdefault(d, []).append(s.arr)
     per: dict[float, dict[str, float]] = {}
     for d, rows in by_d.items():
         f, sf, o, so = (list(c) for c in zip(*rows, strict=True))
         f_mean, f_stat, f_transfer = _combine(f, sf)
         o_mean, o_stat, o_transfer = _combine(o, so)
+        if not (math.isfinite(f_mean) and f_mean > 0):
+            # ARR 0 at the reference: a factor of 0 would erase every model reflection
+            arrs = ", ".join(f"{a:g}" for a in measured[d])
+            raise CalibrationError("arr", f"the measured ARR at the reference (D = {d:g} m: "
+                                   f"{arrs}) gives an ARR factor of {f_mean:g}; it must be > 0 "
+                                   "(measure a reference where the reflection is seen)")
+        if not all(math.isfinite(x) for x in (f_stat, f_transfer, o_mean, o_stat, o_transfer)):
+            raise CalibrationError("tof", f"the reference shots at D = {d:g} m give a "
+                                   "non-finite TOF offset or uncertainty")
         per[d] = {
             "arr_factor": f_mean,
             "arr_factor_std": math.hypot(f_stat, f_transfer),

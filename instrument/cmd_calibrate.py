@@ -66,6 +66,8 @@ def calibrate_command(
     as_json: bool = typer.Option(False, "--json", help="print the calibration as JSON"),
 ) -> None:
     """Fit ARR factor and TOF offset per sphere size on a reference plate; write them as JSON."""
+    if out.is_dir():  # before any work: the fit would be lost
+        _fail(f"--out: {str(out)!r} is a directory; give the name of the JSON file to write")
     try:
         if tof or arr:
             n = len(tof)
@@ -84,9 +86,13 @@ def calibrate_command(
             return
         model = ModelTable.load(table_path(table))
         cal = fit_calibration(model, [Reference(thickness, distance, s) for s in items])
-        cal.save(out)
     except (CalibrationError, InversionError, TableError) as exc:
         _fail(str(exc))
+        return
+    try:
+        cal.save(out)
+    except CalibrationError as exc:
+        _fail(f"--out: {str(exc).partition(': ')[2]}")
         return
     if as_json:
         typer.echo(json.dumps(cal.to_dict(), indent=2))
