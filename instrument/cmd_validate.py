@@ -5,13 +5,40 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
 from .cmd_invert import table_path
 from .table import ModelTable, TableError
 from .table_build import default_workers
-from .validate import validate
+from .validate import ValidationInputError, validate
+
+
+def _fail(message: str) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+def parse_diameters(text: str | None, model: ModelTable) -> list[float] | None:
+    """``--diameters``: a comma list of sphere sizes in m, each one of the table's, each once."""
+    if text is None:
+        return None
+    out: list[float] = []
+    for item in text.split(","):
+        try:
+            d = float(item)
+        except ValueError:
+            _fail(f"--diameters: {item.strip()!r} is not a number (give sphere sizes in m, "
+                  "comma-separated, e.g. 4.76e-3,9.53e-3)")
+        try:
+            d = float(model.axes["diameter_m"][model.diameter_index(d)])
+        except TableError as exc:
+            _fail(f"--diameters: {str(exc).partition(': ')[2]}")
+        if d in out:
+            _fail(f"--diameters: {item.strip()} is listed twice")
+        out.append(d)
+    return out
 
 
 def validate_command(
@@ -30,18 +57,32 @@ def validate_command(
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
 ) -> None:
     """Simulate random plates with noise and dissipation, invert, and score the answers."""
+    if seed < 0:
+        _fail(f"--seed: must be an integer >= 0, got {seed}")
+    # checked before the simulations: a bad path would only show after all of them
+    for flag, path in (("--out", out), ("--measurements", measurements)):
+        if path is not None and path.is_dir():
+            _fail(f"{flag}: {str(path)!r} is a directory; give the name of a JSON file")
+        if path is not None and not path.parent.is_dir():
+            _fail(f"{flag}: the folder {str(path.parent)!r} does not exist")
     try:
         model = ModelTable.load(table_path(table))
     except TableError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(2) from None
-    report = validate(model, n, seed, workers=default_workers() if workers is None else workers,
-                      scheduler=scheduler, progress=progress,
-                      diameters=[float(x) for x in diameters.split(",")] if diameters else None,
-                      measurements=measurements)
+        _fail(str(exc))
+    sizes = parse_diameters(diameters, model)
+    try:
+        report = validate(model, n, seed,
+                          workers=default_workers() if workers is None else workers,
+                          scheduler=scheduler, progress=progress, diameters=sizes,
+                          measurements=measurements)
+    except ValidationInputError as exc:
+        _fail(f"--{exc.field}: {str(exc).partition(': ')[2]}")
     m = report.metrics
     if out is not None:
-        out.write_text(json.dumps({"metrics": m, "scenes": report.scenes}, indent=1) + "\n")
+        try:
+            out.write_text(json.dumps({"metrics": m, "scenes": report.scenes}, indent=1) + "\n")
+        except OSError as exc:
+            _fail(f"--out: cannot write {str(out)!r}: {exc.strerror or exc}")
     if as_json:
         typer.echo(json.dumps(m, indent=2))
         return

@@ -67,6 +67,14 @@ OPEN_BELOW = 1.5
 CLOSED_ABOVE = 3.0
 
 
+class ValidationInputError(ValueError):
+    """A validation request that cannot be run; ``field`` names what is wrong."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
 def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> dict[str, Any]:
     return apply_overrides(dict(base), {
         "chain.diameter": d, "plate.thickness": t, "plate.distance_to_support": length,
@@ -193,13 +201,26 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
     names a JSON file that keeps the simulated, measured plates: when it holds the same draw
     (n, seed, sizes, table grid range and scene) they are reused and only the inversion runs.
+
+    Raises
+    ------
+    ValidationInputError
+        (``seed``, ``diameters``, ``measurements``) A negative seed, a sphere size listed twice,
+        or a measurements file that is not one this function wrote.
+    TableError
+        (``diameter_m``) A sphere size the table does not hold.
     """
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValidationInputError("seed", f"must be an integer >= 0, got {seed!r}")
     rng = np.random.default_rng(seed)
     t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
     if diameters is None:
         diameters = [float(d) for d in table.axes["diameter_m"]]
     else:
         diameters = [float(table.axes["diameter_m"][table.diameter_index(d)]) for d in diameters]
+        if len(set(diameters)) < len(diameters):
+            raise ValidationInputError("diameters", "a sphere size is listed twice (each table "
+                                       "size at most once)")
     base = table.sweep.get("scene", {})
     lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
     draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_axis[-1])))
@@ -321,15 +342,48 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
 
 def _load_measurements(path: str | Path | None,
                        key: Mapping[str, Any]) -> tuple[list[dict[str, Any]], float] | None:
-    if path is None or not Path(path).is_file():
+    """The stored plates when ``path`` holds this draw; None when absent or another draw (it is
+    then overwritten). Anything else is an error, never silently replaced: the file may be the
+    user's."""
+    if path is None:
         return None
-    data = json.loads(Path(path).read_text())
-    if data.get("key") != json.loads(json.dumps(key)):
+    path = Path(path)
+    if path.is_dir():
+        raise ValidationInputError("measurements", f"{str(path)!r} is a directory; give the "
+                                   "name of a JSON file")
+    if not path.exists():
+        return None
+
+    def bad(why: str) -> ValidationInputError:
+        return ValidationInputError("measurements", f"{str(path)!r} is not a measurements file "
+                                    f"written by `solitonde validate` ({why}); delete it or "
+                                    "give another path")
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ValidationInputError("measurements", f"cannot read {str(path)!r}: "
+                                   f"{exc.strerror or exc}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise bad(f"not JSON: {exc}") from None
+    if not isinstance(data, Mapping) or not {"key", "plates", "wall_s"} <= set(data):
+        raise bad("needs the keys key, plates, wall_s")
+    if data["key"] != json.loads(json.dumps(key)):
         return None
     plates = data["plates"]
-    for m in plates:  # JSON keys are strings
-        m["summaries"] = {float(d): s for d, s in m["summaries"].items()}
-    return plates, float(data["wall_s"])
+    try:
+        if not isinstance(plates, list) or len(plates) != int(key["n"]) + 1:
+            raise TypeError(f"plates must be a list of {int(key['n']) + 1}")
+        for m in plates:  # JSON keys are strings
+            float(m["thickness_m"]), float(m["distance_m"])
+            m["summaries"] = {float(d): s for d, s in m["summaries"].items()}
+            for s in m["summaries"].values():
+                if s is not None:
+                    FeatureSummary(float(s["diameter_m"]), float(s["tof_s"]), float(s["arr"]))
+        wall = float(data["wall_s"])
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise bad(f"{type(exc).__name__}: {exc}") from None
+    return plates, wall
 
 
 def _save_measurements(path: str | Path, key: Mapping[str, Any], plates: list[dict[str, Any]],

@@ -75,3 +75,79 @@ def test_table_and_invert_cli(tiny: Path) -> None:
     bad = runner.invoke(build_app(), ["invert", "--tof", str(tof), "--arr", str(arr),
                                       "--diameter", "7e-3", "--table", str(tiny)])
     assert bad.exit_code == 2 and "diameter_m" in bad.output
+
+
+DEFAULT_TABLE = Path(__file__).resolve().parents[1] / "data_samples" / "default_table.h5"
+
+
+def _bad_validate(tmp_path: Path, *args: str) -> str:
+    result = CliRunner().invoke(build_app(), ["validate", "--n", "1", "--table",
+                                              str(DEFAULT_TABLE), "--workers", "1",
+                                              "--no-progress", *args])
+    assert result.exit_code == 2, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    assert "Traceback" not in result.output
+    return result.output
+
+
+@pytest.mark.parametrize(("args", "field", "hint"), [
+    (["--diameters", "0.0127"], "--diameters", "not a sphere size of this table"),
+    (["--diameters", "abc"], "--diameters", "not a number"),
+    (["--diameters", "9.53e-3,abc"], "--diameters", "not a number"),
+    (["--diameters", "9.53e-3,0.00953"], "--diameters", "listed twice"),
+    (["--diameters", "nan"], "--diameters", "not a sphere size"),
+    (["--seed", "-1"], "--seed", ">= 0"),
+])
+def test_validate_bad_flags_are_one_error_line(tmp_path: Path, args: list[str], field: str,
+                                               hint: str) -> None:
+    output = _bad_validate(tmp_path, *args)
+    assert output.startswith(f"error: {field}:") and hint in output
+
+
+@pytest.mark.parametrize("text", ["{bad", "[1]", '{"key": 1}', "\xff\xfe"])
+def test_validate_corrupt_measurements_file_is_refused_not_overwritten(tmp_path: Path,
+                                                                       text: str) -> None:
+    store = tmp_path / "m.json"
+    store.write_bytes(text.encode("latin-1"))
+    output = _bad_validate(tmp_path, "--measurements", str(store))
+    assert output.startswith("error: --measurements:") and "delete it" in output
+    assert store.read_bytes() == text.encode("latin-1")
+
+
+def test_validate_measurements_of_the_draw_but_malformed_plates_is_refused(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A file whose key matches this draw but whose plates were edited: an error, not a
+    KeyError in the scoring."""
+    from solitonde.instrument import validate as module
+
+    seen: dict[str, object] = {}
+
+    def capture(path: object, key: dict[str, object]) -> None:
+        seen.update(key)
+        raise RuntimeError("stop")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(module, "_load_measurements", capture)
+        with pytest.raises(RuntimeError):
+            validate(ModelTable.load(DEFAULT_TABLE), 1, seed=0, measurements=tmp_path / "x")
+    store = tmp_path / "m.json"
+    store.write_text(json.dumps({"key": seen, "plates": [{"thickness_m": 0.003}] * 2,
+                                 "wall_s": 1.0}))
+    output = _bad_validate(tmp_path, "--measurements", str(store))
+    assert output.startswith("error: --measurements:") and "KeyError" in output
+
+
+@pytest.mark.parametrize("flag", ["--out", "--measurements"])
+def test_validate_output_paths_are_checked_before_simulating(tmp_path: Path, flag: str) -> None:
+    output = _bad_validate(tmp_path, flag, str(tmp_path))
+    assert output.startswith(f"error: {flag}:") and "directory" in output
+    output = _bad_validate(tmp_path, flag, str(tmp_path / "missing" / "x.json"))
+    assert output.startswith(f"error: {flag}:") and "does not exist" in output
+
+
+def test_validate_function_refuses_a_negative_seed() -> None:
+    from solitonde.instrument.validate import ValidationInputError
+
+    with pytest.raises(ValidationInputError) as info:
+        validate(ModelTable.load(DEFAULT_TABLE), 1, seed=-1)
+    assert info.value.field == "seed"
