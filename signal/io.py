@@ -22,8 +22,9 @@ plus ``dataset=`` (HDF5) and ``group=``, ``channel=`` (TDMS); :data:`READER_OPTI
 An unknown option is an error naming it. A file a parser cannot read raises
 :class:`~.errors.WaveformError` (field ``file`` unless a field is known), never the parser's
 own exception. Metadata identifiers (``plate_id``, ``position``, ``shot`` labels) stay text;
-``sphere_diameter``, ``t0``, ``dt``, ``sample_rate`` and ``calibration`` must be numbers; other
-text values are decoded only when they are JSON objects, lists, booleans or null. Layouts:
+``t0``, ``dt``, ``sample_rate`` and ``calibration`` must be numbers; ``sphere_diameter`` is a
+number when it reads as one (else left as given, for the consumer to name); other text values
+are decoded only when they are JSON objects, lists, booleans or null. Layouts:
 
 csv
     UTF-8 text (a byte-order mark is allowed). Optional leading ``# key: value`` comment lines
@@ -89,9 +90,8 @@ READER_OPTIONS: dict[str, tuple[str, ...]] = {
 
 IDENTIFIERS = ("plate_id", "position")
 """Metadata that label things: kept as text, never read as numbers (``007`` is not 7)."""
-NUMERIC_METADATA = ("sphere_diameter", "t0", "dt", "sample_rate", "calibration", "wf_increment",
-                    "wf_start_offset")
-"""Metadata that must be numbers; a file holding anything else there is refused."""
+NUMERIC_METADATA = ("t0", "dt", "sample_rate", "calibration", "wf_increment", "wf_start_offset")
+"""Metadata the reader needs as numbers; a file holding anything else there is refused."""
 UNIT_NAMES = {"n": "N", "newton": "N", "newtons": "N", "v": "V", "volt": "V", "volts": "V"}
 """Unit spellings found in files (TDMS ``unit_string``, attributes), case-insensitive."""
 
@@ -159,7 +159,7 @@ def read(path: str | Path, format: str | None = None, **options: Any) -> list[Wa
     except Exception as exc:  # a malformed file broke a parser: the file's error, not a crash
         raise WaveformError(
             "file", f"{path.name} cannot be read as {fmt} ({type(exc).__name__}: {exc})"
-        ) from exc
+        ) from None  # the message carries it; the traceback would pin the reader's open objects
     if not waves:
         raise WaveformError("samples", f"{path.name} holds no shots")
     out = []
@@ -205,7 +205,8 @@ def _identifiers_as_text(meta: Mapping[str, Any]) -> dict[str, Any]:
 def _decode(value: Any, key: str | None = None) -> Any:
     """Metadata value ``key`` from a file as Python: bytes to str, numpy to Python.
 
-    Identifiers stay text; numeric keys must be one number; other text is decoded only when it
+    Identifiers stay text; the keys the reader needs as numbers must be one number;
+    ``sphere_diameter`` text becomes a number when it is one; other text is decoded only when it
     is a JSON object, list, boolean or null (``# scene: {...}``), so labels keep their digits.
     """
     if isinstance(value, np.ndarray):
@@ -216,6 +217,11 @@ def _decode(value: Any, key: str | None = None) -> Any:
         value = value.decode("utf-8", "replace")
     if key in IDENTIFIERS or key == "shot":
         return value.strip() if isinstance(value, str) else value
+    if key == "sphere_diameter" and isinstance(value, str):
+        try:  # a number when it is one; anything else is left for the consumer to name
+            return float(value)
+        except ValueError:
+            return value
     if key in NUMERIC_METADATA:
         if isinstance(value, bool) or not isinstance(value, str | int | float):
             raise WaveformError(key, f"expected one number, got {value!r}")
@@ -567,7 +573,10 @@ def _read_hdf5(
                             if isinstance(obj, h5py.Dataset) else None)
         for ds in items:
             where = f"{path.name}:{ds.name}"
-            attrs = {k: _decode(v, k) for k, v in ds.attrs.items()}
+            # read every attribute before decoding: an error raised while h5py's attribute
+            # iterator is suspended would keep its global lock held by the traceback
+            raw = {k: ds.attrs[k] for k in list(ds.attrs.keys())}
+            attrs = {k: _decode(v, k) for k, v in raw.items()}
             step = _step(_own_dt(attrs.get("dt"), attrs.get("sample_rate")), sample_rate, dt,
                          where)
             start = attrs.get("t0", 0.0) if t0 is None else t0
@@ -637,7 +646,7 @@ def _read_tdms(
             if wanted is not None and ch.name not in wanted:
                 continue
             where = f"{path.name}:{g.name}/{ch.name}"
-            props = {k: _decode(v, k) for k, v in ch.properties.items()}
+            props = {k: _decode(v, k) for k, v in dict(ch.properties).items()}
             if "wf_increment" not in props:
                 if wanted is not None:
                     raise WaveformError("dt", f"channel {g.name}/{ch.name} has no wf_increment",

@@ -290,7 +290,7 @@ def test_units_option_and_tdms_unit_names(tmp_path):
 
 def test_identifiers_stay_text_and_numbers_stay_numbers(tmp_path):
     """`# plate_id: 007` and `# position: 1.50` keep their digits; sphere_diameter is a number;
-    a non-numeric sphere_diameter is refused."""
+    a non-numeric one is kept as given and to_dict (the service's shape) names it."""
     path = tmp_path / "id.csv"
     path.write_text("# plate_id: 007\n# position: 1.50\n# sphere_diameter: 0.00953\n"
                     "# synthetic: true\ntime_s,force_N\n" + _csv_rows())
@@ -299,9 +299,11 @@ def test_identifiers_stay_text_and_numbers_stay_numbers(tmp_path):
     assert w.metadata["sphere_diameter"] == pytest.approx(0.00953)
     assert w.metadata["synthetic"] is True
     path.write_text("# sphere_diameter: big\ntime_s,force_N\n" + _csv_rows())
+    (w,) = io.read(path)
+    assert w.metadata["sphere_diameter"] == "big"
     with pytest.raises(WaveformError) as err:
-        io.read(path)
-    assert err.value.field == "sphere_diameter"
+        w.to_dict()
+    assert err.value.field == "metadata.sphere_diameter"
 
 
 def test_csv_comments_and_headerless_time_column(tmp_path):
