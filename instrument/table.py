@@ -105,7 +105,9 @@ class ModelTable:
         Raises
         ------
         TableError
-            When the file is missing, is not a model table, or has a newer format.
+            When the file is missing, is not a model table, has a newer format, or lacks a
+            dataset or attribute, has one of the wrong shape, or an axis that is not finite and
+            strictly increasing (the field names the dataset, e.g. ``features/arr``).
         """
         path = Path(path)
         if not path.is_file():
@@ -117,26 +119,35 @@ class ModelTable:
         with fh:
             if fh.attrs.get("format") != FORMAT:
                 raise TableError("table", f"{str(path)!r} is not a solitonde model table")
-            version = int(fh.attrs.get("format_version", 0))
+            try:
+                version = int(fh.attrs.get("format_version", 0))
+            except (TypeError, ValueError):
+                raise TableError("format_version", f"expected an integer, got "
+                                 f"{fh.attrs.get('format_version')!r}") from None
             if version > FORMAT_VERSION:
                 raise TableError("format_version", f"table format {version} is newer than this "
                                  f"solitonde reads (up to {FORMAT_VERSION})")
-            axes = {a: np.asarray(fh["axes"][a][...], dtype=float) for a in AXES}
-            features = {k: np.asarray(fh["features"][k][...], dtype=float)
-                        for k in (*SCALAR_FEATURES, *SECONDARY_FEATURES)}
-            diag = {k: np.asarray(v[...]) for k, v in fh["diagnostics"].items()}
+            axes = {a: _axis(fh, a) for a in AXES}
+            grid = tuple(axes[a].size for a in AXES)
+            features = {k: _dataset(fh, f"features/{k}", float, grid) for k in SCALAR_FEATURES}
+            features |= {k: _dataset(fh, f"features/{k}", float, grid, trailing=True)
+                         for k in SECONDARY_FEATURES}
+            diag = {}
+            if "diagnostics" in fh:
+                diag = {k: _dataset(fh, f"diagnostics/{k}", None, grid)
+                        for k in fh["diagnostics"]}
             return cls(
                 axes=axes,
                 features=features,
-                status=np.asarray(fh["status"][...], dtype=np.int8),
-                flags=np.asarray(fh["flags"][...], dtype=np.int32),
-                plate_model=np.asarray(fh["plate_model"][...], dtype=np.int8),
+                status=_dataset(fh, "status", np.int8, grid),
+                flags=_dataset(fh, "flags", np.int32, grid),
+                plate_model=_dataset(fh, "plate_model", np.int8, grid),
                 diagnostics=diag,
-                sweep=json.loads(fh.attrs["sweep"]),
-                provenance=json.loads(fh.attrs.get("provenance", "{}")),
+                sweep=_json_attr(fh, "sweep", None, dict),
+                provenance=_json_attr(fh, "provenance", "{}", dict),
                 complete=bool(fh.attrs.get("complete", False)),
-                flag_names=tuple(json.loads(fh.attrs.get("flag_names", "[]"))),
-                plate_model_names=tuple(json.loads(fh.attrs.get("plate_model_names", "[]")))
+                flag_names=tuple(_json_attr(fh, "flag_names", "[]", list)),
+                plate_model_names=tuple(_json_attr(fh, "plate_model_names", "[]", list))
                 or PLATE_MODEL_NAMES,
                 path=path,
             )
@@ -183,3 +194,67 @@ class ModelTable:
             "sweep": self.sweep,
             "provenance": self.provenance,
         }
+
+
+# Reading and checking a table file ---------------------------------------------------------------
+
+
+def _dataset(fh: h5py.File, name: str, dtype: Any, grid: tuple[int, ...],
+             trailing: bool = False) -> np.ndarray:
+    """Dataset ``name`` as an array of ``dtype`` (None: as stored) with shape ``grid`` (plus one
+    trailing axis when ``trailing``); TableError naming it when absent or of another shape."""
+    obj = fh.get(name)
+    if not isinstance(obj, h5py.Dataset):
+        raise TableError(name, "missing from the table file (not a complete solitonde table; "
+                         "rebuild it with `solitonde table build`)")
+    try:
+        data = np.asarray(obj[...], dtype=dtype)
+    except (TypeError, ValueError, OSError) as exc:
+        raise TableError(name, f"cannot be read as {np.dtype(dtype).name} ({exc})") from None
+    if data.shape[:3] != grid or data.ndim != (4 if trailing else 3):
+        want = f"{grid} + (K,)" if trailing else str(grid)
+        raise TableError(name, f"has shape {data.shape}, but the axes give {want} "
+                         "(diameter_m, thickness_m, distance_m)")
+    return data
+
+
+def _axis(fh: h5py.File, name: str) -> np.ndarray:
+    """Axis ``name``: one or more finite values, strictly increasing; sizes positive, distances
+    non-negative."""
+    field_name = f"axes/{name}"
+    obj = fh.get(field_name)
+    if not isinstance(obj, h5py.Dataset):
+        raise TableError(field_name, "missing from the table file (not a complete solitonde "
+                         "table; rebuild it with `solitonde table build`)")
+    try:
+        values = np.asarray(obj[...], dtype=float)
+    except (TypeError, ValueError, OSError) as exc:
+        raise TableError(field_name, f"cannot be read as numbers ({exc})") from None
+    if values.ndim != 1 or values.size < 1:
+        raise TableError(field_name, f"must be a 1-D axis of at least one value, got shape "
+                         f"{values.shape}")
+    if not np.all(np.isfinite(values)):
+        raise TableError(field_name, "holds a non-finite value")
+    if np.any(np.diff(values) <= 0):
+        raise TableError(field_name, f"must be strictly increasing, got {values.tolist()}")
+    if name == "distance_m" and values[0] < 0:
+        raise TableError(field_name, f"must be >= 0 m, got {values[0]!r}")
+    if name != "distance_m" and values[0] <= 0:
+        raise TableError(field_name, f"must be > 0 m, got {values[0]!r}")
+    return values
+
+
+def _json_attr(fh: h5py.File, name: str, default: str | None, kind: type) -> Any:
+    """Root attribute ``name`` decoded from JSON, of type ``kind``; required when no default."""
+    raw = fh.attrs.get(name, default)
+    if raw is None:
+        raise TableError(name, "attribute missing from the table file (not a complete solitonde "
+                         "table; rebuild it with `solitonde table build`)")
+    try:
+        value = json.loads(raw)
+    except (TypeError, ValueError) as exc:
+        raise TableError(name, f"attribute is not JSON ({exc})") from None
+    if not isinstance(value, kind):
+        raise TableError(name, f"attribute must be a JSON {'object' if kind is dict else 'list'},"
+                         f" got {type(value).__name__}")
+    return value

@@ -480,8 +480,17 @@ def build_table(
     spec = sweep.to_dict()
     out.parent.mkdir(parents=True, exist_ok=True)
     if part.exists():
-        with h5py.File(part, "r") as fh:
-            stored = json.loads(fh.attrs.get("sweep", "null"))
+        not_ours = (f"{str(part)!r} exists but is not an interrupted table build ({{}}); it is "
+                    "left as it is: delete it (or move it away) to start the build afresh")
+        try:
+            with h5py.File(part, "r") as fh:
+                ours = fh.attrs.get("format") == FORMAT and "done" in fh
+                stored = json.loads(fh.attrs.get("sweep", "null")) if ours else None
+        except (OSError, ValueError) as exc:  # not HDF5 (empty, garbage, truncated); bad JSON
+            raise TableError("partial", not_ours.format(exc)) from None
+        if not ours:
+            raise TableError("partial", not_ours.format("an HDF5 file without a solitonde "
+                                                        "table build in it"))
         if stored != json.loads(json.dumps(spec, sort_keys=True)):
             raise TableError("sweep", f"{str(part)!r} holds an interrupted build of another sweep; "
                              "rerun with the same grid and scene to resume, or delete it")

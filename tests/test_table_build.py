@@ -158,3 +158,79 @@ def test_load_rejects_other_files(tmp_path: Path) -> None:
         ModelTable.load(p)
     with pytest.raises(TableError, match="no such file"):
         ModelTable.load(tmp_path / "missing.h5")
+
+
+DEFAULT_TABLE = Path(__file__).resolve().parents[1] / "data_samples" / "default_table.h5"
+
+
+def _reverse(fh: h5py.File, name: str) -> None:
+    fh[name][...] = fh[name][...][::-1]
+
+
+def _replace(fh: h5py.File, name: str, value: object) -> None:
+    del fh[name]
+    fh[name] = value
+
+
+CORRUPTIONS = [
+    ("features/arr_upper_bound", lambda fh: fh.__delitem__("features/arr_upper_bound")),
+    ("features/secondary_ratios", lambda fh: fh.__delitem__("features/secondary_ratios")),
+    ("status", lambda fh: fh.__delitem__("status")),
+    ("axes/distance_m", lambda fh: fh.__delitem__("axes/distance_m")),
+    ("sweep", lambda fh: fh.attrs.__delitem__("sweep")),
+    ("sweep", lambda fh: fh.attrs.__setitem__("sweep", "{not json")),
+    ("provenance", lambda fh: fh.attrs.__setitem__("provenance", "[1]")),
+    ("format_version", lambda fh: fh.attrs.__setitem__("format_version", "abc")),
+    # an axis whose length does not match the features
+    ("features/tof_s", lambda fh: _replace(fh, "axes/thickness_m",
+                                           fh["axes/thickness_m"][...][:5])),
+    ("axes/distance_m", lambda fh: _reverse(fh, "axes/distance_m")),
+    ("axes/thickness_m", lambda fh: _replace(fh, "axes/thickness_m",
+                                             np.r_[fh["axes/thickness_m"][...][:-1], np.nan])),
+    ("axes/diameter_m", lambda fh: _replace(fh, "axes/diameter_m", [0.00476, 0.00476, 0.01905])),
+    ("axes/diameter_m", lambda fh: _replace(fh, "axes/diameter_m", [-0.00476, 0.00953, 0.01905])),
+    ("axes/distance_m", lambda fh: _replace(fh, "axes/distance_m", np.zeros((14, 1)))),
+    ("features/arr", lambda fh: _replace(fh, "features/arr", np.zeros((3, 8)))),
+    ("diagnostics/wall_s", lambda fh: _replace(fh, "diagnostics/wall_s", np.zeros(3))),
+    ("flags", lambda fh: _replace(fh, "flags", np.array(["x"] * 336, dtype="S1"
+                                                        ).reshape(3, 8, 14))),
+]
+
+
+@pytest.mark.parametrize(("field", "corrupt"), CORRUPTIONS,
+                         ids=[f"{c[0]}:{i}" for i, c in enumerate(CORRUPTIONS)])
+def test_load_checks_datasets_attributes_shapes_and_axes(tmp_path: Path, field: str,
+                                                         corrupt: object) -> None:
+    """A damaged table is a TableError naming the dataset or attribute at load, never a
+    KeyError there or a wrong answer later."""
+    p = tmp_path / "t.h5"
+    p.write_bytes(DEFAULT_TABLE.read_bytes())
+    ModelTable.load(p)  # the intact copy loads
+    with h5py.File(p, "a") as fh:
+        corrupt(fh)  # type: ignore[operator]
+    with pytest.raises(TableError) as info:
+        ModelTable.load(p)
+    assert info.value.field == field
+
+
+@pytest.mark.parametrize("content", [b"", b"garbage, not HDF5\n" * 10, b"\x89HDF\r\n\x1a\n"])
+def test_partial_that_is_not_a_build_is_refused_and_kept(tmp_path: Path, content: bytes) -> None:
+    out = tmp_path / "t.h5"
+    part = tmp_path / "t.h5.partial"
+    part.write_bytes(content)
+    with pytest.raises(TableError) as info:
+        build_table(Sweep([4.76e-3], [3e-3], [0.3], scene=FAST), out, workers=1)
+    assert info.value.field == "partial" and "delete it" in str(info.value)
+    assert part.read_bytes() == content and not out.exists()
+
+
+def test_partial_hdf5_of_something_else_is_refused_and_kept(tmp_path: Path) -> None:
+    out = tmp_path / "t.h5"
+    part = tmp_path / "t.h5.partial"
+    with h5py.File(part, "w") as fh:
+        fh["x"] = 1
+    with pytest.raises(TableError, match="delete it") as info:
+        build_table(Sweep([4.76e-3], [3e-3], [0.3], scene=FAST), out, workers=1)
+    assert info.value.field == "partial"
+    with h5py.File(part, "r") as fh:
+        assert list(fh) == ["x"]
