@@ -15,8 +15,9 @@ ARR oscillate with L near a support, small where they are smooth. A calibration 
 model ARR by ``arr_factor`` (experiments lose energy the model does not) and adds ``tof_offset_s``
 to the model TOF; its stated uncertainties (``arr_factor_std``, ``tof_offset_std_s``) enter the
 variances. Beyond D/t = 5, where the paper finds ARR near 0 and the model's "reflection" is a
-train at the detection floor whose features wander between table positions, the model error
-also holds 10 % of TOF and the whole ARR (:data:`FLOOR_TOF_REL_STD`, :data:`FLOOR_ARR_REL_STD`),
+train at the detection floor whose features wander between table positions (table nodes with ARR
+below :data:`FLOOR_ARR_MAX`; near a support the reflection is whole), the model error also holds
+10 % of TOF and the whole ARR (:data:`FLOOR_TOF_REL_STD`, :data:`FLOOR_ARR_REL_STD`),
 so such a size weighs little there. Sphere sizes multiply their likelihoods. Grid points where the
 model detects no reflection cannot explain a measured one and get zero posterior.
 
@@ -25,11 +26,13 @@ status: when the posterior still carries at least :data:`EDGE_FRACTION` of its p
 end of the table that is not a physical limit, the data do not bound the parameter on that side
 (``lower_bound_only``: e.g. L beyond the critical distance, where TOF and ARR no longer depend on
 L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
-bound (``ci95 = [lower, null]``, the 5 % quantile), no MAP or median: the table's end is not an
-estimate. A measurement no table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range``
-with no numbers at all. With several sphere sizes, when all together are out of range but the
-others are not once one size is left out, that answer is given, with the size left out named
-(``excluded_diameters_m``, ``reason``): one disagreeing channel does not void the others.
+bound (``ci95 = [lower, null]``), no MAP or median: the table's end is not an estimate; the bound
+is where the density falls to the level of a likelihood-ratio interval (:data:`LR_LEVELS`), since a
+quantile of a density flat out to the table's end would follow the table's extent. A measurement no
+table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no numbers at all. With
+several sphere sizes, when all together are out of range but the others are not once one size is
+left out, that answer is given, with the size left out named (``excluded_diameters_m``,
+``reason``): one disagreeing channel does not void the others.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -64,11 +68,21 @@ REFLECTION_D_OVER_T = 5.0
 detection floor whose features wander from one table position to the next (TOF by ~10 %)."""
 FLOOR_TOF_REL_STD = 0.1
 FLOOR_ARR_REL_STD = 1.0
-"""Model uncertainty at table nodes beyond :data:`REFLECTION_D_OVER_T`: TOF known to 10 %, ARR
-only as "small" (its own size), so such a size barely weighs there instead of pinning (t, L) to
-a wandering value."""
-FINE_THICKNESS_POINTS = 121
+"""Model uncertainty at table nodes beyond :data:`REFLECTION_D_OVER_T` whose reflection is weak
+(ARR below :data:`FLOOR_ARR_MAX`): TOF known to 10 %, ARR only as "small" (its own size), so
+such a size barely weighs there instead of pinning (t, L) to a wandering value."""
+FLOOR_ARR_MAX = 0.3
+"""A reflection with ARR above this is a clear pulse even beyond D/t = 5 (near a support the
+clamp returns the wave whole, ARR up to 0.99): its features are as exact as anywhere, and the
+floor uncertainty would wrongly make such cells unlikely through the likelihood's log-variance."""
+FINE_THICKNESS_STEPS = 32
+"""Fine cells per table interval in thickness (log-uniform within each interval)."""
 FINE_DISTANCE_STEP_M = 0.0025
+"""Largest fine cell in distance (each table interval is split evenly)."""
+LR_LEVELS = (math.exp(-0.5), math.exp(-0.5 * 3.841458820694124))
+"""Ratios of the marginal posterior density to its peak that bound a one-sided 68 % and 95 %
+answer, the levels of a likelihood-ratio interval for one parameter (chi^2_1 of 1 and 3.84): the
+bound then follows the data, not how far the table extends."""
 PARAMETERS = ("thickness_m", "distance_m")
 
 
@@ -142,6 +156,24 @@ class FeatureSummary:
 # The fine grid ----------------------------------------------------------------------------
 
 
+def _refine(nodes: np.ndarray, steps: Any) -> np.ndarray:
+    """The nodes with ``steps(width)`` even sub-intervals inserted between each neighbour pair."""
+    if nodes.size == 1:
+        return nodes.astype(float).copy()
+    parts = [np.linspace(a, b, steps(b - a) + 1)[:-1] for a, b in pairwise(nodes)]
+    return np.concatenate([*parts, nodes[-1:]])
+
+
+def _cell_widths(x: np.ndarray) -> np.ndarray:
+    """Width of each point's cell (midpoint to midpoint, half cells at the ends): the prior mass
+    of a point under a prior uniform in x."""
+    if x.size == 1:
+        return np.ones(1)
+    mid = 0.5 * (x[1:] + x[:-1])
+    edges = np.concatenate([x[:1], mid, x[-1:]])
+    return np.diff(edges)
+
+
 def _interp_matrix(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Linear-interpolation weights W (len(x), len(nodes)): f(x) = W @ f(nodes)."""
     w = np.zeros((x.size, nodes.size))
@@ -197,6 +229,8 @@ class FineGrid:
     penalty: np.ndarray
     model_tof_var: np.ndarray
     model_arr_var: np.ndarray
+    weight_t: np.ndarray
+    weight_l: np.ndarray
 
     @property
     def model_tof_std_s(self) -> float:
@@ -216,32 +250,36 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     if cached is not None:
         return cached
     t_nodes, l_nodes = table.axes["thickness_m"], table.axes["distance_m"]
-    # Uniform in log t: the prior is uniform in log t (thickness is a scale) and the grid has
-    # the same relative resolution everywhere.
-    t_f = np.geomspace(t_nodes[0], t_nodes[-1], FINE_THICKNESS_POINTS if t_nodes.size > 1 else 1)
-    n_l = max(2, round((l_nodes[-1] - l_nodes[0]) / FINE_DISTANCE_STEP_M) + 1)
-    l_f = np.linspace(l_nodes[0], l_nodes[-1], n_l if l_nodes.size > 1 else 1)
-    wt = _interp_matrix(np.log(t_nodes), np.log(t_f))
+    # Every table node is a fine point (a measurement at a node is judged on the node's own
+    # features); log-uniform in t inside each interval, as the prior is uniform in log t.
+    log_t = _refine(np.log(t_nodes), lambda width: FINE_THICKNESS_STEPS)
+    t_f = np.exp(log_t)
+    l_f = _refine(l_nodes, lambda width: max(1, math.ceil(width / FINE_DISTANCE_STEP_M - 1e-9)))
+    wt = _interp_matrix(np.log(t_nodes), log_t)
     wl = _interp_matrix(l_nodes, l_f)
     ok = table.status[i_d] == STATUS_OK
     tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
     arr = np.where(ok, table.features["arr"][i_d], 0.0)
-    bad = (~ok).astype(float)
     diameter = float(table.axes["diameter_m"][i_d])
-    floor = (diameter / t_nodes > REFLECTION_D_OVER_T).astype(float)[:, None]
-    touched = (wt > 1e-12).astype(float) @ bad @ (wl > 1e-12).astype(float).T
+    floor = ((diameter / t_nodes > REFLECTION_D_OVER_T)[:, None] & (arr < FLOOR_ARR_MAX)
+             ).astype(float)
+    # A cell whose interpolation touches a node without a reflection has no features.
+    touched = (wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T
+    valid = touched == 0
     grid = FineGrid(
-        diameter_m=float(table.axes["diameter_m"][i_d]),
+        diameter_m=diameter,
         thickness_m=t_f,
         distance_m=l_f,
         tof_s=wt @ tof @ wl.T,
         arr=wt @ arr @ wl.T,
-        valid=touched == 0,
-        penalty=np.where(touched == 0, 0.0, np.inf),
+        valid=valid,
+        penalty=np.where(valid, 0.0, np.inf),
         model_tof_var=wt @ (_node_variance(tof, ok, np.log(t_nodes), l_nodes)
                             + floor * (FLOOR_TOF_REL_STD * tof) ** 2) @ wl.T,
         model_arr_var=wt @ (_node_variance(arr, ok, np.log(t_nodes), l_nodes)
                             + floor * (FLOOR_ARR_REL_STD * arr) ** 2) @ wl.T,
+        weight_t=_cell_widths(log_t),
+        weight_l=_cell_widths(l_f),
     )
     table._cache[key] = grid
     return grid
@@ -334,23 +372,36 @@ class Estimate:
         return out
 
 
-def _quantiles(x: np.ndarray, p: np.ndarray, qs: Sequence[float]) -> list[float]:
-    """Quantiles of a density sampled at uniform points x (each point a cell of width dx)."""
+def _quantiles(x: np.ndarray, mass: np.ndarray, qs: Sequence[float]) -> list[float]:
+    """Quantiles of a distribution given as the mass of each point's cell (cells from midpoint
+    to midpoint between the points, half cells at the ends; mass spread evenly in a cell)."""
     if x.size == 1:
         return [float(x[0])] * len(qs)
-    dx = x[1] - x[0]
-    edges = np.concatenate([[x[0] - dx / 2], x + dx / 2])
-    edges = np.clip(edges, x[0], x[-1])
-    cdf = np.concatenate([[0.0], np.cumsum(p)])
+    edges = np.concatenate([x[:1], 0.5 * (x[1:] + x[:-1]), x[-1:]])
+    cdf = np.concatenate([[0.0], np.cumsum(mass)])
     cdf /= cdf[-1]
     return [float(np.interp(q, cdf, edges)) for q in qs]
 
 
-def _summarise(x: np.ndarray, p: np.ndarray, lower_physical: bool,
+def _crossing(x: np.ndarray, density: np.ndarray, level: float, from_left: bool) -> float:
+    """Where ``density`` first reaches ``level`` walking in from one end (linear between points)."""
+    order = range(x.size) if from_left else range(x.size - 1, -1, -1)
+    prev = None
+    for i in order:
+        if density[i] >= level:
+            if prev is None:
+                return float(x[i])
+            f = (level - density[prev]) / (density[i] - density[prev])
+            return float(x[prev] + f * (x[i] - x[prev]))
+        prev = i
+    return float(x[-1] if from_left else x[0])
+
+
+def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physical: bool,
                transform: Any = None) -> ParameterEstimate:
-    """MAP, median, intervals and status of a marginal density ``p`` on uniform points ``x``
-    (``transform`` maps x back to the parameter, e.g. exp for log t)."""
-    est = _summarise_x(x, p, lower_physical)
+    """MAP, median, intervals and status of a marginal posterior given as the mass of each point
+    of ``x`` (cells of ``widths``); ``transform`` maps x back to the parameter (exp for log t)."""
+    est = _summarise_x(x, mass, widths, lower_physical)
     if transform is None:
         return est
 
@@ -365,20 +416,35 @@ def _summarise(x: np.ndarray, p: np.ndarray, lower_physical: bool,
     return ParameterEstimate(f(est.map), f(est.median), pair(est.ci68), pair(est.ci95), est.status)
 
 
-def _summarise_x(x: np.ndarray, p: np.ndarray, lower_physical: bool) -> ParameterEstimate:
-    peak = p.max()
-    lower_open = x.size > 1 and not lower_physical and p[0] >= EDGE_FRACTION * peak
-    upper_open = x.size > 1 and p[-1] >= EDGE_FRACTION * peak
+def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
+                 lower_physical: bool) -> ParameterEstimate:
+    """The summary of :func:`_summarise` on the grid's own axis.
+
+    A side is open (the data do not bound the parameter there) when the density at the table's end
+    is at least :data:`EDGE_FRACTION` of its peak; a physical limit (L = 0) is never open. A one-
+    sided answer reports the likelihood-ratio bound (:data:`LR_LEVELS`), not a quantile: with the
+    density flat out to the table's end, a quantile would follow the table's extent, not the data.
+    At a physical limit an interval whose end falls in the limit's own cell starts there.
+    """
+    density = mass / widths
+    peak = density.max()
+    q = _quantiles(x, mass, (0.025, 0.16, 0.5, 0.84, 0.975))
+    lower_open = x.size > 1 and not lower_physical and density[0] >= EDGE_FRACTION * peak
+    upper_open = x.size > 1 and density[-1] >= EDGE_FRACTION * peak
     if lower_open and upper_open:
         return ParameterEstimate(None, None, None, None, "unconstrained")
     if upper_open:
-        q95, q68 = _quantiles(x, p, (0.05, 0.32))
-        return ParameterEstimate(None, None, (q68, None), (q95, None), "lower_bound_only")
+        b68, b95 = (_crossing(x, density, lv * peak, from_left=True) for lv in LR_LEVELS)
+        if lower_physical:
+            b68, b95 = (float(x[0]) if b <= 0.5 * (x[0] + x[1]) else b for b in (b68, b95))
+        return ParameterEstimate(None, None, (b68, None), (b95, None), "lower_bound_only")
     if lower_open:
-        q95, q68 = _quantiles(x, p, (0.95, 0.68))
-        return ParameterEstimate(None, None, (None, q68), (None, q95), "upper_bound_only")
-    q = _quantiles(x, p, (0.025, 0.16, 0.5, 0.84, 0.975))
-    return ParameterEstimate(float(x[int(np.argmax(p))]), q[2], (q[1], q[3]), (q[0], q[4]),
+        b68, b95 = (_crossing(x, density, lv * peak, from_left=False) for lv in LR_LEVELS)
+        return ParameterEstimate(None, None, (None, b68), (None, b95), "upper_bound_only")
+    if lower_physical and x.size > 1:
+        first_cell = 0.5 * (x[0] + x[1])
+        q = [float(x[0]) if (k < 2 and v <= first_cell) else v for k, v in enumerate(q)]
+    return ParameterEstimate(float(x[int(np.argmax(density))]), q[2], (q[1], q[3]), (q[0], q[4]),
                              "constrained")
 
 
@@ -503,11 +569,13 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     chi2 -= best
     chi2 *= -0.5
     post = np.exp(chi2, out=chi2)
-    post /= post.sum()
     g0 = grids[0]
-    thickness = _summarise(np.log(g0.thickness_m), post.sum(axis=1), lower_physical=False,
-                           transform=np.exp)
-    distance = _summarise(g0.distance_m, post.sum(axis=0),
+    post *= g0.weight_t[:, None]  # prior mass of each cell: uniform in log t and in L
+    post *= g0.weight_l[None, :]
+    post /= post.sum()
+    thickness = _summarise(np.log(g0.thickness_m), post.sum(axis=1), g0.weight_t,
+                           lower_physical=False, transform=np.exp)
+    distance = _summarise(g0.distance_m, post.sum(axis=0), g0.weight_l,
                           lower_physical=bool(g0.distance_m[0] <= 0.0))
     est = Estimate(thickness, distance, items, cal, fit, n_terms)
     if return_posterior:
