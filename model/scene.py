@@ -49,7 +49,7 @@ def _number(value: Any) -> Any:
             raise ValueError(f"expected a number, got {value!r}") from None
     if isinstance(value, int | float):
         try:
-            return _finite(float(value))
+            _finite(float(value))
         except OverflowError:
             raise ValueError(f"must be a finite number, got {value!r}") from None
     return value
