@@ -199,18 +199,25 @@ class ModelTable:
 # Reading and checking a table file ---------------------------------------------------------------
 
 
-def _dataset(fh: h5py.File, name: str, dtype: Any, grid: tuple[int, ...],
-             trailing: bool = False) -> np.ndarray:
-    """Dataset ``name`` as an array of ``dtype`` (None: as stored) with shape ``grid`` (plus one
-    trailing axis when ``trailing``); TableError naming it when absent or of another shape."""
+def _read(fh: h5py.File, name: str, dtype: Any) -> np.ndarray:
+    """Dataset ``name`` as an array of ``dtype`` (None: as stored); TableError naming it when it
+    is absent or cannot be read so."""
     obj = fh.get(name)
     if not isinstance(obj, h5py.Dataset):
         raise TableError(name, "missing from the table file (not a complete solitonde table; "
                          "rebuild it with `solitonde table build`)")
     try:
-        data = np.asarray(obj[...], dtype=dtype)
+        return np.asarray(obj[...], dtype=dtype)
     except (TypeError, ValueError, OSError) as exc:
-        raise TableError(name, f"cannot be read as {np.dtype(dtype).name} ({exc})") from None
+        kind = "numbers" if dtype is None else np.dtype(dtype).name
+        raise TableError(name, f"cannot be read as {kind} ({exc})") from None
+
+
+def _dataset(fh: h5py.File, name: str, dtype: Any, grid: tuple[int, ...],
+             trailing: bool = False) -> np.ndarray:
+    """Dataset ``name`` as an array of ``dtype`` (None: as stored) with shape ``grid`` (plus one
+    trailing axis when ``trailing``); TableError naming it when absent or of another shape."""
+    data = _read(fh, name, dtype)
     if data.shape[:3] != grid or data.ndim != (4 if trailing else 3):
         want = f"{grid} + (K,)" if trailing else str(grid)
         raise TableError(name, f"has shape {data.shape}, but the axes give {want} "
@@ -222,14 +229,7 @@ def _axis(fh: h5py.File, name: str) -> np.ndarray:
     """Axis ``name``: one or more finite values, strictly increasing; sizes positive, distances
     non-negative."""
     field_name = f"axes/{name}"
-    obj = fh.get(field_name)
-    if not isinstance(obj, h5py.Dataset):
-        raise TableError(field_name, "missing from the table file (not a complete solitonde "
-                         "table; rebuild it with `solitonde table build`)")
-    try:
-        values = np.asarray(obj[...], dtype=float)
-    except (TypeError, ValueError, OSError) as exc:
-        raise TableError(field_name, f"cannot be read as numbers ({exc})") from None
+    values = _read(fh, field_name, float)
     if values.ndim != 1 or values.size < 1:
         raise TableError(field_name, f"must be a 1-D axis of at least one value, got shape "
                          f"{values.shape}")
