@@ -61,6 +61,25 @@ CREATE TABLE IF NOT EXISTS shots (
 """
 
 
+def _journal_mode_wal(conn: sqlite3.Connection, timeout_s: float) -> str:
+    """Put the database in WAL mode (a no-op when it already is) and return the mode.
+
+    Two workers opening the store at once, or one opening it while another recovers the WAL a
+    killed process left, can get SQLITE_BUSY here without SQLite's busy handler being consulted:
+    retried for up to ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            mode = str(conn.execute("PRAGMA journal_mode").fetchone()[0])
+            if mode.lower() == "wal":
+                return mode
+            return str(conn.execute("PRAGMA journal_mode = WAL").fetchone()[0])
+        except sqlite3.OperationalError as exc:
+            if "locked" not in str(exc) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
 class StoreError(RuntimeError):
     """The store cannot be opened, or a stored record fails its integrity check."""
 
@@ -156,7 +175,7 @@ class Store:
         with self._lock:
             c = self._conn
             c.execute("PRAGMA busy_timeout = 30000")
-            mode = c.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            mode = _journal_mode_wal(c, timeout_s=30.0)
             if str(mode).lower() != "wal":
                 raise StoreError(f"{self.path}: could not switch to WAL mode (got {mode})")
             c.execute(f"PRAGMA synchronous = {synchronous.upper()}")

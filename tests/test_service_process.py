@@ -198,3 +198,32 @@ def test_kill_9_while_posting_loses_no_acknowledged_measurement(tmp_path: Path) 
         assert conn.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
     tof = [s["features"]["tof_s"] for _, _, resp in acked for s in resp["shots"]]
     assert np.allclose(tof, REFLECTED_S - INCIDENT_S, atol=DT)
+
+
+def test_store_open_retries_a_busy_journal_mode_switch() -> None:
+    """Workers opening the store while another recovers a killed process's WAL can get
+    SQLITE_BUSY on the journal-mode switch without SQLite's busy handler (seen once in CI as a
+    failed worker start): the switch is retried until it succeeds, and only that error is."""
+    from solitonde.instrument.store import _journal_mode_wal
+
+    class Busy:
+        """A connection whose first two statements find the database locked."""
+
+        def __init__(self, error: str = "database is locked", failures: int = 2) -> None:
+            self.error, self.failures, self.calls = error, failures, 0
+
+        def execute(self, sql: str) -> Busy:
+            self.calls += 1
+            if self.calls <= self.failures:
+                raise sqlite3.OperationalError(self.error)
+            return self
+
+        def fetchone(self) -> tuple[str]:
+            return ("wal",)
+
+    conn = Busy()
+    assert _journal_mode_wal(conn, timeout_s=5.0) == "wal" and conn.calls == 3
+    with pytest.raises(sqlite3.OperationalError, match="disk I/O"):
+        _journal_mode_wal(Busy("disk I/O error"), timeout_s=5.0)
+    with pytest.raises(sqlite3.OperationalError, match="locked"):
+        _journal_mode_wal(Busy(failures=10**9), timeout_s=0.2)
