@@ -48,8 +48,9 @@ def validate_command(
     workers: int | None = typer.Option(None, help="local worker processes (default: one per "
                                        "core); 1 runs serially"),
     scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
-    diameters: str | None = typer.Option(None, "--diameters", help="sphere sizes to measure, m, "
-                                         "comma list (default: all of the table's)"),
+    diameters: list[str] | None = typer.Option(None, "--diameters", help="sphere sizes to "
+                                               "measure, m: a comma list, or the option repeated "
+                                               "(default: all of the table's)"),
     measurements: Path | None = typer.Option(None, "--measurements", help="JSON file keeping the "
                                              "simulated shots; reused when it matches the draw"),
     out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
@@ -69,7 +70,7 @@ def validate_command(
         model = ModelTable.load(table_path(table))
     except TableError as exc:
         _fail(str(exc))
-    sizes = parse_diameters(diameters, model)
+    sizes = parse_diameters(",".join(diameters) if diameters else None, model)
     try:
         report = validate(model, n, seed,
                           workers=default_workers() if workers is None else workers,

@@ -95,6 +95,8 @@ def _bad_validate(tmp_path: Path, *args: str) -> str:
     (["--diameters", "abc"], "--diameters", "not a number"),
     (["--diameters", "9.53e-3,abc"], "--diameters", "not a number"),
     (["--diameters", "9.53e-3,0.00953"], "--diameters", "listed twice"),
+    (["--diameters", "9.53e-3", "--diameters", "0.00953"], "--diameters", "listed twice"),
+    (["--diameters", "4.76e-3", "--diameters", "abc"], "--diameters", "not a number"),
     (["--diameters", "nan"], "--diameters", "not a sphere size"),
     (["--seed", "-1"], "--seed", ">= 0"),
 ])
