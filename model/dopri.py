@@ -52,6 +52,7 @@ from .chain import (
     PK_INC_T,
     PK_REF_F,
     PK_REF_T,
+    chain_energy,
     hertz,
     track_peaks,
 )
@@ -266,25 +267,12 @@ def _sample_block(
         w_trace[k0 + s] = w
 
 
-@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
+@njit(cache=True)
 def _balance(y: np.ndarray, n: int, u0: np.ndarray, m: float, g: float, a_s: float,
              a_b: float) -> float:
-    """Energy balance of state ``y``: chain energy (the terms of chain_energy, summed in
-    vectorisable loops) + plate work + dissipated."""
+    """Energy balance of state ``y``: chain energy (as chain_energy) + plate work + dissipated."""
     np1 = n + 1
-    kin = 0.0
-    grav = 0.0
-    for i in range(np1):
-        kin += y[np1 + i] * y[np1 + i]
-        grav += y[i] - u0[i]
-    pot = 0.0
-    for j in range(n):
-        d = y[j] - y[j + 1]
-        d = d if d > 0.0 else 0.0
-        pot += d * d * sqrt(d)
-    db = y[n] - y[2 * np1]
-    db = db if db > 0.0 else 0.0
-    return (0.5 * m * kin + 0.4 * (a_s * pot + a_b * db * db * sqrt(db)) - m * g * grav
+    return (chain_energy(y[:np1], y[np1:2 * np1], u0, y[2 * np1], m, g, a_s, a_b)
             + y[2 * np1 + 1] + y[2 * np1 + 2])
 
 
