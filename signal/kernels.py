@@ -275,6 +275,75 @@ def smoother_gain(h: int) -> float:
     return np.sqrt(acc) / width**2
 
 
+SELECT_ROUNDS = 64
+"""Partition rounds after which :func:`select` sorts what is left (a median-of-three killer
+input; noise never gets there: about 2 log2(n) rounds are typical)."""
+
+
+@njit(cache=True)
+def _partition(a: np.ndarray, lo: int, hi: int, pivot: float, inclusive: bool) -> int:
+    """Moves the values of ``a[lo:hi]`` below ``pivot`` (or not above it, when ``inclusive``) to
+    the front of that range and returns where they end. Branch-free: on noise every comparison
+    is a coin toss, which would cost a mispredicted branch per element."""
+    i = lo
+    for j in range(lo, hi):
+        v = a[j]
+        t = a[i]
+        small = v <= pivot if inclusive else v < pivot
+        a[j] = t if small else v
+        a[i] = v if small else t
+        i += small
+    return i
+
+
+@njit(cache=True)
+def select(a: np.ndarray, k: int) -> float:
+    """The ``k``-th smallest value of ``a`` (0-based), leaving ``a`` partially reordered so that
+    ``a[:k]`` holds the ``k`` smallest values.
+
+    Quickselect with a median-of-three pivot, three-way (values equal to the pivot are set aside
+    in one step, so a quantised or noise-free flat trace costs a pass, not a pass per value).
+    numba's ``np.median`` spends most of its time on mispredicted branches here.
+    """
+    lo, hi = 0, a.size  # the k-th value lies in a[lo:hi]
+    for _ in range(SELECT_ROUNDS):
+        if hi - lo <= 1:
+            return a[k]
+        x, y, z = a[lo], a[(lo + hi) >> 1], a[hi - 1]
+        pivot = max(min(x, y), min(max(x, y), z))  # the median of the three
+        i = _partition(a, lo, hi, pivot, False)
+        if k < i:
+            hi = i
+            continue
+        j = _partition(a, i, hi, pivot, True)  # a[i:j] == pivot
+        if k < j:
+            return pivot
+        lo = j
+    a[lo:hi].sort()
+    return a[k]
+
+
+@njit(cache=True)
+def median_inplace(a: np.ndarray) -> float:
+    """Median of a non-empty finite array, equal to ``np.median`` (the mean of the two middle
+    values for an even size); reorders ``a``."""
+    n = a.size
+    k = n // 2
+    upper = select(a, k)
+    if n % 2:
+        return upper
+    lower = a[0]  # after select, a[:k] holds the k smallest values
+    for i in range(1, k):
+        lower = _fmax(lower, a[i])
+    return 0.5 * (lower + upper)
+
+
+@njit(cache=True)
+def median(x: np.ndarray) -> float:
+    """:func:`median_inplace` of a copy: ``np.median(x)`` for finite ``x``, faster on noise."""
+    return median_inplace(x.copy())
+
+
 MAD_POINTS = 512
 """The MAD is taken over at most this many evenly spread samples (5 % precision on the noise,
 which sets thresholds and the reported SNR; every pulse's own baseline uses all samples)."""
@@ -300,10 +369,10 @@ def detrended_mad(x: np.ndarray) -> float:
     for k in range(m):
         i = k * stride
         r[k] = x[i] - mean - slope * (i - tm)
-    med = np.median(r)
+    med = median_inplace(r)
     for k in range(m):
         r[k] = abs(r[k] - med)
-    return np.median(r)
+    return median_inplace(r)
 
 
 SKIP_BLOCK = 16
@@ -326,19 +395,29 @@ def find_peaks_hysteresis(v: np.ndarray, thr: float, delta: float) -> np.ndarray
     icur = 0
     i = 1
     while i < n:
-        # A block in which no sample makes a new extreme or leaves the hysteresis band changes
-        # nothing: skip it on its (vectorised) max and min, else walk it sample by sample. Most of
-        # a smoothed record is such blocks.
+        # A block in which no sample leaves the hysteresis band about the running extreme (which
+        # the block itself may move, as on a pulse's slow rise) changes only that extreme and
+        # its index: skip it on its (vectorised) max and min, else walk it sample by sample. Most
+        # of a smoothed record is such blocks.
         stop = min(i + SKIP_BLOCK, n)
         if stop - i == SKIP_BLOCK:
             block = v[i:stop]
             hi = vmax(block)
             lo = vmin(block)
-            if seeking_max:
-                unchanged = hi <= cur and lo >= cur - delta
-            else:
-                unchanged = lo >= cur and hi <= cur + delta
-            if unchanged:
+            if seeking_max and lo >= max(cur, hi) - delta:
+                if hi > cur:
+                    cur = hi
+                    icur = i
+                    while v[icur] != hi:
+                        icur += 1
+                i = stop
+                continue
+            if not seeking_max and hi <= min(cur, lo) + delta:
+                if lo < cur:
+                    cur = lo
+                    icur = i
+                    while v[icur] != lo:
+                        icur += 1
                 i = stop
                 continue
         for j in range(i, stop):
@@ -391,38 +470,46 @@ def valley(v: np.ndarray, a: int, b: int) -> int:
     return best
 
 
-@njit(cache=True)
-def quadratic_fit(
-    x: np.ndarray, mask: np.ndarray, degree: int, ramp: np.ndarray
-) -> tuple[np.ndarray, int]:
-    """Least-squares polynomial of ``degree`` (0-2) in u = i / n through the masked-in samples.
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _power_sums(x: np.ndarray, lo: int, hi: int, acc: np.ndarray) -> None:
+    """Adds sum(u^k) for k = 1..4 and sum(u^k x) for k = 0..2 over samples lo..hi-1 to ``acc``
+    (u = i / n). Reassociation lets the sums vectorise; they change only in rounding."""
+    s1 = s2 = s3 = s4 = r0 = r1 = r2 = 0.0
+    inv = 1.0 / x.size
+    for i in range(lo, hi):
+        u = i * inv
+        p2 = u * u
+        xi = x[i]
+        s1 += u
+        s2 += p2
+        s3 += u * p2
+        s4 += p2 * p2
+        r0 += xi
+        r1 += u * xi
+        r2 += p2 * xi
+    acc[0] += s1
+    acc[1] += s2
+    acc[2] += s3
+    acc[3] += s4
+    acc[4] += r0
+    acc[5] += r1
+    acc[6] += r2
 
-    ``ramp`` holds u = i / n (:func:`unit_ramp`). Returns the coefficients (c0, c1, c2) (unused
-    ones zero) and the number of samples used. Fewer than three samples, or a singular system,
-    give a constant.
+
+@njit(cache=True)
+def quadratic_fit(x: np.ndarray, runs: np.ndarray, degree: int) -> tuple[np.ndarray, int]:
+    """Least-squares polynomial of ``degree`` (0-2) in u = i / n through the samples of ``runs``.
+
+    ``runs[k] = (a, b)``: the samples a..b-1 take part (:func:`quiet_runs`); n is ``x.size``.
+    Returns the coefficients (c0, c1, c2) (unused ones zero) and the number of samples used.
+    Fewer than three samples, or a singular system, give a constant.
     """
-    n = x.size
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    s4 = 0.0
-    r0 = 0.0
-    r1 = 0.0
-    r2 = 0.0
+    acc = np.zeros(7)
     count = 0
-    for i in range(n):
-        if mask[i]:
-            u = ramp[i]
-            p2 = u * u
-            xi = x[i]
-            s1 += u
-            s2 += p2
-            s3 += u * p2
-            s4 += p2 * p2
-            r0 += xi
-            r1 += u * xi
-            r2 += p2 * xi
-            count += 1
+    for k in range(runs.shape[0]):
+        _power_sums(x, runs[k, 0], runs[k, 1], acc)
+        count += runs[k, 1] - runs[k, 0]
+    s1, s2, s3, s4, r0, r1, r2 = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5], acc[6]
     coef = np.zeros(3)
     if count == 0:
         return coef, 0
@@ -445,12 +532,37 @@ def quadratic_fit(
 
 
 @njit(cache=True)
-def unit_ramp(n: int) -> np.ndarray:
-    """u = i / n for i in 0..n-1: the abscissa of the slow-trend polynomial."""
-    out = np.empty(n)
-    for i in range(n):
-        out[i] = i / n
-    return out
+def quiet_runs(centres: np.ndarray, reach: np.ndarray, n: int) -> np.ndarray:
+    """Runs ``(a, b)`` (samples a..b-1) of 0..n-1 further than ``reach[j]`` from every
+    ``centres[j]``: the complement of the union of the windows, in order."""
+    m = centres.size
+    starts = np.empty(m, dtype=np.int64)
+    for j in range(m):
+        starts[j] = centres[j] - reach[j]
+    runs = np.empty((m + 1, 2), dtype=np.int64)
+    k = 0
+    free = 0  # first sample not yet covered by a window or a run
+    for j in np.argsort(starts):
+        a = max(0, starts[j])
+        if a > free:
+            runs[k, 0] = free
+            runs[k, 1] = min(a, n)
+            k += 1
+        free = max(free, min(n, centres[j] + reach[j] + 1))
+    if free < n:
+        runs[k, 0] = free
+        runs[k, 1] = n
+        k += 1
+    return runs[:k]
+
+
+@njit(cache=True)
+def run_count(runs: np.ndarray, lo: int, hi: int) -> int:
+    """How many samples of ``runs`` lie in lo..hi-1."""
+    count = 0
+    for k in range(runs.shape[0]):
+        count += max(0, min(runs[k, 1], hi) - max(runs[k, 0], lo))
+    return count
 
 
 @njit(cache=True)
@@ -651,12 +763,12 @@ def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[f
     its first differences (the pulses are smooth on the sample scale) stand in.
     """
     if n_pre > 0:
-        return np.median(y[:n_pre]), max(MAD_TO_SIGMA * detrended_mad(y[:n_pre]), floor)
+        return median(y[:n_pre]), max(MAD_TO_SIGMA * detrended_mad(y[:n_pre]), floor)
     d = np.diff(y)
-    med = np.median(d)
+    med = median_inplace(d)
     for i in range(d.size):
         d[i] = abs(d[i] - med)
-    return ref, max(MAD_TO_SIGMA * np.median(d) / np.sqrt(2.0), floor)
+    return ref, max(MAD_TO_SIGMA * median_inplace(d) / np.sqrt(2.0), floor)
 
 
 @njit(cache=True)
@@ -668,15 +780,6 @@ def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: floa
     if n_pre >= 8 * (4 * h + 1):
         out = max(out, MAD_TO_SIGMA * detrended_mad(s[:n_pre]))
     return out
-
-
-@njit(cache=True)
-def _count(mask: np.ndarray, lo: int, hi: int) -> int:
-    """How many of ``mask[lo:hi]`` are set (clipped to the array)."""
-    count = 0
-    for i in range(max(lo, 0), min(hi, mask.size)):
-        count += mask[i]
-    return count
 
 
 @njit(cache=True)
@@ -727,7 +830,6 @@ def analyze(
     skew: float,
     free_r: bool,
     max_iter: int,
-    ramp: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Detect and measure every pulse of one shot.
 
@@ -751,9 +853,6 @@ def analyze(
         the later ones (travelling back up the chain) ``-skew``.
     max_iter:
         Levenberg-Marquardt iterations per pulse.
-    ramp:
-        :func:`unit_ramp` of ``x.size`` (made here when its size differs), so that callers with
-        many shots of one length divide once.
 
     Returns
     -------
@@ -765,13 +864,14 @@ def analyze(
     head = np.zeros(HEAD)
     # Polarity, from the lightly smoothed trace against the record's median.
     step = max(1, n // 1024)
-    ref = np.median(x[::step])
+    ref = median(x[::step])
     csum, s1 = prefix_and_triangle(x, 2)
     sign = sign_in
     if sign == 0.0:
         sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
-    y = x * sign
-    s1 *= sign
+    y = x if sign > 0 else -x  # read only: a positive trace is used in place
+    if sign < 0:
+        s1 *= -1.0
     ref *= sign
     head[H_SIGN] = sign
     ymax = vmax(y)
@@ -823,31 +923,29 @@ def analyze(
 
     # Slow trend (drift and the chain's slow level changes): a quadratic through the quiet samples,
     # those further than 2 FWHM from every pulse; twice, since the pulses depend on the line.
-    quiet = np.ones(n, dtype=np.bool_)
     for it in range(2):
         if peaks.size == 0:
             break
         bounds = _bounds(v, peaks)
         widths = _widths(v, peaks, bounds)
-        quiet[:] = True
         # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
         # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
         cap = 3.0 * widths[np.argmax(v[peaks])]
+        reach = np.empty(peaks.size, dtype=np.int64)
         for j in range(peaks.size):
-            reach = int(2.0 * min(widths[j], cap)) + 2 * h + 2
-            quiet[max(0, peaks[j] - reach) : min(n, peaks[j] + reach + 1)] = False
-        count_pre = _count(quiet, 0, n_pre)
-        count_post = _count(quiet, n_pre, n)
-        late = _count(quiet, 2 * n // 3, n) > 0
-        middle = _count(quiet, n // 3, 2 * n // 3) > 0
+            reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
+        quiet = quiet_runs(peaks, reach, n)
+        count_pre = run_count(quiet, 0, n_pre)
+        count_post = run_count(quiet, n_pre, n)
+        late = run_count(quiet, 2 * n // 3, n) > 0
+        middle = run_count(quiet, n // 3, 2 * n // 3) > 0
         if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
             break
-        if ramp.size != n:
-            ramp = unit_ramp(n)
-        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1, ramp)
+        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1)
         c0, c1, c2 = coef[0], coef[1], coef[2]
+        inv = 1.0 / n
         for i in range(n):
-            u = ramp[i]
+            u = i * inv
             line[i] = c0 + u * (c1 + u * c2)
             v[i] = s[i] - line[i]
         before = peaks
@@ -960,7 +1058,6 @@ def analyze_batch(
     skew: float,
     free_r: bool,
     max_iter: int,
-    ramp: np.ndarray,
     keep: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`analyze` of every row of ``x`` (one shot per row), without the GIL (callers split
@@ -975,7 +1072,7 @@ def analyze_batch(
     counts = np.zeros(m, dtype=np.int64)
     for i in range(m):
         head, rows = analyze(x[i], sign_in, n_pre_in, h_in, thr_sigma, min_ratio, fit_fraction,
-                             shape_r, skew, free_r, max_iter, ramp)
+                             shape_r, skew, free_r, max_iter)
         heads[i] = head
         counts[i] = rows.shape[0]
         for j in range(min(rows.shape[0], keep)):

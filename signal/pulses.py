@@ -36,7 +36,6 @@ number is never picked out of noise:
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -210,14 +209,6 @@ def lowpass(x: np.ndarray, dt: float, cutoff: float) -> np.ndarray:
     return sosfiltfilt(sos, x)
 
 
-@functools.lru_cache(maxsize=8)
-def _ramp(n: int) -> np.ndarray:
-    """The kernel's trend abscissa i / n for an n-sample record, made once per record length."""
-    ramp = K.unit_ramp(n)
-    ramp.setflags(write=False)
-    return ramp
-
-
 def snr_db(amplitude: float, noise: float) -> float:
     """``20 log10(amplitude / noise)``, the SNR convention of :mod:`solitonde.signal.synth`."""
     return 20.0 * math.log10(max(amplitude, 1e-300) / noise)
@@ -241,7 +232,6 @@ def kernel_args(opts: DetectOptions, n: int, dt: float) -> tuple[Any, ...]:
         sign, n_pre, -1 if opts.smooth_samples is None else opts.smooth_samples,
         opts.threshold_sigma, opts.min_ratio, opts.fit_fraction,
         SHAPE_EXPONENT if free_r else opts.shape_exponent, opts.shape_skew, free_r, MAX_ITER,
-        _ramp(n),
     )
 
 

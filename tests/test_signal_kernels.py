@@ -79,15 +79,54 @@ def test_peak_search_with_block_skipping_equals_the_sample_walk(seed):
 def test_trend_fit_is_least_squares_on_the_quiet_samples():
     n = 2000
     rng = np.random.default_rng(7)
-    ramp = K.unit_ramp(n)
-    np.testing.assert_array_equal(ramp, np.arange(n) / n)
+    ramp = np.arange(n) / n
     y = 3.0 - 2.0 * ramp + 5.0 * ramp**2 + rng.normal(0, 0.01, n)
     mask = np.ones(n, dtype=np.bool_)
     mask[300:700] = False
-    coef, count = K.quadratic_fit(y, mask, 2, ramp)
+    mask[1500:1510] = False
+    runs = np.array([[0, 300], [700, 1500], [1510, n]])
+    coef, count = K.quadratic_fit(y, runs, 2)
     expected = np.polynomial.polynomial.polyfit(ramp[mask], y[mask], 2)
     assert count == mask.sum()
     np.testing.assert_allclose(coef, expected, rtol=1e-9, atol=1e-11)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_quiet_runs_are_the_samples_outside_every_window(seed):
+    """Windows may overlap, nest, start before 0 or end past n; the runs are what a mask says."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 3000))
+    centres = np.sort(rng.integers(0, n, size=int(rng.integers(0, 6))))
+    reach = rng.integers(0, n // 2 + 2, size=centres.size)
+    mask = np.ones(n, dtype=np.bool_)
+    for c, r in zip(centres, reach, strict=True):
+        mask[max(0, c - r) : c + r + 1] = False
+    runs = K.quiet_runs(centres, reach, n)
+    rebuilt = np.zeros(n, dtype=np.bool_)
+    for a, b in runs:
+        assert 0 <= a < b <= n
+        rebuilt[a:b] = True
+    np.testing.assert_array_equal(rebuilt, mask)
+    assert np.all(runs[1:, 0] > runs[:-1, 1])  # in order, none touching
+    lo, hi = sorted(rng.integers(0, n + 1, size=2))
+    assert K.run_count(runs, lo, hi) == mask[lo:hi].sum()
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 64, 513, 1112])
+def test_median_equals_numpy_on_noise_ties_flat_and_sorted_input(n):
+    rng = np.random.default_rng(n)
+    cases = [rng.normal(size=n), np.round(rng.normal(size=n)), np.full(n, -2.5),
+             np.sort(rng.normal(size=n)), np.sort(rng.normal(size=n))[::-1],
+             np.repeat(rng.normal(size=3), n)[:n]]
+    for x in cases:
+        before = x.copy()
+        assert K.median(x) == np.median(x)
+        np.testing.assert_array_equal(x, before)  # the copy is reordered, not x
+        a = x.copy()
+        k = int(rng.integers(0, n))
+        value = K.select(a, k)
+        assert value == np.sort(x)[k]
+        assert np.all(a[:k] <= value) and np.all(a[k + 1 :] >= value) and a[k] == value
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, 1.0000001e12, -1.7e308])
@@ -116,19 +155,3 @@ def test_huge_samples_are_refused_not_crashing_the_kernel():
         extract_batch(np.stack([np.zeros(4000), x]), 5e-7)
     with pytest.raises(WaveformError, match="NaN or inf"):
         Waveform(0.0, 5e-7, np.r_[x[:100], np.nan])
-
-
-def test_analyze_makes_its_own_ramp_when_given_none_of_the_right_size():
-    from solitonde.signal.pulses import DetectOptions, kernel_args
-    from solitonde.signal.synth import degrade, pulse_train
-
-    n, dt = 3000, 1e-7
-    x = pulse_train(n, dt, [(40e-6, 30.0, 30e-6), (200e-6, 14.0, 32e-6)])
-    x = degrade(x, 30.0, np.random.default_rng(4), 30.0, drift=0.05)
-    args = kernel_args(DetectOptions(), n, dt)
-    head, rows = K.analyze(x, *args)
-    for ramp in (np.empty(0), K.unit_ramp(n - 1)):
-        other_head, other_rows = K.analyze(x, *args[:-1], ramp)
-        np.testing.assert_array_equal(other_head, head)
-        np.testing.assert_array_equal(other_rows, rows)
-    assert rows.shape[0] == 2
