@@ -39,6 +39,13 @@ idle core: the chain (Verlet, default scene) ~3.5e8 particle-steps/s; the couple
 the sum-factorised stiffness ~9e7 dof-steps/s (default mesh, 14,400 to 52,728 steps). The dense
 stiffness this weight was first set for ran ~2.6e7 dof-steps/s (weight 25)."""
 
+CONVOLUTION_WEIGHT = 0.25
+"""The ``greens`` plate convolves the whole force history at every plate step (sum over the
+steps s of s multiply-adds: plate_steps^2 / 2 in all), which dominates long runs. One
+multiply-add costs about 0.25 chain particle-steps: measured on one core, 8e9/s while the history
+fits the cache (1e5 steps) and 2e9/s beyond it (4e5 steps, 39 s), against ~3.5e8 particle-steps/s
+(0.175 at the slower rate, rounded up)."""
+
 
 def _json_body(model: Any) -> dict[str, Any]:
     return {"requestBody": {"required": True, "content": {
@@ -83,7 +90,8 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
     Uses the model's own rules (:func:`~solitonde.model.simulate.choose_time_step`,
     :func:`~solitonde.model.simulate.auto_duration`, and for the spectral-element plate tiers
     their stable step). ``cost = chain steps x (particles + 1) + w x plate steps x plate dofs``
-    with ``w`` = :data:`PLATE_DOF_WEIGHT`, in chain particle-steps (about 3.5e8 per CPU second).
+    with ``w`` = :data:`PLATE_DOF_WEIGHT`, in chain particle-steps (about 3.5e8 per CPU second);
+    ``greens`` adds its convolution, :data:`CONVOLUTION_WEIGHT` x plate_steps^2 / 2.
     A plate mesh is only built once a floor of its cost (one plate step per sample) fits the
     ``budget``, so pricing an absurd mesh is itself cheap.
     """
@@ -100,6 +108,8 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
                            "n_samples": int(n_samples)}
     if plate_model in ("sem", "greens"):
         floor = float(n_samples - 1) * (particles + PLATE_DOF_WEIGHT * _sem_dofs(scene))
+        if plate_model == "greens":
+            floor += CONVOLUTION_WEIGHT * 0.5 * float(n_samples - 1) ** 2
         if floor > budget:
             return {**out, "steps": n_samples - 1, "dof": particles + _sem_dofs(scene),
                     "cost": floor, "estimate": "floor (one plate step per sample)"}
@@ -113,6 +123,8 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
         chain_steps = plate_steps * r
         plate_dofs = int(plate.n_dofs)
     cost = float(chain_steps) * particles + PLATE_DOF_WEIGHT * float(plate_steps) * plate_dofs
+    if plate_model == "greens":
+        cost += CONVOLUTION_WEIGHT * 0.5 * float(plate_steps) ** 2
     # dopri5 adapts its step (far fewer than verlet's): verlet's count bounds its cost above.
     estimate = ("upper bound (verlet step counts)" if scene.solver.integrator == "dopri5"
                 else "exact step counts")
@@ -164,6 +176,10 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
 
     try:
         scene = scene_from_dict(payload.scene)
+        if scene.output.traces:
+            # The response carries the sensor trace only: per-particle traces (3 x samples x
+            # particles floats, gigabytes within the cost budget) would be computed for nothing.
+            scene = scene.with_overrides({"output.traces": False})
         cost = simulation_cost(scene, budget)
     except SceneError as exc:
         field = f"scene.{exc.field}"
