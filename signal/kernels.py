@@ -619,6 +619,36 @@ def template(t: np.ndarray, p: np.ndarray, skew: float, f: np.ndarray, jac: np.n
 
 
 @njit(cache=True)
+def solve_spd(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> bool:
+    """Solves ``a x = b`` for a small symmetric positive definite ``a`` by Cholesky, overwriting
+    ``a`` with its factor; False (``x`` undefined) when ``a`` is not positive definite. The LM
+    step's 3x3 or 4x4 system: a LAPACK call costs ten times the arithmetic here."""
+    m = a.shape[0]
+    for i in range(m):
+        for j in range(i + 1):
+            acc = a[i, j]
+            for k in range(j):
+                acc -= a[i, k] * a[j, k]
+            if i == j:
+                if not acc > 0.0:
+                    return False
+                a[i, i] = np.sqrt(acc)
+            else:
+                a[i, j] = acc / a[j, j]
+    for i in range(m):
+        acc = b[i]
+        for k in range(i):
+            acc -= a[i, k] * x[k]
+        x[i] = acc / a[i, i]
+    for i in range(m - 1, -1, -1):
+        acc = x[i]
+        for k in range(i + 1, m):
+            acc -= a[k, i] * x[k]
+        x[i] = acc / a[i, i]
+    return True
+
+
+@njit(cache=True)
 def fit_pulse(
     t: np.ndarray, y: np.ndarray, p0: np.ndarray, skew: float, nfree: int, max_iter: int
 ) -> tuple[np.ndarray, bool]:
@@ -644,6 +674,7 @@ def fit_pulse(
     jtj = np.empty((nfree, nfree))
     g = np.empty(nfree)
     a = np.empty((nfree, nfree))
+    step = np.empty(nfree)
     tmin, tmax = t[0], t[n - 1]
     for _ in range(max_iter):
         for k in range(nfree):
@@ -662,7 +693,9 @@ def fit_pulse(
             a[:, :] = jtj
             for k in range(nfree):
                 a[k, k] += lam * (jtj[k, k] + 1e-12)
-            step = np.linalg.solve(a, g)
+            if not solve_spd(a, g, step):
+                lam *= 10.0
+                continue
             for k in range(nfree):
                 trial[k] = p[k] + step[k]
             trial[1] = min(max(trial[1], tmin), tmax)

@@ -35,8 +35,15 @@ def model_trace(thickness: float = 4.83e-3) -> tuple[np.ndarray, float, Truth]:
 
 
 def test_20db_criteria():
-    """At 20 dB (drift 2 %, 12 bits): median |TOF error| < 1 sample at 2 MHz; median |ARR error|
-    < 2 % at 5 MHz; both medians within 15 % of the Cramer-Rao bound.
+    """At 20 dB (drift 2 %, 12 bits), the issue's line "TOF within one sample period and ARR within
+    2 %": median |TOF error| < 1 sample and median |ARR error| < 0.02 (2 % of the incident
+    amplitude, ARR's full scale) at the scene's 2 MHz; the relative ARR error < 2 % at 5 MHz;
+    every median within 15 % of the Cramer-Rao bound (the estimator is efficient).
+
+    Why ARR in ARR units: at a fixed SNR the reflection's absolute noise is fixed, so the relative
+    error grows as 1 / ARR and no estimator keeps it under 2 % on thin plates (ARR -> 0 above
+    D/t ~ 5, the paper's Fig. 5); an error in ARR units is a property of the measurement, not of
+    the plate (test_arr_error_across_plates shows both).
 
     Both criteria at 2 MHz, or on the 95th percentile, are out of reach of any unbiased
     estimator: the reflected pulse (ARR 0.55) is at 14.8 dB, and the Cramer-Rao bound for this
@@ -54,6 +61,7 @@ def test_20db_criteria():
     print(format_table([row5], "20 dB, 5 MHz (200 shots)"))
     assert row2["detected"] == row2["trials"] and row5["detected"] == row5["trials"]
     assert row2["tof_err_median_samples"] < 1.0
+    assert row2["arr_err_median_abs"] < 0.02
     assert row5["arr_err_median_rel"] < 0.02
     for row in (row2, row5):
         assert row["tof_err_median_samples"] < 1.15 * 0.674 * row["crb_tof_samples"]
@@ -81,3 +89,21 @@ def test_accuracy_table(rate):
                                     f"{rate / 1e6:g} MHz, drift 2 %, 12 bits"))
     by = {r["snr_db"]: r for r in rows}
     assert by[40.0]["tof_err_p95_samples"] < by[10.0]["tof_err_p95_samples"]
+
+
+@pytest.mark.slow
+def test_arr_error_across_plates():
+    """20 dB at 2 MHz on a thinner, the reference and a thicker plate (-m slow -s): the ARR
+    error in ARR units stays put while the relative error grows as the reflection weakens."""
+    rows = []
+    for thickness in (3.18e-3, 4.83e-3, 9.53e-3):
+        fine, dt, truth = model_trace(thickness)
+        (row,) = study(fine, dt, truth, RATE, [20.0], trials=400, seed=4)
+        print("\n" + format_table([row], f"D 9.53 mm, t {thickness * 1e3:.2f} mm, "
+                                          f"ARR {truth.arr:.3f}, 2 MHz, 20 dB"))
+        rows.append((truth.arr, row))
+    rows.sort(key=lambda item: item[0])
+    rel = [r["arr_err_median_rel"] for _, r in rows]
+    assert rel == sorted(rel, reverse=True)  # weaker reflection, larger relative error
+    for _, row in rows:
+        assert row["arr_err_median_abs"] < 0.02

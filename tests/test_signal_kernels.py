@@ -155,3 +155,18 @@ def test_huge_samples_are_refused_not_crashing_the_kernel():
         extract_batch(np.stack([np.zeros(4000), x]), 5e-7)
     with pytest.raises(WaveformError, match="NaN or inf"):
         Waveform(0.0, 5e-7, np.r_[x[:100], np.nan])
+
+
+@pytest.mark.parametrize("m", [1, 3, 4])
+def test_spd_solve_matches_numpy_and_refuses_indefinite_systems(m):
+    rng = np.random.default_rng(m)
+    j = rng.normal(size=(20, m))
+    a = j.T @ j + 1e-3 * np.eye(m)
+    b = rng.normal(size=m)
+    x = np.empty(m)
+    assert K.solve_spd(a.copy(), b, x)
+    np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-10)
+    indefinite = a.copy()
+    indefinite[m - 1, m - 1] = -1.0
+    assert not K.solve_spd(indefinite, b, x)
+    assert not K.solve_spd(np.zeros((m, m)), b, x)
