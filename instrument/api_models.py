@@ -162,11 +162,29 @@ class InversionInput(Strict):
     n_shots: int = Field(1, ge=1, le=100_000)
 
 
+class CalibrationEntry(Strict):
+    """One sphere size's calibration, as ``solitonde calibrate`` writes it."""
+
+    diameter_m: float = Field(gt=0, le=1.0, description="sphere diameter D, m")
+    arr_factor: float = Field(1.0, gt=0, le=10.0)
+    tof_offset_s: float = Field(0.0, ge=-1e-2, le=1e-2)
+    arr_factor_std: float | None = Field(None, ge=0, le=10.0)
+    arr_factor_transfer_std: float | None = Field(None, ge=0, le=10.0)
+    tof_offset_std_s: float | None = Field(None, ge=0, le=1e-2)
+    tof_offset_transfer_std_s: float | None = Field(None, ge=0, le=1e-2)
+    n_references: int | None = Field(None, ge=1, le=100_000)
+
+
 class Calibration(Strict):
-    """Experiment calibration: multiply model ARR by arr_factor, add tof_offset_s to model TOF."""
+    """Experiment calibration: multiply model ARR by arr_factor, add tof_offset_s to model TOF;
+    ``per_diameter`` entries override the global pair for their sphere size. The JSON file
+    ``solitonde calibrate`` writes is accepted as it is."""
 
     arr_factor: float = Field(1.0, gt=0, le=10.0)
     tof_offset_s: float = Field(0.0, ge=-1e-2, le=1e-2)
+    per_diameter: list[CalibrationEntry] = Field(default_factory=list, max_length=16)
+    reference: dict[str, Any] | None = Field(
+        None, description="where the calibration came from (kept, not used)")
 
 
 class InvertIn(Strict):

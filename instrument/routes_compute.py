@@ -68,7 +68,8 @@ async def invert(request: Request) -> dict[str, Any]:
     except ValidationError as exc:
         raise from_pydantic(exc, InvertIn) from None
     inputs = [i.model_dump() for i in payload.inputs]
-    calibration = payload.calibration.model_dump() if payload.calibration else None
+    calibration = payload.calibration.model_dump(exclude_none=True) if payload.calibration \
+        else None
     try:
         estimate = await run_in_threadpool(svc.estimator.invert, inputs, calibration)
     except EstimateUnavailable as exc:
@@ -77,7 +78,7 @@ async def invert(request: Request) -> dict[str, Any]:
         field = getattr(exc, "field", None) or "inputs"
         if field in InversionInput.model_fields:
             field = f"inputs.{field}"
-        elif field in Calibration.model_fields:
+        elif field in Calibration.model_fields or field.startswith("per_diameter["):
             field = f"calibration.{field}"
         message = str(exc).partition(": ")[2] or str(exc)
         raise Problem(422, f"{field}: {message}", kind="invalid-input", field=field) from None

@@ -96,3 +96,40 @@ def test_measurement_without_sphere_size_says_why_no_estimate(client: TestClient
     del shots[0]["metadata"]["sphere_diameter"]
     body = client.post("/v1/measurements", json={"shots": shots}).json()
     assert body["estimate"] is None and "sphere_diameter" in body["estimate_reason"]
+
+
+def test_invert_takes_the_per_size_calibration_file_calibrate_writes(client: TestClient,
+                                                                      tmp_path: Path) -> None:
+    """The JSON ``solitonde calibrate`` writes posts as it is: its per-size entry is applied (an
+    ARR factor of 0.5 halves the model ARR the measurement is compared with, so doubling the
+    measured ARR gives back the uncalibrated answer), a duplicate size is a 422 naming it."""
+    from solitonde.instrument.calibration import Calibration as FileCalibration
+
+    body = client.post("/v1/measurements", json={"shots": simulated_shots(4.0e-3)}).json()
+    (agg,) = body["aggregates"]
+    inputs = [{"diameter_m": agg["sphere_diameter"], "tof_s": agg["tof_s"]["mean"],
+               "tof_std_s": agg["tof_s"]["std"], "arr": agg["arr"]["mean"],
+               "arr_std": agg["arr"]["std"], "n_shots": agg["tof_s"]["count"]}]
+    plain = client.post("/v1/invert", json={"inputs": inputs}).json()["estimate"]
+    path = FileCalibration(1.0, 0.0, {TABLE_DIAMETER: {"arr_factor": 0.5, "tof_offset_s": 0.0,
+                                                        "arr_factor_std": 0.0,
+                                                        "n_references": 2}},
+                           {"plate": "reference"}).save(tmp_path / "cal.json")
+    import json
+
+    cal = json.loads(path.read_text())
+    halved = [{**inputs[0], "arr": 0.5 * inputs[0]["arr"], "arr_std": 0.5 * inputs[0]["arr_std"]}]
+    r = client.post("/v1/invert", json={"inputs": halved, "calibration": cal})
+    assert r.status_code == 200, r.text
+    est = r.json()["estimate"]
+    assert est["thickness_m"]["median"] == pytest.approx(plain["thickness_m"]["median"],
+                                                        rel=0.02)
+    assert est["calibration"]["per_diameter"][0]["arr_factor"] == 0.5
+    # the same size listed twice, and a bad entry: 422 naming the entry's field
+    cal["per_diameter"].append(dict(cal["per_diameter"][0]))
+    r = client.post("/v1/invert", json={"inputs": halved, "calibration": cal})
+    assert r.status_code == 422, r.text
+    assert r.json()["field"] == "calibration.per_diameter[1].diameter_m"
+    cal["per_diameter"] = [{"diameter_m": TABLE_DIAMETER, "arr_factor": -1}]
+    r = client.post("/v1/invert", json={"inputs": halved, "calibration": cal})
+    assert r.status_code == 422 and "per_diameter" in r.json()["field"]
