@@ -74,14 +74,21 @@ def waveforms_from_shots(shots: Sequence[Any], common: Any = None) -> list[Wavef
     return out
 
 
-def read_file(path: Path, fmt: str, options: Mapping[str, Any]) -> list[Waveform]:
-    """Read an uploaded file with the signal readers; every failure becomes a 422 on ``file``."""
+def read_file(path: Path, fmt: str, options: Mapping[str, Any],
+              client_name: str | None = None) -> list[Waveform]:
+    """Read an uploaded file with the signal readers; every failure becomes a 422 on ``file``.
+
+    Messages name ``client_name`` (the client's file name) where the readers name ``path``, the
+    server's temporary file."""
     from solitonde.signal import io as signal_io  # the readers live in the signal package
 
     try:
         waveforms = signal_io.read(path, format=fmt, **dict(options))
     except WaveformError as exc:
-        raise waveform_error(exc, "file") from None
+        name = client_name or "the upload"
+        raise waveform_error(WaveformError(
+            exc.field, exc.message.replace(path.name, name),
+            exc.allowed.replace(path.name, name) if exc.allowed else None), "file") from None
     except TypeError as exc:
         raise Problem(422, f"file: reader options not accepted for {fmt}: {exc}",
                       kind="invalid-input", field="file") from None

@@ -304,14 +304,14 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
     path = svc.uploads.write(stream, fmt)
     try:
         check_self_contained(path, fmt)
-        declared = declared_values(path, fmt)
+        declared = declared_values(path, fmt, opts.dataset)
         limit = settings.max_samples_per_request
         if declared is not None and declared > limit:
             raise Problem(413, f"file: declares {declared:,} samples; at most {limit:,} per "
                           f"request ({settings.max_samples_per_shot:,} per shot)",
                           kind="content-too-large", field="file")
         options = {k: getattr(opts, k) for k in _READER_OPTIONS if getattr(opts, k) is not None}
-        waveforms = read_file(path, fmt, options)
+        waveforms = read_file(path, fmt, options, filename)
     finally:
         path.unlink(missing_ok=True)
     meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter")

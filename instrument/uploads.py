@@ -105,16 +105,17 @@ def check_self_contained(path: Path, fmt: str) -> None:
                       kind="invalid-input", field="file")
 
 
-def declared_values(path: Path, fmt: str) -> int | None:
+def declared_values(path: Path, fmt: str, dataset: str | None = None) -> int | None:
     """How many values the file declares in all the arrays the reader decodes, from headers alone.
 
-    The readers decode every dataset of an HDF5 file, every channel of a TDMS file and the arrays
-    of an NPZ archive, so the count is their sum: a limit on the largest array alone lets a small
-    compressed file of many arrays just under it through. A value is counted per 8 bytes of its
-    element (an HDF5 array type or a long fixed-width string is several), since the readers
-    decode each element whole. Returns ``None`` for formats without a size header (CSV, whose
-    size the body limit bounds). A file too broken to size is left to the reader, which reports
-    it properly.
+    The readers decode every dataset of an HDF5 file (or of its ``dataset=`` subtree), every
+    channel of a TDMS file and the arrays of an NPZ archive, so the count is their sum: a limit
+    on the largest array alone lets a small compressed file of many arrays just under it
+    through. A value is counted per 8 bytes of its element (an HDF5 array type or a long
+    fixed-width string is several), since the readers decode each element whole. Returns
+    ``None`` for formats without a size header (CSV, whose size the body limit bounds) and for
+    a ``dataset=`` the file lacks. A file too broken to size is left to the reader, which
+    reports it properly.
     """
     try:
         if fmt == "npy":
@@ -125,7 +126,7 @@ def declared_values(path: Path, fmt: str) -> int | None:
                 return sum(_npy_values(zf.open(name)) for name in zf.namelist()
                            if name.endswith(".npy"))
         if fmt == "hdf5":
-            return _hdf5_values(path)
+            return _hdf5_values(path, dataset)
         if fmt == "tdms":
             from nptdms import TdmsFile
 
@@ -151,7 +152,7 @@ def _npy_values(fh: BinaryIO) -> int:
     return _values(shape, np.dtype(dtype))
 
 
-def _hdf5_values(path: Path) -> int:
+def _hdf5_values(path: Path, dataset: str | None = None) -> int | None:
     import h5py
 
     total = 0
@@ -162,5 +163,13 @@ def _hdf5_values(path: Path) -> int:
             total += _values(obj.shape, obj.dtype)
 
     with h5py.File(path, "r") as fh:
-        fh.visititems(visit)  # the objects the reader visits, each once
+        root = fh
+        if dataset is not None:
+            if dataset not in fh:
+                return None  # the reader names what the file holds
+            root = fh[dataset]
+        if isinstance(root, h5py.Dataset):
+            visit(root.name, root)
+        else:
+            root.visititems(visit)  # the objects the reader visits, each once
     return total

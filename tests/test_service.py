@@ -354,9 +354,9 @@ def test_upload_of_many_arrays_is_sized_by_their_sum(tmp_path: Path, monkeypatch
     calls: list[str] = []
     real = routes_measurements.read_file
 
-    def spy(path, fmt, options):
+    def spy(path, fmt, options, client_name=None):
         calls.append(fmt)
-        return real(path, fmt, options)
+        return real(path, fmt, options, client_name)
 
     monkeypatch.setattr(routes_measurements, "read_file", spy)
     n = 100_000
@@ -371,6 +371,27 @@ def test_upload_of_many_arrays_is_sized_by_their_sum(tmp_path: Path, monkeypatch
         assert calls == [] and stored(client) == 0
         r = client.post("/v1/measurements", files={"file": (name, single.read_bytes())})
         assert r.status_code != 413 and len(calls) == 1, r.text  # zeros: no pulse, a 422
+        assert stored(client) == 0
+
+
+def test_hdf5_upload_with_dataset_is_sized_by_that_dataset(tmp_path: Path) -> None:
+    """``dataset=`` reads one dataset of a file: the size check counts that one (it counted the
+    whole file and refused a small selection from a large file with 413); a file holding more than
+    the request limit is still refused without ``dataset=``, and a selection over it too."""
+    n = 100_000
+    path = tmp_path / "many.h5"
+    _many_hdf5_datasets(path, 5, n)
+    with make_client(tmp_path, max_samples_per_shot=n, max_samples_per_request=3 * n) as client:
+        body = path.read_bytes()
+        r = client.post("/v1/measurements", files={"file": ("many.h5", body)})
+        assert r.status_code == 413, r.text
+        r = client.post("/v1/measurements", files={"file": ("many.h5", body)},
+                        data={"dataset": "s3"})
+        assert r.status_code == 422 and "no pulse" in r.text, r.text  # zeros: read, no pulse
+        r = client.post("/v1/measurements", files={"file": ("many.h5", body)},
+                        data={"dataset": "nope"})
+        assert r.status_code == 422 and r.json()["field"] == "file.dataset", r.text
+        assert "no 'nope' in many.h5" in r.json()["detail"]  # the client's name, not the server's
         assert stored(client) == 0
 
 
