@@ -101,7 +101,7 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
 
     check_solver(scene)  # SceneError (422) before any mesh is built
     plate_model, _ = resolve_plate_model(scene)
-    duration = (auto_duration(scene) if scene.output.duration == "auto"
+    duration = (auto_duration(scene, plate_model) if scene.output.duration == "auto"
                 else float(scene.output.duration))
     n_samples = math.ceil(duration * scene.output.sample_rate * (1.0 - 1e-12)) + 1
     particles = scene.chain.n_particles + 1

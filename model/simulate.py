@@ -40,6 +40,8 @@ DASHPOT_STEP_FRACTION = 0.0125
 #: Upper bound of that fraction at coarse resolution: the explicit midpoint sub-step of the
 #: dashpot is stable up to h k_b / Z = 2 (linearised); half a relaxation time keeps a margin.
 DASHPOT_STEP_FRACTION_MAX = 0.5
+#: Plate models whose plate never moves: their auto duration uses lambda = 0.
+STATIC_PLATE_MODELS = ("rigid", "halfspace")
 #: Default limits on one run.
 MAX_STEPS = 20_000_000
 MAX_SAMPLES = 20_000_000
@@ -153,22 +155,33 @@ def choose_time_step(
     return interval / n_sub, n_sub
 
 
-def auto_duration(scene: Scene) -> float:
+def auto_duration(scene: Scene, plate_model: str | None = None) -> float:
     """Simulated time for ``output.duration = 'auto'``: until the reflection has passed the sensor.
 
-    From the theory of :mod:`solitonde.model.zener` (the infinite plate, whose TOF is longer than
-    the half-space's, so the same rule covers the static tiers): the incident pulse reaches the
+    From the theory of :mod:`solitonde.model.zener` for the plate model the scene runs with
+    (``plate_model``, resolved from the scene when None): Zener's infinite plate for the plates
+    that move (``infinite``, and ``sem``/``greens``, whose supports only shorten the TOF), and
+    lambda = 0 with the wall's own Hertz constant for the static tiers (``rigid``,
+    ``halfspace``): their reflection does not depend on the plate's thickness, and the infinite
+    plate's TOF, which grows without bound as the plate thins, would stretch or refuse their runs.
+    The incident pulse reaches the
     sensor after about (sensor_index + 1) D / V_s; the reflected one follows a TOF later. The run
     goes on for another quarter TOF plus two pulse widths (5 D / V_s each) so that the reflected
     pulse and the secondary pulses right behind it are recorded whole. This is ``predict``'s TOF
     (Eq. 15) assembled from zener's own functions with its tabulated restitution, which costs
     microseconds instead of an ODE solve per run.
     """
-    return _auto_duration(scene, scene.sphere_mass, scene.a_s, scene.a_p, scene.plate_impedance)
+    name = plate_model if plate_model is not None else resolve_plate_model(scene)[0]
+    if name in STATIC_PLATE_MODELS:
+        a_bottom, z = make_boundary(scene, (name, "")).a_bottom, math.inf
+    else:
+        a_bottom, z = scene.a_p, scene.plate_impedance
+    return _auto_duration(scene, scene.sphere_mass, scene.a_s, a_bottom, z)
 
 
 def _auto_duration(scene: Scene, m: float, a_s: float, a_p: float, z: float) -> float:
-    """:func:`auto_duration` with the scene's derived constants already at hand."""
+    """:func:`auto_duration` with the constants at hand: ``a_p`` the bottom contact's Hertz
+    constant, ``z`` the plate impedance (inf: a wall, lambda = 0)."""
     from . import zener
 
     d = scene.chain.diameter
@@ -248,8 +261,12 @@ def simulate(
     tau = scene.effects.damping if scene.effects.dissipation else 0.0
 
     auto = scene.output.duration == "auto"
-    duration = (_auto_duration(scene, m, a_s, scene.a_p, scene.plate_impedance) if auto
-                else float(scene.output.duration))
+    if auto:
+        static = boundary.name in STATIC_PLATE_MODELS
+        duration = _auto_duration(scene, m, a_s, boundary.a_bottom,
+                                  math.inf if static else scene.plate_impedance)
+    else:
+        duration = float(scene.output.duration)
     if adaptive:
         # The step adapts to rtol; samples come from the dense output, not from steps.
         dt, n_sub = 1.0 / scene.output.sample_rate, 1
