@@ -62,11 +62,18 @@ def contact_radius(scene: Scene) -> float:
 def plate_for(scene: Scene) -> ElasticPlate:
     """The spectral-element plate of a scene (kept for reuse within the process)."""
     p, s = scene.plate, scene.sem
-    return _plate_cached(
-        (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
-        tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
-        p.supports, contact_radius(scene), 0 if s.preset == "paper" else int(s.contact_refinement),
-    )
+    try:
+        return _plate_cached(
+            (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
+            tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
+            p.supports, contact_radius(scene),
+            0 if s.preset == "paper" else int(s.contact_refinement),
+        )
+    except ValueError as exc:  # the mesh cannot put a node under the chain (too coarse)
+        raise SceneError("sem.elements", f"{exc} (plate.distance_to_support "
+                         f"{p.distance_to_support} m, elements {list(s.elements)}, order "
+                         f"{list(s.order)})", allowed="more elements or a higher order, so that "
+                         "a GLL node can fall under the chain") from None
 
 
 class _PlateTier(BottomBoundary):
