@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 import time
+from collections import OrderedDict
 from typing import Protocol
 
 import numpy as np
@@ -46,20 +48,44 @@ class GreensCache(Protocol):
         """Keep ``response`` under ``key`` (replacing a shorter one)."""
 
 
-class MemoryCache:
-    """Process-wide in-memory cache (the model layer's default)."""
+#: Default bound of a :class:`MemoryCache`: a long-running service sees a new response per plate,
+#: position and step (up to tens of MB each), which an unbounded cache would keep forever.
+MEMORY_CACHE_BYTES = 512 * 1024 * 1024
 
-    def __init__(self) -> None:
-        self._items: dict[str, np.ndarray] = {}
+
+class MemoryCache:
+    """Process-wide in-memory cache (the model layer's default), least recently used first out
+    once its responses exceed ``max_bytes``; safe to share between threads."""
+
+    def __init__(self, max_bytes: int = MEMORY_CACHE_BYTES) -> None:
+        self._items: OrderedDict[str, np.ndarray] = OrderedDict()
+        self._bytes = 0
+        self._lock = threading.Lock()
+        self.max_bytes = max_bytes
 
     def load(self, key: str) -> np.ndarray | None:
-        return self._items.get(key)
+        with self._lock:
+            found = self._items.get(key)
+            if found is not None:
+                self._items.move_to_end(key)
+            return found
 
     def store(self, key: str, response: np.ndarray) -> None:
-        self._items[key] = np.array(response, dtype=float)
+        array = np.array(response, dtype=float)
+        with self._lock:
+            old = self._items.pop(key, None)
+            if old is not None:
+                self._bytes -= old.nbytes
+            self._items[key] = array
+            self._bytes += array.nbytes
+            while self._bytes > self.max_bytes and len(self._items) > 1:
+                _, dropped = self._items.popitem(last=False)
+                self._bytes -= dropped.nbytes
 
     def clear(self) -> None:
-        self._items.clear()
+        with self._lock:
+            self._items.clear()
+            self._bytes = 0
 
 
 _default_cache: GreensCache = MemoryCache()
