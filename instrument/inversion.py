@@ -18,8 +18,14 @@ variances. Beyond D/t = 5, where the paper finds ARR near 0 and the model's "ref
 train at the detection floor whose features wander between table positions (table nodes with ARR
 below :data:`FLOOR_ARR_MAX`; near a support the reflection is whole), the model error also holds
 10 % of TOF and the whole ARR (:data:`FLOOR_TOF_REL_STD`, :data:`FLOOR_ARR_REL_STD`),
-so such a size weighs little there. Sphere sizes multiply their likelihoods. Grid points where the
-model detects no reflection cannot explain a measured one and get zero posterior.
+so such a size weighs little there. Where the model detects no reflection in that regime, the
+reflection is below the detector's floor (the table's ``arr_upper_bound``, ~0.02), and a noisy
+shot can still pick a floor-level "reflection" out of the noise: such a node is a floor node too,
+its ARR that bound and its TOF that of the nearest reflection in its thickness row (far from a
+support TOF hardly depends on L), so cells next to it explain a weak measured reflection instead
+of being ruled out (which pinned thin plates far from a support to the few cells near it that
+had one). Elsewhere, grid points where the model detects no reflection cannot explain a measured
+one and get zero posterior. Sphere sizes multiply their likelihoods.
 
 Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
 status: when the posterior still carries at least :data:`EDGE_FRACTION` of its peak density at an
@@ -47,7 +53,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from .calibration import Calibration
-from .table import STATUS_OK, ModelTable, TableError
+from .table import STATUS_NO_REFLECTION, STATUS_OK, ModelTable, TableError
 
 DEFAULT_TOF_REL_STD = 0.01
 """Per-shot TOF scatter assumed when none is given: 1 % of the TOF."""
@@ -243,6 +249,25 @@ class FineGrid:
         return float(np.sqrt(self.model_arr_var[self.valid].mean())) if self.valid.any() else 0.0
 
 
+def _floor_nodes(quiet: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """The no-reflection nodes (``quiet``, beyond D/t = 5) that take floor-level features: those
+    in a thickness row with a reflection somewhere to borrow a TOF from."""
+    return quiet & ok.any(axis=1, keepdims=True)
+
+
+def _row_nearest(values: np.ndarray, ok: np.ndarray, l_nodes: np.ndarray) -> np.ndarray:
+    """Each node's value replaced by that of the nearest node in L (same thickness) with
+    ``ok``; rows without one keep theirs. Far from a support TOF hardly depends on L, so a
+    floor node's unseen reflection is given its nearest neighbour's time."""
+    out = values.copy()
+    for i in range(values.shape[0]):
+        good = np.flatnonzero(ok[i])
+        if good.size:
+            nearest = good[np.abs(l_nodes[good][None, :] - l_nodes[:, None]).argmin(axis=1)]
+            out[i] = values[i, nearest]
+    return out
+
+
 def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     """The fine grid of sphere size ``i_d`` (computed once per table and kept on it)."""
     key = f"fine:{i_d}"
@@ -261,10 +286,15 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
     arr = np.where(ok, table.features["arr"][i_d], 0.0)
     diameter = float(table.axes["diameter_m"][i_d])
-    floor = ((diameter / t_nodes > REFLECTION_D_OVER_T)[:, None] & (arr < FLOOR_ARR_MAX)
-             ).astype(float)
-    # A cell whose interpolation touches a node without a reflection has no features.
-    touched = (wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T
+    beyond = (diameter / t_nodes > REFLECTION_D_OVER_T)[:, None]
+    quiet = _floor_nodes(beyond & (table.status[i_d] == STATUS_NO_REFLECTION), ok)
+    has = ok | quiet  # nodes with features (measured, or filled in at the floor)
+    bound = np.nan_to_num(table.features["arr_upper_bound"][i_d])
+    arr = np.where(quiet, bound, arr)
+    tof = np.where(quiet, _row_nearest(tof, ok, l_nodes), tof)
+    floor = (beyond & (arr < FLOOR_ARR_MAX) & has).astype(float)
+    # A cell whose interpolation touches a node without features has none itself.
+    touched = (wt > 1e-12).astype(float) @ (~has).astype(float) @ (wl > 1e-12).astype(float).T
     valid = touched == 0
     grid = FineGrid(
         diameter_m=diameter,
