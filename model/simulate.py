@@ -278,11 +278,14 @@ def simulate(
     n_samples = math.ceil(intervals) + 1 if intervals <= max_samples else math.inf
     steps = (n_samples - 1) * n_sub
     if (steps > max_steps and not adaptive) or n_samples > max_samples:
+        advice = ("shorten output.duration, lower output.sample_rate or raise the budget"
+                  if interval <= duration else
+                  f"raise output.sample_rate: one sample interval ({interval:.4g} s) is longer "
+                  "than the record, which is run to the end of its last interval")
         raise SimulationError(
             f"step_budget_exceeded: output.duration of {duration:.4g} s needs {steps:,.0f} "
             f"steps of {dt:.3g} s and {n_samples:,.0f} samples (budget: {max_steps:,} steps, "
-            f"{max_samples:,} samples); shorten output.duration, lower output.sample_rate or "
-            f"raise the budget"
+            f"{max_samples:,} samples); {advice}"
         )
 
     u, v = initial_state(n, m, g, a_s, boundary.a_bottom, v_imp)

@@ -1,4 +1,4 @@
-"""Review findings on Zener's impact model: very inelastic impacts and vanishing plates."""
+"""Zener's impact model for very inelastic impacts (large lambda) and vanishing plates."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Review findings on the spectral-element tiers: a mesh that cannot hold the chain's node."""
+"""Spectral-element tiers at their limits: a mesh that cannot hold the chain's node, a bounded
+response cache."""
 
 from __future__ import annotations
 

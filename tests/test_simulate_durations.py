@@ -1,4 +1,4 @@
-"""Review findings on simulate(): the auto duration of the static plate tiers."""
+"""simulate(): auto durations of the static plate tiers, and what a record too long to run says."""
 
 from __future__ import annotations
 
@@ -24,3 +24,14 @@ def test_wall_duration_ignores_plate_thickness(plate_model: str) -> None:
         assert 0.9 < r.truth["arr"] <= 1.0
         durations.append(duration)
     assert durations[0] == durations[1] < 1.5e-3
+
+
+def test_a_sample_interval_longer_than_the_record_says_raise_the_rate() -> None:
+    """At 0.001 Hz the record runs to the end of one 1000 s interval: the advice is to raise the
+    sample rate (it said to lower it); a long record at a fine rate still says to lower it."""
+    from solitonde.model.errors import SimulationError
+
+    with pytest.raises(SimulationError, match=r"raise output.sample_rate: one sample interval"):
+        simulate(scene_from_dict({"output": {"sample_rate": 1e-3}}))
+    with pytest.raises(SimulationError, match=r"shorten output.duration, lower output.sample_rate"):
+        simulate(scene_from_dict({"output": {"sample_rate": 1e9, "duration": 1.0}}))

@@ -1,4 +1,4 @@
-"""Review findings on POST /v1/simulate: pricing of the greens convolution, per-particle traces."""
+"""POST /v1/simulate limits: pricing of the greens convolution, no per-particle traces."""
 
 from __future__ import annotations
 
