@@ -93,8 +93,10 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
     their stable step). ``cost = chain steps x (particles + 1) + w x plate steps x plate dofs``
     with ``w`` = :data:`PLATE_DOF_WEIGHT`, in chain particle-steps (about 3.5e8 per CPU second);
     ``greens`` adds its convolution, :data:`CONVOLUTION_WEIGHT` x plate_steps^2 / 2.
-    A plate mesh is only built once a floor of its cost (one plate step per sample) fits the
-    ``budget``, so pricing an absurd mesh is itself cheap.
+    A plate mesh is only built once a floor of its cost fits the ``budget``, so pricing an absurd
+    mesh is itself cheap: the floor counts a plate step per sample, or more where a
+    longitudinal wave would cross an element through the thickness in less (no explicit
+    spectral-element step can be longer than that, :func:`_plate_steps_floor`).
     """
     from solitonde.model.boundary import StepPlan, make_boundary, resolve_plate_model
     from solitonde.model.simulate import auto_duration, check_solver, choose_time_step
@@ -108,12 +110,13 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
     out: dict[str, Any] = {"plate_model": plate_model, "duration_s": duration,
                            "n_samples": int(n_samples)}
     if plate_model in ("sem", "greens"):
-        floor = float(n_samples - 1) * (particles + PLATE_DOF_WEIGHT * _sem_dofs(scene))
+        steps = max(n_samples - 1, _plate_steps_floor(scene, duration))
+        floor = float(steps) * (particles + PLATE_DOF_WEIGHT * _sem_dofs(scene))
         if plate_model == "greens":
-            floor += CONVOLUTION_WEIGHT * 0.5 * float(n_samples - 1) ** 2
+            floor += CONVOLUTION_WEIGHT * 0.5 * float(steps) ** 2
         if floor > budget:
-            return {**out, "steps": n_samples - 1, "dof": particles + _sem_dofs(scene),
-                    "cost": floor, "estimate": "floor (one plate step per sample)"}
+            return {**out, "steps": steps, "dof": particles + _sem_dofs(scene),
+                    "cost": floor, "estimate": "floor (before the plate mesh is built)"}
     boundary = make_boundary(scene)
     dt, n_sub = choose_time_step(scene, boundary)
     chain_steps, plate_steps, plate_dofs = (n_samples - 1) * n_sub, 0, 0
@@ -131,6 +134,18 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
                 else "exact step counts")
     return {**out, "steps": int(max(chain_steps, plate_steps)), "dof": particles + plate_dofs,
             "cost": cost, "estimate": estimate}
+
+
+def _plate_steps_floor(scene: Any, duration: float) -> int:
+    """Fewest explicit plate steps ``duration`` can take: the stable step of a spectral-element
+    mesh is below the time a longitudinal wave takes to cross its thinnest element (2 h / c_L is
+    the 1-D linear element's own limit; higher orders and more dimensions only shorten it), and
+    through the thickness no element is thicker than t / elements_z."""
+    sem = getattr(scene, "sem", None)
+    if sem is None:
+        return 0
+    h = scene.plate.thickness / sem.elements[2]
+    return math.ceil(duration * scene.plate_material.longitudinal_velocity / (2.0 * h))
 
 
 def _sem_dofs(scene: Any) -> int:

@@ -54,3 +54,38 @@ def test_simulate_service_never_records_particle_traces(tmp_path: Path, monkeypa
         r = client.post("/v1/simulate", json={"scene": scene, "include_trace": False})
     assert r.status_code == 200, r.text
     assert seen == [False]
+
+
+@pytest.mark.parametrize("sem", [
+    {},  # the default mesh
+    {"elements": [8, 8, 1], "order": [2, 2, 1], "contact_refinement": 0},
+    {"elements": [2, 2, 2], "order": [5, 5, 3], "contact_refinement": 0},
+])
+@pytest.mark.parametrize("plate", [{"thickness": 3.18e-3}, {"thickness": 6e-3}])
+def test_plate_step_floor_is_below_the_real_step_count(sem: dict, plate: dict) -> None:
+    """The floor priced before any mesh is built never exceeds the step count of the built
+    mesh (else a feasible request would be refused)."""
+    from solitonde.instrument.routes_compute import _plate_steps_floor
+
+    scene = scene_from_dict({"effects": {"plate_model": "sem"}, "sem": sem,
+                             "plate": {**plate, "distance_to_support": 0.05},
+                             "output": {"sample_rate": 1e3, "duration": 2e-4}})
+    real = simulation_cost(scene)["steps"]
+    assert 1 <= _plate_steps_floor(scene, 2e-4) <= real
+
+
+def test_a_huge_mesh_at_a_low_sample_rate_is_refused_before_it_is_built(monkeypatch) -> None:
+    """[512, 512, 1] elements (19 million degrees of freedom, 1.1 GB and 4 s to build) at 500 Hz:
+    one plate step per sample priced it under the budget, so the mesh was built to be refused."""
+    from solitonde.model import boundary
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the plate mesh was built")
+
+    monkeypatch.setattr(boundary, "make_boundary", refuse)
+    scene = scene_from_dict({"effects": {"plate_model": "sem"},
+                             "sem": {"elements": [512, 512, 1]},
+                             "output": {"sample_rate": 500.0}})
+    budget = Settings().max_simulation_cost
+    cost = simulation_cost(scene, budget)
+    assert cost["cost"] > budget and cost["estimate"].startswith("floor")
