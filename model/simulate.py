@@ -338,7 +338,9 @@ def simulate(
         "bottom_peak_time_s": float(pk[PK_BOT_T]),
     }
     diagnostics: dict[str, Any] = {
-        "status": "reflection_passed" if auto else "duration_reached",
+        # auto: the record was meant to pass the reflection; say so only when one was found
+        "status": ("reflection_passed" if valid else "reflection_not_found") if auto
+                  else "duration_reached",
         "energy_drift": float(drift / e_scale),
         "energy_error_final": float(final / e_scale),
         "energy_scale_J": e_scale,

@@ -35,3 +35,14 @@ def test_a_sample_interval_longer_than_the_record_says_raise_the_rate() -> None:
         simulate(scene_from_dict({"output": {"sample_rate": 1e-3}}))
     with pytest.raises(SimulationError, match=r"shorten output.duration, lower output.sample_rate"):
         simulate(scene_from_dict({"output": {"sample_rate": 1e9, "duration": 1.0}}))
+
+
+def test_auto_record_without_a_found_reflection_does_not_claim_to_pass_it() -> None:
+    """At the 100 m/s limit the simulated reflection (ARR ~0.01) comes far later than Zener's
+    estimate that sizes an auto record: the truth has no reflection, and the status says so
+    instead of ``reflection_passed``."""
+    r = simulate(scene_from_dict({"striker": {"velocity": 100.0}}))
+    assert r.truth["tof_s"] != r.truth["tof_s"]  # NaN: not in the record
+    assert r.diagnostics["status"] == "reflection_not_found"
+    ok = simulate(scene_from_dict({"striker": {"velocity": 1.0}}))
+    assert ok.diagnostics["status"] == "reflection_passed" and ok.truth["arr"] > 0.1
