@@ -13,6 +13,8 @@ from pathlib import Path
 
 import typer
 
+from solitonde.signal.errors import WaveformError
+
 from .calibration import CalibrationError, Reference, fit_calibration
 from .cmd_invert import table_path
 from .inversion import FeatureSummary, InversionError
@@ -31,7 +33,13 @@ def summaries_from_files(files: list[Path], diameter: float | None) -> list[Feat
     paths, missing = collect(files)
     if missing:
         raise CalibrationError("files", missing[0]["error"])
-    rows = [r for p in paths for r in analyse_file(p, None, {})]
+    rows = []
+    for p in paths:
+        try:
+            file_rows, _ = analyse_file(p, None, {})
+        except WaveformError as exc:
+            raise CalibrationError("files", f"{p}: {exc}") from None
+        rows.extend(file_rows)
     if diameter is not None:
         for r in rows:
             r["sphere_diameter"] = diameter

@@ -115,3 +115,30 @@ def test_every_key_calibrate_writes_is_read_back(tmp_path: Path) -> None:
     written = json.loads(out.read_text())["per_diameter"][0]
     back = Calibration.load(out).to_dict()["per_diameter"][0]
     assert back == written
+
+
+SAMPLE = TABLE.parent / "waveforms" / "synthetic_D9.53_t4.83_snr40.csv"
+
+
+def test_calibrate_from_waveform_files_fits_and_writes(tmp_path: Path) -> None:
+    """The files path analyses the shots itself (it crashed with a TypeError on every file)."""
+    out = tmp_path / "cal.json"
+    res = _run("calibrate", str(SAMPLE), "--thickness", "4.83e-3", "--distance", "0.457",
+               "--table", str(TABLE), "--out", str(out))
+    assert res.exit_code == 0, res.output
+    cal = Calibration.load(out)
+    (entry,) = cal.to_dict()["per_diameter"]
+    assert entry["diameter_m"] == pytest.approx(9.53e-3)
+    assert entry["n_references"] == 1
+    assert cal.to_dict()["reference"]["references"][0]["n_shots"] == 2
+
+
+def test_calibrate_from_an_unreadable_file_is_one_error_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"not hdf5 at all")
+    res = _run("calibrate", str(bad), "--thickness", "4.83e-3", "--distance", "0.457",
+               "--diameter", "0.00953", "--table", str(TABLE), "--out", str(tmp_path / "c.json"))
+    assert res.exit_code == 2
+    assert res.exception is None or isinstance(res.exception, SystemExit)
+    assert "error: files: " in res.output and "bad.h5" in res.output
+    assert not (tmp_path / "c.json").exists()
