@@ -13,6 +13,7 @@ files in volts that carry no calibration (a run in which no file used it reports
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -36,7 +37,8 @@ ROW_KEYS = ("source", "shot", *FEATURES, "flags", "arr_upper_bound", "plate_id",
 
 def collect(paths: Iterable[Path], fmt: str | None = None
             ) -> tuple[list[Path], list[dict[str, Any]]]:
-    """Files to analyse and the paths that gave none (missing, or a folder with no files).
+    """Files to analyse, each once, and the paths that gave none (missing, or a folder with no
+    files).
 
     Folders are searched recursively: for the known extensions, or, with ``fmt`` given, every
     regular file whose name does not start with a dot.
@@ -57,7 +59,14 @@ def collect(paths: Iterable[Path], fmt: str | None = None
             files.append(p)
         else:
             missing.append({"source": str(p), "error": f"no such file or folder: {p}"})
-    return files, missing
+    seen: set[Path] = set()
+    unique = []
+    for f in files:  # a file named twice (itself and in its folder) is one set of shots
+        key = f.resolve()
+        if key not in seen:
+            seen.add(key)
+            unique.append(f)
+    return unique, missing
 
 
 def _clean(value: Any) -> Any:
@@ -143,23 +152,41 @@ def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
     for col in ("plate_id", "position", "sphere_diameter", "error", "source"):
         table[col] = table[col].map(lambda v: None if v is None else str(v))
     tmp = out.with_name(f".{out.name}.tmp")
-    if out.suffix.lower() == ".parquet":
-        table.to_parquet(tmp, index=False)
-    else:
-        table.to_csv(tmp, index=False)
-    tmp.replace(out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if out.suffix.lower() == ".parquet":
+            table.to_parquet(tmp, index=False)
+        else:
+            table.to_csv(tmp, index=False)
+        tmp.replace(out)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
-    """One PNG per measured shot, named after its file and shot number."""
+    """One PNG per measured shot, named ``<stem>_shot<k>.png`` after its file and shot number.
+
+    Files that share a stem (``x.csv`` and ``x.npy``, or ``a/x.csv`` and ``b/x.csv``) keep the
+    extension in the name and then a counter, so no shot's plot overwrites another's.
+    """
     from .plotting import trace_png
 
     folder.mkdir(parents=True, exist_ok=True)
+    used: set[str] = set()
     for r in rows:
         if "features" not in r:
             continue
         w = r["waveform"]
-        name = f"{Path(r['source']).stem}_shot{r['shot'] if r['shot'] is not None else 0}.png"
+        shot = r["shot"] if r["shot"] is not None else 0
+        name = f"{Path(r['source']).stem}_shot{shot}.png"
+        if name in used:
+            base, k = f"{Path(r['source']).name}_shot{shot}", 2
+            name = f"{base}.png"
+            while name in used:
+                name, k = f"{base}_{k}.png", k + 1
+        used.add(name)
         png = trace_png(w.t0, w.dt, w.samples, r["features"].to_dict(), units="N",
                         title=f"{Path(r['source']).name}, shot {r['shot']}")
         tmp = folder / f".{name}.tmp"
@@ -198,6 +225,12 @@ def analyze(
     if out is not None and out.suffix.lower() not in OUT_SUFFIXES:
         console.print(f"[red]--out: {out.name} must end in {' or '.join(OUT_SUFFIXES)}[/red]")
         raise typer.Exit(code=2)
+    for flag, path, want in (("--out", out, "file"), ("--plots", plots, "folder")):
+        if path is not None and (path.is_dir() if want == "file"
+                                 else path.exists() and not path.is_dir()):
+            console.print(f"[red]{flag}: {str(path)!r} is a "
+                          f"{'folder' if want == 'file' else 'file'}; give a {want}[/red]")
+            raise typer.Exit(code=2)
     if fmt is not None:
         try:
             signal_io.detect_format("x", fmt)
@@ -237,10 +270,14 @@ def analyze(
             estimates = estimates_for_aggregates(aggs, table, calibration_file)
         except ValueError as exc:  # table or calibration unreadable
             errors.append({"source": str(table or "table"), "error": str(exc)})
-    if out is not None:
-        _write_rows(out, rows)
-    if plots is not None:
-        _write_plots(plots, rows)
+    for flag, target, write in (("--out", out, _write_rows), ("--plots", plots, _write_plots)):
+        if target is None:
+            continue
+        try:
+            write(target, rows)
+        except OSError as exc:  # the analysis stands; say what could not be written
+            errors.append({"source": flag, "error": f"cannot write {str(target)!r}: "
+                           f"{exc.strerror or exc}"})
     shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
     if as_json:
         json.dump({"shots": shots, "aggregates": aggs, "errors": errors,

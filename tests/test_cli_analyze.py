@@ -1,0 +1,81 @@
+"""`solitonde analyze` output paths and inputs: bad `--out`/`--plots` are clean errors (never a
+traceback after the analysis), no plot overwrites another, a file named twice counts once."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from solitonde.instrument.cli import build_app
+
+DATA = Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"
+CSV = DATA / "synthetic_D9.53_t4.83_snr40.csv"  # two shots, plate and position in its metadata
+
+
+def _run(*args: str):
+    return CliRunner().invoke(build_app(), list(args))
+
+
+def test_out_a_folder_is_a_usage_error_before_any_work(tmp_path: Path) -> None:
+    out = tmp_path / "r.csv"
+    out.mkdir()
+    res = _run("analyze", str(CSV), "--out", str(out))
+    assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.output
+    assert "--out" in res.output and "folder" in res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]
+
+
+def test_plots_a_file_is_a_usage_error(tmp_path: Path) -> None:
+    plots = tmp_path / "plots"
+    plots.write_text("x")
+    res = _run("analyze", str(CSV), "--plots", str(plots))
+    assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.output
+    assert "--plots" in res.output
+
+
+def test_out_that_cannot_be_written_keeps_json_valid_and_exits_1(tmp_path: Path) -> None:
+    (tmp_path / "afile").write_text("x")
+    res = _run("analyze", str(CSV), "--json", "--out", str(tmp_path / "afile" / "r.csv"))
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit), res.output
+    body = json.loads(res.stdout)
+    assert len(body["shots"]) == 2
+    (err,) = body["errors"]
+    assert err["source"] == "--out" and "cannot write" in err["error"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+def test_out_in_a_new_folder_is_created(tmp_path: Path) -> None:
+    out = tmp_path / "new" / "sub" / "r.parquet"
+    res = _run("analyze", str(CSV), "--out", str(out))
+    assert res.exit_code == 0, res.output
+    assert out.is_file() and sorted(p.name for p in out.parent.iterdir()) == ["r.parquet"]
+
+
+def test_plots_of_files_sharing_a_stem_do_not_overwrite_each_other(tmp_path: Path) -> None:
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        shutil.copy(CSV, tmp_path / sub / "x.csv")
+    shutil.copy(DATA / "synthetic_D9.53_t2.29_snr40.npy", tmp_path / "a" / "x.npy")
+    plots = tmp_path / "plots"
+    res = _run("analyze", str(tmp_path / "a"), str(tmp_path / "b"), "--plots", str(plots),
+               "--json")
+    assert res.exit_code == 0, res.output
+    n_shots = len(json.loads(res.stdout)["shots"])
+    assert n_shots == 6
+    assert len(list(plots.glob("*.png"))) == n_shots
+    assert not list(plots.glob(".*"))
+
+
+def test_a_file_named_twice_is_analysed_once(tmp_path: Path) -> None:
+    (tmp_path / "d").mkdir()
+    shutil.copy(CSV, tmp_path / "d" / "x.csv")
+    res = _run("analyze", str(tmp_path / "d"), str(tmp_path / "d" / "x.csv"),
+               str(tmp_path / "d" / ".." / "d" / "x.csv"), "--json")
+    assert res.exit_code == 0, res.output
+    body = json.loads(res.stdout)
+    assert len(body["shots"]) == 2
+    (agg,) = body["aggregates"]
+    assert agg["n_shots"] == 2
