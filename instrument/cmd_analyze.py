@@ -264,12 +264,19 @@ def analyze(
     aggs = aggregates(rows)
     estimates = None
     if invert:
-        from .cmd_invert import estimates_for_aggregates
+        from .calibration import CalibrationError
+        from .cmd_invert import estimates_for_aggregates, table_path
 
         try:
             estimates = estimates_for_aggregates(aggs, table, calibration_file)
-        except ValueError as exc:  # table or calibration unreadable
-            errors.append({"source": str(table or "table"), "error": str(exc)})
+        except CalibrationError as exc:
+            errors.append({"source": str(calibration_file), "error": str(exc)})
+        except ValueError as exc:  # table unreadable
+            errors.append({"source": str(table_path(table)), "error": str(exc)})
+        for row in estimates or []:
+            if row.get("error"):  # an inversion that failed (e.g. a size the table lacks)
+                errors.append({"source": f"estimate for plate {row['plate_id']}, position "
+                               f"{row['position']}", "error": row["error"]})
     for flag, target, write in (("--out", out, _write_rows), ("--plots", plots, _write_plots)):
         if target is None:
             continue

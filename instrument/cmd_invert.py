@@ -81,7 +81,13 @@ def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]], table_file: Path
                 skipped.append({"sphere_diameter": d, "reason": "no sphere_diameter in metadata"
                                 if d is None else "no shot with a detected reflection"})
                 continue
-            inputs.append(FeatureSummary(float(d), float(tof["mean"]), float(arr["mean"]),
+            try:
+                diameter = float(d)
+            except (TypeError, ValueError):
+                skipped.append({"sphere_diameter": d, "reason": f"sphere_diameter {d!r} in the "
+                                "metadata is not a number"})
+                continue
+            inputs.append(FeatureSummary(diameter, float(tof["mean"]), float(arr["mean"]),
                                          tof.get("std"), arr.get("std"),
                                          int(tof.get("count") or 1)))
         row["skipped"] = skipped

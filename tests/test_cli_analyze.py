@@ -79,3 +79,39 @@ def test_a_file_named_twice_is_analysed_once(tmp_path: Path) -> None:
     assert len(body["shots"]) == 2
     (agg,) = body["aggregates"]
     assert agg["n_shots"] == 2
+
+
+def _with_diameter(tmp_path: Path, value: str) -> Path:
+    path = tmp_path / f"d_{value}.csv"
+    path.write_text(CSV.read_text().replace("sphere_diameter: 0.00953",
+                                            f"sphere_diameter: {value}"))
+    return path
+
+
+def test_invert_that_fails_for_a_position_is_an_error_and_exit_1(tmp_path: Path) -> None:
+    """A sphere size the table lacks: the estimate fails, so the run did not all succeed."""
+    res = _run("analyze", str(_with_diameter(tmp_path, "0.006")), "--invert", "--json")
+    assert res.exit_code == 1, res.output
+    body = json.loads(res.stdout)
+    (err,) = body["errors"]
+    assert "diameter_m" in err["error"] and "synthetic-t4.83mm" in err["source"]
+    assert body["estimates"][0]["estimate"] is None
+
+
+def test_a_non_numeric_diameter_skips_that_group_not_every_estimate(tmp_path: Path) -> None:
+    res = _run("analyze", str(_with_diameter(tmp_path, "abc")), str(CSV), "--invert", "--json")
+    body = json.loads(res.stdout)
+    assert body["errors"] == [], body["errors"]
+    (row,) = body["estimates"]  # both files are plate synthetic-t4.83mm at position 0.457
+    assert row["estimate"]["thickness_m"]["status"] == "constrained"
+    (skip,) = row["skipped"]
+    assert skip["sphere_diameter"] == "abc" and "not a number" in skip["reason"]
+
+
+def test_an_unreadable_calibration_file_is_named_as_the_source(tmp_path: Path) -> None:
+    cal = tmp_path / "cal.json"
+    cal.write_text("{")
+    res = _run("analyze", str(CSV), "--invert", "--json", "--calibration-file", str(cal))
+    assert res.exit_code == 1
+    (err,) = json.loads(res.stdout)["errors"]
+    assert err["source"] == str(cal) and err["error"].startswith("calibration")
