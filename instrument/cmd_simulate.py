@@ -12,6 +12,7 @@ scene in ``metadata["scene"]``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from pathlib import Path
@@ -112,8 +113,13 @@ def write_plot(path: Path, result: SimulationResult, data: dict[str, Any]) -> No
     png = trace_png(result.t0, result.dt, result.samples, data, title=title)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(png)
-    tmp.replace(path)
+    try:
+        tmp.write_bytes(png)
+        tmp.replace(path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise
 
 
 def _table(data: dict[str, Any]) -> Table:
@@ -150,6 +156,10 @@ def simulate_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
+    for flag, path in (("--out", out), ("--plot", plot)):
+        if path is not None and path.is_dir():  # before the run, which may take minutes
+            typer.echo(f"error: {flag}: {str(path)!r} is a folder; give a file name", err=True)
+            raise typer.Exit(code=2)
     try:
         scene = load_scene(scene_file, overrides or [])
         greens_cache.install()
@@ -174,15 +184,26 @@ def simulate_command(
         feature_error = str(exc)
         typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
     data = summary(result, features, feature_error)
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        signal_io.write(out, waveform, format="csv")
-    if plot is not None:
-        write_plot(plot, result, data)
+    failed = []
+    for flag, path in (("--out", out), ("--plot", plot)):
+        if path is None:
+            continue
+        try:
+            if flag == "--out":
+                path.parent.mkdir(parents=True, exist_ok=True)
+                signal_io.write(path, waveform, format="csv")
+            else:
+                write_plot(path, result, data)
+        except OSError as exc:  # the result is still printed; the exit code says what failed
+            failed.append(f"error: {flag}: cannot write {str(path)!r}: {exc.strerror or exc}")
     if as_json:
         typer.echo(json.dumps(_json_safe(data), indent=2))
     else:
         Console().print(_table(data))
+    for line in failed:
+        typer.echo(line, err=True)
+    if failed:
+        raise typer.Exit(code=1)
 
 
 def register(app: typer.Typer) -> None:

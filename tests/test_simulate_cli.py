@@ -63,3 +63,24 @@ def test_unmeasurable_trace_and_non_utf8_scene(runner, tmp_path):
     res = runner.invoke(build_app(), ["simulate", str(scene)])
     assert res.exit_code == 2 and isinstance(res.exception, SystemExit)
     assert "not UTF-8 text" in res.output
+
+
+def test_out_or_plot_a_folder_is_refused_before_the_run(runner, tmp_path):
+    folder = tmp_path / "trace.csv"
+    folder.mkdir()
+    for flag in ("--out", "--plot"):
+        res = runner.invoke(build_app(), ["simulate", flag, str(folder)])
+        assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.output
+        assert f"error: {flag}: " in res.output and "folder" in res.output
+    assert [p.name for p in tmp_path.iterdir()] == ["trace.csv"]
+
+
+def test_an_output_that_cannot_be_written_is_an_error_after_the_result(runner, tmp_path):
+    """The shot's JSON still prints; the exit code is 1; no temporary file is left behind."""
+    (tmp_path / "afile").write_text("x")
+    res = runner.invoke(build_app(), ["simulate", "--json", "--plot",
+                                      str(tmp_path / "afile" / "t.png")])
+    assert res.exit_code == 1 and isinstance(res.exception, SystemExit), res.output
+    assert list(json.loads(res.stdout))[:12] == KEYS
+    assert "error: --plot: cannot write" in res.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["afile"]
