@@ -468,10 +468,17 @@ def build_table(
     Raises
     ------
     TableError
-        When ``<out>.partial`` exists but was started for another sweep.
+        When ``<out>.partial`` exists but was started for another sweep, or ``out`` is a folder.
+    SceneError
+        When a grid point's scene is invalid (before any file is made, so that the corrected
+        sweep is not refused as "another sweep").
     """
     out = Path(out)
     part = partial_path(out)
+    if out.is_dir():  # the finished table could not be renamed onto it
+        raise TableError("out", f"{str(out)!r} is a folder; give the table file's name")
+    for ix in np.ndindex(sweep.shape):
+        sweep.scene_at(*ix)
     workers = default_workers() if workers is None else max(1, int(workers))
     runner = (f"dask scheduler {scheduler}" if scheduler else
               "serial" if workers <= 1 else f"dask LocalCluster, {workers} processes x 1 thread")

@@ -234,3 +234,25 @@ def test_partial_hdf5_of_something_else_is_refused_and_kept(tmp_path: Path) -> N
     assert info.value.field == "partial"
     with h5py.File(part, "r") as fh:
         assert list(fh) == ["x"]
+
+
+def test_out_a_folder_is_refused_before_any_work(tmp_path: Path) -> None:
+    """The finished table could not be renamed onto a folder: refused first, not after the build."""
+    out = tmp_path / "t.h5"
+    out.mkdir()
+    with pytest.raises(TableError, match=r"out: .* is a folder"):
+        build_table(Sweep([4.76e-3], [3e-3], [0.3], scene=FAST), out, workers=1)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.h5"]
+
+
+def test_a_bad_grid_point_leaves_no_partial_that_refuses_the_corrected_sweep(
+        tmp_path: Path) -> None:
+    """A distance beyond the plate fails before the partial file exists; the fix then builds."""
+    from solitonde.model.errors import SceneError
+
+    out = tmp_path / "t.h5"
+    with pytest.raises(SceneError, match="distance_to_support"):
+        build_table(Sweep([4.76e-3], [3e-3], [0.3, 5.0], scene=FAST), out, workers=1)
+    assert not partial_path(out).exists()
+    report = build_table(Sweep([4.76e-3], [3e-3], [0.3], scene=FAST), out, workers=1)
+    assert report.complete and out.exists()
