@@ -45,10 +45,11 @@ def test_20db_criteria():
     D/t ~ 5, the paper's Fig. 5); an error in ARR units is a property of the measurement, not of
     the plate (test_arr_error_across_plates shows both).
 
-    Both criteria at 2 MHz, or on the 95th percentile, are out of reach of any unbiased
-    estimator: the reflected pulse (ARR 0.55) is at 14.8 dB, and the Cramer-Rao bound for this
-    pulse shape (amplitude, time and width unknown) puts the median |ARR error| at 2.2 % at 2 MHz
-    (p95 6.5 %; 2.0 % even with the reflection's width tied to the incident's by ARR^(-1/6)) and
+    Read as relative ARR errors, both criteria at 2 MHz, or on the 95th percentile, are out of
+    reach of any unbiased estimator: the reflected pulse (ARR 0.55) is at 14.8 dB, and the
+    Cramer-Rao bound for this pulse shape (amplitude, time, width and baseline unknown) puts the
+    median |ARR error| at 2.15 % at 2 MHz (p95 6.3 %; 2.03 % even with the reflection's width
+    tied to the incident's by ARR^(-1/6)) and
     the median |TOF error| at 1.3 samples at 5 MHz (p95 3.7); the timing spread in sample periods
     grows as the root of the rate, the ARR spread falls as its inverse root, so both medians sit
     under their limits only between about 2.5 and 3 MHz, right at the bound. The slow study
