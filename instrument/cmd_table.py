@@ -26,6 +26,7 @@ from .table_build import (
     build_table,
     default_distances_m,
     default_thicknesses_m,
+    partial_path,
 )
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -45,6 +46,17 @@ def parse_axis(text: str | None, name: str, default: list[float]) -> list[float]
     except ValueError:
         raise typer.BadParameter(f"{text!r}: expected a comma list of numbers in m, or "
                                  "lin:START:STOP:N / geom:START:STOP:N", param_hint=name) from None
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Ctrl-C, also when it arrived inside compiled code (numba re-raises it as a SystemError
+    caused by the KeyboardInterrupt)."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
 
 
 def _fail(message: str) -> None:
@@ -85,6 +97,14 @@ def build_command(
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return
+    except (KeyboardInterrupt, SystemError) as exc:
+        if not _interrupted(exc):
+            raise
+        part = partial_path(out)
+        kept = (f"the points done so far are kept in {str(part)!r}; run the same command again "
+                "to resume" if part.exists() else "nothing was written")
+        typer.echo(f"interrupted: {kept}", err=True)
+        raise typer.Exit(130) from None
     data = {"path": str(report.path), "complete": report.complete,
             "points_written": report.points_written, "plates_written": report.plates_written,
             "wall_s": report.wall_s, "scenes_per_s": report.scenes_per_s, "runner": report.runner}
