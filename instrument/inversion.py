@@ -428,10 +428,10 @@ def _crossing(x: np.ndarray, density: np.ndarray, level: float, from_left: bool)
 
 
 def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physical: bool,
-               transform: Any = None) -> ParameterEstimate:
+               transform: Any = None, profile: np.ndarray | None = None) -> ParameterEstimate:
     """MAP, median, intervals and status of a marginal posterior given as the mass of each point
     of ``x`` (cells of ``widths``); ``transform`` maps x back to the parameter (exp for log t)."""
-    est = _summarise_x(x, mass, widths, lower_physical)
+    est = _summarise_x(x, mass, widths, lower_physical, profile)
     if transform is None:
         return est
 
@@ -447,11 +447,16 @@ def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physic
 
 
 def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
-                 lower_physical: bool) -> ParameterEstimate:
+                 lower_physical: bool, profile: np.ndarray | None = None) -> ParameterEstimate:
     """The summary of :func:`_summarise` on the grid's own axis.
 
     A side is open (the data do not bound the parameter there) when the density at the table's end
-    is at least :data:`EDGE_FRACTION` of its peak; a physical limit (L = 0) is never open. A one-
+    is at least :data:`EDGE_FRACTION` of its peak, or when the profile likelihood there (the best
+    fit over the other parameter, relative to the overall best) is above the 95 % likelihood-ratio
+    level: a marginal can fall towards an end only because less of the other parameter's range
+    fits there (near a support thickness and distance trade off, and thin plates fit a narrower
+    band of L), which is prior volume, not evidence against that end. A physical limit (L = 0) is
+    never open. A one-
     sided answer reports the likelihood-ratio bound (:data:`LR_LEVELS`), not a quantile: with the
     density flat out to the table's end, a quantile would follow the table's extent, not the data.
     At a physical limit an interval whose end falls in the limit's own cell starts there.
@@ -459,8 +464,10 @@ def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
     density = mass / widths
     peak = density.max()
     q = _quantiles(x, mass, (0.025, 0.16, 0.5, 0.84, 0.975))
-    lower_open = x.size > 1 and not lower_physical and density[0] >= EDGE_FRACTION * peak
-    upper_open = x.size > 1 and density[-1] >= EDGE_FRACTION * peak
+    ends = np.zeros(2, dtype=bool) if profile is None else profile[[0, -1]] >= LR_LEVELS[1]
+    lower_open = x.size > 1 and not lower_physical and (density[0] >= EDGE_FRACTION * peak
+                                                         or bool(ends[0]))
+    upper_open = x.size > 1 and (density[-1] >= EDGE_FRACTION * peak or bool(ends[1]))
     if lower_open and upper_open:
         return ParameterEstimate(None, None, None, None, "unconstrained")
     if upper_open:
@@ -599,14 +606,16 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     chi2 -= best
     chi2 *= -0.5
     post = np.exp(chi2, out=chi2)
+    # the profile likelihood of each parameter (the best over the other), before the prior
+    profile_t, profile_l = post.max(axis=1), post.max(axis=0)
     g0 = grids[0]
     post *= g0.weight_t[:, None]  # prior mass of each cell: uniform in log t and in L
     post *= g0.weight_l[None, :]
     post /= post.sum()
     thickness = _summarise(np.log(g0.thickness_m), post.sum(axis=1), g0.weight_t,
-                           lower_physical=False, transform=np.exp)
+                           lower_physical=False, transform=np.exp, profile=profile_t)
     distance = _summarise(g0.distance_m, post.sum(axis=0), g0.weight_l,
-                          lower_physical=bool(g0.distance_m[0] <= 0.0))
+                          lower_physical=bool(g0.distance_m[0] <= 0.0), profile=profile_l)
     est = Estimate(thickness, distance, items, cal, fit, n_terms)
     if return_posterior:
         est.posterior = {"thickness_m": g0.thickness_m, "distance_m": g0.distance_m,
