@@ -66,6 +66,14 @@ def register(app: typer.Typer) -> None:
         except SettingsError as exc:
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(2) from None
+        from .store import Store, StoreError
+
+        try:  # a store that cannot be used is one line here, not a traceback from each worker
+            Store(settings.store_path, settings.store_synchronous,
+                  background_checkpoint=False).close()
+        except StoreError as exc:
+            typer.echo(f"error: store: {exc}", err=True)
+            raise typer.Exit(2) from None
         if settings.table_path is None or not settings.table_path.is_file():
             where = settings.table_path or DEFAULT_TABLE
             typer.echo(f"warning: no model table at {where}: serving without estimates "

@@ -61,6 +61,17 @@ CREATE TABLE IF NOT EXISTS shots (
 """
 
 
+SCHEMA_VERSION = 1
+"""Stored as SQLite's ``user_version``; a store with a larger one was written by a newer
+solitonde and is refused rather than written in a layout this version does not know."""
+
+_COLUMNS = {
+    "measurements": {"id", "created_at", "plate_id", "position", "n_shots", "source", "result"},
+    "shots": {"measurement_id", "shot_index", "t0", "dt", "units", "calibration", "metadata",
+              "n_samples", "dtype", "codec", "sha256", "samples", "features"},
+}
+
+
 def _journal_mode_wal(conn: sqlite3.Connection, timeout_s: float) -> str:
     """Put the database in WAL mode (a no-op when it already is) and return the mode.
 
@@ -171,16 +182,25 @@ class Store:
         except (OSError, sqlite3.Error) as exc:
             raise StoreError(f"cannot open the store at {str(self.path)!r}: {exc}") from None
         self._lock = threading.Lock()
-        self._writer_fd = _open_writer_lock(self.path)
-        with self._lock:
-            c = self._conn
-            c.execute("PRAGMA busy_timeout = 30000")
-            mode = _journal_mode_wal(c, timeout_s=30.0)
-            if str(mode).lower() != "wal":
-                raise StoreError(f"{self.path}: could not switch to WAL mode (got {mode})")
-            c.execute(f"PRAGMA synchronous = {synchronous.upper()}")
-            c.execute("PRAGMA foreign_keys = ON")
-            self._write_schema()
+        try:
+            self._writer_fd = _open_writer_lock(self.path)
+            with self._lock:
+                c = self._conn
+                c.execute("PRAGMA busy_timeout = 30000")
+                mode = _journal_mode_wal(c, timeout_s=30.0)
+                if str(mode).lower() != "wal":
+                    raise StoreError(f"{self.path}: could not switch to WAL mode (got {mode})")
+                c.execute(f"PRAGMA synchronous = {synchronous.upper()}")
+                c.execute("PRAGMA foreign_keys = ON")
+                self._write_schema()
+        except (OSError, sqlite3.Error, StoreError) as exc:
+            self._conn.close()
+            if getattr(self, "_writer_fd", None) is not None:
+                os.close(self._writer_fd)
+            if isinstance(exc, StoreError):
+                raise
+            raise StoreError(f"cannot use the store at {str(self.path)!r}: {exc} (not a "
+                             "solitonde measurement store, damaged, or not writable)") from None
         self._stop = threading.Event()
         self._checkpointer: threading.Thread | None = None
         if background_checkpoint:
@@ -209,9 +229,21 @@ class Store:
         c = self._conn
         c.execute("BEGIN IMMEDIATE")
         try:
+            version = int(c.execute("PRAGMA user_version").fetchone()[0])
+            if version > SCHEMA_VERSION:
+                raise StoreError(f"{str(self.path)!r} was written by a newer solitonde (store "
+                                 f"schema {version}; this version knows up to {SCHEMA_VERSION})")
+            for table, columns in _COLUMNS.items():
+                have = {row[1] for row in c.execute(f"PRAGMA table_info({table})")}
+                if have and not columns <= have:  # an existing table of some other layout
+                    raise StoreError(f"{str(self.path)!r} is not a solitonde measurement store "
+                                     f"(its table {table!r} lacks "
+                                     f"{', '.join(sorted(columns - have))})")
             for statement in _SCHEMA.split(";"):
                 if statement.strip():
                     c.execute(statement)
+            if version < SCHEMA_VERSION:
+                c.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             c.execute("COMMIT")
         except BaseException:
             c.execute("ROLLBACK")
