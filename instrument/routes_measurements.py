@@ -380,7 +380,11 @@ async def export_measurements(
 def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     import pandas as pd
 
-    rows = list(svc.store.shot_rows(plate_id, svc.settings.export_rows_max))
+    limit = svc.settings.export_rows_max
+    rows = list(svc.store.shot_rows(plate_id, limit + 1))
+    if len(rows) > limit:  # never a silently cut export
+        raise Problem(422, f"export: more than {limit:,} shots match; export at most {limit:,} "
+                      "rows at a time (ask for one plate_id)", kind="limit", field="plate_id")
     frame = pd.DataFrame(rows)
     if fmt == "parquet":
         buf = io.BytesIO()

@@ -127,6 +127,19 @@ def test_export_csv_and_parquet(client: TestClient) -> None:
     assert client.get("/v1/measurements/export?format=xlsx").status_code == 422
 
 
+def test_export_above_its_row_limit_is_refused_not_cut(tmp_path: Path) -> None:
+    """Three shots against a limit of two: 422 naming the limit (it was a 200 with two rows);
+    one plate's two shots still export."""
+    with make_client(tmp_path, export_rows_max=2) as client:
+        client.post("/v1/measurements", json={"shots": [shot_json(seed=1), shot_json(seed=2)]})
+        client.post("/v1/measurements", json={"shots": [shot_json(seed=3, plate_id="other")]})
+        r = client.get("/v1/measurements/export?format=csv")
+        assert r.status_code == 422 and r.headers["content-type"] == PROBLEM
+        assert r.json()["field"] == "plate_id" and "2" in r.json()["detail"]
+        r = client.get("/v1/measurements/export?format=csv&plate_id=P1")
+        assert r.status_code == 200 and len(pd.read_csv(io.StringIO(r.text))) == 2
+
+
 def _raw(client: TestClient, body: bytes | str, ctype: str | None = "application/json",
          url: str = "/v1/measurements"):
     headers = {"content-type": ctype} if ctype else {}
