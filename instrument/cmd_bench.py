@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.console import Console
@@ -22,9 +23,12 @@ def accuracy_command(
     """TOF and ARR error against a converged reference, and wall time, per plate model and mesh."""
     from tqdm import tqdm
 
-    from solitonde.instrument.accuracy import configs, run_bench, table_rows, write_outputs
+    from solitonde.instrument.accuracy import configs, run_bench, write_outputs
     from solitonde.instrument.figures import _clean
 
+    if out is not None and out.exists() and not out.is_dir():  # before minutes of runs
+        typer.echo(f"error: --out: {str(out)!r} is a file; give a folder", err=True)
+        raise typer.Exit(2)
     total = 2 * (len(configs(quick)) + 1)
     with tqdm(total=total, desc="bench accuracy", disable=not sys.stderr.isatty()) as bar:
         def tick(label: str) -> None:
@@ -32,11 +36,25 @@ def accuracy_command(
             bar.update(1)
 
         result = run_bench(quick, tick)
+    write_error = None
     if out is not None:
-        write_outputs(result, out)
+        try:
+            write_outputs(result, out)
+        except OSError as exc:  # the results are still printed; the exit code says it failed
+            write_error = f"error: --out: cannot write into {str(out)!r}: {exc.strerror or exc}"
     if as_json:
         typer.echo(json.dumps(_clean(result), indent=2))
-        return
+    else:
+        _print(result)
+    if write_error:
+        typer.echo(write_error, err=True)
+        raise typer.Exit(1)
+
+
+def _print(result: dict[str, Any]) -> None:
+    from solitonde.instrument.accuracy import table_rows
+    from solitonde.instrument.figures import _clean
+
     table = Table(title=f"What accuracy costs (reference: {result['reference']['config']})")
     for name in ("config", "scene", "TOF us", "ARR", "TOF err %", "ARR err %", "wall s",
                  "cached s", "Pareto"):

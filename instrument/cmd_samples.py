@@ -111,6 +111,9 @@ def samples(
     seed: int = typer.Option(20240601, "--seed", help="Noise seed (fixed: reproducible files)."),
 ) -> None:
     """Regenerate the synthetic sample waveforms and their truth table (data_samples/waveforms/)."""
+    if out.exists() and not out.is_dir():
+        typer.echo(f"error: --out: {str(out)!r} is a file; give a folder", err=True)
+        raise typer.Exit(2)
     rows = make_samples(out, seed)
     typer.echo(f"wrote {len({r['file'] for r in rows})} files, {len(rows)} shots, truth.tsv "
                f"to {out}")
