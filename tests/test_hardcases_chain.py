@@ -27,7 +27,10 @@ def _check(scene):
     r = simulate(scene)
     d = r.diagnostics
     assert np.isfinite(r.samples).all()
-    assert d["status"] == "reflection_passed"
+    # the auto record passes the reflection's time; at D/t = 12 the reflection may be too weak
+    # to find, and the status then says so
+    found = bool(np.isfinite(r.truth["tof_s"]))
+    assert d["status"] == ("reflection_passed" if found else "reflection_not_found")
     assert d["energy_drift"] < 1e-6
     # No contact can carry more than all the striker's energy on top of the whole static load.
     m = scene.sphere_mass
