@@ -19,6 +19,7 @@ import typer
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import apply_overrides, load_scene_file
 
+from .settings import DEFAULT_TABLE
 from .table import ModelTable, TableError
 from .table_build import (
     PAPER_DIAMETERS_M,
@@ -29,8 +30,7 @@ from .table_build import (
     partial_path,
 )
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_TABLE_PATH = REPO_ROOT / "data_samples" / "default_table.h5"
+DEFAULT_TABLE_PATH = DEFAULT_TABLE
 
 
 def parse_axis(text: str | None, name: str, default: list[float]) -> list[float]:

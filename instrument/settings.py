@@ -13,7 +13,8 @@ from pathlib import Path
 from typing import Any
 
 DEFAULT_STORE = Path(".solitonde") / "measurements.sqlite"
-DEFAULT_TABLE = Path("data_samples") / "default_table.h5"
+DEFAULT_TABLE = Path(__file__).resolve().parent.parent / "data_samples" / "default_table.h5"
+"""The bundled table, found from the package's own place (not the folder ``serve`` starts in)."""
 
 # Environment variable -> settings field. Used by `build_app_from_env`, which is what uvicorn
 # workers import: `serve` passes its options to them through these variables.

@@ -227,3 +227,13 @@ def test_store_open_retries_a_busy_journal_mode_switch() -> None:
         _journal_mode_wal(Busy("disk I/O error"), timeout_s=5.0)
     with pytest.raises(sqlite3.OperationalError, match="locked"):
         _journal_mode_wal(Busy(failures=10**9), timeout_s=0.2)
+
+
+def test_serve_finds_the_bundled_table_from_any_folder(tmp_path: Path, monkeypatch) -> None:
+    """`serve` without --table uses the bundled table wherever it is started (it looked for
+    data_samples/ under the current folder and, elsewhere, served without estimates)."""
+    from solitonde.instrument.settings import DEFAULT_TABLE
+
+    monkeypatch.chdir(tmp_path)
+    assert DEFAULT_TABLE.is_absolute() and DEFAULT_TABLE.is_file()
+    assert DEFAULT_TABLE == ROOT / "data_samples" / "default_table.h5"
