@@ -9,6 +9,7 @@ and the metadata in the query), which skips text parsing altogether.
 
 from __future__ import annotations
 
+import dataclasses
 import hmac
 import io
 from typing import Annotated, Any
@@ -386,6 +387,11 @@ def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
         raise Problem(422, f"export: more than {limit:,} shots match; export at most {limit:,} "
                       "rows at a time (ask for one plate_id)", kind="limit", field="plate_id")
     frame = pd.DataFrame(rows)
+    if not rows:  # still the columns, so a script reading an empty export finds them
+        from solitonde.signal.features import Features
+
+        frame = pd.DataFrame(columns=[*svc.store.EXPORT_COLUMNS,
+                                      *(f.name for f in dataclasses.fields(Features))])
     if fmt == "parquet":
         buf = io.BytesIO()
         frame.to_parquet(buf, index=False)

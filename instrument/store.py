@@ -369,6 +369,11 @@ class Store:
             rows = self._conn.execute(sql, args).fetchall()
         return [_measurement(r) for r in rows]
 
+    EXPORT_COLUMNS = ("measurement_id", "created_at", "plate_id", "position", "shot_index",
+                      "shot", "sphere_diameter", "t0_s", "dt_s", "units", "calibration",
+                      "n_samples")
+    """The columns :meth:`shot_rows` puts before each shot's features."""
+
     def shot_rows(self, plate_id: str | None = None,
                   limit: int = 200_000) -> Iterator[dict[str, Any]]:
         """Flat rows (one per shot, features spread into columns) for export."""

@@ -125,6 +125,12 @@ def test_export_csv_and_parquet(client: TestClient) -> None:
     frame = pd.read_parquet(io.BytesIO(r.content))
     assert len(frame) == 3 and {"tof_s", "arr", "snr_db", "flags"} <= set(frame.columns)
     assert client.get("/v1/measurements/export?format=xlsx").status_code == 422
+    # an export that matches nothing still has the columns (it was an empty file)
+    full = list(pd.read_csv(io.StringIO(client.get("/v1/measurements/export").text)).columns)
+    r = client.get("/v1/measurements/export?format=csv&plate_id=nobody")
+    assert r.status_code == 200 and r.text.splitlines()[0].split(",") == full
+    r = client.get("/v1/measurements/export?format=parquet&plate_id=nobody")
+    assert list(pd.read_parquet(io.BytesIO(r.content)).columns) == full
 
 
 def test_export_above_its_row_limit_is_refused_not_cut(tmp_path: Path) -> None:
