@@ -80,8 +80,14 @@ def build_command(
     scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the build report as JSON"),
+    overwrite: bool = typer.Option(False, "--overwrite", help="replace an existing table file "
+                                   "(without --out: the bundled table)"),
 ) -> None:
     """Simulate the sweep (resuming an interrupted build) and write the table atomically."""
+    if out.is_file() and not partial_path(out).exists() and not overwrite:
+        which = " (the bundled table: --out was not given)" if out == DEFAULT_TABLE_PATH else ""
+        _fail(f"--out: {str(out)!r} exists{which}; give another --out, or --overwrite to "
+              "replace it")
     try:
         base: dict[str, Any] = load_scene_file(scene) if scene is not None else {}
         base = apply_overrides(base, set_)

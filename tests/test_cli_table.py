@@ -45,3 +45,28 @@ def test_other_system_errors_are_not_taken_for_ctrl_c(tmp_path: Path, monkeypatc
     res = CliRunner().invoke(build_app(), ["table", "build", *GRID, "--out",
                                            str(tmp_path / "t.h5")])
     assert isinstance(res.exception, SystemError)
+
+
+def test_an_existing_table_is_not_replaced_without_overwrite(tmp_path: Path, monkeypatch) -> None:
+    """`table build` onto an existing file (without --out: the bundled table) is refused before
+    any work, naming --overwrite; with --overwrite it builds; a partial file is a resume."""
+    calls: list[Path] = []
+
+    def build_table(sweep, out, **kw):
+        calls.append(out)
+        raise cmd_table.TableError("stop here")  # the build itself is not under test
+
+    monkeypatch.setattr(cmd_table, "build_table", build_table)
+    out = tmp_path / "t.h5"
+    out.write_bytes(b"a finished table")
+    res = CliRunner().invoke(build_app(), ["table", "build", *GRID, "--out", str(out)])
+    assert res.exit_code == 2 and "--overwrite" in res.output and calls == []
+    assert out.read_bytes() == b"a finished table"
+    res = CliRunner().invoke(build_app(), ["table", "build", *GRID])
+    assert res.exit_code == 2 and "the bundled table" in res.output and calls == []
+    res = CliRunner().invoke(build_app(), ["table", "build", *GRID, "--out", str(out),
+                                           "--overwrite"])
+    assert calls == [out]
+    Path(str(out) + ".partial").write_bytes(b"")  # an interrupted rebuild resumes
+    CliRunner().invoke(build_app(), ["table", "build", *GRID, "--out", str(out)])
+    assert calls == [out, out]
