@@ -16,11 +16,17 @@ class SceneError(ValueError):
 
     def __init__(self, field: str, message: str, allowed: str | None = None) -> None:
         self.field = field
+        self.message = message
         self.allowed = allowed
         text = f"{field}: {message}"
         if allowed:
             text += f" (allowed: {allowed})"
         super().__init__(text)
+
+    def __reduce__(self) -> tuple[type[SceneError], tuple[str, str, str | None]]:
+        # The default rebuilds from args (the one formatted text) and fails on the three-argument
+        # __init__: a SceneError could not cross a process boundary (process pool, Dask).
+        return type(self), (self.field, self.message, self.allowed)
 
 
 class SimulationError(RuntimeError):

@@ -127,3 +127,22 @@ def test_batch_collects_errors_when_asked():
         simulate_many(scenes, workers=1)
     with pytest.raises(SceneError):
         scene_grid(None, {"plate.thickness": 3e-3})
+
+
+def test_batch_collects_a_scene_error_over_processes():
+    """One scene failing with a SceneError in a worker process fills its own slot, field intact.
+
+    A SceneError could not be unpickled (its three-argument __init__), so the process pool broke
+    and every result of the batch was lost.
+    """
+    good = scene_from_dict({"effects": {"plate_model": "infinite"}})
+    bad = scene_from_dict({"effects": {"plate_model": "sem"}, "solver": {"integrator": "dopri5"}})
+    out = simulate_many([good, bad, good], workers=2, chunk_size=1, raise_errors=False,
+                        backend="processes")
+    assert isinstance(out[1], SceneError)
+    assert out[1].field == "solver.integrator"
+    assert "dopri5" in str(out[1])
+    np.testing.assert_array_equal(out[0].samples, out[2].samples)
+    assert out[0].scene is good and out[2].scene is good
+    with pytest.raises(SceneError):
+        simulate_many([good, bad], workers=2, chunk_size=1, backend="processes")
