@@ -382,10 +382,16 @@ def fig3(out: Path) -> dict[str, Any]:
                        "incident_time_s": f.incident_time_s, "tof_s": f.tof_s, "arr": f.arr}
         ax.plot(r.time * 1e3, r.samples, label=f"t = {t * 1e3:.2f} mm (D/t = {scene.d_over_t:.2f},"
                 f" {r.plate_model})", color="tab:red" if label == "thin" else "tab:blue")
-    n = min(traces["thin"][0].size, traces["thick"][0].size)
-    frame = pd.DataFrame({"time_s": traces["thin"][0][:n],
-                          "force_thin_N": traces["thin"][1][:n],
-                          "force_thick_N": traces["thick"][1][:n]})
+    # Records differ in length (auto duration): the CSV keeps both whole, the shorter NaN-padded.
+    longest = max(traces.values(), key=lambda tr: tr[0].size)[0]
+    columns = {"time_s": longest}
+    for label, (time_s, force) in traces.items():
+        if not np.allclose(time_s, longest[:time_s.size], rtol=0.0, atol=1e-12):
+            raise ValueError("fig 3: the two traces are not on one time grid")
+        padded = np.full(longest.size, np.nan)
+        padded[:force.size] = force
+        columns[f"force_{label}_N"] = padded
+    frame = pd.DataFrame(columns)
     ax.set_xlabel("time after impact (ms)")
     ax.set_ylabel("sensor force (N)")
     ax.set_title("Fig. 3: sensor traces, D = 9.53 mm, plate centre")
@@ -583,7 +589,9 @@ def run_sweep(plan: Plan, workers: int, cache_folder: str | None,
             for fut in as_completed(futures):
                 rows.extend(fut.result())
                 tick("distance sweep")
-    return pd.DataFrame(rows)
+    # as_completed hands rows back in finishing order: one order whatever the worker count
+    return (pd.DataFrame(rows).sort_values(["diameter_m", "thickness_m", "distance_m"])
+            .reset_index(drop=True))
 
 
 def reproduce(out: str | Path, quick: bool = False, *, workers: int | None = None,
@@ -684,6 +692,7 @@ def paper_statements(trace_info: dict[str, Any], sweep: pd.DataFrame,
     """Our numbers for each statement of PHYSICS.md section 10."""
     near: dict[str, Any] = {}
     for d, g in sweep.groupby("diameter_m"):
+        g = g.sort_values(["thickness_m", "distance_m"])  # each list below in thickness_m order
         first = g[g["distance_m"] > 0]["distance_m"].min()
         at0 = g[g["distance_m"] == 0]
         at1 = g[np.isclose(g["distance_m"], first)]

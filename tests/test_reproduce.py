@@ -12,9 +12,13 @@ from typer.testing import CliRunner
 
 from solitonde.instrument.cli import build_app
 from solitonde.instrument.reproduce import (
+    CENTRE_M,
     DIAMETERS_M,
     PLATES_M,
+    THICK_PLATE_M,
+    TRACE_DIAMETER_M,
     check_critical_distance,
+    paper_statements,
     scene_for,
     settled_distance,
     spearman,
@@ -145,3 +149,42 @@ def test_theory_curve_is_predict(diameter):
         assert row.arr == pytest.approx(p.arr, rel=1e-7, abs=1e-12)
         assert row.tof_s == pytest.approx(p.tof_s, rel=1e-7)
         assert row.tau_c == pytest.approx(p.tau_c, rel=1e-7)
+
+
+def test_fig3_csv_holds_both_whole_traces(quick):
+    """The CSV behind Fig. 3 holds every plotted sample of both traces (was cut to the shorter)."""
+    from solitonde.model.simulate import simulate
+
+    f = pd.read_csv(quick / "fig3_traces.csv")
+    for column, thickness in (("force_thin_N", PLATES_M[0]), ("force_thick_N", THICK_PLATE_M)):
+        r = simulate(scene_for(TRACE_DIAMETER_M, thickness))
+        kept = f[column].notna().to_numpy()
+        assert kept.sum() == r.samples.size
+        np.testing.assert_allclose(f["time_s"].to_numpy()[kept], r.time, rtol=1e-9)
+        np.testing.assert_allclose(f[column].to_numpy()[kept], r.samples, rtol=1e-9, atol=1e-9)
+
+
+def test_paper_statements_list_values_in_thickness_order():
+    """Each near-support list follows thickness_m, whatever order the sweep's rows come in.
+
+    With workers > 1 the rows arrive in finishing order; the lists at L = 0 and at the first
+    L > 0 were each in their own row order, so a value could sit under another plate's thickness.
+    """
+    rows = [{"diameter_m": 9.53e-3, "thickness_m": t, "distance_m": L,
+             "tof_s": 1e-3 * (0.5 + t + L), "arr": 0.5 + 10 * t + L}
+            for t in PLATES_M for L in (0.0, 0.01, CENTRE_M)]
+    # finishing order: L = 0 of the thick plate first, L = 0.01 of the thin plate first
+    order = sorted(range(len(rows)), key=lambda i: (rows[i]["distance_m"],
+                                                    -rows[i]["thickness_m"]
+                                                    if rows[i]["distance_m"] == 0.0
+                                                    else rows[i]["thickness_m"]))
+    sweep = pd.DataFrame([rows[i] for i in order])
+    crit = pd.DataFrame([{"diameter_m": 9.53e-3, "thickness_m": t, "critical_distance_m": 0.0}
+                         for t in PLATES_M])
+    statements = paper_statements({}, sweep, crit)
+    near = next(v for k, v in statements.items() if k.startswith("near_support"))["9.53 mm"]
+    for i, t in enumerate(near["thickness_m"]):
+        assert near["tof_at_0_s"][i] == pytest.approx(1e-3 * (0.5 + t))
+        assert near["arr_at_0"][i] == pytest.approx(0.5 + 10 * t)
+        assert near["tof_at_10mm_s"][i] == pytest.approx(1e-3 * (0.51 + t))
+        assert near["arr_at_10mm"][i] == pytest.approx(0.51 + 10 * t)
