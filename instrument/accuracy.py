@@ -197,7 +197,7 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
     finally:
         greens.set_default_cache(previous)
     frame = pd.DataFrame(rows)
-    frame["error"] = frame[["tof_error", "arr_error"]].max(axis=1)
+    frame["error"] = combined_error(frame)
     frame["pareto"] = pareto(frame)
     return {
         "scene": {"diameter_m": DIAMETER_M, "thickness_m": THICKNESS_M,
@@ -209,10 +209,22 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
     }
 
 
+def combined_error(frame: pd.DataFrame) -> pd.Series:
+    """max(TOF error, ARR error) per run; NaN when either is missing (e.g. no reflection found).
+
+    A missing feature is not a small error: pandas' default max would skip it and report the
+    other error alone.
+    """
+    return frame[["tof_error", "arr_error"]].max(axis=1, skipna=False)
+
+
 def pareto(frame: pd.DataFrame) -> list[bool]:
-    """Per scene: no other run is both faster (warm time where it exists) and more accurate."""
+    """Per scene: no other run is both faster (warm time where it exists) and more accurate.
+
+    A run without an error (a feature missing) counts as infinitely wrong.
+    """
     cost = frame["wall_warm_s"].fillna(frame["wall_s"]).to_numpy()
-    err = frame["error"].to_numpy()
+    err = np.nan_to_num(frame["error"].to_numpy(dtype=float), nan=np.inf)
     scene = frame["scene"].to_numpy()
     keep = []
     for i in range(len(frame)):

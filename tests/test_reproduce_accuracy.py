@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.accuracy import BUDGETS, Config, pareto, recommend
+from solitonde.instrument.accuracy import BUDGETS, Config, combined_error, pareto, recommend
 from solitonde.instrument.cli import build_app
 
 
@@ -52,6 +52,21 @@ def test_recommendation_respects_budgets():
     assert rec["table_build"]["cost_per_shot_s"] == pytest.approx(0.15)
     assert rec["table_build"]["tof_error"] <= BUDGETS["table_build"]["tof"]
     assert rec["reference"]["config"] == "sem paper 48x48x1 p442"
+
+
+def test_a_run_missing_a_feature_is_not_accurate():
+    """No ARR (no reflection found) is no error figure, not the TOF error alone: off the front."""
+    nan = float("nan")
+    f = pd.DataFrame([("centre", "infinite", "infinite", 0.002, 0.03, 0.010, nan),
+                      ("centre", "sem coarse", "sem", 0.001, nan, 0.005, nan)],
+                     columns=["scene", "config", "tier", "tof_error", "arr_error", "wall_s",
+                              "wall_warm_s"])
+    f["error"] = combined_error(f)
+    assert f["error"].iloc[0] == pytest.approx(0.03) and pd.isna(f["error"].iloc[1])
+    # the cheapest run stays on the front whatever its error; it no longer pushes the dashpot off
+    assert pareto(f) == [True, True]
+    f.loc[1, "wall_s"] = 0.02
+    assert pareto(f) == [True, False]
 
 
 @pytest.mark.slow
