@@ -419,7 +419,9 @@ def fig4(out: Path, grid_theory: pd.DataFrame, points: int) -> None:
     ax.set_title("Fig. 4: Zener impact, e and tau_c against lambda")
     ax.legend(loc="center right")
     save_png(fig, out / "fig4_zener.png")
-    save_csv(frame, out / "fig4_zener.csv")
+    grid = grid_theory[["diameter_m", "thickness_m", "d_over_t", "lambda", "e", "tau_c"]]
+    save_csv(pd.concat([frame.assign(source="curve"), grid.assign(source="grid")],
+                       ignore_index=True), out / "fig4_zener.csv")
 
 
 def fig5(out: Path, curve: pd.DataFrame, grid_inf: pd.DataFrame, centre: pd.DataFrame) -> None:

@@ -188,3 +188,16 @@ def test_paper_statements_list_values_in_thickness_order():
         assert near["arr_at_0"][i] == pytest.approx(0.5 + 10 * t)
         assert near["tof_at_10mm_s"][i] == pytest.approx(1e-3 * (0.51 + t))
         assert near["arr_at_10mm"][i] == pytest.approx(0.51 + 10 * t)
+
+
+def test_fig4_csv_holds_the_marked_grid(quick):
+    """Fig. 4's CSV has the curve and the 3 x 3 grid points the PNG marks (lambda, e, tau_c)."""
+    f = pd.read_csv(quick / "fig4_zener.csv")
+    grid = f[f["source"] == "grid"]
+    assert len(grid) == len(DIAMETERS_M) * len(PLATES_M)
+    for row in grid.to_dict(orient="records"):
+        scene = scene_for(row["diameter_m"], row["thickness_m"])
+        assert row["d_over_t"] == pytest.approx(scene.d_over_t)
+        assert row["lambda"] == pytest.approx(zener.inelasticity(scene), rel=1e-9)
+    curve = f[f["source"] == "curve"].sort_values("lambda")
+    assert len(curve) > 10 and np.all(np.diff(curve["e"]) <= 0)
