@@ -55,7 +55,8 @@ def _print(result: dict[str, Any]) -> None:
     from solitonde.instrument.accuracy import table_rows
     from solitonde.instrument.figures import _clean
 
-    table = Table(title=f"What accuracy costs (reference: {result['reference']['config']})")
+    quick = " [quick: tiny meshes, numbers not converged]" if result.get("quick") else ""
+    table = Table(title=f"What accuracy costs (reference: {result['reference']['config']}){quick}")
     for name in ("config", "scene", "TOF us", "ARR", "TOF err %", "ARR err %", "wall s",
                  "cached s", "Pareto"):
         table.add_column(name, justify="left" if name in ("config", "scene") else "right")
@@ -63,7 +64,8 @@ def _print(result: dict[str, Any]) -> None:
         table.add_row(*row)
     console = Console()
     console.print(table)
-    console.print("recommendation: " + json.dumps(_clean(result["recommendation"]), indent=2))
+    console.print(("recommendation (quick: machinery only, not advice): " if quick else
+                   "recommendation: ") + json.dumps(_clean(result["recommendation"]), indent=2))
 
 
 def register(app: typer.Typer) -> None:

@@ -69,6 +69,21 @@ def test_a_run_missing_a_feature_is_not_accurate():
     assert pareto(f) == [True, False]
 
 
+def test_quick_table_says_it_is_not_advice(capsys):
+    """--quick's printed table and recommendation say the tiny-mesh numbers are not converged."""
+    from solitonde.instrument.cmd_bench import _print
+
+    f = _frame(ROWS).assign(tof_s=6.9e-4, arr=0.085)
+    f["pareto"] = pareto(f)
+    result = {"rows": f.to_dict(orient="records"), "reference": {"config": "sem paper 12x12x1"},
+              "recommendation": recommend(f, Config("sem", (12, 12, 1), (3, 3, 2))), "quick": True}
+    _print(result)
+    text = " ".join(capsys.readouterr().out.split())
+    assert "not converged" in text and "not advice" in text
+    _print({**result, "quick": False})
+    assert "not advice" not in capsys.readouterr().out
+
+
 @pytest.mark.slow
 def test_bench_cli_quick(tmp_path):
     """The command end to end on tiny meshes: JSON, CSV and the Pareto PNG."""
