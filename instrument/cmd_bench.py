@@ -55,7 +55,7 @@ def _print(result: dict[str, Any]) -> None:
     from solitonde.instrument.accuracy import table_rows
     from solitonde.instrument.figures import _clean
 
-    quick = " [quick: tiny meshes, numbers not converged]" if result.get("quick") else ""
+    quick = " (quick: tiny meshes, numbers not converged)" if result.get("quick") else ""
     table = Table(title=f"What accuracy costs (reference: {result['reference']['config']}){quick}")
     for name in ("config", "scene", "TOF us", "ARR", "TOF err %", "ARR err %", "wall s",
                  "cached s", "Pareto"):
