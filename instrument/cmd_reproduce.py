@@ -47,7 +47,7 @@ def reproduce_command(
     Console().print(table)
     Console().print(f"figures and data in {out}; checks in {out / 'summary.json'}")
     if not summary["all_passed"]:
-        raise typer.Exit(2)
+        raise typer.Exit(3)  # not 2, a usage error: a script can tell a failed check apart
 
 
 def register(app: typer.Typer) -> None:

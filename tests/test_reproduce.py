@@ -201,3 +201,23 @@ def test_fig4_csv_holds_the_marked_grid(quick):
         assert row["lambda"] == pytest.approx(zener.inelasticity(scene), rel=1e-9)
     curve = f[f["source"] == "curve"].sort_values("lambda")
     assert len(curve) > 10 and np.all(np.diff(curve["e"]) <= 0)
+
+
+def test_a_failed_check_has_its_own_exit_code(tmp_path, monkeypatch) -> None:
+    """A failed paper check exits 3, a usage error 2 (both were 2: a CI script could not tell
+    them apart)."""
+    from typer.testing import CliRunner
+
+    from solitonde.instrument import reproduce as reproduce_module
+    from solitonde.instrument.cli import build_app
+
+    def failing(out, quick, **kwargs):
+        return {"quick": quick, "wall_s": 1.0, "all_passed": False,
+                "checks": {"arr_curve": {"passed": False}}}
+
+    monkeypatch.setattr(reproduce_module, "reproduce", failing)
+    runner = CliRunner()
+    assert runner.invoke(build_app(), ["reproduce", "--out", str(tmp_path), "--quick"]
+                         ).exit_code == 3
+    assert runner.invoke(build_app(), ["reproduce", "--out", str(tmp_path), "--preset", "x"]
+                         ).exit_code == 2
