@@ -135,6 +135,8 @@ def simulate_many(
     workers = default_workers() if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    if chunk_size is not None and int(chunk_size) < 1:
+        raise ValueError(f"chunk_size must be >= 1 or None, got {chunk_size}")
     if backend not in ("auto", "threads", "processes"):
         raise ValueError(f"backend must be 'auto', 'threads' or 'processes', got {backend!r}")
     if not scene_list:

@@ -146,3 +146,10 @@ def test_batch_collects_a_scene_error_over_processes():
     assert out[0].scene is good and out[2].scene is good
     with pytest.raises(SceneError):
         simulate_many([good, bad], workers=2, chunk_size=1, backend="processes")
+
+
+def test_batch_refuses_a_chunk_size_below_one() -> None:
+    """A non-positive chunk size is named (it ended in the process pool's own max_workers
+    error)."""
+    with pytest.raises(ValueError, match="chunk_size must be >= 1"):
+        simulate_many([scene_from_dict({})] * 2, workers=2, chunk_size=-1, backend="processes")
