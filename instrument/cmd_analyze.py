@@ -13,7 +13,7 @@ files in volts that carry no calibration (a run in which no file used it reports
 
 from __future__ import annotations
 
-import contextlib
+import io
 import json
 import math
 import sys
@@ -151,18 +151,14 @@ def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
     table["flags"] = table["flags"].map(lambda f: ";".join(f) if isinstance(f, list) else "")
     for col in ("plate_id", "position", "sphere_diameter", "error", "source"):
         table[col] = table[col].map(lambda v: None if v is None else str(v))
-    tmp = out.with_name(f".{out.name}.tmp")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if out.suffix.lower() == ".parquet":
-            table.to_parquet(tmp, index=False)
-        else:
-            table.to_csv(tmp, index=False)
-        tmp.replace(out)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink(missing_ok=True)
-        raise
+    from .figures import write_bytes
+
+    if out.suffix.lower() == ".parquet":
+        buf = io.BytesIO()
+        table.to_parquet(buf, index=False)
+        write_bytes(out, buf.getvalue())
+    else:
+        write_bytes(out, table.to_csv(index=False).encode())
 
 
 def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
@@ -171,6 +167,7 @@ def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
     Files that share a stem (``x.csv`` and ``x.npy``, or ``a/x.csv`` and ``b/x.csv``) keep the
     extension in the name and then a counter, so no shot's plot overwrites another's.
     """
+    from .figures import write_bytes
     from .plotting import trace_png
 
     folder.mkdir(parents=True, exist_ok=True)
@@ -189,9 +186,7 @@ def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
         used.add(name)
         png = trace_png(w.t0, w.dt, w.samples, r["features"].to_dict(), units="N",
                         title=f"{Path(r['source']).name}, shot {r['shot']}")
-        tmp = folder / f".{name}.tmp"
-        tmp.write_bytes(png)
-        tmp.replace(folder / name)
+        write_bytes(folder / name, png)
 
 
 def _fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:

@@ -12,7 +12,6 @@ scene in ``metadata["scene"]``.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 from pathlib import Path
@@ -105,21 +104,13 @@ def _json_safe(data: Any) -> Any:
 
 def write_plot(path: Path, result: SimulationResult, data: dict[str, Any]) -> None:
     """Sensor trace with the detected incident and reflected pulses marked (PNG)."""
+    from .figures import write_bytes
     from .plotting import trace_png
 
     s = result.scene
     title = (f"D = {s.chain.diameter * 1e3:.2f} mm, t = {s.plate.thickness * 1e3:.2f} mm, "
              f"L = {s.plate.distance_to_support * 1e3:.0f} mm, {result.plate_model}")
-    png = trace_png(result.t0, result.dt, result.samples, data, title=title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        tmp.write_bytes(png)
-        tmp.replace(path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink(missing_ok=True)
-        raise
+    write_bytes(path, trace_png(result.t0, result.dt, result.samples, data, title=title))
 
 
 def _table(data: dict[str, Any]) -> Table:
@@ -185,15 +176,17 @@ def simulate_command(
         typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
     data = summary(result, features, feature_error)
     failed = []
-    for flag, path in (("--out", out), ("--plot", plot)):
+    def write_csv(path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        signal_io.write(path, waveform, format="csv")
+
+    writers = (("--out", out, write_csv),
+               ("--plot", plot, lambda path: write_plot(path, result, data)))
+    for flag, path, write in writers:
         if path is None:
             continue
         try:
-            if flag == "--out":
-                path.parent.mkdir(parents=True, exist_ok=True)
-                signal_io.write(path, waveform, format="csv")
-            else:
-                write_plot(path, result, data)
+            write(path)
         except OSError as exc:  # the result is still printed; the exit code says what failed
             failed.append(f"error: {flag}: cannot write {str(path)!r}: {exc.strerror or exc}")
     if as_json:

@@ -254,12 +254,6 @@ class FineGrid:
         return float(np.sqrt(self.model_arr_var[self.valid].mean())) if self.valid.any() else 0.0
 
 
-def _floor_nodes(quiet: np.ndarray, ok: np.ndarray) -> np.ndarray:
-    """The no-reflection nodes (``quiet``, beyond D/t = 5) that take floor-level features: those
-    in a thickness row with a reflection somewhere to borrow a TOF from."""
-    return quiet & ok.any(axis=1, keepdims=True)
-
-
 def _row_nearest(values: np.ndarray, ok: np.ndarray, l_nodes: np.ndarray) -> np.ndarray:
     """Each node's value replaced by that of the nearest node in L (same thickness) with
     ``ok``; rows without one keep theirs. Far from a support TOF hardly depends on L, so a
@@ -292,7 +286,10 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     arr = np.where(ok, table.features["arr"][i_d], 0.0)
     diameter = float(table.axes["diameter_m"][i_d])
     beyond = (diameter / t_nodes > REFLECTION_D_OVER_T)[:, None]
-    quiet = _floor_nodes(beyond & (table.status[i_d] == STATUS_NO_REFLECTION), ok)
+    # no-reflection nodes there take floor-level features, given a reflection in their row to
+    # borrow a TOF from
+    quiet = (beyond & (table.status[i_d] == STATUS_NO_REFLECTION)
+             & ok.any(axis=1, keepdims=True))
     has = ok | quiet  # nodes with features (measured, or filled in at the floor)
     bound = np.nan_to_num(table.features["arr_upper_bound"][i_d])
     arr = np.where(quiet, bound, arr)
