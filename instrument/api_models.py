@@ -128,6 +128,9 @@ class MeasurementOut(BaseModel):
         description="thickness_m and distance_m (map, median, ci68, ci95, status), or null")
     estimate_reason: str | None = Field(None, description="why the estimate is null")
     links: dict[str, str] = Field(default_factory=dict)
+    skipped_channels: list[dict[str, str]] = Field(
+        default_factory=list, description="an upload's channels not analysed: {channel, reason} "
+        "(a trigger step or flat line, or not the channel asked for); not stored")
 
 
 class MeasurementSummary(BaseModel):

@@ -68,12 +68,13 @@ def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]], table_file: Path
     """
     table = ModelTable.load(table_path(table_file))
     cal = Calibration.load(calibration_file) if calibration_file else None
-    groups: dict[tuple[Any, Any], list[Mapping[str, Any]]] = {}
+    groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
     for a in aggs:
-        groups.setdefault((a.get("plate_id"), a.get("position")), []).append(a)
+        key = (a.get("plate_id"), a.get("position"), a.get("x_m"), a.get("y_m"))
+        groups.setdefault(key, []).append(a)
     out = []
-    for (plate, position), members in groups.items():
-        row: dict[str, Any] = {"plate_id": plate, "position": position}
+    for (plate, position, x_m, y_m), members in groups.items():
+        row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
         inputs, skipped = [], []
         for a in members:
             d, tof, arr = a.get("sphere_diameter"), a.get("tof_s") or {}, a.get("arr") or {}
@@ -91,6 +92,8 @@ def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]], table_file: Path
                                          tof.get("std"), arr.get("std"),
                                          int(tof.get("count") or 1)))
         row["skipped"] = skipped
+        row["diameters_m"] = [i.diameter_m for i in inputs]
+        row["n_shots"] = sum(i.n_shots for i in inputs)
         if not inputs:
             row["estimate"] = None
         else:
@@ -159,7 +162,10 @@ def register(app: typer.Typer) -> None:
 
 def describe_row(row: Mapping[str, Any]) -> str:
     """One `analyze --invert` estimate as text."""
-    head = f"estimate for plate {row.get('plate_id')}, position {row.get('position')}:"
+    head = f"estimate for plate {row.get('plate_id')}, position {row.get('position')}"
+    if row.get("x_m") is not None and row.get("y_m") is not None:
+        head += f" (x {row['x_m']:g} m, y {row['y_m']:g} m)"
+    head += ":"
     est = row.get("estimate")
     if est is None:
         why = row.get("error") or "; ".join(s["reason"] for s in row.get("skipped", [])) or "-"

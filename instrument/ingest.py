@@ -224,6 +224,10 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, estimator: Es
                           features=s["features"], shot_index=i)
                for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
     result = {"aggregates": aggregates, "estimate": estimate, "estimate_reason": reason}
+    coordinates = {k: waveforms[0].metadata.get(k) for k in ("x_m", "y_m")
+                   if isinstance(waveforms[0].metadata.get(k), int | float)}
+    if coordinates:  # where on the plate, for the estimates export
+        result["location"] = coordinates
     new_id, created_at = store.add(records, result, source=source, plate_id=plate_id,
                                    position=position)
     return measurement_dict(MeasurementRecord(

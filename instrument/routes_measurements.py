@@ -21,6 +21,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from pydantic import ConfigDict, Field, ValidationError
 
+from solitonde.signal import channels as signal_channels
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.waveform import Waveform
 
@@ -108,16 +109,18 @@ class UploadFields(Strict):
                                       description="Hz, for files without a time column")
     dt: float | None = Field(None, gt=0, le=1.0, description="s, instead of sample_rate")
     t0: float | None = Field(None, ge=-1e3, le=1e3, description="s, time of the first sample")
-    group: str | None = Field(None, max_length=200, description="TDMS group")
-    channel: str | None = Field(None, max_length=200, description="TDMS channel")
+    group: str | None = Field(None, max_length=200, description="TDMS group: only its channels")
+    channel: str | None = Field(None, max_length=200, description="the channel to analyse: a "
+                                "column name, or a TDMS channel as group/channel or channel; "
+                                "default: the file's channels that are sensor traces (a "
+                                "trigger step or a flat line is skipped, and listed)")
     dataset: str | None = Field(None, max_length=200, description="HDF5 dataset")
 
 
 MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
 ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 0")]
 
-_READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "group", "channel",
-                   "dataset")
+_READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "dataset")
 
 
 def binary_parameters() -> list[dict[str, Any]]:
@@ -315,6 +318,12 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
         waveforms = read_file(path, fmt, options, filename)
     finally:
         path.unlink(missing_ok=True)
+    try:
+        waveforms, skipped = signal_channels.select(
+            waveforms, [opts.channel] if opts.channel else None, opts.group,
+            filename or "the upload")
+    except WaveformError as exc:
+        raise waveform_error(exc, "") from None
     meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter")
             if getattr(opts, k) is not None}
     if filename:
@@ -322,7 +331,8 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
     if meta:
         waveforms = [wf.with_metadata(**meta) for wf in waveforms]
     check_counts(waveforms, settings, "file.shots")
-    return measure_and_store(waveforms, svc.store, svc.estimator, f"upload:{fmt}", "file.shots")
+    stored = measure_and_store(waveforms, svc.store, svc.estimator, f"upload:{fmt}", "file.shots")
+    return {**stored, "skipped_channels": skipped}
 
 
 @router.get("/measurements", response_model=MeasurementPage, responses=ERRORS,
@@ -359,27 +369,37 @@ async def list_measurements(
 @router.get(
     "/measurements/export",
     responses={**ERRORS, 200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}},
-                               "description": "one row per shot"}},
+                               "description": "one row per shot, or per measurement"}},
     response_class=Response,
-    summary="Export measured features as CSV or Parquet (one row per shot)",
+    summary="Export measured features (one row per shot) or estimates (one row per measurement)",
 )
 async def export_measurements(
     request: Request,
     format: str = Query("csv", pattern="^(csv|parquet)$", description="csv or parquet"),
     plate_id: str | None = Query(None, max_length=200, description="only this plate"),
+    kind: str = Query("shots", pattern="^(shots|estimates)$",
+                      description="shots: features per shot; estimates: thickness and distance "
+                      "per measurement (one position), bounds and status in flat columns"),
 ) -> Response:
-    """Per-shot features of the stored measurements, oldest first."""
+    """Stored measurements, oldest first; timestamps in ISO 8601 UTC."""
     from .app import service
 
     svc = service(request)
-    data, media = await run_in_threadpool(_export, svc, format, plate_id)
-    name = f"measurements.{'parquet' if format == 'parquet' else 'csv'}"
+    exporter = _export if kind == "shots" else _export_estimates
+    data, media = await run_in_threadpool(exporter, svc, format, plate_id)
+    suffix = "parquet" if format == "parquet" else "csv"
+    name = f"{'measurements' if kind == 'shots' else 'estimates'}.{suffix}"
     return Response(data, media_type=media,
                     headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
+_MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
+
+
 def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     import pandas as pd
+
+    from .estimate_rows import iso_utc
 
     limit = svc.settings.export_rows_max
     rows = list(svc.store.shot_rows(plate_id, limit + 1))
@@ -392,11 +412,42 @@ def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
 
         frame = pd.DataFrame(columns=[*svc.store.EXPORT_COLUMNS,
                                       *(f.name for f in dataclasses.fields(Features))])
+    frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")
+    for col in ("measurement_id", "shot_index", "shot", "n_samples"):
+        frame[col] = pd.to_numeric(frame[col]).astype("Int64")
     if fmt == "parquet":
         buf = io.BytesIO()
         frame.to_parquet(buf, index=False)
-        return buf.getvalue(), "application/vnd.apache.parquet"
-    return frame.to_csv(index=False).encode(), "text/csv"
+        return buf.getvalue(), _MEDIA[fmt]
+    return frame.to_csv(index=False).encode(), _MEDIA[fmt]
+
+
+def _export_estimates(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+    """One row per stored measurement: where, from what, and its estimate's columns."""
+    from .estimate_rows import ESTIMATE_COLUMNS, estimate_row, iso_utc, to_bytes
+
+    limit = svc.settings.export_rows_max
+    rows: list[dict[str, Any]] = []
+    after = 0
+    while True:
+        page = svc.store.list(plate_id, after, 1000)
+        for r in page:
+            diameters = [a["sphere_diameter"] for a in r.result.get("aggregates", [])
+                         if a.get("sphere_diameter") is not None]
+            location = {"plate_id": r.plate_id, "position": r.position,
+                        **(r.result.get("location") or {})}
+            rows.append({"measurement_id": r.id, "created_at": iso_utc(r.created_at),
+                         **estimate_row(location, diameters, r.n_shots, r.result.get("estimate"),
+                                        r.result.get("estimate_reason"))})
+        if len(rows) > limit:
+            raise Problem(422, f"export: more than {limit:,} measurements match; export at most "
+                          f"{limit:,} rows at a time (ask for one plate_id)", kind="limit",
+                          field="plate_id")
+        if len(page) < 1000:
+            break
+        after = page[-1].id
+    columns = ("measurement_id", "created_at", *ESTIMATE_COLUMNS)
+    return to_bytes(rows, fmt, columns), _MEDIA[fmt]
 
 
 def _missing(measurement_id: int) -> Problem:

@@ -27,12 +27,16 @@ number when it reads as one (else left as given, for the consumer to name); othe
 are decoded only when they are JSON objects, lists, booleans or null. Layouts:
 
 csv
-    UTF-8 text (a byte-order mark is allowed). Optional leading ``# key: value`` comment lines
-    (metadata; ``# dt:``, ``# sample_rate:``, ``# t0:``, ``# calibration:`` are used as such),
-    then a header ``time_s,force_N`` (more force columns = more shots; ``voltage_V`` columns need
-    a calibration). A header-less table whose first column is a uniform, increasing ramp is
-    ``time, force...``; otherwise every column is a shot. Without a time column the sample
-    period comes from the comments or ``sample_rate=``; ``t0`` defaults to 0.
+    Text tables as scopes, DAQ programs and spreadsheets write them (Tektronix, Keysight,
+    Rigol, PicoScope, LeCroy, units in the column names, comma/semicolon/tab delimited, decimal
+    commas: :mod:`.csv_layouts` lists them), and this project's own: optional leading
+    ``# key: value`` comment lines (metadata; ``# dt:``, ``# sample_rate:``, ``# t0:``,
+    ``# calibration:`` are used as such), then a header ``time_s,force_N``. UTF-8 (a byte-order
+    mark is allowed) or Windows-1252. Units come from the file and are scaled to s and V or N;
+    the time column is the time axis, never a shot; each value column is a channel (metadata
+    ``channel``: its label) and a shot. A header-less table whose first column is a uniform,
+    increasing ramp is ``time, values...``; otherwise every column is a shot. Without a time
+    column the sample period comes from the comments or ``sample_rate=``; ``t0`` defaults to 0.
 npy
     2-D ``(n_samples, 1 + shots)`` with a uniform time axis in column 0; otherwise samples only
     (1-D, or one shot per row), which need ``sample_rate=``.
@@ -345,99 +349,45 @@ def _rows(array: np.ndarray, name: str) -> list[np.ndarray]:
 
 # --- CSV ----------------------------------------------------------------------------------------
 
-_TIME_LABELS = ("time_s", "time", "t_s", "t")
-
-
 def _read_csv(
     path: Path, sample_rate: float | None = None, dt: float | None = None,
     t0: float | None = None, units: str | None = None, calibration: float | None = None,
 ) -> list[Waveform]:
-    import io as _io
+    """Any layout :mod:`.csv_layouts` knows; one waveform per value column."""
+    from .csv_layouts import SCOPE_LAYOUTS, parse
 
-    import pandas as pd
-
+    raw = path.read_bytes()
     try:
-        text = path.read_bytes().decode("utf-8-sig")
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise WaveformError("file", f"{path.name}: not UTF-8 text (byte {exc.object[exc.start]:#x}"
-                            f" at offset {exc.start})", "UTF-8 or ASCII text") from None
-    meta: dict[str, Any] = {}
-    skip = 0
-    for line in text.splitlines():
-        if not line.startswith("#"):
-            break
-        skip += 1
-        key, sep, value = line[1:].partition(":")
-        if sep and key.strip():
-            meta[key.strip()] = _decode(value.strip(), key.strip())
-    try:
-        frame = pd.read_csv(_io.StringIO(text), skiprows=skip, header=None, dtype=str,
-                            skip_blank_lines=True)
-    except pd.errors.EmptyDataError:
-        raise WaveformError("samples", f"{path.name}: empty, no samples") from None
-    except pd.errors.ParserError as exc:
-        raise WaveformError("file", f"{path.name}: not a table of comma-separated columns "
-                            f"({exc})") from None
-    first = [str(c).strip() for c in frame.iloc[0]]
-    has_header = any(_not_number(c) for c in first)
-    labels = first if has_header else None
-    body = frame.iloc[1:] if has_header else frame
-    if body.empty:
-        raise WaveformError("samples", f"{path.name}: empty, no samples")
-    try:
-        data = body.apply(pd.to_numeric, errors="raise").to_numpy(dtype=np.float64)
-    except (ValueError, TypeError) as exc:
-        raise WaveformError("samples", f"{path.name}: non-numeric value ({exc})") from None
+        try:  # Windows spreadsheets and scope software write the ANSI code page ("µs")
+            text = raw.decode("cp1252")
+        except UnicodeDecodeError:
+            raise WaveformError("file", f"{path.name}: not text (byte "
+                                f"{exc.object[exc.start]:#x} at offset {exc.start})",
+                                "UTF-8 or Windows-1252 text") from None
+    table = parse(text, path.name)
+    meta = {k: _decode(v, k) for k, v in table.metadata.items()}
     file_t0, file_dt, file_rate = (meta.pop(k, None) for k in ("t0", "dt", "sample_rate"))
-    if labels is not None and labels[0].lower() in _TIME_LABELS:
-        if data.shape[1] < 2:
-            raise WaveformError("channel", f"{path.name}: a time column but no sample column",
-                                "time_s,force_N")
-        own_t0, own = uniform_grid(data[:, 0])
-        columns = [(labels[j], data[:, j]) for j in range(1, data.shape[1])]
-    elif labels is None and data.shape[1] >= 2 and _is_time_axis(data[:, 0]):
-        own_t0, own = uniform_grid(data[:, 0])  # header-less "time, force...": no shot is a ramp
-        columns = [(None, data[:, j]) for j in range(1, data.shape[1])]
+    if table.time is not None:
+        own_t0, own = uniform_grid(table.time, rounding=table.time_resolution)
     else:
         own_t0 = 0.0 if file_t0 is None else file_t0
         own = _own_dt(file_dt, file_rate)
-        names = labels if labels is not None else [None] * data.shape[1]
-        columns = [(names[j], data[:, j]) for j in range(data.shape[1])]
     step = _step(own, sample_rate, dt, path.name)
     start = own_t0 if t0 is None else t0
     own_cal = meta.pop("calibration", None)
+    vendor = table.layout in SCOPE_LAYOUTS or table.layout == "generic"
     parts = []
-    for j, (label, column) in enumerate(columns):
-        if label is None:
-            unit = _units(None, units, path.name)
-        else:
-            suffix = label.rsplit("_", 1)[-1] if "_" in label else ""
-            unit = _units(suffix, units, f"{path.name} column {label!r}") if suffix in UNITS \
-                else (units or _units_of(label))
+    for j, column in enumerate(table.columns):
+        unit = _units(column.unit, units, f"{path.name} column {column.label!r}")
         m = dict(meta)
-        if len(columns) > 1:
-            m.setdefault("channel", label if label is not None else f"column_{j + 1}")
+        if len(table.columns) > 1 or vendor:
+            m.setdefault("channel", column.label)
+        if len(table.columns) > 1:
             m["shot"] = j
-        parts.append((start, step, column, unit, own_cal, m))
+        parts.append((start, step, column.values, unit, own_cal, m))
     return _shots(parts, calibration, path.name)
-
-
-def _units_of(label: str) -> str:
-    """Units from a column label such as ``force_N`` or ``voltage_V``."""
-    suffix = label.rsplit("_", 1)[-1] if "_" in label else ""
-    if suffix not in UNITS:
-        raise WaveformError(
-            "units", f"column {label!r} does not end in a known unit", "a '_N' or '_V' suffix"
-        )
-    return suffix
-
-
-def _not_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return True
-    return False
 
 
 def _write_csv(path: Path, waves: list[Waveform]) -> None:

@@ -68,8 +68,11 @@ def invalid_sample(value: float) -> str:
     return f"a value of magnitude beyond {MAX_ABS_SAMPLE:g} ({value:g})"
 
 
-def uniform_grid(time: Any, name: str = "time") -> tuple[float, float]:
+def uniform_grid(time: Any, name: str = "time", rounding: float = 0.0) -> tuple[float, float]:
     """Check that ``time`` is strictly increasing and uniform; return ``(t0, dt)``.
+
+    ``rounding`` (s) is how far a stamp may be off the grid because the file printed it with
+    few digits (half its last digit); it adds to the tolerance.
 
     Raises
     ------
@@ -93,7 +96,7 @@ def uniform_grid(time: Any, name: str = "time") -> tuple[float, float]:
     dt = (t[-1] - t[0]) / (t.size - 1)
     deviation = np.abs(t - (t[0] + dt * np.arange(t.size)))
     worst = int(np.argmax(deviation))
-    if deviation[worst] > UNIFORM_TOLERANCE * dt:
+    if deviation[worst] > UNIFORM_TOLERANCE * dt + rounding:
         raise WaveformError(
             name,
             f"non-uniform sampling: stamp {worst} is {deviation[worst] / dt:.3g} sample periods "

@@ -93,7 +93,7 @@ def test_voltage_needs_calibration(tmp_path):
         ("time_s,force_N\n" + "".join(f"{i}e-6,1.0\n" for i in range(5)), "samples"),
         ("time_s,force_N\n" + "".join(f"{(i if i != 7 else 9)}e-6,1\n" for i in range(40)), "time"),
         ("time_s,force_N\n" + "".join(f"{i * i}e-6,1\n" for i in range(40)), "time"),
-        ("time_s,force_kN\n" + "".join(f"{i}e-6,1\n" for i in range(40)), "units"),
+        ("time_s,force_psi\n" + "".join(f"{i}e-6,1\n" for i in range(40)), "units"),
         ("time_s\n" + "".join(f"{i}e-6\n" for i in range(40)), "channel"),
     ],
     ids=["empty", "nan", "inf", "too_few", "non_monotonic", "non_uniform", "unknown_units",
@@ -230,7 +230,10 @@ def test_malformed_files_raise_waveform_error_naming_the_field(tmp_path):
     with h5py.File(tmp_path / "attr.h5", "w") as fh:
         fh["x"] = x
         fh["x"].attrs["dt"] = [DT, DT]
-    cases = {"lat.csv": "file", "bad.json": "file", "list.npz": "metadata", "obj.npy": "file",
+    (w,) = io.read(tmp_path / "lat.csv")  # Windows-1252, as Windows spreadsheets save it
+    assert w.metadata["operator"] == "J\u00fcrgen"
+    (tmp_path / "bin.csv").write_bytes(b"time_s,force_N\n\x81\x8d\x90" + _csv_rows().encode())
+    cases = {"bin.csv": "file", "bad.json": "file", "list.npz": "metadata", "obj.npy": "file",
              "attr.h5": "dt"}
     for name, field in cases.items():
         with pytest.raises(WaveformError) as err:

@@ -1,0 +1,89 @@
+"""Estimates as flat table rows: one row per plate and position, for CSV and Parquet.
+
+`analyze --estimates-out` and the service's ``/v1/measurements/export?kind=estimates`` write the
+same columns, so a script reads either. Every interval bound is its own column
+(``thickness_m_ci95_low``); a side the data leave open is empty, and ``*_status`` says why.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from datetime import UTC, datetime
+from typing import Any
+
+PARAMETERS = ("thickness_m", "distance_m")
+STATS = ("map", "median", "ci68_low", "ci68_high", "ci95_low", "ci95_high", "status")
+LOCATION_COLUMNS = ("plate_id", "position", "x_m", "y_m", "sphere_diameters_m", "n_shots")
+ESTIMATE_COLUMNS = (*LOCATION_COLUMNS, *(f"{p}_{s}" for p in PARAMETERS for s in STATS),
+                    "reason")
+"""The columns of an estimates file, in order."""
+
+
+def iso_utc(epoch_s: float | None) -> str | None:
+    """Seconds since the epoch as ISO 8601 UTC (``2026-11-25T02:58:41.123Z``)."""
+    if epoch_s is None:
+        return None
+    stamp = datetime.fromtimestamp(float(epoch_s), tz=UTC)
+    return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _finite(value: Any) -> float | None:
+    if value is None:
+        return None
+    number = float(value)
+    return number if math.isfinite(number) else None
+
+
+def parameter_columns(estimate: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The ``thickness_m_*`` and ``distance_m_*`` columns of one estimate (its ``to_dict``)."""
+    out: dict[str, Any] = {}
+    for name in PARAMETERS:
+        p = (estimate or {}).get(name) or {}
+        ci68, ci95 = p.get("ci68") or (None, None), p.get("ci95") or (None, None)
+        status = p.get("status")
+        values = {"map": p.get("map"), "median": p.get("median"), "ci68_low": ci68[0],
+                  "ci68_high": ci68[1], "ci95_low": ci95[0], "ci95_high": ci95[1]}
+        if status == "lower_bound_only":  # the inversion reports the open side as the grid's
+            values.update(ci68_high=None, ci95_high=None)  # edge; the file leaves it empty
+        elif status == "upper_bound_only":
+            values.update(ci68_low=None, ci95_low=None)
+        for stat, value in values.items():
+            out[f"{name}_{stat}"] = _finite(value)
+        out[f"{name}_status"] = status
+    return out
+
+
+def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shots: int,
+                 estimate: Mapping[str, Any] | None, reason: str | None) -> dict[str, Any]:
+    """One row: where (plate, position, coordinates), from what (sphere sizes, shots), the
+    estimate's columns, and ``reason`` when there is no estimate or it comes with one."""
+    row = {"plate_id": location.get("plate_id"), "position": location.get("position"),
+           "x_m": _finite(location.get("x_m")), "y_m": _finite(location.get("y_m")),
+           "sphere_diameters_m": ";".join(f"{d:.6g}" for d in sorted(set(diameters))) or None,
+           "n_shots": int(n_shots)}
+    row.update(parameter_columns(estimate))
+    row["reason"] = reason if reason else (estimate or {}).get("reason")
+    return row
+
+
+def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
+             columns: Sequence[str] = ESTIMATE_COLUMNS) -> bytes:
+    """Rows as CSV or Parquet bytes with ``columns`` in order (also when there are no rows);
+    ``n_shots`` and ``measurement_id`` stay integers."""
+    import pandas as pd
+
+    frame = pd.DataFrame(list(rows), columns=list(columns))
+    for col in ("n_shots", "measurement_id"):
+        if col in frame:
+            frame[col] = frame[col].astype("Int64")
+    for col in ("plate_id", "position", "sphere_diameters_m", "reason", "created_at",
+                *(f"{p}_status" for p in PARAMETERS)):
+        if col in frame:
+            frame[col] = frame[col].astype("string")
+    if fmt == "parquet":
+        buf = io.BytesIO()
+        frame.to_parquet(buf, index=False)
+        return buf.getvalue()
+    return frame.to_csv(index=False).encode()

@@ -1,0 +1,190 @@
+"""Campaign manifests: which file holds which plate, position and sphere size.
+
+A lab's day of shots is a folder of scope or DAQ files whose names say little. A manifest, CSV or
+YAML, gives one row per file or glob (relative to the manifest's folder)::
+
+    file,plate_id,position,x_m,y_m,sphere_diameter_m,calibration_N_per_V
+    p1_*.csv,P7,A1,0.100,0.020,0.00953,20.0
+
+A YAML manifest is a list of such rows, or a mapping whose ``files`` list holds the rows and
+whose other keys are defaults for every row. :func:`load` validates every row (a clear error
+naming the row and the key) and :func:`match` resolves the rows to files: a row that matches no
+file, or a file that two rows match, is an error naming the rows.
+"""
+
+from __future__ import annotations
+
+import csv
+import glob
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+KEYS = ("file", "plate_id", "position", "x_m", "y_m", "sphere_diameter_m",
+        "calibration_N_per_V")
+"""The manifest's columns; ``file`` is required, the others optional."""
+TEXT_LIMIT = 200
+"""Longest plate_id or position (the service's limit)."""
+
+
+class ManifestError(ValueError):
+    """A manifest that cannot be used; the message names the file, the row and the key."""
+
+
+@dataclass(frozen=True)
+class Row:
+    """One manifest row: where it is (``where``: file and row number), the file pattern, the
+    metadata it gives its files (the waveform metadata keys ``plate_id``, ``position``,
+    ``x_m``, ``y_m``, ``sphere_diameter``) and the calibration (N/V) for files in volts."""
+
+    where: str
+    pattern: str
+    metadata: dict[str, Any] = field(default_factory=dict)
+    calibration: float | None = None
+
+
+def load(path: Path) -> list[Row]:
+    """The rows of the manifest at ``path`` (``.csv`` or ``.yaml``/``.yml``), validated."""
+    suffix = path.suffix.lower()
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ManifestError(f"--manifest: cannot read {str(path)!r} ({exc})") from None
+    if suffix == ".csv":
+        records = _csv_records(text, path)
+    elif suffix in (".yaml", ".yml"):
+        records = _yaml_records(text, path)
+    else:
+        raise ManifestError(f"--manifest: {path.name} must end in .csv, .yaml or .yml")
+    if not records:
+        raise ManifestError(f"--manifest: {path.name} has no rows")
+    return [_row(where, record) for where, record in records]
+
+
+def _csv_records(text: str, path: Path) -> list[tuple[str, dict[str, Any]]]:
+    lines = [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
+    if not lines:
+        return []
+    dialect = csv.Sniffer().sniff(lines[0], delimiters=",;\t") if any(
+        d in lines[0] for d in ",;\t") else csv.excel
+    reader = csv.DictReader(lines, dialect=dialect)
+    _check_keys(reader.fieldnames or [], f"{path.name} header")
+    out = []
+    for i, record in enumerate(reader, start=2):
+        if None in record:  # more cells than the header names
+            raise ManifestError(f"--manifest: {path.name} row {i}: more values than the "
+                                "header has columns")
+        out.append((f"{path.name} row {i}", {k.strip(): (v.strip() if isinstance(v, str) else v)
+                                             for k, v in record.items() if k is not None}))
+    return out
+
+
+def _yaml_records(text: str, path: Path) -> list[tuple[str, dict[str, Any]]]:
+    import yaml
+
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ManifestError(f"--manifest: {path.name} is not valid YAML ({exc})") from None
+    defaults: dict[str, Any] = {}
+    if isinstance(doc, Mapping):
+        defaults = {k: v for k, v in doc.items() if k != "files"}
+        _check_keys(defaults, f"{path.name} (top level)")
+        doc = doc.get("files")
+    if not isinstance(doc, list):
+        raise ManifestError(f"--manifest: {path.name} must hold a list of rows, or a mapping "
+                            "with a 'files' list")
+    out = []
+    for i, item in enumerate(doc, start=1):
+        if not isinstance(item, Mapping):
+            raise ManifestError(f"--manifest: {path.name} entry {i} is not a mapping of "
+                                f"{', '.join(KEYS)}")
+        _check_keys(item, f"{path.name} entry {i}")
+        out.append((f"{path.name} entry {i}", {**defaults, **item}))
+    return out
+
+
+def _check_keys(keys: Iterable[Any], where: str) -> None:
+    unknown = [str(k) for k in keys if str(k).strip() not in KEYS]
+    if unknown:
+        raise ManifestError(f"--manifest: {where}: unknown column {unknown[0]!r} (allowed: "
+                            f"{', '.join(KEYS)})")
+
+
+def _row(where: str, record: Mapping[str, Any]) -> Row:
+    def blank(value: Any) -> bool:
+        return value is None or (isinstance(value, str) and not value.strip())
+
+    pattern = record.get("file")
+    if blank(pattern):
+        raise ManifestError(f"--manifest: {where}: file: missing (a file name or glob, "
+                            "relative to the manifest's folder)")
+    meta: dict[str, Any] = {}
+    for key in ("plate_id", "position"):
+        value = record.get(key)
+        if not blank(value):
+            text = str(value).strip()
+            if len(text) > TEXT_LIMIT:
+                raise ManifestError(f"--manifest: {where}: {key}: {len(text)} characters; at "
+                                    f"most {TEXT_LIMIT}")
+            meta[key] = text
+    for key, target in (("x_m", "x_m"), ("y_m", "y_m"), ("sphere_diameter_m", "sphere_diameter")):
+        if not blank(record.get(key)):
+            meta[target] = _number(record[key], where, key)
+    calibration = None
+    if not blank(record.get("calibration_N_per_V")):
+        calibration = _number(record["calibration_N_per_V"], where, "calibration_N_per_V")
+    return Row(where, str(pattern).strip(), meta, calibration)
+
+
+_ALLOWED = {"x_m": ("a finite number of metres", lambda v: True),
+            "y_m": ("a finite number of metres", lambda v: True),
+            "sphere_diameter_m": ("a diameter in metres, 0 < D <= 1", lambda v: 0.0 < v <= 1.0),
+            "calibration_N_per_V": ("a sensitivity in N/V > 0", lambda v: v > 0.0)}
+
+
+def _number(value: Any, where: str, key: str) -> float:
+    allowed, ok = _ALLOWED[key]
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ManifestError(f"--manifest: {where}: {key}: {value!r} is not a number (allowed: "
+                            f"{allowed})") from None
+    if not (math.isfinite(number) and ok(number)):
+        raise ManifestError(f"--manifest: {where}: {key}: {value!r} is out of range (allowed: "
+                            f"{allowed})")
+    return number
+
+
+def match(rows: list[Row], base: Path, extensions: Iterable[str] | None
+          ) -> list[tuple[Path, Row]]:
+    """Each manifest row's files, in row order; patterns are relative to ``base``.
+
+    A glob keeps the regular files with one of ``extensions`` (None: every file whose name does
+    not start with a dot); a plain name must exist. Raises :class:`ManifestError` for a row that
+    matches nothing, or a file that two rows match.
+    """
+    wanted = None if extensions is None else {e.lower() for e in extensions}
+    owner: dict[Path, Row] = {}
+    out = []
+    for row in rows:
+        pattern = row.pattern if Path(row.pattern).is_absolute() else str(base / row.pattern)
+        if glob.has_magic(row.pattern):
+            found = sorted(Path(p) for p in glob.glob(pattern, recursive=True)
+                           if Path(p).is_file() and not Path(p).name.startswith(".")
+                           and (wanted is None or Path(p).suffix.lower() in wanted))
+        else:
+            found = [Path(pattern)] if Path(pattern).is_file() else []
+        if not found:
+            raise ManifestError(f"--manifest: {row.where}: no file matches {row.pattern!r} "
+                                f"(looked in {str(base)!r})")
+        for f in found:
+            key = f.resolve()
+            if key in owner:
+                raise ManifestError(f"--manifest: {f.name} is matched by {owner[key].where} "
+                                    f"and by {row.where}; give each file one row")
+            owner[key] = row
+            out.append((f, row))
+    return out
