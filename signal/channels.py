@@ -21,7 +21,7 @@ from .errors import WaveformError
 from .waveform import Waveform
 
 SENSOR, TRIGGER, FLAT, UNCLEAR = "sensor", "trigger", "flat", "unclear"
-EVENT_SIGMA = 10.0
+EVENT_SIGMA = 6.0
 """A channel whose largest excursion is under this many noise deviations holds no event."""
 STEP_FRACTION = 0.5
 """A channel that ends this fraction of its largest excursion away from its start level has
@@ -132,8 +132,9 @@ def select(waves: Sequence[Waveform], channels: Sequence[str] | None = None,
     listing = "; ".join(f"{name}: {v.kind} ({v.reason})"
                         for name, v in zip(names, verdicts, strict=True))
     if any(v.kind == UNCLEAR for v in verdicts) or not kept:
-        what = "no channel is a sensor trace" if not kept else "cannot tell which channels " \
-            "are sensor traces"
+        unclear = any(v.kind == UNCLEAR for v in verdicts)
+        what = "cannot tell which channels are sensor traces" if unclear else \
+            "no channel is a sensor trace"
         raise WaveformError("channel", f"{where}: {what}: {listing}",
                             "name the channels to analyse: " + ", ".join(dict.fromkeys(names)))
     skipped = [{"channel": name, "reason": v.reason}

@@ -150,7 +150,8 @@ def _dialect(body: list[tuple[int, str]], name: str) -> tuple[str | None, bool]:
             return ("" if len(parts) == 1 else delimiter), decimal_comma
     if len(body) == 1 or not any(_NUMBER.match(c.strip()) for _n, text in body
                                  for c in re.split(r"[,;\t ]", text)):
-        raise WaveformError("samples", f"{name}: no data rows, no samples")
+        raise WaveformError("samples", f"{name}: no data rows, no samples",
+                            "header lines, then one row of numbers per sample")
     raise WaveformError("file", f"{name} line {number}: {line[:80]!r} is not a row of numbers",
                         "a table whose last line is numbers separated by commas, semicolons "
                         "or tabs")
@@ -181,8 +182,8 @@ def _matrix(rows: list[tuple[int, list[str]]], width: int, decimal_comma: bool,
     """Rows of cells as floats; a short, long or non-numeric row is an error naming its line."""
     for number, parts in rows:
         if len(parts) != width:
-            raise WaveformError("file", f"{name} line {number}: {len(parts)} values, the rows "
-                                f"above have {width}", f"{width} values on every data row")
+            raise WaveformError("file", f"{name} line {number}: {len(parts)} values, the last "
+                                f"row has {width}", f"{width} values on every data row")
     try:
         return np.array([[_number(p, decimal_comma) for p in parts] for _n, parts in rows],
                         dtype=np.float64).reshape(len(rows), width)
@@ -201,7 +202,7 @@ def _read_rows(rows: list[tuple[int, str]], delimiter: str | None, decimal_comma
     """The data lines as a float matrix (pandas' C parser), and the first column's texts."""
     import pandas as pd
 
-    width = len(_split(rows[0][1], delimiter))
+    width = len(_split(rows[-1][1], delimiter))
     text = "\n".join(line for _n, line in rows)
     sep = r"\s+" if delimiter is None else ("\x1f" if delimiter == "" else delimiter)
     try:
