@@ -30,6 +30,10 @@ class ShotMetadata(Strict):
     sphere_diameter: float | None = Field(None, gt=0, le=1.0,
                                           description="chain sphere diameter D, m")
     shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
+    x_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position on the "
+                              "plate, x in the plate's own frame, m (within the plate's size "
+                              "when the service's table states it)")
+    y_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position, y, m")
     extra: dict[str, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
                                                  "not the fields above, nor 'source' (a 422)")
@@ -127,6 +131,7 @@ class MeasurementOut(BaseModel):
     estimate: dict[str, Any] | None = Field(
         description="thickness_m and distance_m (map, median, ci68, ci95, status), or null")
     estimate_reason: str | None = Field(None, description="why the estimate is null")
+    location: dict[str, float] | None = Field(None, description="x_m and y_m on the plate")
     links: dict[str, str] = Field(default_factory=dict)
     skipped_channels: list[dict[str, str]] = Field(
         default_factory=list, description="an upload's channels not analysed: {channel, reason} "
@@ -144,6 +149,7 @@ class MeasurementSummary(BaseModel):
     source: str
     aggregates: list[dict[str, Any]]
     estimate: dict[str, Any] | None
+    location: dict[str, float] | None = Field(None, description="x_m and y_m on the plate")
 
 
 class MeasurementPage(BaseModel):

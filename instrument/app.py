@@ -160,6 +160,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
         openapi_tags=[
             {"name": "measurements", "description": "post shots, read them back, export"},
+            {"name": "plates", "description": "plates, their maps and located supports"},
             {"name": "compute", "description": "inversion and simulation"},
             {"name": "service", "description": "table, health and readiness"},
         ],
@@ -169,10 +170,12 @@ def build_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
 
-    from . import routes_compute, routes_measurements
+    from . import routes_compute, routes_measurements, routes_plates, web
 
     app.include_router(routes_measurements.router, prefix="/v1")
+    app.include_router(routes_plates.router, prefix="/v1")
     app.include_router(routes_compute.router, prefix="/v1")
+    app.include_router(web.router)
 
     @app.get("/healthz", tags=["service"], response_model=Health)
     async def healthz() -> dict[str, Any]:

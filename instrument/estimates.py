@@ -80,6 +80,15 @@ class Estimator:
     def loaded(self) -> bool:
         return self.table is not None
 
+    def plate_size(self) -> list[float] | None:
+        """The plate size (m) of the table's scenes, or None without a table."""
+        if not hasattr(self, "_plate_size"):
+            plate = (((self.summary() or {}).get("provenance") or {}).get("scene_defaults")
+                     or {}).get("plate") or {}
+            size = plate.get("size")
+            self._plate_size = [float(s) for s in size] if size else None
+        return self._plate_size
+
     def summary(self) -> dict[str, Any] | None:
         """The table's axes and provenance, JSON-ready."""
         if self.table is None:

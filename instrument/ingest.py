@@ -118,19 +118,37 @@ def check_counts(waveforms: Sequence[Waveform], settings: Settings, prefix: str)
                       field=prefix)
 
 
-def check_metadata(waveforms: Sequence[Waveform], prefix: str) -> None:
+def check_metadata(waveforms: Sequence[Waveform], prefix: str,
+                   plate_size: Sequence[float] | None = None) -> None:
     """Check the metadata the analysis reads, whatever set it: an uploaded file's attributes,
     comments or properties become metadata unvalidated, and ``sphere_diameter`` groups the shots
-    and sizes the inversion, so it must be a diameter in metres as in a JSON shot."""
+    and sizes the inversion, so it must be a diameter in metres as in a JSON shot. ``x_m`` and
+    ``y_m`` place the position on the plate: finite metres, within ``plate_size`` when the
+    service knows the plate (its table's)."""
     for i, wf in enumerate(waveforms):
+        def field_of(key: str, i: int = i) -> str:
+            return f"{prefix}.{i}.metadata.{key}" if prefix else key
+
         d = wf.metadata.get("sphere_diameter")
-        if d is None:
-            continue
-        ok = isinstance(d, numbers.Real) and not isinstance(d, bool | np.bool_)
-        if not (ok and math.isfinite(float(d)) and 0.0 < float(d) <= 1.0):
-            field = f"{prefix}.{i}.metadata.sphere_diameter" if prefix else "sphere_diameter"
-            raise Problem(422, f"{field}: {d!r} is not a sphere diameter (allowed: a number of "
-                          "metres, 0 < D <= 1)", kind="invalid-input", field=field)
+        if d is not None:
+            ok = isinstance(d, numbers.Real) and not isinstance(d, bool | np.bool_)
+            if not (ok and math.isfinite(float(d)) and 0.0 < float(d) <= 1.0):
+                raise Problem(422, f"{field_of('sphere_diameter')}: {d!r} is not a sphere "
+                              "diameter (allowed: a number of metres, 0 < D <= 1)",
+                              kind="invalid-input", field=field_of("sphere_diameter"))
+        for axis, key in enumerate(("x_m", "y_m")):
+            v = wf.metadata.get(key)
+            if v is None:
+                continue
+            ok = isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_) \
+                and math.isfinite(float(v))
+            high = plate_size[axis] if plate_size else None
+            if ok and (high is None or 0.0 <= float(v) <= high):
+                continue
+            allowed = (f"0..{high:g} m, within the plate (its table's size {plate_size[0]:g} x "
+                       f"{plate_size[1]:g} m)" if high is not None else "a finite number of m")
+            raise Problem(422, f"{field_of(key)}: {v!r} is not a position on the plate "
+                          f"(allowed: {allowed})", kind="invalid-input", field=field_of(key))
 
 
 def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None, str | None]:
@@ -211,7 +229,7 @@ def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
 def measure_and_store(waveforms: Sequence[Waveform], store: Store, estimator: Estimator,
                       source: str, prefix: str) -> dict[str, Any]:
     """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
-    check_metadata(waveforms, prefix)
+    check_metadata(waveforms, prefix, estimator.plate_size())
     plate_id, position = location_of(waveforms, prefix)
     feats, aggregates = analyse(waveforms, prefix)
     try:
@@ -224,8 +242,8 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, estimator: Es
                           features=s["features"], shot_index=i)
                for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
     result = {"aggregates": aggregates, "estimate": estimate, "estimate_reason": reason}
-    coordinates = {k: waveforms[0].metadata.get(k) for k in ("x_m", "y_m")
-                   if isinstance(waveforms[0].metadata.get(k), int | float)}
+    coordinates = {k: float(waveforms[0].metadata[k]) for k in ("x_m", "y_m")
+                   if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export
         result["location"] = coordinates
     new_id, created_at = store.add(records, result, source=source, plate_id=plate_id,
@@ -250,6 +268,7 @@ def measurement_dict(record: Any) -> dict[str, Any]:
         "aggregates": record.result.get("aggregates", []),
         "estimate": record.result.get("estimate"),
         "estimate_reason": record.result.get("estimate_reason"),
+        "location": record.result.get("location"),
         "links": {"self": f"/v1/measurements/{record.id}",
                   "plot": f"/v1/measurements/{record.id}/plot.png"},
     }

@@ -156,3 +156,132 @@ def _summary(features: Mapping[str, Any]) -> str:
         lines.append("flags: " + (", ".join(map(str, flags)) if not isinstance(flags, str)
                                   else flags))
     return "\n".join(lines)
+
+
+_MAP_PARAMETERS = (("thickness_m", "plate thickness", "viridis"),
+                   ("distance_m", "distance to the nearest support", "magma"))
+
+
+def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: int = 560) -> bytes:
+    """Thickness and distance-to-support maps of a plate (``instrument.plate_map.build``).
+
+    Each position is a marker coloured by its median (mm, colour bar beside each panel): filled
+    when the answer is constrained; a hollow triangle pointing up ("at least") or down ("at most")
+    at its 95 % bound when it is one-sided; a grey cross when there is no answer. The located
+    support is drawn as a dashed line, the plate's outline when its size is known.
+    """
+    from matplotlib.lines import Line2D
+
+    positions = [p for p in plate_map.get("positions", [])
+                 if p.get("x_m") is not None and p.get("y_m") is not None]
+    size = plate_map.get("plate_size_m")
+    support = plate_map.get("support")
+    with _LOCK:
+        fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
+        FigureCanvasAgg(fig)
+        axes = fig.subplots(1, 2)
+        xs = [p["x_m"] * 1e3 for p in positions]
+        ys = [p["y_m"] * 1e3 for p in positions]
+        if size:
+            xlim, ylim = (0.0, size[0] * 1e3), (0.0, size[1] * 1e3)
+        elif positions:
+            pad = max(20.0, 0.1 * max(np.ptp(xs), np.ptp(ys)))
+            xlim = (min(xs) - pad, max(xs) + pad)
+            ylim = (min(ys) - pad, max(ys) + pad)
+        else:
+            xlim = ylim = (0.0, 1.0)
+        for ax, (key, label, cmap) in zip(axes, _MAP_PARAMETERS, strict=True):
+            values = []
+            for p in positions:
+                est = p.get(key) or {}
+                status = est.get("status")
+                if status == "constrained":
+                    values.append(est["median"] * 1e3)
+                elif status == "lower_bound_only" and est.get("ci95"):
+                    values.append(est["ci95"][0] * 1e3)
+                elif status == "upper_bound_only" and est.get("ci95"):
+                    values.append(est["ci95"][1] * 1e3)
+                else:
+                    values.append(np.nan)
+            finite = [v for v in values if np.isfinite(v)]
+            vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
+            if vmax - vmin < 1e-9:
+                vmin, vmax = vmin - 0.5, vmax + 0.5
+            scatter = None
+            for p, v, x, y in zip(positions, values, xs, ys, strict=True):
+                status = (p.get(key) or {}).get("status")
+                if not np.isfinite(v):
+                    ax.plot(x, y, "x", color="0.5", ms=9, mew=2)
+                    continue
+                marker = {"constrained": "o", "lower_bound_only": "^",
+                          "upper_bound_only": "v"}[status]
+                hollow = status != "constrained"
+                scatter = ax.scatter([x], [y], c=[v], cmap=cmap, vmin=vmin, vmax=vmax,
+                                     marker=marker, s=160, linewidths=2.5,
+                                     edgecolors="face" if hollow else "black",
+                                     facecolors="none" if hollow else None, zorder=3)
+                if hollow:  # a hollow marker takes its colour from its edge
+                    scatter.set_edgecolors(scatter.to_rgba(np.array([v])))
+            if scatter is not None:
+                bar = fig.colorbar(scatter, ax=ax)
+                bar.set_label(f"{label}, mm (median; bound if one-sided)")
+            if size:
+                ax.add_patch(_outline(size))
+            if support:
+                _draw_support(ax, support, xlim, ylim)
+            for p, x, y in zip(positions, xs, ys, strict=True):
+                if p.get("position"):
+                    ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
+                                xytext=(7, 7), fontsize=7, color="0.25")
+            ax.set_xlim(*xlim)
+            ax.set_ylim(*ylim)
+            ax.set_aspect("equal", adjustable="box")
+            ax.set_xlabel("x on the plate, mm")
+            ax.set_ylabel("y on the plate, mm")
+            ax.set_title(label)
+        handles = [Line2D([], [], marker="o", ls="", color="0.3", label="constrained (median)"),
+                   Line2D([], [], marker="^", ls="", mfc="none", color="0.3",
+                          label="at least (95 % bound)"),
+                   Line2D([], [], marker="v", ls="", mfc="none", color="0.3",
+                          label="at most (95 % bound)"),
+                   Line2D([], [], marker="x", ls="", color="0.5", label="no answer")]
+        if support:
+            handles.append(Line2D([], [], ls="--", color="crimson", label="located support"))
+        fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False,
+                   fontsize=8)
+        title = f"plate {plate_map.get('plate_id')}: {len(positions)} positions"
+        if support:
+            lo, hi = support["ci95_offset_m"]
+            title += (f"; support at {support['normal_angle_deg']:.1f} deg, offset "
+                      f"{support['offset_m'] * 1e3:.1f} mm (95 % {_mm(lo)}..{_mm(hi)} mm)")
+        elif plate_map.get("support_reason"):
+            title += f"; support not located: {plate_map['support_reason'][:70]}"
+        fig.suptitle(title, fontsize=10)
+        fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=0.88, wspace=0.25)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+        return buf.getvalue()
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value * 1e3:.1f}"
+
+
+def _outline(size: Sequence[float]) -> Any:
+    from matplotlib.patches import Rectangle
+
+    return Rectangle((0.0, 0.0), size[0] * 1e3, size[1] * 1e3, fill=False, ec="0.4", lw=1.2)
+
+
+def _draw_support(ax: Any, support: Mapping[str, Any], xlim: Sequence[float],
+                  ylim: Sequence[float]) -> None:
+    """The line x cos(theta) + y sin(theta) = offset across the axes (mm)."""
+    theta = np.radians(support["normal_angle_deg"])
+    c, s, off = np.cos(theta), np.sin(theta), support["offset_m"] * 1e3
+    if abs(s) < abs(c):  # more vertical than horizontal: x from y
+        yy = np.array(ylim, dtype=float)
+        xx = (off - yy * s) / c
+    else:
+        xx = np.array(xlim, dtype=float)
+        yy = (off - xx * c) / s
+    ax.plot(xx, yy, ls="--", color="crimson", lw=2, zorder=2)

@@ -103,6 +103,8 @@ class UploadFields(Strict):
     plate_id: str | None = Field(None, max_length=200)
     position: str | None = Field(None, max_length=200)
     sphere_diameter: float | None = Field(None, gt=0, le=1.0, description="m")
+    x_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, x, m")
+    y_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, y, m")
     units: str | None = Field(None, description="N or V, for files that do not say")
     calibration: float | None = Field(None, description="sensor sensitivity, N/V")
     sample_rate: float | None = Field(None, gt=0, le=1e10,
@@ -324,8 +326,8 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
             filename or "the upload")
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
-    meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter")
-            if getattr(opts, k) is not None}
+    meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter", "x_m",
+                                          "y_m") if getattr(opts, k) is not None}
     if filename:
         meta["source"] = filename  # the reader named it after the server's temporary file
     if meta:
@@ -354,7 +356,8 @@ async def list_measurements(
     items = [{"id": r.id, "created_at": r.created_at, "plate_id": r.plate_id,
               "position": r.position, "n_shots": r.n_shots, "source": r.source,
               "aggregates": r.result.get("aggregates", []),
-              "estimate": r.result.get("estimate")} for r in records]
+              "estimate": r.result.get("estimate"),
+              "location": r.result.get("location")} for r in records]
     next_url = None
     if more and records:
         from urllib.parse import urlencode
@@ -464,6 +467,18 @@ async def get_measurement(request: Request, measurement_id: MeasurementId) -> di
     if record is None:
         raise _missing(measurement_id)
     return measurement_dict(record)
+
+
+@router.delete("/measurements/{measurement_id}", status_code=204, response_class=Response,
+               responses={**ERRORS, 404: _PROBLEM}, summary="Remove a measurement and its shots")
+async def delete_measurement(request: Request, measurement_id: MeasurementId) -> Response:
+    """Removes the measurement and every shot of it in one transaction; 404 when there is none
+    (also the second time). The plate's map follows."""
+    from .app import service
+
+    if not await run_in_threadpool(service(request).store.delete, measurement_id):
+        raise _missing(measurement_id)
+    return Response(status_code=204)
 
 
 @router.get("/measurements/{measurement_id}/shots/{shot_index}",

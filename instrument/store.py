@@ -311,7 +311,42 @@ class Store:
                 raise
         return new_id, now
 
+    def delete(self, measurement_id: int) -> bool:
+        """Remove one measurement and its shots in one transaction; False when there was none."""
+        with self._writer():
+            c = self._conn
+            c.execute("BEGIN IMMEDIATE")
+            try:
+                c.execute("DELETE FROM shots WHERE measurement_id = ?", (measurement_id,))
+                gone = c.execute("DELETE FROM measurements WHERE id = ?",
+                                 (measurement_id,)).rowcount
+                c.execute("COMMIT")
+            except BaseException:
+                c.execute("ROLLBACK")
+                raise
+        return gone > 0
+
     # Reading ------------------------------------------------------------------------------
+    def plates(self) -> list[dict[str, Any]]:
+        """Every plate_id with its measurement and shot counts and its last activity (Unix s);
+        measurements without a plate_id are left out."""
+        with self._lock:
+            rows = self._conn.execute(
+                "SELECT plate_id, COUNT(*), SUM(n_shots), COUNT(DISTINCT position), "
+                "MAX(created_at) FROM measurements WHERE plate_id IS NOT NULL "
+                "GROUP BY plate_id ORDER BY plate_id").fetchall()
+        return [{"plate_id": r[0], "n_measurements": r[1], "n_shots": r[2],
+                 "n_positions": r[3], "last_activity": r[4]} for r in rows]
+
+    def all_of_plate(self, plate_id: str, limit: int) -> list[MeasurementRecord]:
+        """Every measurement of ``plate_id`` in id order, at most ``limit``."""
+        with self._lock:
+            rows = self._conn.execute(
+                "SELECT id, created_at, plate_id, position, n_shots, source, result "
+                "FROM measurements WHERE plate_id = ? ORDER BY id LIMIT ?",
+                (plate_id, limit)).fetchall()
+        return [_measurement(r) for r in rows]
+
     def count(self) -> int:
         with self._lock:
             return int(self._conn.execute("SELECT COUNT(*) FROM measurements").fetchone()[0])

@@ -76,7 +76,7 @@ def test_export_of_estimates_one_row_per_measurement(client: TestClient):
     shots = [w.to_dict() for w in signal_io.read(H5)]
     for i, s in enumerate(shots):
         s["metadata"] = {"plate_id": "P9", "position": "A1", "sphere_diameter": 9.53e-3,
-                         "shot": i, "extra": {"x_m": 0.25, "y_m": 0.457}}
+                         "shot": i, "x_m": 0.25, "y_m": 0.457}
     r = client.post("/v1/measurements", json={"shots": shots})
     assert r.status_code == 201, r.text
     r = client.get("/v1/measurements/export?kind=estimates&format=csv")

@@ -1,0 +1,77 @@
+"""REST routes for plates: the plates in the store, each plate's map and its picture.
+
+A plate is the measurements that share a ``plate_id``; those whose metadata carry ``x_m`` and
+``y_m`` are its scan. The map pools the shots of each position and inverts them once, then
+locates the clamped edge from the positions' distance answers (instrument.plate_map).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Path, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import Response
+
+from .problems import Problem
+from .routes_measurements import _PROBLEM, AUTH, ERRORS
+
+router = APIRouter(tags=["plates"], dependencies=[AUTH])
+MAP_POSITIONS_MAX = 5_000
+"""Measurements read for one map; a plate with more is refused with 422 (a limit, stated)."""
+
+PlateId = Path(..., min_length=1, max_length=200, description="the plate's plate_id")
+
+
+@router.get("/plates", responses=ERRORS, summary="Plates in the store, with counts")
+async def list_plates(request: Request) -> dict[str, Any]:
+    """Every plate_id with its measurement, shot and position counts and last activity (ISO
+    8601 UTC)."""
+    from .app import service
+    from .estimate_rows import iso_utc
+
+    plates = await run_in_threadpool(service(request).store.plates)
+    for p in plates:
+        p["last_activity"] = iso_utc(p["last_activity"])
+        p["links"] = {"map": f"/v1/plates/{p['plate_id']}/map",
+                      "map_png": f"/v1/plates/{p['plate_id']}/map.png"}
+    return {"items": plates}
+
+
+def _map(svc: Any, plate_id: str) -> dict[str, Any]:
+    from . import plate_map
+
+    records = svc.store.all_of_plate(plate_id, MAP_POSITIONS_MAX + 1)
+    if not records:
+        raise Problem(404, f"plate_id: no measurement of plate {plate_id!r}", kind="not-found",
+                      field="plate_id")
+    if len(records) > MAP_POSITIONS_MAX:
+        raise Problem(422, f"plate_id: more than {MAP_POSITIONS_MAX:,} measurements of plate "
+                      f"{plate_id!r}; a map reads at most {MAP_POSITIONS_MAX:,}", kind="limit",
+                      field="plate_id")
+    positions = plate_map.from_records(records, svc.estimator)
+    return plate_map.build(plate_id, positions, svc.estimator.plate_size())
+
+
+@router.get("/plates/{plate_id}/map", responses={**ERRORS, 404: _PROBLEM},
+            summary="A plate's map: positions, estimates, the located support")
+async def get_map(request: Request, plate_id: str = PlateId) -> dict[str, Any]:
+    """Per position: coordinates, shot count, thickness and distance (median, intervals,
+    status); then ``support`` (``normal_angle_deg``, ``offset_m``, ``ci95_offset_m``,
+    ``n_positions``, ``residual_m``) or null with ``support_reason``."""
+    from .app import service
+
+    return await run_in_threadpool(_map, service(request), plate_id)
+
+
+@router.get("/plates/{plate_id}/map.png", response_class=Response,
+            responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
+            summary="PNG of a plate's thickness and distance-to-support maps")
+async def get_map_png(request: Request, plate_id: str = PlateId) -> Response:
+    from .app import service
+    from .plotting import map_png
+
+    svc = service(request)
+    data = await run_in_threadpool(_map, svc, plate_id)
+    png = await run_in_threadpool(map_png, data)
+    return Response(png, media_type="image/png")
