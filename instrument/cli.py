@@ -18,6 +18,7 @@ COMMAND_MODULES: list[str] = [
     "cmd_serve",
     "cmd_table",
     "cmd_invert",
+    "cmd_map",
     "cmd_calibrate",
     "cmd_validate",
     "cmd_reproduce",

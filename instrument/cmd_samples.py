@@ -106,15 +106,82 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
     return truth_rows
 
 
+SCAN_PLATE = "SCAN-A"
+SCAN_THICKNESS = 3.0e-3
+SCAN_DIAMETER = 9.53e-3
+SCAN_POSITIONS = (("P01", 0.004, 0.120), ("P02", 0.008, 0.780), ("P03", 0.012, 0.300),
+                  ("P04", 0.016, 0.620), ("P05", 0.020, 0.450), ("P06", 0.025, 0.200),
+                  ("P07", 0.060, 0.700), ("P08", 0.200, 0.400))
+"""(name, x, y) in metres on the paper's plate; its clamped edge is x = 0, so x is the truth.
+Six positions lie within the ~30 mm where the edge changes the reflection (the critical
+distance, k = 0.2), spread along the edge so that its direction is told; two lie beyond."""
+SCAN_SHOTS = 3
+SCAN_SNR_DB = 40.0
+
+
+def make_scan(out_dir: Path, seed: int = 20261125) -> list[dict[str, Any]]:
+    """A simulated scan of positions near the clamped edge x = 0 of the paper's plate, as a lab
+    brings it: plain files that name nothing (``scan_<position>_shot<k>.csv``, force in N),
+    a campaign manifest (``campaign.csv``) that says which file is where, and ``truth.tsv``.
+
+    Each position is one simulation (the auto tier: Green's functions of the 3-D plate near the
+    edge) with the chain at distance x from the edge; its shots differ by their noise (40 dB,
+    1 % drift, 12 bits). The model's chain stands on the plate's centre line, so y only places
+    the position on the map; the free edges at y = 0 and y = 0.914 m are far from every y used.
+    """
+    from .table_build import measured_waveform
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    truth, manifest = [], []
+    for name, x, y in SCAN_POSITIONS:
+        scene = load_scene(None, [f"chain.diameter={SCAN_DIAMETER!r}",
+                                  f"plate.thickness={SCAN_THICKNESS!r}",
+                                  f"plate.distance_to_support={x!r}", "output.duration=auto"])
+        sim = simulate(scene)
+        reference = sim.truth["incident_peak_N"]
+        for k in range(SCAN_SHOTS):
+            noisy = degrade(sim.samples, SCAN_SNR_DB, rng, reference, drift=DRIFT, bits=BITS)
+            wave = measured_waveform(sim, samples=noisy)
+            signal_io.write(out_dir / f"scan_{name}_shot{k}.csv",
+                            Waveform(wave.t0, wave.dt, wave.samples, "N", None, {}))
+        manifest.append({"file": f"scan_{name}_shot*.csv", "plate_id": SCAN_PLATE,
+                         "position": name, "x_m": x, "y_m": y,
+                         "sphere_diameter_m": SCAN_DIAMETER})
+        truth.append({"position": name, "x_m": x, "y_m": y, "distance_m": x,
+                      "thickness_m": SCAN_THICKNESS, "plate_model": sim.plate_model,
+                      "tof_s": sim.truth["tof_s"], "arr": sim.truth["arr"]})
+    for name, rows in (("campaign.csv", manifest), ("truth.tsv", truth)):
+        with (out_dir / name).open("w", newline="", encoding="utf-8") as fh:
+            writer = csv.DictWriter(fh, fieldnames=list(rows[0]),
+                                    delimiter="\t" if name.endswith(".tsv") else ",")
+            writer.writeheader()
+            writer.writerows({k: (f"{v:.9g}" if isinstance(v, float) else v)
+                              for k, v in row.items()} for row in rows)
+    return truth
+
+
 def samples(
-    out: Path = typer.Option(Path("data_samples/waveforms"), "--out", help="Folder to write into."),
-    seed: int = typer.Option(20240601, "--seed", help="Noise seed (fixed: reproducible files)."),
+    out: Path = typer.Option(None, "--out", help="Folder to write into (default: "
+                             "data_samples/waveforms, or data_samples/scan with --scan)."),
+    seed: int = typer.Option(None, "--seed", help="Noise seed (fixed by default: reproducible "
+                             "files)."),
+    scan: bool = typer.Option(False, "--scan", help="Write the simulated scan near a clamped "
+                              "edge instead: plain files, campaign.csv, truth.tsv (about a "
+                              "minute)."),
 ) -> None:
-    """Regenerate the synthetic sample waveforms and their truth table (data_samples/waveforms/)."""
+    """Regenerate the synthetic sample waveforms and their truth table (data_samples/waveforms/),
+    or with --scan the simulated scan of a plate near its clamped edge (data_samples/scan/)."""
+    out = out or Path("data_samples/scan" if scan else "data_samples/waveforms")
     if out.exists() and not out.is_dir():
         typer.echo(f"error: --out: {str(out)!r} is a file; give a folder", err=True)
         raise typer.Exit(2)
-    rows = make_samples(out, seed)
+    if scan:
+        rows = make_scan(out, 20261125 if seed is None else seed)
+        typer.echo(f"wrote {len(rows)} positions x {SCAN_SHOTS} shots, campaign.csv, truth.tsv "
+                   f"to {out}")
+        return
+    rows = make_samples(out, 20240601 if seed is None else seed)
     typer.echo(f"wrote {len({r['file'] for r in rows})} files, {len(rows)} shots, truth.tsv "
                f"to {out}")
 

@@ -159,7 +159,7 @@ def _summary(features: Mapping[str, Any]) -> str:
 
 
 _MAP_PARAMETERS = (("thickness_m", "plate thickness", "viridis"),
-                   ("distance_m", "distance to the nearest support", "magma"))
+                   ("distance_m", "distance to the nearest support", "plasma"))
 
 
 def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: int = 560) -> bytes:
@@ -182,8 +182,9 @@ def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: in
         axes = fig.subplots(1, 2)
         xs = [p["x_m"] * 1e3 for p in positions]
         ys = [p["y_m"] * 1e3 for p in positions]
-        if size:
-            xlim, ylim = (0.0, size[0] * 1e3), (0.0, size[1] * 1e3)
+        if size:  # a margin, so that an edge and positions on it stay in sight
+            mx, my = 0.04 * size[0] * 1e3, 0.04 * size[1] * 1e3
+            xlim, ylim = (-mx, size[0] * 1e3 + mx), (-my, size[1] * 1e3 + my)
         elif positions:
             pad = max(20.0, 0.1 * max(np.ptp(xs), np.ptp(ys)))
             xlim = (min(xs) - pad, max(xs) + pad)
@@ -207,24 +208,27 @@ def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: in
             vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
             if vmax - vmin < 1e-9:
                 vmin, vmax = vmin - 0.5, vmax + 0.5
-            scatter = None
+            from matplotlib import colormaps
+            from matplotlib.cm import ScalarMappable
+            from matplotlib.colors import Normalize
+
+            mappable = ScalarMappable(Normalize(vmin, vmax), colormaps[cmap])
             for p, v, x, y in zip(positions, values, xs, ys, strict=True):
                 status = (p.get(key) or {}).get("status")
                 if not np.isfinite(v):
                     ax.plot(x, y, "x", color="0.5", ms=9, mew=2)
                     continue
-                marker = {"constrained": "o", "lower_bound_only": "^",
-                          "upper_bound_only": "v"}[status]
-                hollow = status != "constrained"
-                scatter = ax.scatter([x], [y], c=[v], cmap=cmap, vmin=vmin, vmax=vmax,
-                                     marker=marker, s=160, linewidths=2.5,
-                                     edgecolors="face" if hollow else "black",
-                                     facecolors="none" if hollow else None, zorder=3)
-                if hollow:  # a hollow marker takes its colour from its edge
-                    scatter.set_edgecolors(scatter.to_rgba(np.array([v])))
-            if scatter is not None:
-                bar = fig.colorbar(scatter, ax=ax)
-                bar.set_label(f"{label}, mm (median; bound if one-sided)")
+                colour = mappable.to_rgba(v)
+                if status == "constrained":
+                    ax.scatter([x], [y], color=[colour], marker="o", s=160, edgecolors="black",
+                               linewidths=1.0, zorder=3)
+                else:  # hollow: the colour is the edge's
+                    ax.scatter([x], [y], marker="^" if status == "lower_bound_only" else "v",
+                               s=170, facecolors="none", edgecolors=[colour], linewidths=2.5,
+                               zorder=3)
+            if finite:
+                bar = fig.colorbar(mappable, ax=ax)
+                bar.set_label(f"{label.split()[0]}, mm")
             if size:
                 ax.add_patch(_outline(size))
             if support:
@@ -239,7 +243,7 @@ def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: in
             ax.set_xlabel("x on the plate, mm")
             ax.set_ylabel("y on the plate, mm")
             ax.set_title(label)
-        handles = [Line2D([], [], marker="o", ls="", color="0.3", label="constrained (median)"),
+        handles = [Line2D([], [], marker="o", ls="", color="0.3", label="median (constrained)"),
                    Line2D([], [], marker="^", ls="", mfc="none", color="0.3",
                           label="at least (95 % bound)"),
                    Line2D([], [], marker="v", ls="", mfc="none", color="0.3",
