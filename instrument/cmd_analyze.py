@@ -375,7 +375,7 @@ def analyze(
             continue
         rows.extend(file_rows)
         calibration_used = calibration_used or used
-    if calibration is not None and jobs and not calibration_used:
+    if calibration is not None and jobs and not calibration_used and not errors:
         errors.append({"source": "--calibration", "error": "no file holds volts without a "
                        "calibration of its own; --calibration was not used"})
     skipped = [{"source": r["source"], "channel": r["channel"], "reason": r["skipped"]}
