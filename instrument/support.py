@@ -11,9 +11,11 @@ gap between its 68 % and 95 % bounds as the deviation. The fit minimises the sum
 normalised violations (a chi-square); the 95 % interval of the offset is where its profile,
 minimised over the angle, rises by 3.84 above the minimum.
 
-The positions cannot tell where the edge is when fewer than three answers say anything, none of
-them is constrained (all far from any support), or they lie on one line (the edge and its mirror
-image fit equally well); :func:`locate` then returns None and the reason.
+The positions cannot tell where the edge is when fewer than three answers say anything, fewer
+than two are constrained (all far from any support), they lie on one line, or a line on their
+other side (the edge's mirror image) fits within the 95 % chi-square level of the best, as it does
+for positions standing along the edge at one distance; :func:`locate` then returns None and the
+reason.
 """
 
 from __future__ import annotations
@@ -29,9 +31,8 @@ from scipy import optimize
 SIGMA_FLOOR_M = 0.5e-3
 """Smallest deviation given to an answer: the table's own interpolation error is of this size."""
 CHI2_95_1DOF = 3.841458820694124
-COLLINEAR_RATIO = 0.05
-"""Positions whose spread across their best line is under this fraction of the spread along it
-are collinear for this purpose."""
+COLLINEAR_M = 1e-4
+"""Positions whose spread across their best line is under this (0.1 mm) lie on one line."""
 
 
 @dataclass(frozen=True)
@@ -124,13 +125,19 @@ def locate(positions: Sequence[Mapping[str, Any]]) -> tuple[SupportFit | None, s
     xy = np.array([[a.x, a.y] for a in data])
     centred = xy - xy.mean(axis=0)
     spread = np.linalg.svd(centred, compute_uv=False)
-    if spread[1] <= COLLINEAR_RATIO * spread[0]:
+    if spread[1] <= COLLINEAR_M:
         return None, ("the positions lie on one line: the edge and its mirror image across it "
                       "fit equally well; add a position off that line")
     span = float(np.abs(xy).max() + max(a.centre for a in data) + 1.0)
     grid = np.radians(np.arange(0.0, 360.0, 2.0))
     scores = [(_best_offset(t, data, span), t) for t in grid]
-    (offset, _), theta = min(scores, key=lambda item: item[0][1])
+    (offset, best), theta = min(scores, key=lambda item: item[0][1])
+    mirror = min(score for (_o, score), t in scores
+                 if abs((t - theta + math.pi) % (2 * math.pi) - math.pi) > math.pi / 2)
+    if mirror - best < CHI2_95_1DOF:
+        return None, ("the positions cannot tell on which side of them the edge lies: they "
+                      "stand along it at one distance, and its mirror image fits as well; add "
+                      "positions at other distances from it")
     res = optimize.minimize(lambda p: _chi2(p[0], p[1], data), [theta, offset],
                             method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-9})
     theta, offset = float(res.x[0]), float(res.x[1])
