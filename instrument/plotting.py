@@ -158,8 +158,8 @@ def _summary(features: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-_MAP_PARAMETERS = (("thickness_m", "plate thickness", "viridis"),
-                   ("distance_m", "distance to the nearest support", "plasma"))
+_MAP_PARAMETERS = (("thickness_m", "plate thickness", "thickness", "viridis"),
+                   ("distance_m", "distance to the nearest support", "distance", "plasma"))
 
 
 def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: int = 560) -> bytes:
@@ -191,7 +191,7 @@ def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: in
             ylim = (min(ys) - pad, max(ys) + pad)
         else:
             xlim = ylim = (0.0, 1.0)
-        for ax, (key, label, cmap) in zip(axes, _MAP_PARAMETERS, strict=True):
+        for ax, (key, label, short, cmap) in zip(axes, _MAP_PARAMETERS, strict=True):
             values = []
             for p in positions:
                 est = p.get(key) or {}
@@ -228,7 +228,7 @@ def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: in
                                zorder=3)
             if finite:
                 bar = fig.colorbar(mappable, ax=ax)
-                bar.set_label(f"{label.split()[0]}, mm")
+                bar.set_label(f"{short}, mm")
             if size:
                 ax.add_patch(_outline(size))
             if support:
