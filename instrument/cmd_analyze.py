@@ -169,8 +169,7 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
     used = used and own is None  # `used` tells whether --calibration served
     waves, skipped = signal_channels.select(waves, choice.channels or None, choice.group,
                                             path.name)
-    sources = [(" ".join(f"{FLAGS[k]} {v}" for k, v in choice.metadata.items()),
-                choice.metadata)] if choice.metadata else []
+    sources = [(FLAGS[k], {k: v}) for k, v in choice.metadata.items()]
     if row is not None and row.metadata:
         sources.append((row.where, row.metadata))
     rows: list[dict[str, Any]] = [{"source": str(path), "channel": s["channel"],

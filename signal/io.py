@@ -22,9 +22,10 @@ plus ``dataset=`` (HDF5) and ``group=``, ``channel=`` (TDMS); :data:`READER_OPTI
 An unknown option is an error naming it. A file a parser cannot read raises
 :class:`~.errors.WaveformError` (field ``file`` unless a field is known), never the parser's
 own exception. Metadata identifiers (``plate_id``, ``position``, ``shot`` labels) stay text;
-``t0``, ``dt``, ``sample_rate`` and ``calibration`` must be numbers; ``sphere_diameter`` is a
-number when it reads as one (else left as given, for the consumer to name); other text values
-are decoded only when they are JSON objects, lists, booleans or null. Layouts:
+``t0``, ``dt``, ``sample_rate`` and ``calibration`` must be numbers; ``sphere_diameter``,
+``x_m`` and ``y_m`` are numbers when they read as one (else left as given, for the consumer to
+name); other text values are decoded only when they are JSON objects, lists, booleans or null.
+Layouts:
 
 csv
     Text tables as scopes, DAQ programs and spreadsheets write them (Tektronix, Keysight,
@@ -221,7 +222,7 @@ def _decode(value: Any, key: str | None = None) -> Any:
         value = value.decode("utf-8", "replace")
     if key in IDENTIFIERS or key == "shot":
         return value.strip() if isinstance(value, str) else value
-    if key == "sphere_diameter" and isinstance(value, str):
+    if key in ("sphere_diameter", "x_m", "y_m") and isinstance(value, str):
         try:  # a number when it is one; anything else is left for the consumer to name
             return float(value)
         except ValueError:

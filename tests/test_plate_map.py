@@ -207,3 +207,21 @@ def test_map_from_the_services_store(scanned, tmp_path):
     res = CliRunner().invoke(build_cli(), ["map", str(store), "--plate-id", "SCAN-A", "--json"])
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)["support"]["n_positions"] >= 6
+
+
+@pytest.mark.slow
+def test_a_freshly_simulated_scan_locates_the_edge_within_10_mm(tmp_path):
+    """The scan simulated anew (about a minute): the bundled files are what this produces."""
+    from solitonde.instrument.cmd_samples import make_scan
+
+    truth = {row["position"]: row for row in make_scan(tmp_path / "scan", seed=7)}
+    est = tmp_path / "est.csv"
+    run = CliRunner().invoke
+    res = run(build_cli(), ["analyze", "--manifest", str(tmp_path / "scan" / "campaign.csv"),
+                            "--estimates-out", str(est)])
+    assert res.exit_code == 0, res.output
+    res = run(build_cli(), ["map", str(est), "--plate-id", "SCAN-A", "--json"])
+    plate_map = json.loads(res.stdout)
+    assert plate_map["support"] is not None, plate_map["support_reason"]
+    for p in plate_map["positions"]:
+        assert abs(p["distance_to_located_support_m"] - truth[p["position"]]["x_m"]) < TOLERANCE_M
