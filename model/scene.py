@@ -19,7 +19,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationEr
 
 from .contact import hertz_sphere_flat, hertz_sphere_sphere, plate_impedance, sphere_mass
 from .errors import SceneError
-from .materials import MATERIALS, Material, get_material
+from .materials import Material, material_of, properties_from
 
 STANDARD_GRAVITY = 9.80665  # m/s^2
 
@@ -64,10 +64,12 @@ def _integer(value: Any) -> Any:
     return value
 
 
-def _material_name(value: Any) -> Any:
-    if isinstance(value, str) and value not in MATERIALS:
-        raise ValueError(f"unknown material {value!r}; known: {', '.join(sorted(MATERIALS))}")
-    return value
+def _material(value: Any) -> Any:
+    """A library name stays a name; a mapping of properties is checked and kept as a mapping."""
+    if isinstance(value, str):
+        properties_from(value)  # raises for an unknown name, listing the known ones
+        return value
+    return properties_from(value)
 
 
 def _duration(value: Any) -> Any:
@@ -110,7 +112,8 @@ def _plate_side(value: Any) -> Any:
 Number = Annotated[float, BeforeValidator(_number)]
 PlateSide = Annotated[float, BeforeValidator(_plate_side)]
 Integer = Annotated[int, BeforeValidator(_integer)]
-MaterialName = Annotated[str, BeforeValidator(_material_name)]
+MaterialName = Annotated[str | dict[str, str | float], BeforeValidator(_material)]
+"""A material: a name from the library, or ``{name, youngs_modulus, poisson_ratio, density}``."""
 
 
 def _fail(field: str, message: str) -> ValueError:
@@ -131,7 +134,8 @@ class ChainSpec(_Section):
         20, ge=1, le=100_000, description="spheres in the chain (striker not counted)"
     )
     diameter: Number = Field(9.53e-3, gt=0.0, le=1.0, description="sphere diameter D, m")
-    material: MaterialName = Field("steel_440c", description="sphere material key")
+    material: MaterialName = Field("steel_440c", description="sphere material: a library name "
+                                   "or {name, youngs_modulus, poisson_ratio, density} (SI)")
     sensor_index: Integer = Field(
         7, ge=1, description="sensor particle, counted from the top, 1-based"
     )
@@ -174,7 +178,8 @@ class PlateSpec(_Section):
     size: tuple[PlateSide, PlateSide] = Field(
         (0.914, 0.914), description="in-plane size (along the centre line, across), m"
     )
-    material: MaterialName = Field("al_6061", description="plate material key")
+    material: MaterialName = Field("al_6061", description="plate material: a library name or "
+                                   "{name, youngs_modulus, poisson_ratio, density} (SI)")
     supports: Literal["opposite_edges", "all_edges", "none"] = Field(
         "opposite_edges", description="which edges are clamped"
     )
@@ -304,11 +309,11 @@ class Scene(_Section):
     # Derived physical quantities -------------------------------------------------------------
     @property
     def sphere_material(self) -> Material:
-        return get_material(self.chain.material, "chain.material")
+        return material_of(self.chain.material, "chain.material")
 
     @property
     def plate_material(self) -> Material:
-        return get_material(self.plate.material, "plate.material")
+        return material_of(self.plate.material, "plate.material")
 
     @property
     def sphere_mass(self) -> float:
