@@ -34,6 +34,11 @@ class ShotMetadata(Strict):
                               "plate, x in the plate's own frame, m (within the plate's size "
                               "when the service's table states it)")
     y_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position, y, m")
+    table: str | None = Field(None, max_length=64, description="the model table to invert "
+                              "against, by id (GET /v1/tables); needed when several could serve")
+    plate_material: str | None = Field(None, max_length=80, description="the plate's material "
+                                       "(a library name): picks the table of that family, and "
+                                       "a named table of another family is refused")
     extra: dict[str, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
                                                  "not the fields above, nor 'source' (a 422)")
@@ -201,6 +206,9 @@ class InvertIn(Strict):
 
     inputs: list[InversionInput] = Field(min_length=1, max_length=16)
     calibration: Calibration | None = None
+    table: str | None = Field(None, max_length=64, description="the model table, by id")
+    plate_material: str | None = Field(None, max_length=80,
+                                       description="the plate's material (a library name)")
 
 
 class InvertOut(BaseModel):

@@ -22,11 +22,11 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from . import problems
 from .api_models import Health, Ready, Strict, TableOut, request_models
-from .estimates import Estimator
 from .ingest import warm_up
 from .problems import Problem
 from .settings import Settings
 from .store import Store
+from .table_set import TableSet
 from .uploads import UploadDir
 
 log = logging.getLogger("solitonde.instrument")
@@ -53,7 +53,7 @@ class Service:
 
     settings: Settings
     store: Store
-    estimator: Estimator
+    estimator: TableSet
     uploads: UploadDir
     shot_model: type[Strict]
     measurement_model: type[Strict]
@@ -135,9 +135,11 @@ def build_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         store = Store(settings.store_path, settings.store_synchronous)
         log.info("feature extractor ready in %.2f s", warm_up())
-        estimator = Estimator(settings.table_path)
+        estimator = TableSet([settings.table_path, *settings.table_paths])
         if not estimator.loaded:
             log.warning("serving without estimates: %s", estimator.reason)
+        else:
+            log.info("model tables: %s", ", ".join(estimator.estimators))
         svc = Service(settings, store, estimator, UploadDir(), shot_model, measurement_model,
                       anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS))
         app.state.service = svc
@@ -195,6 +197,13 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         loaded = svc.estimator.loaded
         return {"ready": True, "store": str(svc.settings.store_path), "table_loaded": loaded,
                 "estimates": loaded, "reason": None if loaded else svc.estimator.reason}
+
+    @app.get("/v1/tables", tags=["service"], dependencies=[routes_measurements.AUTH])
+    async def tables(request: Request) -> dict[str, Any]:
+        """Every loaded model table: id, plate family (materials with their properties, plate
+        size, supports, gravity, chain, striker), sphere sizes and axes' ranges."""
+        svc = service(request)
+        return {"items": svc.estimator.listing(), "problems": svc.estimator.problems}
 
     @app.get("/v1/table", tags=["service"], response_model=TableOut,
              dependencies=[routes_measurements.AUTH])

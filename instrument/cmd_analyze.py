@@ -306,7 +306,11 @@ def analyze(
     estimates_out: Path | None = typer.Option(None, "--estimates-out", help="Write the "
                                               "estimates, one row per plate and position, to a "
                                               ".csv or .parquet file (implies --invert)."),
-    table: Path | None = typer.Option(None, "--table", help="Model table for --invert."),
+    table: list[Path] = typer.Option([], "--table", help="Model table (or folder of tables) for "
+                                     "--invert; repeat for several plate families."),
+    plate_material: str | None = typer.Option(None, "--plate-material", help="The plate's "
+                                              "material (a library name): --invert uses the "
+                                              "table of that family, refuses another."),
     calibration_file: Path | None = typer.Option(None, "--calibration-file", help="Calibration "
                                                  "JSON (solitonde calibrate) for --invert."),
     plots: Path | None = typer.Option(None, "--plots", help="Folder for one PNG per shot (trace "
@@ -392,11 +396,12 @@ def analyze(
         from .table import TableError
 
         try:
-            estimates = estimates_for_aggregates(aggs, table, calibration_file)
+            estimates = estimates_for_aggregates(aggs, table, calibration_file, plate_material)
         except CalibrationError as exc:
             errors.append({"source": str(calibration_file), "error": str(exc)})
         except (TableError, ValueError, OSError) as exc:  # table unreadable
-            errors.append({"source": str(table_path(table)), "error": str(exc)})
+            errors.append({"source": ", ".join(map(str, table)) or str(table_path(None)),
+                           "error": str(exc)})
         for est in estimates or []:
             if est.get("error"):  # an inversion that failed (e.g. a size the table lacks)
                 errors.append({"source": f"estimate for plate {est['plate_id']}, position "

@@ -19,7 +19,8 @@ import typer
 from .calibration import Calibration, CalibrationError
 from .cmd_table import DEFAULT_TABLE_PATH
 from .inversion import Estimate, FeatureSummary, InversionError, invert
-from .table import ModelTable, TableError
+from .table import TableError
+from .table_set import TableChoiceError, TableSet
 
 
 def table_path(option: Path | None) -> Path:
@@ -28,6 +29,17 @@ def table_path(option: Path | None) -> Path:
         return option
     env = os.environ.get("SOLITONDE_TABLE")
     return Path(env) if env else DEFAULT_TABLE_PATH
+
+
+def table_set(options: Sequence[Path] | None) -> TableSet:
+    """The tables ``--table`` names (files or folders, repeatable), else the default one.
+
+    Raises TableError when one cannot be loaded (a command line names only tables it means)."""
+    paths = list(options or []) or [table_path(None)]
+    tables = TableSet(paths)
+    if tables.problems:
+        raise TableError("table", "; ".join(tables.problems))
+    return tables
 
 
 def _fail(message: str) -> None:
@@ -60,13 +72,16 @@ def describe(est: Estimate) -> str:
     return "\n".join(lines)
 
 
-def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]], table_file: Path | None,
-                             calibration_file: Path | None) -> list[dict[str, Any]]:
-    """Estimates per (plate_id, position) from `analyze` aggregates, sphere sizes combined.
+def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]],
+                             table_files: Sequence[Path] | None,
+                             calibration_file: Path | None,
+                             plate_material: str | None = None) -> list[dict[str, Any]]:
+    """Estimates per (plate_id, position) from `analyze` aggregates, sphere sizes combined, each
+    against the table of its family (instrument.table_set's rule).
 
-    Raises TableError/CalibrationError when the table or calibration cannot be read.
+    Raises TableError/CalibrationError when a table or the calibration cannot be read.
     """
-    table = ModelTable.load(table_path(table_file))
+    tables = table_set(table_files)
     cal = Calibration.load(calibration_file) if calibration_file else None
     groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
     for a in aggs:
@@ -98,7 +113,13 @@ def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]], table_file: Path
             row["estimate"] = None
         else:
             try:
-                row["estimate"] = invert(table, inputs, cal).to_dict()
+                chosen = tables.choose([i.diameter_m for i in inputs], None, plate_material)
+                row["estimate"] = {**invert(chosen.table, inputs, cal).to_dict(),
+                                   "table": chosen.table.table_id}
+            except TableChoiceError as exc:
+                row["estimate"] = None
+                flag = "--plate-material" if exc.field == "plate_material" else "--table"
+                row["error"] = f"{flag}: {exc.message}"
             except (InversionError, TableError) as exc:
                 row["estimate"] = None
                 row["error"] = str(exc)
@@ -114,8 +135,12 @@ def invert_command(
     tof_std: list[float] = typer.Option([], "--tof-std", help="shot scatter of TOF, s"),
     arr_std: list[float] = typer.Option([], "--arr-std", help="shot scatter of ARR"),
     shots: list[int] = typer.Option([], "--shots", help="number of shots averaged"),
-    table: Path | None = typer.Option(None, "--table", help="model table (default: "
-                                      "$SOLITONDE_TABLE, else data_samples/default_table.h5)"),
+    table: list[Path] = typer.Option([], "--table", help="model table or folder of tables "
+                                     "(repeat for several plate families; default: "
+                                     "$SOLITONDE_TABLE, else data_samples/default_table.h5)"),
+    plate_material: str | None = typer.Option(None, "--plate-material", help="the plate's "
+                                              "material (a library name): picks the table of "
+                                              "that family; another family is refused"),
     calibration: Path | None = typer.Option(None, "--calibration", help="calibration JSON from "
                                             "`solitonde calibrate`"),
     posterior: bool = typer.Option(False, "--posterior", help="include the 2-D posterior (JSON)"),
@@ -133,9 +158,14 @@ def invert_command(
         items = [FeatureSummary(diameter[i], tof[i], arr[i],
                                 tof_std[i] if tof_std else None, arr_std[i] if arr_std else None,
                                 shots[i] if shots else 1) for i in range(n)]
-        model = ModelTable.load(table_path(table))
+        tables = table_set(table)
+        chosen = tables.choose(diameter, None, plate_material)
         cal = Calibration.load(calibration) if calibration else None
-        est = invert(model, items, cal, return_posterior=posterior)
+        est = invert(chosen.table, items, cal, return_posterior=posterior)
+    except TableChoiceError as exc:
+        flag = "--plate-material" if exc.field == "plate_material" else "--table"
+        _fail(f"{flag}: {exc.message}")
+        return
     except (InversionError, TableError, CalibrationError) as exc:
         _fail(str(exc))
         return

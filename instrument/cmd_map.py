@@ -69,14 +69,14 @@ def map_command(
     out: Path | None = typer.Option(None, "--out", help="Write the map as PNG."),
     as_json: bool = typer.Option(False, "--json", help="Print the map JSON (positions, "
                                  "support)."),
-    table: Path | None = typer.Option(None, "--table", help="Model table: the plate's size "
-                                      "for the outline and, for a store, the inversion "
-                                      "(default: $SOLITONDE_TABLE, else the bundled table)."),
+    table: list[Path] = typer.Option([], "--table", help="Model table(s): the plate's size "
+                                     "for the outline and, for a store, the inversion "
+                                     "(default: $SOLITONDE_TABLE, else the bundled table)."),
 ) -> None:
     """Map a plate: thickness and distance to support at each position, the support located."""
     from .cmd_invert import table_path
-    from .estimates import Estimator
     from .plate_map import build
+    from .table_set import TableSet
 
     suffix = source.suffix.lower()
     if not source.is_file():
@@ -88,7 +88,7 @@ def map_command(
         _fail(f"--out: {out.name} must end in .png")
     if out is not None and out.is_dir():
         _fail(f"--out: {str(out)!r} is a folder; give a file")
-    estimator = Estimator(table_path(table))
+    estimator = TableSet(table or [table_path(None)])
     if suffix in STORE_SUFFIXES and not estimator.loaded:
         _fail(f"--table: {estimator.reason}")
     positions = (_from_store(source, plate_id, estimator) if suffix in STORE_SUFFIXES

@@ -45,9 +45,10 @@ def register(app: typer.Typer) -> None:
         host: str = typer.Option("127.0.0.1", help="address to bind (loopback by default)"),
         port: int = typer.Option(8000, min=1, max=65535, help="TCP port"),
         workers: int = typer.Option(1, min=1, max=64, help="uvicorn worker processes"),
-        table: Path | None = typer.Option(
-            None, help=f"model table for estimates (default: $SOLITONDE_TABLE, else "
-                       f"{DEFAULT_TABLE} when it exists; without one, no estimates)"),
+        table: list[Path] = typer.Option(
+            [], help=f"model table for estimates, or a folder of them; repeat for several plate "
+                     f"families (default: $SOLITONDE_TABLE, else {DEFAULT_TABLE} when it "
+                     "exists; without one, no estimates)"),
         store: Path | None = typer.Option(
             None, help=f"SQLite measurement store (default: $SOLITONDE_STORE, else "
                        f"{DEFAULT_STORE})"),
@@ -57,12 +58,13 @@ def register(app: typer.Typer) -> None:
         import uvicorn
 
         env_table = os.environ.get("SOLITONDE_TABLE") or None
-        table_path = table or (Path(env_table) if env_table else None)
+        table_path = table[0] if table else (Path(env_table) if env_table else None)
         if table_path is None and DEFAULT_TABLE.is_file():
             table_path = DEFAULT_TABLE
         try:
             settings = Settings.from_env(host=host, port=port, table_path=table_path,
-                                         store_path=store)
+                                         store_path=store,
+                                         table_paths=tuple(table[1:]) if table else None)
         except SettingsError as exc:
             typer.echo(f"error: {exc}", err=True)
             raise typer.Exit(2) from None
@@ -74,7 +76,12 @@ def register(app: typer.Typer) -> None:
         except StoreError as exc:
             typer.echo(f"error: store: {exc}", err=True)
             raise typer.Exit(2) from None
-        if settings.table_path is None or not settings.table_path.is_file():
+        given = [p for p in (settings.table_path, *settings.table_paths) if p is not None]
+        for p in given[1:]:
+            if not p.exists():
+                typer.echo(f"error: --table: no such file or folder: {p}", err=True)
+                raise typer.Exit(2)
+        if not given or not given[0].exists():
             where = settings.table_path or DEFAULT_TABLE
             typer.echo(f"warning: no model table at {where}: serving without estimates "
                        "(measurements come back with \"estimate\": null)", err=True)

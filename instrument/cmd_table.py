@@ -8,6 +8,7 @@ t = 1.5..6 mm, L = 0..457 mm dense within 200 mm).
 from __future__ import annotations
 
 import json
+import re
 import shlex
 import sys
 from pathlib import Path
@@ -82,8 +83,13 @@ def build_command(
     as_json: bool = typer.Option(False, "--json", help="print the build report as JSON"),
     overwrite: bool = typer.Option(False, "--overwrite", help="replace an existing table file "
                                    "(without --out: the bundled table)"),
+    table_id: str | None = typer.Option(None, "--id", help="the table's id, which measurements "
+                                        "and the service name it by (default: the file's stem)"),
 ) -> None:
     """Simulate the sweep (resuming an interrupted build) and write the table atomically."""
+    if table_id is not None and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", table_id):
+        _fail(f"--id: {table_id!r} is not an id (allowed: 1-64 letters, digits, '.', '_', '-', "
+              "starting with a letter or digit)")
     if out.is_file() and not partial_path(out).exists() and not overwrite:
         which = " (the bundled table: --out was not given)" if out == DEFAULT_TABLE_PATH else ""
         _fail(f"--out: {str(out)!r} exists{which}; give another --out, or --overwrite to "
@@ -99,7 +105,7 @@ def build_command(
         )
         command = "solitonde " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
-                             command=command)
+                             command=command, table_id=table_id)
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return

@@ -19,10 +19,11 @@ from solitonde.signal.errors import WaveformError
 from solitonde.signal.waveform import Waveform
 
 from .api_models import ShotMetadata
-from .estimates import Estimator, _jsonable
+from .estimates import _jsonable
 from .problems import Problem
 from .settings import Settings
 from .store import MeasurementRecord, ShotRecord, Store
+from .table_set import TableChoiceError, TableSet
 
 
 def waveform_error(exc: WaveformError, prefix: str) -> Problem:
@@ -226,22 +227,45 @@ def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
             "t0": wf.t0, "dt": wf.dt, "units": wf.units, "features": _to_dict(features)}
 
 
-def measure_and_store(waveforms: Sequence[Waveform], store: Store, estimator: Estimator,
+def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -> Any:
+    """The table for these shots (their ``table`` / ``plate_material`` and sphere sizes), or
+    None when the service has none; a 422 naming ``metadata.table`` (or ``plate_material``)
+    when none fits or several could serve."""
+    if not tables.loaded:
+        return None
+    meta = waveforms[0].metadata
+    diameters = {float(w.metadata["sphere_diameter"]) for w in waveforms
+                 if w.metadata.get("sphere_diameter") is not None}
+    try:
+        return tables.choose(diameters, meta.get("table"), meta.get("plate_material"))
+    except TableChoiceError as exc:
+        field = f"metadata.{exc.field}"
+        raise Problem(422, f"{field}: {exc.message}", kind="invalid-input", field=field) from None
+
+
+def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: TableSet,
                       source: str, prefix: str) -> dict[str, Any]:
     """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
-    check_metadata(waveforms, prefix, estimator.plate_size())
+    chosen = choose_table(waveforms, tables, prefix)
+    check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
     plate_id, position = location_of(waveforms, prefix)
     feats, aggregates = analyse(waveforms, prefix)
-    try:
-        estimate, reason = estimator.estimate(aggregates)
-    except Exception as exc:  # an inversion that refuses these features (e.g. out of range)
-        estimate, reason = None, f"inversion failed: {exc}"
+    if chosen is None:
+        estimate, reason = None, tables.reason
+    else:
+        try:
+            estimate, reason = chosen.estimate(aggregates)
+        except Exception as exc:  # an inversion that refuses these features (e.g. out of range)
+            estimate, reason = None, f"inversion failed: {exc}"
+        if estimate is not None:
+            estimate = {**estimate, "table": chosen.table.table_id}
     shots = [shot_out(i, wf, f) for i, (wf, f) in enumerate(zip(waveforms, feats, strict=True))]
     records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
                           calibration=wf.calibration, metadata=s["metadata"],
                           features=s["features"], shot_index=i)
                for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
-    result = {"aggregates": aggregates, "estimate": estimate, "estimate_reason": reason}
+    result = {"aggregates": aggregates, "estimate": estimate, "estimate_reason": reason,
+              "table": chosen.table.table_id if chosen else None}
     coordinates = {k: float(waveforms[0].metadata[k]) for k in ("x_m", "y_m")
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export

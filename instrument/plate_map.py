@@ -59,8 +59,11 @@ def from_records(records: Sequence[Any], estimator: Any) -> list[dict[str, Any]]
     out = []
     for (name, x, y), members in groups.items():
         pooled = pool([a for m in members for a in m.result.get("aggregates", [])])
+        table = next((m.result["table"] for m in reversed(members) if m.result.get("table")),
+                     None)
         try:
-            estimate, reason = estimator.estimate(pooled)
+            estimate, reason = estimator.estimate(pooled, table=table) if table else \
+                estimator.estimate(pooled)
         except Exception as exc:  # an inversion refusing these features: say why, go on
             estimate, reason = None, f"inversion failed: {exc}"
         out.append(position_entry(name, x, y, sum(m.n_shots for m in members), estimate, reason,

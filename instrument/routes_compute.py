@@ -27,6 +27,7 @@ from .api_models import (
 from .estimates import EstimateUnavailable, _jsonable
 from .problems import Problem, from_pydantic
 from .routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
+from .table_set import TableChoiceError
 
 router = APIRouter(tags=["compute"], dependencies=[AUTH])
 
@@ -70,10 +71,16 @@ async def invert(request: Request) -> dict[str, Any]:
     inputs = [i.model_dump() for i in payload.inputs]
     calibration = payload.calibration.model_dump(exclude_none=True) if payload.calibration \
         else None
+    if not svc.estimator.loaded:
+        raise Problem(503, f"table: {svc.estimator.reason}", kind="no-table", field="table")
     try:
-        estimate = await run_in_threadpool(svc.estimator.invert, inputs, calibration)
+        estimate = await run_in_threadpool(svc.estimator.invert, inputs, calibration,
+                                           payload.table, payload.plate_material)
     except EstimateUnavailable as exc:
         raise Problem(503, f"table: {exc}", kind="no-table", field="table") from None
+    except TableChoiceError as exc:
+        raise Problem(422, f"{exc.field}: {exc.message}", kind="invalid-input",
+                      field=exc.field) from None
     except ValueError as exc:  # InversionError, TableError, CalibrationError: they name a field
         field = getattr(exc, "field", None) or "inputs"
         if field in InversionInput.model_fields:

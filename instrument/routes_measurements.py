@@ -105,6 +105,8 @@ class UploadFields(Strict):
     sphere_diameter: float | None = Field(None, gt=0, le=1.0, description="m")
     x_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, x, m")
     y_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, y, m")
+    table: str | None = Field(None, max_length=64, description="model table id")
+    plate_material: str | None = Field(None, max_length=80, description="plate material name")
     units: str | None = Field(None, description="N or V, for files that do not say")
     calibration: float | None = Field(None, description="sensor sensitivity, N/V")
     sample_rate: float | None = Field(None, gt=0, le=1e10,
@@ -327,7 +329,8 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
     meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter", "x_m",
-                                          "y_m") if getattr(opts, k) is not None}
+                                          "y_m", "table", "plate_material")
+            if getattr(opts, k) is not None}
     if filename:
         meta["source"] = filename  # the reader named it after the server's temporary file
     if meta:

@@ -22,6 +22,7 @@ ENV_VARS: dict[str, str] = {
     "SOLITONDE_HOST": "host",
     "SOLITONDE_PORT": "port",
     "SOLITONDE_TABLE": "table_path",
+    "SOLITONDE_MORE_TABLES": "table_paths",
     "SOLITONDE_STORE": "store_path",
     "SOLITONDE_API_KEY": "api_key",
     "SOLITONDE_MAX_BODY_BYTES": "max_body_bytes",
@@ -51,6 +52,9 @@ class Settings:
         Where ``serve`` binds; loopback by default so nothing is exposed by accident.
     table_path:
         Model table (HDF5) for estimates; ``None`` or a missing file serves without estimates.
+    table_paths:
+        More tables (files or folders of ``*.h5``), one per plate family;
+        ``SOLITONDE_MORE_TABLES`` lists them separated by the path separator (``:``).
     store_path:
         SQLite measurement store; its folder is created on start.
     api_key:
@@ -75,6 +79,7 @@ class Settings:
     host: str = "127.0.0.1"
     port: int = 8000
     table_path: Path | None = None
+    table_paths: tuple[Path, ...] = ()
     store_path: Path = field(default_factory=lambda: DEFAULT_STORE)
     api_key: str | None = None
     max_body_bytes: int = 64 * 1024 * 1024
@@ -123,7 +128,9 @@ class Settings:
         env: dict[str, str] = {}
         for var, name in ENV_VARS.items():
             value = getattr(self, name)
-            if value is not None:
+            if isinstance(value, tuple):
+                env[var] = os.pathsep.join(str(v) for v in value)
+            elif value is not None:
                 env[var] = str(value)
         return env
 
@@ -150,6 +157,8 @@ def _convert(name: str, type_name: str, raw: str, var: str) -> Any:
             return int(float(raw)) if "e" in raw.lower() else int(raw)
         if "float" in type_name:
             return float(raw)
+        if "tuple" in type_name:
+            return tuple(Path(p) for p in raw.split(os.pathsep) if p)
     except ValueError:
         raise SettingsError(name, f"{var}={raw!r} is not a number") from None
     return raw

@@ -98,6 +98,21 @@ class ModelTable:
     def shape(self) -> tuple[int, ...]:
         return tuple(self.axes[a].size for a in AXES)
 
+    @property
+    def table_id(self) -> str:
+        """The id given at build (``table build --id``), else the file's stem."""
+        given = self.provenance.get("table_id")
+        return str(given) if given else (self.path.stem if self.path else "table")
+
+    @property
+    def family(self) -> dict[str, Any] | None:
+        """The plate family the table was built for (instrument.family), None if unrecorded."""
+        if "family" not in self._cache:
+            from .family import family_of_table
+
+            self._cache["family"] = family_of_table(self.provenance)
+        return self._cache["family"]
+
     @classmethod
     def load(cls, path: str | Path) -> ModelTable:
         """Read a table file written by :mod:`solitonde.instrument.table_build`.
@@ -178,7 +193,9 @@ class ModelTable:
         """JSON-ready description: axes (values and ranges), point counts, provenance."""
         models, counts = np.unique(self.plate_model, return_counts=True)
         return {
+            "id": self.table_id,
             "path": str(self.path) if self.path else None,
+            "family": self.family,
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "complete": self.complete,

@@ -347,7 +347,8 @@ def solitonde_version() -> str:
         return "unknown"
 
 
-def _provenance(fh: h5py.File, sweep: Sweep, runner: str, command: str | None) -> dict[str, Any]:
+def _provenance(fh: h5py.File, sweep: Sweep, runner: str, command: str | None,
+                table_id: str | None = None) -> dict[str, Any]:
     models = np.unique(fh["plate_model"][...])
     dt = fh["diagnostics"]["dt_s"][...]
     return {
@@ -363,6 +364,7 @@ def _provenance(fh: h5py.File, sweep: Sweep, runner: str, command: str | None) -
                     "processor": platform.processor() or platform.machine(),
                     "cpus": os.cpu_count(), "python": platform.python_version()},
         "scene_defaults": sweep.base_scene().to_dict(),
+        **({"table_id": table_id} if table_id else {}),
         "tiers": [PLATE_MODEL_NAMES[int(m)] for m in models],
         "mesh": json.loads(fh.attrs["mesh"]) if "mesh" in fh.attrs else None,
         "step_s": {"min": float(np.nanmin(dt)), "max": float(np.nanmax(dt))}
@@ -453,6 +455,7 @@ def build_table(
     max_plates: int | None = None,
     command: str | None = None,
     on_plate: Callable[[dict[str, Any]], None] | None = None,
+    table_id: str | None = None,
 ) -> BuildReport:
     """Build (or continue building) the table for ``sweep`` at ``out``.
 
@@ -464,6 +467,7 @@ def build_table(
     max_plates: stop after writing this many plates, leaving ``<out>.partial`` to resume from
         (what an interruption does; for tests and chunked builds).
     command: the command line, recorded in the provenance.
+    table_id: the table's id, recorded in the provenance (default: the file's stem when loaded).
 
     Raises
     ------
@@ -538,7 +542,8 @@ def build_table(
             fh.flush()
         complete = bool(fh["done"][...].all())
         if complete:
-            fh.attrs["provenance"] = json.dumps(_provenance(fh, sweep, runner, command))
+            fh.attrs["provenance"] = json.dumps(_provenance(fh, sweep, runner, command,
+                                                            table_id))
             fh.attrs["complete"] = True
     if complete:
         os.replace(part, out)
