@@ -7,11 +7,14 @@ then states them (``maxItems``) and the validator enforces the same numbers.
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, create_model
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model
 
-SCALAR = str | float | int | bool | None
+TEXT_MAX = 1000
+"""Longest text value of free-form metadata; a key is at most 100 characters."""
+SCALAR = Annotated[str, StringConstraints(max_length=TEXT_MAX)] | float | int | bool | None
+Key = Annotated[str, StringConstraints(max_length=100)]
 
 
 class Strict(BaseModel):
@@ -39,7 +42,7 @@ class ShotMetadata(Strict):
     plate_material: str | None = Field(None, max_length=80, description="the plate's material "
                                        "(a library name): picks the table of that family, and "
                                        "a named table of another family is refused")
-    extra: dict[str, SCALAR] = Field(default_factory=dict, max_length=50,
+    extra: dict[Key, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
                                                  "not the fields above, nor 'source' (a 422)")
 

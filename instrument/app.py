@@ -195,7 +195,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         except Exception as exc:
             raise Problem(503, f"store: not usable ({exc})", field="store") from None
         loaded = svc.estimator.loaded
-        return {"ready": True, "store": str(svc.settings.store_path), "table_loaded": loaded,
+        return {"ready": True, "store": svc.settings.store_path.name, "table_loaded": loaded,
                 "estimates": loaded, "reason": None if loaded else svc.estimator.reason}
 
     @app.get("/v1/tables", tags=["service"], dependencies=[routes_measurements.AUTH])

@@ -228,6 +228,7 @@ def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
     table["shot"] = table["shot"].astype("Int64")
     for col in ("plate_id", "position", "sphere_diameter", "error", "source", "channel"):
         table[col] = table[col].map(lambda v: None if v is None else str(v))
+    from .estimate_rows import neutralised
     from .figures import write_bytes
 
     if out.suffix.lower() == ".parquet":
@@ -235,7 +236,7 @@ def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
         table.to_parquet(buf, index=False)
         write_bytes(out, buf.getvalue())
     else:
-        write_bytes(out, table.to_csv(index=False).encode())
+        write_bytes(out, neutralised(table).to_csv(index=False).encode())
 
 
 def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:

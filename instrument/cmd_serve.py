@@ -53,6 +53,9 @@ def register(app: typer.Typer) -> None:
             None, help=f"SQLite measurement store (default: $SOLITONDE_STORE, else "
                        f"{DEFAULT_STORE})"),
         log_level: str = typer.Option("info", help="uvicorn log level"),
+        insecure: bool = typer.Option(False, "--insecure", help="serve a non-loopback address "
+                                      "without SOLITONDE_API_KEY (anyone who reaches it can "
+                                      "write and read measurements)"),
     ) -> None:
         """Start the REST service (OpenAPI docs at /docs); Ctrl-C stops it cleanly."""
         import uvicorn
@@ -86,9 +89,14 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"warning: no model table at {where}: serving without estimates "
                        "(measurements come back with \"estimate\": null)", err=True)
         if host not in ("127.0.0.1", "localhost", "::1"):
+            if settings.api_key is None and not insecure:
+                typer.echo(f"error: --host {host}: other machines could reach the service and "
+                           "SOLITONDE_API_KEY is not set; set a key (16 characters or more), or "
+                           "pass --insecure to serve without one", err=True)
+                raise typer.Exit(2)
             typer.echo(f"warning: binding {host}: the service is reachable from other "
                        "machines" + ("" if settings.api_key else
-                                     " and SOLITONDE_API_KEY is not set"), err=True)
+                                     " and SOLITONDE_API_KEY is not set (--insecure)"), err=True)
         os.environ.update(settings.to_env())
         shown = f"[{host}]" if ":" in host else host
         url = f"http://{shown}:{port}"

@@ -68,6 +68,24 @@ def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shot
     return row
 
 
+FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+"""A CSV cell starting with one of these is a formula to a spreadsheet (OWASP CSV injection)."""
+
+
+def neutralised(frame: Any) -> Any:
+    """``frame`` with every text cell that a spreadsheet would run as a formula prefixed by a
+    single quote (OWASP); numbers, also negative ones, are left as they are. For CSV only:
+    Parquet keeps values as they are."""
+    from pandas.api.types import is_numeric_dtype
+
+    out = frame.copy()
+    for col in out.columns:
+        if not is_numeric_dtype(out[col]):
+            out[col] = out[col].map(lambda v: "'" + v if isinstance(v, str) and v.startswith(
+                FORMULA_STARTS) else v)
+    return out
+
+
 def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
              columns: Sequence[str] = ESTIMATE_COLUMNS) -> bytes:
     """Rows as CSV or Parquet bytes with ``columns`` in order (also when there are no rows);
@@ -86,4 +104,4 @@ def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
         buf = io.BytesIO()
         frame.to_parquet(buf, index=False)
         return buf.getvalue()
-    return frame.to_csv(index=False).encode()
+    return neutralised(frame).to_csv(index=False).encode()

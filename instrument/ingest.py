@@ -130,6 +130,7 @@ def check_metadata(waveforms: Sequence[Waveform], prefix: str,
         def field_of(key: str, i: int = i) -> str:
             return f"{prefix}.{i}.metadata.{key}" if prefix else key
 
+        check_sizes(wf.metadata, field_of)
         d = wf.metadata.get("sphere_diameter")
         if d is not None:
             ok = isinstance(d, numbers.Real) and not isinstance(d, bool | np.bool_)
@@ -150,6 +151,38 @@ def check_metadata(waveforms: Sequence[Waveform], prefix: str,
                        f"{plate_size[1]:g} m)" if high is not None else "a finite number of m")
             raise Problem(422, f"{field_of(key)}: {v!r} is not a position on the plate "
                           f"(allowed: {allowed})", kind="invalid-input", field=field_of(key))
+
+
+METADATA_KEYS_MAX = 100
+IDENTIFIER_MAX = 200
+TEXT_MAX = 1000
+NESTED_MAX = 16_384
+
+
+def check_sizes(meta: Mapping[str, Any], field_of: Any) -> None:
+    """The limits JSON metadata has, for metadata from any source (a file's header, comments,
+    attributes or properties): plate_id and position at most 200 characters, other text at most
+    1000, a key at most 100, at most 100 keys, a nested value at most 16 kB of JSON."""
+    import json
+
+    if len(meta) > METADATA_KEYS_MAX:
+        raise Problem(422, f"{field_of('')[:-1] or 'metadata'}: {len(meta)} keys; at most "
+                      f"{METADATA_KEYS_MAX}", kind="limit", field=field_of("")[:-1] or "metadata")
+    for key, value in meta.items():
+        key = str(key)
+        if len(key) > 100:
+            raise Problem(422, f"{field_of(key[:40])}...: a key of {len(key)} characters; at "
+                          "most 100", kind="limit", field=field_of(key[:40]))
+        if isinstance(value, str):
+            limit = IDENTIFIER_MAX if key in ("plate_id", "position") else TEXT_MAX
+            if len(value) > limit:
+                raise Problem(422, f"{field_of(key)}: {len(value):,} characters; at most "
+                              f"{limit}", kind="limit", field=field_of(key))
+        elif isinstance(value, Mapping | list | tuple):
+            size = len(json.dumps(_jsonable(value), default=str))
+            if size > NESTED_MAX:
+                raise Problem(422, f"{field_of(key)}: {size:,} bytes of JSON; at most "
+                              f"{NESTED_MAX:,}", kind="limit", field=field_of(key))
 
 
 def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None, str | None]:

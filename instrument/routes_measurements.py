@@ -405,7 +405,7 @@ _MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
 def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     import pandas as pd
 
-    from .estimate_rows import iso_utc
+    from .estimate_rows import iso_utc, neutralised
 
     limit = svc.settings.export_rows_max
     rows = list(svc.store.shot_rows(plate_id, limit + 1))
@@ -425,7 +425,7 @@ def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
         buf = io.BytesIO()
         frame.to_parquet(buf, index=False)
         return buf.getvalue(), _MEDIA[fmt]
-    return frame.to_csv(index=False).encode(), _MEDIA[fmt]
+    return neutralised(frame).to_csv(index=False).encode(), _MEDIA[fmt]
 
 
 def _export_estimates(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:

@@ -16,6 +16,9 @@ DEFAULT_STORE = Path(".solitonde") / "measurements.sqlite"
 DEFAULT_TABLE = Path(__file__).resolve().parent.parent / "data_samples" / "default_table.h5"
 """The bundled table, found from the package's own place (not the folder ``serve`` starts in)."""
 
+API_KEY_MIN = 16
+"""Shortest API key accepted; a blank one would silently turn authentication off."""
+
 # Environment variable -> settings field. Used by `build_app_from_env`, which is what uvicorn
 # workers import: `serve` passes its options to them through these variables.
 ENV_VARS: dict[str, str] = {
@@ -103,8 +106,12 @@ class Settings:
         if self.store_synchronous.upper() not in ("NORMAL", "FULL"):
             raise SettingsError("store_synchronous",
                                 f"must be NORMAL or FULL, got {self.store_synchronous!r}")
-        if self.api_key is not None and not self.api_key.strip():
-            object.__setattr__(self, "api_key", None)
+        if self.api_key is not None and len(self.api_key.strip()) < API_KEY_MIN:
+            what = "blank" if not self.api_key.strip() else f"{len(self.api_key.strip())} " \
+                "characters"
+            raise SettingsError("api_key", f"SOLITONDE_API_KEY is {what}: a key of at least "
+                                f"{API_KEY_MIN} characters, or unset it to serve on loopback "
+                                "without one (a blank key would turn authentication off)")
 
     @classmethod
     def from_env(cls, environ: Mapping[str, str] | None = None, **overrides: Any) -> Settings:
@@ -114,7 +121,9 @@ class Settings:
         values: dict[str, Any] = {}
         for var, name in ENV_VARS.items():
             raw = environ.get(var)
-            if raw is None or raw == "":
+            # an empty key is refused, not taken as "no key": `SOLITONDE_API_KEY=$SECRET` with
+            # the secret missing must not start a server without authentication
+            if raw is None or (raw == "" and name != "api_key"):
                 continue
             values[name] = _convert(name, str(types[name]), raw, var)
         values.update({k: v for k, v in overrides.items() if v is not None})

@@ -122,9 +122,7 @@ def declared_values(path: Path, fmt: str, dataset: str | None = None) -> int | N
             with open(path, "rb") as fh:
                 return _npy_values(fh)
         if fmt == "npz":
-            with zipfile.ZipFile(path) as zf:
-                return sum(_npy_values(zf.open(name)) for name in zf.namelist()
-                           if name.endswith(".npy"))
+            return _npz_values(path)
         if fmt == "hdf5":
             return _hdf5_values(path, dataset)
         if fmt == "tdms":
@@ -135,6 +133,23 @@ def declared_values(path: Path, fmt: str, dataset: str | None = None) -> int | N
     except Exception:
         return None
     return None
+
+
+def _npz_values(path: Path) -> int:
+    """Every member of the archive, whatever its name (numpy reads ``samples`` as well as
+    ``samples.npy``), sized by the larger of its .npy header's shape and its uncompressed size
+    in the zip directory, so that nothing is inflated before the limit is checked."""
+    total = 0
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            by_size = -(-int(info.file_size) // 8)
+            try:
+                with zf.open(info) as member:
+                    by_header = _npy_values(member)
+            except Exception:  # not an array header: its uncompressed size bounds it
+                by_header = 0
+            total += max(by_size, by_header)
+    return total
 
 
 def _values(shape: tuple[int, ...] | None, dtype: np.dtype) -> int:

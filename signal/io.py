@@ -62,6 +62,7 @@ json
 from __future__ import annotations
 
 import json
+import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -576,9 +577,7 @@ def _read_tdms(
     sample_rate: float | None = None, dt: float | None = None, t0: float | None = None,
     units: str | None = None, calibration: float | None = None,
 ) -> list[Waveform]:
-    from nptdms import TdmsFile
-
-    tdms = TdmsFile.read(path)
+    tdms = _read_whole_tdms(path)
     groups = {g.name: g for g in tdms.groups()}
     if group is not None and group not in groups:
         raise WaveformError("group", f"no group {group!r} in {path.name}",
@@ -614,6 +613,41 @@ def _read_tdms(
     if wanted is not None and not parts:
         raise WaveformError("channel", f"none of {wanted} found in {path.name}")
     return _shots(parts, calibration, path.name)
+
+
+class _Collect(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+def _read_whole_tdms(path: Path) -> Any:
+    """The TDMS file, refused when it is cut short or damaged: npTDMS reads what it can of a
+    truncated file and only logs a warning, which would store a shot with samples missing."""
+    from nptdms import TdmsFile
+
+    handler = _Collect()
+    logger = logging.getLogger("nptdms")
+    logger.addHandler(handler)
+    try:
+        tdms = TdmsFile.read(path)
+    finally:
+        logger.removeHandler(handler)
+    if handler.messages:
+        raise WaveformError("file", f"{path.name} is truncated or damaged: "
+                            f"{handler.messages[0]}", "a complete TDMS file")
+    for group in tdms.groups():
+        for ch in group.channels():
+            declared = ch.properties.get("wf_samples")
+            if declared is not None and int(declared) != len(ch):
+                raise WaveformError("file", f"{path.name}: channel {group.name}/{ch.name} "
+                                    f"holds {len(ch)} samples, its wf_samples says "
+                                    f"{int(declared)}: the file is truncated or damaged",
+                                    "a complete TDMS file")
+    return tdms
 
 
 def _write_tdms(path: Path, waves: list[Waveform], group: str = "shots") -> None:

@@ -434,7 +434,8 @@ def test_upload_problems_name_the_field(client: TestClient) -> None:
 def test_api_key_guards_writes_and_stored_data(tmp_path: Path) -> None:
     """With a key set: no key or a wrong key is a 401 (nothing stored); header or bearer works;
     health and docs stay open."""
-    with make_client(tmp_path, api_key="s3cret-key") as client:
+    key = "s3cret-key-0123456789"
+    with make_client(tmp_path, api_key=key) as client:
         body = {"shots": [shot_json()]}
         r = client.post("/v1/measurements", json=body)
         assert r.status_code == 401 and r.json()["field"] == "api_key"
@@ -443,13 +444,14 @@ def test_api_key_guards_writes_and_stored_data(tmp_path: Path) -> None:
         assert r.status_code == 401
         assert client.app.state.service.store.count() == 0
         for url in ["/v1/measurements", "/v1/measurements/1", "/v1/measurements/1/plot.png",
+                    "/v1/plates", "/v1/plates/P1/map", "/v1/tables",
                     "/v1/measurements/export", "/v1/measurements/1/shots/0", "/v1/table"]:
             assert client.get(url).status_code == 401, url
-        r = client.post("/v1/measurements", json=body, headers={"X-API-Key": "s3cret-key"})
+        r = client.post("/v1/measurements", json=body, headers={"X-API-Key": key})
         assert r.status_code == 201
         mid = r.json()["id"]
         r = client.get(f"/v1/measurements/{mid}",
-                       headers={"Authorization": "Bearer s3cret-key"})
+                       headers={"Authorization": f"Bearer {key}"})
         assert r.status_code == 200 and r.json()["id"] == mid
         assert client.get("/healthz").status_code == 200
         assert client.get("/readyz").status_code == 200

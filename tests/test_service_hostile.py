@@ -1,0 +1,127 @@
+"""Hostile and broken uploads (part of the hardening): every archive member sized from its
+header, truncated TDMS refused, file metadata held to the JSON limits, spreadsheet formulas
+neutralised in CSV exports, a blank or short API key refused at start, no server path shown."""
+
+from __future__ import annotations
+
+import io
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from fastapi.testclient import TestClient
+from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+from service_support import shot_json, shot_samples
+
+from solitonde.instrument.app import build_app
+from solitonde.instrument.settings import Settings, SettingsError
+
+
+@pytest.fixture
+def client(tmp_path: Path):
+    with TestClient(build_app(Settings(store_path=tmp_path / "s.sqlite"))) as c:
+        yield c
+
+
+def _count(client: TestClient) -> int:
+    return client.app.state.service.store.count()
+
+
+def test_an_npz_member_without_the_npy_suffix_is_sized_from_its_header(client):
+    """numpy reads a member named 'samples' as well as 'samples.npy': a deflated member that
+    declares 10^8 float64 is refused from the zip directory, not inflated to 800 MB first."""
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(header, {"descr": "<f8", "fortran_order": False,
+                                                  "shape": (10**8,)})
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        with zf.open("samples", "w", force_zip64=True) as member:
+            member.write(header.getvalue())
+            zeros = bytes(1 << 20)
+            for _ in range(800):
+                member.write(zeros)
+        zf.writestr("dt", np.float64(5e-7).tobytes())
+    body = buf.getvalue()
+    assert len(body) < 2_000_000
+    started = time.perf_counter()
+    r = client.post("/v1/measurements", files={"file": ("bomb.npz", body)})
+    elapsed = time.perf_counter() - started
+    assert r.status_code == 413 and r.json()["field"] == "file", r.text
+    assert "8,000,000" in r.json()["detail"]
+    assert elapsed < 1.0, elapsed
+    assert _count(client) == 0
+
+
+def test_a_truncated_tdms_is_refused_not_stored_in_part(client, tmp_path):
+    path = tmp_path / "two.tdms"
+    props = {"wf_increment": 5e-7, "wf_start_offset": 0.0, "wf_samples": 4000,
+             "unit_string": "N"}
+    with TdmsWriter(str(path)) as tdms:
+        for k in range(2):
+            tdms.write_segment([RootObject(), GroupObject("shots"),
+                                ChannelObject("shots", f"shot_{k}", shot_samples(k),
+                                              properties=props)])
+    whole = path.read_bytes()
+    assert client.post("/v1/measurements", files={"file": ("two.tdms", whole)}).status_code == 201
+    r = client.post("/v1/measurements", files={"file": ("cut.tdms", whole[:-8000])})
+    assert r.status_code == 422 and r.json()["field"].startswith("file")
+    assert "truncated" in r.json()["detail"] and "cut.tdms" in r.json()["detail"]
+    assert _count(client) == 1
+
+
+def test_file_metadata_is_held_to_the_limits_json_metadata_has(client):
+    rows = "".join(f"{i * 5e-7:.9g},{v:.6g}\n" for i, v in enumerate(shot_samples()))
+    for header, field in ((f"# plate_id: {'P' * 1_000_000}\n", "plate_id"),
+                          (f"# operator: {'x' * 5000}\n", "operator")):
+        body = (header + "time_s,force_N\n" + rows).encode()
+        r = client.post("/v1/measurements", files={"file": ("big.csv", body)})
+        assert r.status_code == 422 and r.json()["field"].endswith(field), r.text[:300]
+    shot = shot_json()
+    shot["metadata"]["extra"] = {"note": "y" * 1_000_000}
+    r = client.post("/v1/measurements", json={"shots": [shot]})
+    assert r.status_code == 422 and "extra" in r.json()["field"]
+    assert _count(client) == 0
+
+
+def test_formulas_are_neutralised_in_csv_exports_and_kept_in_parquet(client):
+    shot = shot_json(plate_id='=HYPERLINK("http://x","y")', position="-A1")
+    assert client.post("/v1/measurements", json={"shots": [shot]}).status_code == 201
+    for kind in ("shots", "estimates"):
+        text = client.get(f"/v1/measurements/export?kind={kind}").text
+        frame = pd.read_csv(io.StringIO(text))
+        assert frame["plate_id"][0] == '\'=HYPERLINK("http://x","y")', kind
+        assert frame["position"][0] == "'-A1"
+        parquet = pd.read_parquet(io.BytesIO(client.get(
+            f"/v1/measurements/export?kind={kind}&format=parquet").content))
+        assert parquet["plate_id"][0] == '=HYPERLINK("http://x","y")'
+    shots = pd.read_csv(io.StringIO(client.get("/v1/measurements/export").text))
+    assert (shots["t0_s"] <= 0).all() or shots["t0_s"].dtype.kind == "f"  # numbers untouched
+
+
+@pytest.mark.parametrize("key", ["", "   ", "short-key"])
+def test_a_blank_or_short_api_key_is_refused_at_start(key):
+    with pytest.raises(SettingsError) as err:
+        Settings.from_env({"SOLITONDE_API_KEY": key})
+    assert err.value.field == "api_key" and "16" in str(err.value)
+
+
+def test_readiness_does_not_show_where_the_store_is(client, tmp_path):
+    ready = client.get("/readyz").json()
+    assert ready["store"] == "s.sqlite" and str(tmp_path) not in str(ready)
+
+
+def test_serving_another_address_without_a_key_needs_insecure(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from solitonde.instrument.cli import build_app as build_cli
+
+    monkeypatch.delenv("SOLITONDE_API_KEY", raising=False)
+    res = CliRunner().invoke(build_cli(), ["serve", "--host", "0.0.0.0", "--store",
+                                           str(tmp_path / "s.sqlite")])
+    assert res.exit_code == 2 and "--insecure" in res.stderr
+    monkeypatch.setenv("SOLITONDE_API_KEY", " " * 20)
+    res = CliRunner().invoke(build_cli(), ["serve", "--store", str(tmp_path / "s.sqlite")])
+    assert res.exit_code == 2 and "api_key" in res.stderr
