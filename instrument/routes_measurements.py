@@ -420,7 +420,9 @@ def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
                                       *(f.name for f in dataclasses.fields(Features))])
     frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")
     for col in ("measurement_id", "shot_index", "shot", "n_samples"):
-        frame[col] = pd.to_numeric(frame[col]).astype("Int64")
+        numbers = pd.to_numeric(frame[col], errors="coerce")
+        if numbers.notna().sum() == frame[col].notna().sum():  # a file's text shot labels stay
+            frame[col] = numbers.astype("Int64")
     if fmt == "parquet":
         buf = io.BytesIO()
         frame.to_parquet(buf, index=False)

@@ -125,3 +125,11 @@ def test_serving_another_address_without_a_key_needs_insecure(tmp_path, monkeypa
     monkeypatch.setenv("SOLITONDE_API_KEY", " " * 20)
     res = CliRunner().invoke(build_cli(), ["serve", "--store", str(tmp_path / "s.sqlite")])
     assert res.exit_code == 2 and "api_key" in res.stderr
+
+
+def test_a_text_shot_label_from_a_file_exports_as_text(client):
+    rows = "".join(f"{i * 5e-7:.9g},{v:.6g}\n" for i, v in enumerate(shot_samples()))
+    body = ("# shot: A3\n# plate_id: P\ntime_s,force_N\n" + rows).encode()
+    assert client.post("/v1/measurements", files={"file": ("a.csv", body)}).status_code == 201
+    frame = pd.read_csv(io.StringIO(client.get("/v1/measurements/export").text))
+    assert frame["shot"][0] == "A3"
