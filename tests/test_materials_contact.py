@@ -22,7 +22,7 @@ def test_library_holds_the_paper_materials():
 
 def test_unknown_material_lists_the_known_ones():
     with pytest.raises(SceneError) as info:
-        get_material("brass", field="plate.material")
+        get_material("unobtainium", field="plate.material")
     assert info.value.field == "plate.material"
     for name in MATERIALS:
         assert name in str(info.value)
