@@ -277,7 +277,8 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
 
 
 def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: TableSet,
-                      source: str, prefix: str) -> dict[str, Any]:
+                      source: str, prefix: str,
+                      idempotency: tuple[str, str] | None = None) -> dict[str, Any]:
     """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
     chosen = choose_table(waveforms, tables, prefix)
     check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
@@ -304,7 +305,7 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
     if coordinates:  # where on the plate, for the estimates export
         result["location"] = coordinates
     new_id, created_at = store.add(records, result, source=source, plate_id=plate_id,
-                                   position=position)
+                                   position=position, idempotency=idempotency)
     return measurement_dict(MeasurementRecord(
         id=new_id, created_at=created_at, plate_id=plate_id, position=position,
         n_shots=len(records), source=source, result=result, shots=records))

@@ -10,6 +10,7 @@ and the metadata in the query), which skips text parsing altogether.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import hmac
 import io
 from typing import Annotated, Any
@@ -42,6 +43,7 @@ from .ingest import (
     waveforms_from_shots,
 )
 from .problems import PROBLEM_MEDIA_TYPE, Problem, ProblemModel, from_pydantic
+from .store import KeyTaken
 from .uploads import FORMATS, check_self_contained, declared_values, pick_format
 
 SECURITY_SCHEMES = {
@@ -89,6 +91,7 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
+IDEMPOTENCY_KEY_MAX = 200
 
 
 
@@ -178,7 +181,13 @@ def require_json(request: Request) -> None:
         "application/json": {"schema": {"$ref": "#/components/schemas/MeasurementIn"}},
         BINARY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}},
         "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MeasurementUpload"}},
-    }}, "parameters": binary_parameters()},
+    }}, "parameters": [*binary_parameters(), {
+        "name": "Idempotency-Key", "in": "header", "required": False,
+        "schema": {"type": "string", "minLength": 1, "maxLength": IDEMPOTENCY_KEY_MAX},
+        "description": "a key the client makes per measurement (a UUID): a retry with the same "
+                       "key and content returns the first answer (same id, header "
+                       "Idempotent-Replayed) instead of storing again; the same key with other "
+                       "content is a 422"}]},
 )
 async def post_measurement(request: Request) -> JSONResponse:
     """Measure TOF and ARR on every shot, aggregate per sphere size, estimate, store.
@@ -200,28 +209,85 @@ async def post_measurement(request: Request) -> JSONResponse:
         raise Problem(422, f"{name}: query parameters describe a binary ({BINARY_MEDIA_TYPE}) "
                       "body only; a JSON shot carries them in the body, an upload in form "
                       "fields", kind="invalid-input", field=name)
-    if media == "application/json":
-        body = await request.body()
-        # In a worker thread: the event loop keeps reading other requests (and answering
-        # /healthz) while this one is parsed, measured and waits for the store's writer lock.
-        result = await anyio.to_thread.run_sync(_ingest_json, svc, body,
-                                                limiter=svc.ingest_lane)
-    elif media == BINARY_MEDIA_TYPE:
-        body = await request.body()
-        query = request.query_params.multi_items()
-        result = await anyio.to_thread.run_sync(_ingest_binary, svc, body, query,
-                                                limiter=svc.ingest_lane)
-    elif media == "multipart/form-data":
-        result = await _ingest_upload(svc, request)
-    else:
+    if media not in ("application/json", BINARY_MEDIA_TYPE, "multipart/form-data"):
         raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
                       f"application/json, {BINARY_MEDIA_TYPE}, multipart/form-data)",
                       kind="unsupported-media-type", field="content-type")
+    key = idempotency_key(request)
+    try:
+        if media == "multipart/form-data":
+            result = await _ingest_upload(svc, request, key)
+            if isinstance(result, JSONResponse):  # a replayed answer
+                return result
+        else:
+            body = await request.body()
+            query = request.query_params.multi_items()
+            idem = None
+            if key is not None:
+                idem = (key, _digest(media.encode(), str(sorted(query)).encode(), body))
+                replay = await _replay(svc, *idem)
+                if replay is not None:
+                    return replay
+            # In a worker thread: the event loop keeps reading other requests (and answering
+            # /healthz) while this one is parsed, measured and waits for the store's writer lock.
+            if media == "application/json":
+                result = await anyio.to_thread.run_sync(_ingest_json, svc, body, idem,
+                                                        limiter=svc.ingest_lane)
+            else:
+                result = await anyio.to_thread.run_sync(_ingest_binary, svc, body, query, idem,
+                                                        limiter=svc.ingest_lane)
+    except KeyTaken:  # the same request, retried while the first was being stored
+        replay = await _replay(svc, key or "", None)
+        if replay is None:
+            raise Problem(409, "Idempotency-Key: the request that took this key was removed "
+                          "meanwhile; retry", kind="conflict", field="Idempotency-Key") from None
+        return replay
     return JSONResponse(result, status_code=201,
                         headers={"Location": f"/v1/measurements/{result['id']}"})
 
 
-def _ingest_json(svc: Any, body: bytes) -> dict[str, Any]:
+def idempotency_key(request: Request) -> str | None:
+    """The request's ``Idempotency-Key`` header (1-200 printable characters), if any."""
+    key = request.headers.get("idempotency-key")
+    if key is None:
+        return None
+    key = key.strip()
+    if not key or len(key) > IDEMPOTENCY_KEY_MAX or not key.isprintable():
+        raise Problem(422, "Idempotency-Key: not a key (allowed: 1-200 printable characters, "
+                      "e.g. a UUID the client makes per measurement)", kind="invalid-input",
+                      field="Idempotency-Key")
+    return key
+
+
+def _digest(*parts: bytes) -> str:
+    """SHA-256 over the parts, each length-prefixed (so no two splits hash alike)."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return h.hexdigest()
+
+
+async def _replay(svc: Any, key: str, digest: str | None) -> JSONResponse | None:
+    """The measurement stored under ``key`` as the first answer gave it, or None when the key
+    is new; a 422 when the key came with another request (``digest``; None skips the check)."""
+    found = await run_in_threadpool(svc.store.idempotent, key)
+    if found is None:
+        return None
+    stored_digest, measurement_id = found
+    if digest is not None and stored_digest != digest:
+        raise Problem(422, "Idempotency-Key: this key was used with another request body; a "
+                      "new measurement needs a new key", kind="invalid-input",
+                      field="Idempotency-Key")
+    record = await run_in_threadpool(svc.store.get, measurement_id)
+    if record is None:
+        return None
+    return JSONResponse(measurement_dict(record), status_code=201,
+                        headers={"Location": f"/v1/measurements/{record.id}",
+                                 "Idempotent-Replayed": "true"})
+
+
+def _ingest_json(svc: Any, body: bytes, idem: tuple[str, str] | None = None) -> dict[str, Any]:
     if not body:
         raise Problem(422, "body: empty; send {\"shots\": [...]}", kind="invalid-input",
                       field="body")
@@ -231,10 +297,11 @@ def _ingest_json(svc: Any, body: bytes) -> dict[str, Any]:
         raise from_pydantic(exc, svc.measurement_model) from None
     waveforms = waveforms_from_shots(request.shots, request.metadata)
     check_counts(waveforms, svc.settings, "shots")
-    return measure_and_store(waveforms, svc.store, svc.estimator, "json", "shots")
+    return measure_and_store(waveforms, svc.store, svc.estimator, "json", "shots", idem)
 
 
-def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]]) -> dict[str, Any]:
+def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]],
+                   idem: tuple[str, str] | None = None) -> dict[str, Any]:
     """One shot from its raw little-endian samples; what they are comes from the query."""
     seen: set[str] = set()
     for name, _ in query:
@@ -265,10 +332,10 @@ def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]]) -> dict[
                             units=params.units, calibration=params.calibration, metadata=meta)
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
-    return measure_and_store([waveform], svc.store, svc.estimator, "binary", "")
+    return measure_and_store([waveform], svc.store, svc.estimator, "binary", "", idem)
 
 
-async def _ingest_upload(svc: Any, request: Request) -> dict[str, Any]:
+async def _ingest_upload(svc: Any, request: Request, key: str | None = None) -> Any:
     try:
         form = await request.form(max_files=1, max_fields=len(UploadFields.model_fields) + 1)
     except Problem:
@@ -290,8 +357,16 @@ async def _ingest_upload(svc: Any, request: Request) -> dict[str, Any]:
         except ValidationError as exc:
             raise from_pydantic(exc, UploadFields) from None
         fmt = pick_format(opts.format, upload.filename)
+        idem = None
+        if key is not None:  # the content, not the bytes: a retry has a new multipart boundary
+            content = await anyio.to_thread.run_sync(_file_bytes, upload.file)
+            idem = (key, _digest(b"multipart", str(sorted(fields.items())).encode(),
+                                 (upload.filename or "").encode(), content))
+            replay = await _replay(svc, *idem)
+            if replay is not None:
+                return replay
         return await anyio.to_thread.run_sync(_ingest_file, svc, upload.file, fmt, opts,
-                                              client_name(upload.filename),
+                                              client_name(upload.filename), idem,
                                               limiter=svc.upload_lane)
     finally:
         await form.close()
@@ -306,8 +381,17 @@ def client_name(filename: str | None) -> str | None:
     return name or None
 
 
+def _file_bytes(stream: Any) -> bytes:
+    """An upload's content (the body limit bounds it), the stream rewound for the reader."""
+    stream.seek(0)
+    data = stream.read()
+    stream.seek(0)
+    return bytes(data)
+
+
 def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
-                 filename: str | None = None) -> dict[str, Any]:
+                 filename: str | None = None,
+                 idem: tuple[str, str] | None = None) -> dict[str, Any]:
     settings = svc.settings
     path = svc.uploads.write(stream, fmt)
     try:
@@ -336,7 +420,8 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
     if meta:
         waveforms = [wf.with_metadata(**meta) for wf in waveforms]
     check_counts(waveforms, settings, "file.shots")
-    stored = measure_and_store(waveforms, svc.store, svc.estimator, f"upload:{fmt}", "file.shots")
+    stored = measure_and_store(waveforms, svc.store, svc.estimator, f"upload:{fmt}", "file.shots",
+                               idem)
     return {**stored, "skipped_channels": skipped}
 
 

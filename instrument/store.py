@@ -58,6 +58,12 @@ CREATE TABLE IF NOT EXISTS shots (
     features          TEXT NOT NULL,
     PRIMARY KEY (measurement_id, shot_index)
 );
+CREATE TABLE IF NOT EXISTS idempotency (
+    key             TEXT PRIMARY KEY,
+    digest          TEXT NOT NULL,
+    measurement_id  INTEGER NOT NULL,
+    created_at      REAL NOT NULL
+);
 """
 
 
@@ -93,6 +99,11 @@ def _journal_mode_wal(conn: sqlite3.Connection, timeout_s: float) -> str:
 
 class StoreError(RuntimeError):
     """The store cannot be opened, or a stored record fails its integrity check."""
+
+
+class KeyTaken(RuntimeError):
+    """An ``Idempotency-Key`` another request stored first (a concurrent retry): nothing was
+    written; the caller answers with that request's measurement."""
 
 
 @dataclass
@@ -281,8 +292,13 @@ class Store:
 
     # Writing ------------------------------------------------------------------------------
     def add(self, shots: Sequence[ShotRecord], result: dict[str, Any], source: str,
-            plate_id: str | None = None, position: str | None = None) -> tuple[int, float]:
-        """Store one measurement and its shots in one transaction; returns (id, created_at)."""
+            plate_id: str | None = None, position: str | None = None,
+            idempotency: tuple[str, str] | None = None) -> tuple[int, float]:
+        """Store one measurement and its shots in one transaction; returns (id, created_at).
+
+        ``idempotency`` (key, digest of the request) is stored in the same transaction, so a
+        retry finds the measurement exactly when it was committed; a key already taken raises
+        :class:`KeyTaken` and writes nothing."""
         rows = []
         for i, shot in enumerate(shots):
             dtype, digest, blob = encode_samples(shot.samples)
@@ -305,11 +321,24 @@ class Store:
                     "metadata, n_samples, dtype, codec, sha256, samples, features) "
                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                     [(new_id, *row) for row in rows])
+                if idempotency is not None:
+                    c.execute("INSERT INTO idempotency (key, digest, measurement_id, created_at) "
+                              "VALUES (?, ?, ?, ?)", (*idempotency, new_id, now))
                 c.execute("COMMIT")
+            except sqlite3.IntegrityError:
+                c.execute("ROLLBACK")
+                raise KeyTaken(idempotency[0] if idempotency else "") from None
             except BaseException:
                 c.execute("ROLLBACK")
                 raise
         return new_id, now
+
+    def idempotent(self, key: str) -> tuple[str, int] | None:
+        """The request digest and measurement id stored under ``key``, or None."""
+        with self._lock:
+            row = self._conn.execute("SELECT digest, measurement_id FROM idempotency WHERE key = ?",
+                                     (key,)).fetchone()
+        return None if row is None else (str(row[0]), int(row[1]))
 
     def delete(self, measurement_id: int) -> bool:
         """Remove one measurement and its shots in one transaction; False when there was none."""
@@ -318,6 +347,7 @@ class Store:
             c.execute("BEGIN IMMEDIATE")
             try:
                 c.execute("DELETE FROM shots WHERE measurement_id = ?", (measurement_id,))
+                c.execute("DELETE FROM idempotency WHERE measurement_id = ?", (measurement_id,))
                 gone = c.execute("DELETE FROM measurements WHERE id = ?",
                                  (measurement_id,)).rowcount
                 c.execute("COMMIT")

@@ -133,3 +133,31 @@ def test_a_text_shot_label_from_a_file_exports_as_text(client):
     assert client.post("/v1/measurements", files={"file": ("a.csv", body)}).status_code == 201
     frame = pd.read_csv(io.StringIO(client.get("/v1/measurements/export").text))
     assert frame["shot"][0] == "A3"
+
+
+def test_a_retry_with_the_same_idempotency_key_returns_the_first_answer(client):
+    """A measurement committed while the client saw a reset is not stored twice on retry: the
+    same key and body give the same id; the same key with another body is a 422; for an upload
+    the content counts, not the multipart boundary."""
+    body = {"shots": [shot_json(seed=3)]}
+    first = client.post("/v1/measurements", json=body, headers={"Idempotency-Key": "k-1"})
+    again = client.post("/v1/measurements", json=body, headers={"Idempotency-Key": "k-1"})
+    assert first.status_code == again.status_code == 201
+    assert again.json()["id"] == first.json()["id"]
+    assert again.headers["idempotent-replayed"] == "true"
+    assert _count(client) == 1
+    other = client.post("/v1/measurements", json={"shots": [shot_json(seed=4)]},
+                        headers={"Idempotency-Key": "k-1"})
+    assert other.status_code == 422 and other.json()["field"] == "Idempotency-Key"
+    rows = "".join(f"{i * 5e-7:.9g},{v:.6g}\n" for i, v in enumerate(shot_samples()))
+    csv_body = ("time_s,force_N\n" + rows).encode()
+    ids = {client.post("/v1/measurements", files={"file": ("a.csv", csv_body)},
+                       data={"plate_id": "P"}, headers={"Idempotency-Key": "up-7"}).json()["id"]
+           for _ in range(2)}
+    assert len(ids) == 1 and _count(client) == 2
+    bad = client.post("/v1/measurements", json=body, headers={"Idempotency-Key": "x" * 300})
+    assert bad.status_code == 422 and bad.json()["field"] == "Idempotency-Key"
+    # deleting the measurement frees its key: a later post with it stores anew
+    assert client.delete(f"/v1/measurements/{first.json()['id']}").status_code == 204
+    anew = client.post("/v1/measurements", json=body, headers={"Idempotency-Key": "k-1"})
+    assert anew.status_code == 201 and anew.json()["id"] != first.json()["id"]
