@@ -13,6 +13,10 @@ import dataclasses
 import hashlib
 import hmac
 import io
+import logging
+import math
+import threading
+import time
 from typing import Annotated, Any
 
 import anyio.to_thread
@@ -55,8 +59,58 @@ SECURITY_SCHEMES = {
 """Declared in the OpenAPI document by the app factory; checked by :func:`require_key`."""
 
 
+class FailedKeys:
+    """Failed API key attempts per client address, in this worker process: after
+    :attr:`LIMIT` within :attr:`WINDOW_S` seconds a client gets 429 until the window passes
+    (a key is not guessed at request speed), and a warning is logged at most once per
+    :attr:`LOG_EVERY_S` per client, with the count (a flood does not flood the log)."""
+
+    LIMIT = 10
+    WINDOW_S = 60.0
+    LOG_EVERY_S = 10.0
+    CLIENTS_MAX = 10_000
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._seen: dict[str, list[float]] = {}
+        self._logged: dict[str, float] = {}
+
+    def _recent(self, client: str, now: float) -> list[float]:
+        times = [t for t in self._seen.get(client, []) if now - t < self.WINDOW_S]
+        if times:
+            self._seen[client] = times
+        else:
+            self._seen.pop(client, None)
+        return times
+
+    def blocked_for(self, client: str) -> float:
+        """Seconds until ``client`` may try again (0: now)."""
+        now = time.monotonic()
+        with self._lock:
+            times = self._recent(client, now)
+            return self.WINDOW_S - (now - times[0]) if len(times) >= self.LIMIT else 0.0
+
+    def failed(self, client: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            if len(self._seen) >= self.CLIENTS_MAX and client not in self._seen:
+                self._seen.clear()  # bounded memory under a spray of addresses
+                self._logged.clear()
+            times = self._recent(client, now)
+            times.append(now)
+            self._seen[client] = times
+            if now - self._logged.get(client, -math.inf) >= self.LOG_EVERY_S:
+                self._logged[client] = now
+                log.warning("api key: %d failed attempt(s) from %s in the last %.0f s",
+                            len(times), client, self.WINDOW_S)
+
+
+FAILED_KEYS = FailedKeys()
+
+
 async def require_key(request: Request) -> None:
-    """With SOLITONDE_API_KEY set, the request must carry it (header or bearer token).
+    """With SOLITONDE_API_KEY set, the request must carry it (header or bearer token); a client
+    that failed too often is refused for a while (:class:`FailedKeys`).
 
     Reads the two headers itself (one dependency instead of FastAPI's two security classes: this
     runs on every request).
@@ -66,15 +120,22 @@ async def require_key(request: Request) -> None:
     expected = service(request).settings.api_key
     if expected is None:
         return
+    client = request.client.host if request.client else "unknown"
+    wait = FAILED_KEYS.blocked_for(client)
+    if wait > 0:
+        raise Problem(429, f"api_key: too many failed attempts from {client}; try again in "
+                      f"{math.ceil(wait)} s", kind="too-many-requests", field="api_key",
+                      headers={"Retry-After": str(math.ceil(wait))})
     given = request.headers.get("x-api-key")
     if given is None:
         scheme, _, token = request.headers.get("authorization", "").partition(" ")
         given = token.strip() if scheme.lower() == "bearer" and token.strip() else None
-    if given is None:
+    if given is None:  # not counted: a client that does not know a key is needed is no guesser
         raise Problem(401, "api_key: this server needs an API key (X-API-Key header or "
                       "Authorization: Bearer)", kind="unauthorized", field="api_key",
                       headers={"WWW-Authenticate": 'Bearer realm="solitonde"'})
     if not hmac.compare_digest(given.encode(), expected.encode()):
+        FAILED_KEYS.failed(client)
         raise Problem(401, "api_key: the key given is not this server's key",
                       kind="unauthorized", field="api_key",
                       headers={"WWW-Authenticate": 'Bearer realm="solitonde"'})
@@ -91,6 +152,7 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 }
 
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
+log = logging.getLogger("solitonde.instrument")
 IDEMPOTENCY_KEY_MAX = 200
 
 

@@ -161,3 +161,22 @@ def test_a_retry_with_the_same_idempotency_key_returns_the_first_answer(client):
     assert client.delete(f"/v1/measurements/{first.json()['id']}").status_code == 204
     anew = client.post("/v1/measurements", json=body, headers={"Idempotency-Key": "k-1"})
     assert anew.status_code == 201 and anew.json()["id"] != first.json()["id"]
+
+
+def test_failed_key_attempts_are_logged_sparingly_and_then_refused(tmp_path, caplog):
+    from solitonde.instrument.routes_measurements import FAILED_KEYS, FailedKeys
+
+    key = "k" * 20
+    caplog.set_level("WARNING", logger="solitonde.instrument")
+    with TestClient(build_app(Settings(store_path=tmp_path / "s.sqlite", api_key=key))) as c:
+        FAILED_KEYS.__init__()  # a fresh count for this client
+        codes = [c.get("/v1/measurements", headers={"X-API-Key": f"guess-{i}"}).status_code
+                 for i in range(FailedKeys.LIMIT + 3)]
+        assert codes[:FailedKeys.LIMIT] == [401] * FailedKeys.LIMIT
+        assert codes[FailedKeys.LIMIT:] == [429] * 3
+        refused = c.get("/v1/measurements", headers={"X-API-Key": key})
+        assert refused.status_code == 429 and int(refused.headers["retry-after"]) > 0
+        lines = [r for r in caplog.records if "failed attempt" in r.getMessage()]
+        assert len(lines) == 1  # one line for the burst, with its count
+        FAILED_KEYS.__init__()
+        assert c.get("/v1/measurements", headers={"X-API-Key": key}).status_code == 200
