@@ -34,8 +34,22 @@ app = typer.Typer(
 )
 
 
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"solitonde {version('solitonde')}")
+        except PackageNotFoundError:
+            typer.echo("solitonde (not installed)")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
+def _root(
+    _show_version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit."),
+) -> None:
     """Plate NDE with highly nonlinear solitary waves: theory, simulation, analysis, service."""
     # A callback keeps `solitonde <command>` a group even while only one command is registered.
 

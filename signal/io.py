@@ -179,7 +179,10 @@ def write(
     path: str | Path, waveforms: Waveform | Sequence[Waveform], format: str | None = None,
     **options: Any,
 ) -> Path:
-    """Write shots to ``path`` atomically (temporary name, then rename); returns the path."""
+    """Write shots to ``path`` atomically (temporary name, then rename); returns the path.
+
+    The file gets the permissions of any file the user makes (0644 under the usual umask), not
+    the temporary file's 0600."""
     path = Path(path)
     fmt = detect_format(path, format)
     waves = [waveforms] if isinstance(waveforms, Waveform) else list(waveforms)
@@ -189,6 +192,9 @@ def write(
     os.close(fd)
     try:
         _WRITERS[fmt](Path(tmp), waves, **options)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -348,3 +348,14 @@ def test_to_json_is_what_the_service_accepts(tmp_path):
         stored = r.json()
         assert stored["position"] == "0.457" and stored["n_shots"] == len(shots)
         assert stored["shots"][0]["metadata"]["channel"] == "force_N"
+
+
+def test_written_files_follow_the_umask_not_the_temporary_files_0600(tmp_path):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        path = io.write(tmp_path / "w.csv", Waveform(0.0, DT, np.ones(64), "N"))
+    finally:
+        os.umask(old)
+    assert path.stat().st_mode & 0o777 == 0o644
