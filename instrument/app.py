@@ -75,6 +75,31 @@ def service(request: Request) -> Service:
     return svc
 
 
+class Options:
+    """ASGI middleware: ``OPTIONS`` on any route answers 204 with ``Allow`` listing the methods
+    its path takes (``GET``, ``POST``, ``DELETE`` ...), 404 on a path no route has."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope["method"] != "OPTIONS":
+            await self.app(scope, receive, send)
+            return
+        from starlette.routing import Match
+
+        routes = scope["app"].routes
+        methods = {m for m in ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+                   if any(r.matches({**scope, "method": m})[0] == Match.FULL for r in routes)}
+        if not methods:
+            await self.app(scope, receive, send)  # the usual 404
+            return
+        allow = ", ".join(sorted(methods | {"OPTIONS"}))
+        await send({"type": "http.response.start", "status": 204,
+                    "headers": [(b"allow", allow.encode())]})
+        await send({"type": "http.response.body", "body": b""})
+
+
 class BodyLimit:
     """ASGI middleware: 413 for bodies larger than ``max_bytes``, declared or streamed."""
 
@@ -171,6 +196,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
     app.state.service = None
     problems.install(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(Options)
 
     from . import routes_compute, routes_measurements, routes_plates, web
 

@@ -180,3 +180,12 @@ def test_failed_key_attempts_are_logged_sparingly_and_then_refused(tmp_path, cap
         assert len(lines) == 1  # one line for the burst, with its count
         FAILED_KEYS.__init__()
         assert c.get("/v1/measurements", headers={"X-API-Key": key}).status_code == 200
+
+
+def test_options_lists_every_method_a_path_takes(client):
+    for path, allow in (("/v1/measurements", "GET, OPTIONS, POST"),
+                        ("/v1/measurements/7", "DELETE, GET, OPTIONS"),
+                        ("/v1/plates/P/map.png", "GET, OPTIONS"), ("/v1/invert", "OPTIONS, POST")):
+        r = client.options(path)
+        assert r.status_code == 204 and r.headers["allow"] == allow, (path, r.headers)
+    assert client.options("/v1/nothing").status_code == 404
