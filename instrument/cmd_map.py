@@ -53,9 +53,12 @@ def _from_store(path: Path, plate_id: str, estimator: Any) -> list[dict[str, Any
         store = Store(path, background_checkpoint=False)
     except (StoreError, OSError) as exc:
         _fail(f"ESTIMATES: {exc}")
-    records = store.all_of_plate(plate_id, 100_000)
-    if not records:
+    try:
+        records = store.all_of_plate(plate_id, 100_000)
         plates = [p["plate_id"] for p in store.plates()]
+    finally:
+        store.close()
+    if not records:
         _fail(f"--plate-id: no plate {plate_id!r} in {path.name} (plates: "
               f"{', '.join(plates) or 'none'})")
     return from_records(records, estimator)
