@@ -236,7 +236,13 @@ def require_json(request: Request) -> None:
     "/measurements",
     status_code=201,
     response_model=MeasurementOut,
-    responses=ERRORS,
+    responses={**ERRORS, 201: {"description": "the stored measurement", "links": {
+        name: {"operationId": op, "parameters": {"measurement_id": "$response.body#/id", **extra}}
+        for name, op, extra in (("GetMeasurement", "get_measurement", {}),
+                                ("GetShot", "get_shot", {"shot_index": 0}),
+                                ("PlotMeasurement", "plot_measurement", {}),
+                                ("DeleteMeasurement", "delete_measurement", {}))}}},
+    operation_id="post_measurement",
     summary="Post one or more shots (JSON), one shot's raw samples (binary) or a waveform file "
             "(multipart)",
     openapi_extra={"requestBody": {"required": True, "content": {
@@ -610,7 +616,8 @@ def _missing(measurement_id: int) -> Problem:
 
 
 @router.get("/measurements/{measurement_id}", response_model=MeasurementOut,
-            responses={**ERRORS, 404: _PROBLEM}, summary="One stored measurement")
+            responses={**ERRORS, 404: _PROBLEM}, summary="One stored measurement",
+            operation_id="get_measurement")
 async def get_measurement(request: Request, measurement_id: MeasurementId) -> dict[str, Any]:
     """Features per shot, aggregates and estimate as stored."""
     from .app import service
@@ -622,7 +629,8 @@ async def get_measurement(request: Request, measurement_id: MeasurementId) -> di
 
 
 @router.delete("/measurements/{measurement_id}", status_code=204, response_class=Response,
-               responses={**ERRORS, 404: _PROBLEM}, summary="Remove a measurement and its shots")
+               responses={**ERRORS, 404: _PROBLEM}, summary="Remove a measurement and its shots",
+               operation_id="delete_measurement")
 async def delete_measurement(request: Request, measurement_id: MeasurementId) -> Response:
     """Removes the measurement and every shot of it in one transaction; 404 when there is none
     (also the second time). The plate's map follows."""
@@ -634,7 +642,7 @@ async def delete_measurement(request: Request, measurement_id: MeasurementId) ->
 
 
 @router.get("/measurements/{measurement_id}/shots/{shot_index}",
-            responses={**ERRORS, 404: _PROBLEM},
+            responses={**ERRORS, 404: _PROBLEM}, operation_id="get_shot",
             summary="One stored shot with its samples (as stored, bit for bit)")
 async def get_shot(request: Request, measurement_id: MeasurementId,
                    shot_index: ShotIndex) -> dict[str, Any]:
@@ -651,6 +659,7 @@ async def get_shot(request: Request, measurement_id: MeasurementId,
 
 
 @router.get("/measurements/{measurement_id}/plot.png", response_class=Response,
+            operation_id="plot_measurement",
             responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
             summary="PNG of a shot's trace with the incident and reflected pulses marked")
 async def plot_measurement(
