@@ -92,27 +92,42 @@ class Table:
 
 
 def parse(text: str, name: str) -> Table:
-    """The table in ``text`` (the contents of file ``name``, for messages)."""
-    lines = text.splitlines()
+    """The table in ``text`` (the contents of file ``name``, for messages).
+
+    Only the first lines (the header, at most :data:`_HEADER_LINES_MAX`) and the last are
+    looked at line by line; the data block goes to pandas' C parser whole, so a file of
+    millions of rows costs about what reading its numbers costs.
+    """
     comments: dict[str, str] = {}
-    first = 0
-    while first < len(lines) and lines[first].startswith("#") and not _is_lecroy_segment(
-            lines[first]):
-        key, sep, value = lines[first][1:].partition(":")
-        if sep and key.strip():
-            comments[key.strip()] = value.strip()
-        first += 1
-    body = [(i + 1, line) for i, line in enumerate(lines) if i >= first and line.strip()]
-    if not body:
+    head: list[tuple[int, str, int]] = []  # (line number, text, offset) of non-blank lines
+    pos, number = 0, 0
+    while pos < len(text) and len(head) <= _HEADER_LINES_MAX:
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end
+        line = text[pos:end].rstrip("\r")
+        number += 1
+        if not head and line.startswith("#") and not _is_lecroy_segment(line):
+            key, sep, value = line[1:].partition(":")
+            if sep and key.strip():
+                comments[key.strip()] = value.strip()
+        elif line.strip():
+            head.append((number, line, pos))
+        pos = end + 1
+    if not head:
         raise WaveformError("samples", f"{name}: empty, no samples")
-    delimiter, decimal_comma = _dialect(body, name)
-    head = [(number, _split(line, delimiter)) for number, line in body[:_HEADER_LINES_MAX]]
-    if _is_tek_legacy(head):
-        cells = head + [(n, _split(line, delimiter)) for n, line in body[_HEADER_LINES_MAX:]]
-        table = _tek_legacy(cells, decimal_comma, name)
+    last = text.rstrip().rsplit("\n", 1)[-1].rstrip("\r")
+    last_number = number if pos >= len(text) else text.count("\n", 0, len(text.rstrip())) + 1
+    delimiter, decimal_comma = _dialect(head, (last_number, last), name)
+    cells = [(n, _split(line, delimiter)) for n, line, _ in head[:_HEADER_LINES_MAX]]
+    if _is_tek_legacy(cells):
+        every = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip()
+                 and i + 1 >= head[0][0]]
+        table = _tek_legacy([(n, _split(line, delimiter)) for n, line in every],
+                            decimal_comma, name)
     else:
-        start = _data_start(head, decimal_comma, name)
-        table = _headed(head[:start], body[start:], delimiter, decimal_comma, name)
+        start = _data_start(cells, decimal_comma, name)
+        number0, _, offset = head[start]
+        table = _headed(cells[:start], text[offset:], number0, delimiter, decimal_comma, name)
     table.metadata = {**comments, **table.metadata}
     return table
 
@@ -138,9 +153,10 @@ def _is_number(cell: str, decimal_comma: bool) -> bool:
     return decimal_comma or "," not in cell
 
 
-def _dialect(body: list[tuple[int, str]], name: str) -> tuple[str | None, bool]:
+def _dialect(head: list[tuple[int, str, int]], last: tuple[int, str],
+             name: str) -> tuple[str | None, bool]:
     """Delimiter (None: whitespace, "": one column) and decimal mark, read off the last line."""
-    number, line = body[-1]
+    number, line = last
     for delimiter in ("\t", ";", ",", None):
         parts = _split(line, delimiter)
         decimal_comma = delimiter != "," and any("," in p for p in parts)
@@ -148,7 +164,7 @@ def _dialect(body: list[tuple[int, str]], name: str) -> tuple[str | None, bool]:
         if (len(parts) >= 2 or delimiter is None) and numeric and all(
                 _is_number(p, decimal_comma) for p in numeric):
             return ("" if len(parts) == 1 else delimiter), decimal_comma
-    if len(body) == 1 or not any(_NUMBER.match(c.strip()) for _n, text in body
+    if len(head) == 1 or not any(_NUMBER.match(c.strip()) for _n, text, _o in head
                                  for c in re.split(r"[,;\t ]", text)):
         raise WaveformError("samples", f"{name}: no data rows, no samples",
                             "header lines, then one row of numbers per sample")
@@ -197,40 +213,37 @@ def _matrix(rows: list[tuple[int, list[str]]], width: int, decimal_comma: bool,
     raise WaveformError("file", f"{name}: the data rows cannot be read as numbers")
 
 
-def _read_rows(rows: list[tuple[int, str]], delimiter: str | None, decimal_comma: bool,
+def _read_rows(block: str, number0: int, delimiter: str | None, decimal_comma: bool,
                name: str) -> tuple[np.ndarray, list[str]]:
-    """The data lines as a float matrix (pandas' C parser), and the first column's texts."""
+    """The data block (from line ``number0`` on) as a float matrix, and some of the first
+    column's texts (for their printed precision). Fast: pandas' C parser straight to floats;
+    anything odd (a text cell, a short or long row, over-range marks) takes the slow path,
+    which parses line by line and names the first bad line."""
     import pandas as pd
 
-    width = len(_split(rows[-1][1], delimiter))
-    text = "\n".join(line for _n, line in rows)
+    last = block.rstrip().rsplit("\n", 1)[-1]
+    width = len(_split(last, delimiter))
     sep = r"\s+" if delimiter is None else ("\x1f" if delimiter == "" else delimiter)
     try:
-        frame = pd.read_csv(io.StringIO(text), sep=sep, header=None, dtype=str,
-                            keep_default_na=False, skipinitialspace=True,
-                            engine="python" if delimiter is None else "c")
-        frame = frame.iloc[:, :width] if frame.shape[1] > width and (
-            frame.iloc[:, width:] == "").all().all() else frame  # trailing delimiters
-        if frame.shape[1] != width or frame.isna().to_numpy().any():
-            raise ValueError("ragged")  # the slow path names the line
-        cells = frame.apply(lambda c: c.str.strip().str.strip('"'))
-        if decimal_comma:
-            cells = cells.apply(lambda c: c.str.replace(",", ".", regex=False))
-        over = cells.isin(list(OVER_RANGE))
-        numbers = cells.mask(over, "nan").apply(pd.to_numeric, errors="raise")
-        data = numbers.to_numpy(dtype=np.float64)
-        if over.to_numpy().any():
-            data[over.to_numpy()] = [OVER_RANGE[v] for v in cells.to_numpy()[over.to_numpy()]]
-        return data, list(frame.iloc[:, 0])
+        frame = pd.read_csv(io.StringIO(block), sep=sep, header=None, dtype=np.float64,
+                            decimal="," if decimal_comma else ".", skipinitialspace=True,
+                            quotechar='"', engine="python" if delimiter is None else "c")
+        if frame.shape[1] > width and frame.iloc[:, width:].isna().all().all():
+            frame = frame.iloc[:, :width]  # a trailing delimiter on every row (Rigol, Tek)
+        data = frame.to_numpy(dtype=np.float64)
+        if data.shape[1] != width or np.isnan(data).any():
+            raise ValueError("missing or NaN cells")  # told apart on the slow path
     except (ValueError, TypeError, pd.errors.ParserError):
+        rows = [(number0 + i, line) for i, line in enumerate(block.splitlines()) if line.strip()]
         split = [(n, _split(line, delimiter)) for n, line in rows]
         data = _matrix(split, width, decimal_comma, name)  # raises, naming the line
-        return data, [parts[0] for _n, parts in split]
+    sample = [*block[:20_000].splitlines()[:200], last]
+    return data, [(_split(line, delimiter) or [""])[0] for line in sample if line.strip()]
 
 
-def _headed(header: list[tuple[int, list[str]]], rows: list[tuple[int, str]],
+def _headed(header: list[tuple[int, list[str]]], block: str, number0: int,
             delimiter: str | None, decimal_comma: bool, name: str) -> Table:
-    data, first_texts = _read_rows(rows, delimiter, decimal_comma, name)
+    data, first_texts = _read_rows(block, number0, delimiter, decimal_comma, name)
     width = data.shape[1]
     first_cell = header[0][1][0].lower() if header and header[0][1] else ""
     labels, units_row = _labels(header, width)
