@@ -32,6 +32,8 @@ from .uploads import UploadDir
 log = logging.getLogger("solitonde.instrument")
 
 INGEST_THREADS = 1
+LARGE_UPLOAD_BYTES = 4 * 1024 * 1024
+"""Uploads above this size (4 MiB) have a lane of their own (:attr:`Service.lane_for`)."""
 """Worker threads per process that parse, measure and store posted shots (one FIFO lane).
 
 The ingest holds the GIL most of the time, so more threads add no throughput: they only share
@@ -61,6 +63,15 @@ class Service:
     """``anyio.CapacityLimiter`` the JSON and binary ingest runs under (made in the lifespan)."""
     upload_lane: Any = None
     """The same for uploaded files, which can take seconds: shots never queue behind them."""
+    large_upload_lane: Any = None
+    """Uploads larger than :data:`LARGE_UPLOAD_BYTES`, one at a time: a 60 MB file takes a
+    second or two and a few hundred MB to read, and an ordinary upload does not wait for it."""
+
+    def lane_for(self, size: int | None) -> Any:
+        """The lane an upload of ``size`` bytes is parsed in."""
+        if size is not None and size > LARGE_UPLOAD_BYTES and self.large_upload_lane is not None:
+            return self.large_upload_lane
+        return self.upload_lane
 
     def close(self) -> None:
         self.store.close()
@@ -166,7 +177,8 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         else:
             log.info("model tables: %s", ", ".join(estimator.estimators))
         svc = Service(settings, store, estimator, UploadDir(), shot_model, measurement_model,
-                      anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS))
+                      anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS),
+                      anyio.CapacityLimiter(1))
         app.state.service = svc
         # Everything loaded so far (numpy, pandas, matplotlib, the table: ~170k objects) lives
         # as long as the process; a full collection walks all of it (50-150 ms measured), a

@@ -435,7 +435,7 @@ async def _ingest_upload(svc: Any, request: Request, key: str | None = None) -> 
                 return replay
         return await anyio.to_thread.run_sync(_ingest_file, svc, upload.file, fmt, opts,
                                               client_name(upload.filename), idem,
-                                              limiter=svc.upload_lane)
+                                              limiter=svc.lane_for(upload.size))
     finally:
         await form.close()
 

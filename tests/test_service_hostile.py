@@ -189,3 +189,15 @@ def test_options_lists_every_method_a_path_takes(client):
         r = client.options(path)
         assert r.status_code == 204 and r.headers["allow"] == allow, (path, r.headers)
     assert client.options("/v1/nothing").status_code == 404
+
+
+def test_a_large_upload_is_parsed_in_a_lane_of_its_own(client):
+    """One large file at a time, and never in the lane ordinary uploads take."""
+    from solitonde.instrument.app import LARGE_UPLOAD_BYTES
+
+    svc = client.app.state.service
+    assert svc.lane_for(1000) is svc.upload_lane
+    assert svc.lane_for(None) is svc.upload_lane
+    big = svc.lane_for(LARGE_UPLOAD_BYTES + 1)
+    assert big is svc.large_upload_lane and big is not svc.upload_lane
+    assert big.total_tokens == 1
