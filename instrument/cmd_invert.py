@@ -36,7 +36,7 @@ def table_set(options: Sequence[Path] | None) -> TableSet:
 
     Raises TableError when one cannot be loaded (a command line names only tables it means)."""
     paths = list(options or []) or [table_path(None)]
-    tables = TableSet(paths)
+    tables = TableSet(paths, warm_up=False)
     if tables.problems:
         raise TableError("table", "; ".join(tables.problems))
     return tables

@@ -91,7 +91,7 @@ def map_command(
         _fail(f"--out: {out.name} must end in .png")
     if out is not None and out.is_dir():
         _fail(f"--out: {str(out)!r} is a folder; give a file")
-    estimator = TableSet(table or [table_path(None)])
+    estimator = TableSet(table or [table_path(None)], warm_up=False)
     if suffix in STORE_SUFFIXES and not estimator.loaded:
         _fail(f"--table: {estimator.reason}")
     positions = (_from_store(source, plate_id, estimator) if suffix in STORE_SUFFIXES

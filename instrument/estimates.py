@@ -40,7 +40,7 @@ class Estimator:
         HDF5 model table; ``None`` or a missing file gives an estimator without a table.
     """
 
-    def __init__(self, table_path: str | Path | None) -> None:
+    def __init__(self, table_path: str | Path | None, warm_up: bool = True) -> None:
         self.path = Path(table_path) if table_path is not None else None
         self.table: Any = None
         self._invert: Any = None
@@ -63,7 +63,8 @@ class Estimator:
             log.warning(self.reason)
             return
         self._invert = inversion_mod.invert
-        self._warm_up(inversion_mod)
+        if warm_up:  # a service does it once at start; a command line inverts once
+            self._warm_up(inversion_mod)
 
     def _warm_up(self, inversion_mod: Any) -> None:
         """Build the inversion's fine grids now, not in the first request that needs them."""

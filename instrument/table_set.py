@@ -40,12 +40,12 @@ def table_files(paths: Iterable[Path]) -> list[Path]:
 class TableSet:
     """The loaded tables by id; with one table it behaves as that table's Estimator."""
 
-    def __init__(self, paths: Sequence[str | Path | None]) -> None:
+    def __init__(self, paths: Sequence[str | Path | None], warm_up: bool = True) -> None:
         files = table_files(Path(p) for p in paths if p is not None)
         self.estimators: dict[str, Estimator] = {}
         self.problems: list[str] = []
         for f in files:
-            est = Estimator(f)
+            est = Estimator(f, warm_up)
             if not est.loaded:
                 self.problems.append(est.reason or f"model table {str(f)!r} not loaded")
                 continue
