@@ -355,10 +355,20 @@ async def _replay(svc: Any, key: str, digest: str | None) -> JSONResponse | None
                                  "Idempotent-Replayed": "true"})
 
 
+JSON_VALUES_SLACK = 10_000
+"""Commas a JSON body may hold beyond one per allowed sample (metadata, keys)."""
+
+
 def _ingest_json(svc: Any, body: bytes, idem: tuple[str, str] | None = None) -> dict[str, Any]:
     if not body:
         raise Problem(422, "body: empty; send {\"shots\": [...]}", kind="invalid-input",
                       field="body")
+    # Every sample needs a comma: more commas than allowed samples is refused before parsing,
+    # which would build a Python float per value (64 MiB of "0," is 3 GB of objects).
+    limit = svc.settings.max_samples_per_request
+    if body.count(b",") > limit + JSON_VALUES_SLACK:
+        raise Problem(413, f"body: more than {limit:,} values; at most {limit:,} samples per "
+                      "request", kind="content-too-large", field="body")
     try:
         request = svc.measurement_model.model_validate_json(body)
     except ValidationError as exc:

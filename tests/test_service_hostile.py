@@ -201,3 +201,16 @@ def test_a_large_upload_is_parsed_in_a_lane_of_its_own(client):
     big = svc.lane_for(LARGE_UPLOAD_BYTES + 1)
     assert big is svc.large_upload_lane and big is not svc.upload_lane
     assert big.total_tokens == 1
+
+
+def test_a_json_body_of_more_values_than_allowed_is_refused_before_parsing(client):
+    """64 MiB of "0," would be 33 million Python floats (about 3 GB) if parsed: it is counted
+    first and refused with 413, fast."""
+    limit = client.app.state.service.settings.max_samples_per_request
+    n = limit + 20_000
+    body = b'{"shots": [{"dt": 5e-7, "samples": [' + b"0," * (n - 1) + b"0]}]}"
+    started = time.perf_counter()
+    r = client.post("/v1/measurements", content=body, headers={"content-type": "application/json"})
+    assert r.status_code == 413 and r.json()["field"] == "body", r.text[:300]
+    assert f"{limit:,}" in r.json()["detail"]
+    assert time.perf_counter() - started < 2.0
