@@ -89,6 +89,9 @@ class Table:
     dt: float | None = None
     time_resolution: float = 0.0
     """Half the last printed digit of the time column (s): rounding the grid may show."""
+    declared_rows: int | None = None
+    """The number of samples the header declares (Tektronix ``Record Length``, LeCroy
+    ``SegmentSize``, this project's ``# n_samples``), if it declares one."""
 
 
 def parse(text: str, name: str) -> Table:
@@ -128,8 +131,44 @@ def parse(text: str, name: str) -> Table:
         start = _data_start(cells, decimal_comma, name)
         number0, _, offset = head[start]
         table = _headed(cells[:start], text[offset:], number0, delimiter, decimal_comma, name)
+    own = comments.pop("n_samples", None)
+    if own is not None and table.declared_rows is None:
+        table.declared_rows = _count(own, "n_samples", name)
     table.metadata = {**comments, **table.metadata}
+    _check_length(table, name)
     return table
+
+
+def _count(text: str, key: str, name: str) -> int:
+    try:
+        return int(float(text))
+    except ValueError:
+        raise WaveformError("file", f"{name}: {key} {text!r} is not a number",
+                            "a whole number of samples") from None
+
+
+def _check_length(table: Table, name: str) -> None:
+    """A file with fewer rows than its header declares was cut short (a dropped link, a full
+    disk): refused, since the shot's tail (often the reflection) is missing. A file cut exactly
+    at a line end with no declared length cannot be told from a shorter record."""
+    rows = len(table.columns[0].values) if table.columns else 0
+    if table.declared_rows is not None and rows < table.declared_rows:
+        raise WaveformError("file", f"{name}: {rows} data rows, its header declares "
+                            f"{table.declared_rows}: the file is cut short (truncated)",
+                            "the whole file as the instrument wrote it")
+
+
+def _declared_rows(header: list[tuple[int, list[str]]], scope: dict[str, str],
+                   name: str) -> int | None:
+    """The record length a Tektronix or LeCroy header states; None for a gated Tektronix
+    record (its length may be the whole record's) and for layouts that state none."""
+    for _number, parts in header:
+        if len(parts) >= 4 and parts[0] == "Segments" and parts[2] == "SegmentSize":
+            return _count(parts[1], "Segments", name) * _count(parts[3], "SegmentSize", name)
+    gating = scope.get("Gating", "0.0% to 100.0%").replace(" ", "")
+    if "Record Length" in scope and gating in ("0.0%to100.0%", "0%to100%"):
+        return _count(scope["Record Length"], "Record Length", name)
+    return None
 
 
 # --- dialect ------------------------------------------------------------------------------------
@@ -198,8 +237,9 @@ def _matrix(rows: list[tuple[int, list[str]]], width: int, decimal_comma: bool,
     """Rows of cells as floats; a short, long or non-numeric row is an error naming its line."""
     for number, parts in rows:
         if len(parts) != width:
-            raise WaveformError("file", f"{name} line {number}: {len(parts)} values, the last "
-                                f"row has {width}", f"{width} values on every data row")
+            raise WaveformError("file", f"{name} line {number}: {len(parts)} values, the other "
+                                f"rows have {width} (a file cut short, or a stray row)",
+                                f"{width} values on every data row")
     try:
         return np.array([[_number(p, decimal_comma) for p in parts] for _n, parts in rows],
                         dtype=np.float64).reshape(len(rows), width)
@@ -222,7 +262,11 @@ def _read_rows(block: str, number0: int, delimiter: str | None, decimal_comma: b
     import pandas as pd
 
     last = block.rstrip().rsplit("\n", 1)[-1]
-    width = len(_split(last, delimiter))
+    # the row width from the middle of the block: a file cut short loses its last line, a
+    # stray first row is one row; either is then named as the odd one
+    middle = block.rfind("\n", 0, len(block) // 2) + 1
+    end = block.find("\n", middle)
+    width = len(_split(block[middle:end if end >= 0 else len(block)], delimiter))
     sep = r"\s+" if delimiter is None else ("\x1f" if delimiter == "" else delimiter)
     try:
         frame = pd.read_csv(io.StringIO(block), sep=sep, header=None, dtype=np.float64,
@@ -275,8 +319,10 @@ def _headed(header: list[tuple[int, list[str]]], block: str, number0: int,
         raise WaveformError("file", f"{name} line {number}: {','.join(parts)[:80]!r} is not a "
                             f"header of {width} column names", "a header row naming each column "
                             "(time first), or a known oscilloscope layout")
-    return _assemble(layout, labels, units_row, data, scope, meta, first_texts, decimal_comma,
-                     name)
+    table = _assemble(layout, labels, units_row, data, scope, meta, first_texts, decimal_comma,
+                      name)
+    table.declared_rows = _declared_rows(header, scope, name)
+    return table
 
 
 def _labels(header: list[tuple[int, list[str]]], width: int
@@ -473,8 +519,10 @@ def _tek_legacy(cells: list[tuple[int, list[str]]], decimal_comma: bool, name: s
     if meta_all[0].get("Model Number"):
         meta["instrument"] = f"Tektronix {meta_all[0]['Model Number']}"
     _over_range(columns, name)
+    length = meta_all[0].get("Record Length")
     return Table("tektronix-legacy", time, columns, meta,
-                 time_resolution=_resolution([r[1][0] for r in rows], decimal_comma))
+                 time_resolution=_resolution([r[1][0] for r in rows], decimal_comma),
+                 declared_rows=None if length is None else _count(length, "Record Length", name))
 
 
 def _is_lecroy_segment(line: str) -> bool:

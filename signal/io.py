@@ -412,6 +412,7 @@ def _write_csv(path: Path, waves: list[Waveform]) -> None:
             fh.write(f"# {key}: {text}\n")
         if ref.calibration is not None:
             fh.write(f"# calibration: {ref.calibration!r}\n")
+        fh.write(f"# n_samples: {ref.n}\n")  # lets a reader tell a file cut short
         labels = ["time_s"] + [("force_N" if w.units == "N" else "voltage_V") for w in waves]
         fh.write(",".join(labels) + "\n")
         table = np.column_stack([ref.times] + [w.samples for w in waves])

@@ -116,3 +116,41 @@ def test_a_bad_cell_in_the_middle_of_the_data_is_named_by_its_line(tmp_path):
     with pytest.raises(WaveformError) as err:
         io.read(path, calibration=1.0)
     assert "line 151, column 2" in str(err.value) and "'1.2.3'" in str(err.value)
+
+
+VENDOR = __import__("pathlib").Path(__file__).parent / "data" / "vendor"
+
+
+@pytest.mark.parametrize("name", ["tek_mso5_save_waveform.csv", "tek_tbs_legacy.csv",
+                                  "lecroy_waverunner.csv"])
+def test_a_scope_file_cut_at_a_line_end_is_refused_by_its_declared_record_length(tmp_path,
+                                                                                   name):
+    """Cut exactly between two rows, a file still parses; its header's record length tells."""
+    lines = (VENDOR / name).read_text().splitlines(keepends=True)
+    whole = io.read(VENDOR / name, calibration=1.0)
+    assert whole[0].n > 1000
+    path = tmp_path / name
+    path.write_text("".join(lines[:-300]))
+    with pytest.raises(WaveformError) as err:
+        io.read(path, calibration=1.0)
+    assert "cut short" in str(err.value) and name in str(err.value), str(err.value)
+
+
+def test_the_projects_own_csv_declares_its_length_and_a_cut_one_is_refused(tmp_path):
+    from solitonde.signal.waveform import Waveform
+
+    path = io.write(tmp_path / "own.csv", Waveform(samples=PULSE, t0=float(T[0]), dt=0.5e-6,
+                                                   units="V", calibration=1.0))
+    assert io.read(path)[0].n == PULSE.size and "n_samples" not in io.read(path)[0].metadata
+    text = path.read_text()
+    path.write_text(text[:text.rfind("\n", 0, len(text) - 2000) + 1])
+    with pytest.raises(WaveformError, match=r"own\.csv: \d+ data rows, its header declares 300"):
+        io.read(path)
+
+
+def test_a_row_cut_short_at_the_end_is_named_as_the_odd_one(tmp_path):
+    path = tmp_path / "end.csv"
+    path.write_text("Time (s),V1 (V),V2 (V)\n" + "".join(
+        f"{t:.9g},{v:.7g},{v:.7g}\n" for t, v in zip(T, PULSE, strict=True)) + "1e-4,0.5\n")
+    with pytest.raises(WaveformError, match=r"line 302: 2 values, the other rows have 3"):
+        io.read(path, calibration=1.0)

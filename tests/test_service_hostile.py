@@ -214,3 +214,27 @@ def test_a_json_body_of_more_values_than_allowed_is_refused_before_parsing(clien
     assert r.status_code == 413 and r.json()["field"] == "body", r.text[:300]
     assert f"{limit:,}" in r.json()["detail"]
     assert time.perf_counter() - started < 2.0
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npy", ".npz", ".h5", ".json", ".tdms"])
+def test_a_file_cut_short_in_any_format_is_refused_and_nothing_is_stored(client, tmp_path,
+                                                                           suffix):
+    """An upload that stopped part way (a dropped link, a full disk on the scope) is a 422 that
+    names the file, never a 500 and never the shots that happened to arrive."""
+    from solitonde.signal import io as signal_io
+    from solitonde.signal.waveform import Waveform
+
+    shots = [Waveform(samples=shot_samples(k), t0=0.0, dt=5e-7, units="N",
+                      metadata={"plate_id": "P1", "position": "A1", "sphere_diameter": 9.53e-3})
+             for k in range(3)]
+    path = signal_io.write(tmp_path / f"three{suffix}", shots)
+    whole = path.read_bytes()
+    assert client.post("/v1/measurements",
+                       files={"file": (path.name, whole)}).status_code == 201
+    for keep in (0.4, 0.7, 0.95):
+        cut = whole[:int(len(whole) * keep)]
+        r = client.post("/v1/measurements", files={"file": (f"cut{suffix}", cut)})
+        assert r.status_code == 422, (suffix, keep, r.status_code, r.text[:300])
+        assert r.json()["field"].startswith("file"), r.text[:300]
+        assert f"cut{suffix}" in r.json()["detail"], r.text[:300]
+    assert _count(client) == 1
