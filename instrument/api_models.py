@@ -11,6 +11,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model
 
+from solitonde.signal.waveform import MIN_SAMPLES
+
 TEXT_MAX = 1000
 """Longest text value of free-form metadata; a key is at most 100 characters."""
 SCALAR = Annotated[str, StringConstraints(max_length=TEXT_MAX)] | float | int | bool | None
@@ -95,7 +97,7 @@ def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type
         "ShotIn",
         __base__=ShotBase,
         __doc__=f"One recorded shot (at most {max_samples:,} samples).",
-        samples=(list[float], Field(..., min_length=1, max_length=max_samples,
+        samples=(list[float], Field(..., min_length=MIN_SAMPLES, max_length=max_samples,
                                     description=f"sensor samples, at most {max_samples:,}")),
     )
     measurement = create_model(

@@ -17,10 +17,9 @@ from typing import Any
 
 import anyio
 from fastapi import FastAPI, Request
-from fastapi.openapi.utils import get_openapi
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from . import problems
+from . import openapi_doc, problems
 from .api_models import Health, Ready, Strict, TableOut, request_models
 from .ingest import warm_up
 from .problems import Problem
@@ -253,7 +252,9 @@ def build_app(settings: Settings | None = None) -> FastAPI:
                 "reason": est.reason, "summary": est.summary(),
                 "limits": svc.settings.limits()}
 
-    _custom_openapi(app, shot_model, measurement_model)
+    from .api_models import InvertIn, SimulateIn
+
+    openapi_doc.install(app, (shot_model, measurement_model, InvertIn, SimulateIn))
     return app
 
 
@@ -280,31 +281,3 @@ def _description(s: Settings) -> str:
         "**Errors** are RFC 9457 `application/problem+json` with `field` naming the first "
         "failing field (dotted path, e.g. `shots.0.dt`) and `errors` listing all of them."
     )
-
-
-def _custom_openapi(app: FastAPI, *models: type[Strict]) -> None:
-    """Add the request models the routes parse themselves (for speed) to the schema."""
-    from .routes_measurements import SECURITY_SCHEMES, upload_schema
-
-    def openapi() -> dict[str, Any]:
-        if app.openapi_schema:
-            return app.openapi_schema
-        schema = get_openapi(title=app.title, version=app.version, description=app.description,
-                             routes=app.routes, tags=app.openapi_tags)
-        components = schema.setdefault("components", {}).setdefault("schemas", {})
-        from .api_models import InvertIn, SimulateIn
-
-        for model in (*models, InvertIn, SimulateIn):
-            js = model.model_json_schema(ref_template="#/components/schemas/{model}")
-            components.update(js.pop("$defs", {}))
-            components[model.__name__] = js
-        components["MeasurementUpload"] = upload_schema()
-        schema["components"]["securitySchemes"] = SECURITY_SCHEMES
-        for path, operations in schema.get("paths", {}).items():
-            if path.startswith("/v1/"):
-                for op in operations.values():
-                    op["security"] = [{"APIKeyHeader": []}, {"HTTPBearer": []}, {}]
-        app.openapi_schema = schema
-        return schema
-
-    app.openapi = openapi  # type: ignore[method-assign]

@@ -193,17 +193,11 @@ _READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "dataset")
 
 
 def binary_parameters() -> list[dict[str, Any]]:
-    """OpenAPI query parameters of a binary shot (only read with an octet-stream body).
-
-    OpenAPI parameters belong to the whole operation, so none is marked required there (a JSON
-    or multipart request must not send any); ``dtype`` and ``dt`` are required for binary
-    bodies, which the descriptions say and the route enforces.
-    """
+    """OpenAPI query parameters of ``POST /v1/measurements/raw`` (``dtype`` and ``dt`` required)."""
     schema = BinaryShotParams.model_json_schema()
     required = set(schema.get("required", []))
-    return [{"name": name, "in": "query", "required": False,
-             "description": (f"binary shots only{', required' if name in required else ''}: "
-                             f"{prop.get('description', name)}"),
+    return [{"name": name, "in": "query", "required": name in required,
+             "description": prop.get("description", name),
              "schema": {k: v for k, v in prop.items() if k not in ("title", "description")}}
             for name, prop in schema["properties"].items()]
 
@@ -232,55 +226,85 @@ def require_json(request: Request) -> None:
                       field="content-type")
 
 
+_POST_LINKS = {201: {"description": "the stored measurement", "links": {
+    name: {"operationId": op, "parameters": {"measurement_id": "$response.body#/id", **extra}}
+    for name, op, extra in (("GetMeasurement", "get_measurement", {}),
+                            ("GetShot", "get_shot", {"shot_index": 0}),
+                            ("PlotMeasurement", "plot_measurement", {}),
+                            ("DeleteMeasurement", "delete_measurement", {}))}}}
+_IDEMPOTENCY_HEADER = {
+    "name": "Idempotency-Key", "in": "header", "required": False,
+    "schema": {"type": "string", "minLength": 1, "maxLength": IDEMPOTENCY_KEY_MAX},
+    "description": "a key the client makes per measurement (a UUID): a retry with the same key "
+                   "and content returns the first answer (same id, header Idempotent-Replayed) "
+                   "instead of storing again; the same key with other content is a 422"}
+
+
 @router.post(
     "/measurements",
     status_code=201,
     response_model=MeasurementOut,
-    responses={**ERRORS, 201: {"description": "the stored measurement", "links": {
-        name: {"operationId": op, "parameters": {"measurement_id": "$response.body#/id", **extra}}
-        for name, op, extra in (("GetMeasurement", "get_measurement", {}),
-                                ("GetShot", "get_shot", {"shot_index": 0}),
-                                ("PlotMeasurement", "plot_measurement", {}),
-                                ("DeleteMeasurement", "delete_measurement", {}))}}},
+    responses={**ERRORS, **_POST_LINKS},
     operation_id="post_measurement",
-    summary="Post one or more shots (JSON), one shot's raw samples (binary) or a waveform file "
-            "(multipart)",
+    summary="Post one or more shots (JSON) or a waveform file (multipart)",
     openapi_extra={"requestBody": {"required": True, "content": {
         "application/json": {"schema": {"$ref": "#/components/schemas/MeasurementIn"}},
-        BINARY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}},
         "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MeasurementUpload"}},
-    }}, "parameters": [*binary_parameters(), {
-        "name": "Idempotency-Key", "in": "header", "required": False,
-        "schema": {"type": "string", "minLength": 1, "maxLength": IDEMPOTENCY_KEY_MAX},
-        "description": "a key the client makes per measurement (a UUID): a retry with the same "
-                       "key and content returns the first answer (same id, header "
-                       "Idempotent-Replayed) instead of storing again; the same key with other "
-                       "content is a 422"}]},
+    }}, "parameters": [_IDEMPOTENCY_HEADER]},
 )
 async def post_measurement(request: Request) -> JSONResponse:
     """Measure TOF and ARR on every shot, aggregate per sphere size, estimate, store.
 
     JSON body: ``{"shots": [{"t0", "dt", "samples", "units", "calibration", "metadata"}]}``.
-    Binary body (``application/octet-stream``): one shot's samples as little-endian float32 or
-    float64 without a header; ``dtype`` and ``dt`` (and optionally ``t0``, ``units``,
-    ``calibration``, ``plate_id``, ``position``, ``sphere_diameter``, ``shot``) in the query.
-    Multipart: a ``file`` field (CSV, NPY, NPZ, HDF5, TDMS) and optional metadata fields; the file
-    is written to a private temporary file the server names. All shots of a request share
-    ``plate_id`` and ``position``. Returns 201 with the stored measurement and its id.
+    Multipart: a ``file`` field (CSV, NPY, NPZ, HDF5, TDMS, JSON) and optional metadata fields;
+    the file is written to a private temporary file the server names. All shots of a request
+    share ``plate_id`` and ``position``. Returns 201 with the stored measurement and its id.
+    No query parameters. (A raw binary body is also taken here, as at ``/v1/measurements/raw``,
+    for clients written before that route.)
     """
-    from .app import service
-
-    svc = service(request)
     media = _media_type(request)
     if media in ("application/json", "multipart/form-data") and request.query_params:
         name = next(iter(request.query_params))
         raise Problem(422, f"{name}: query parameters describe a binary ({BINARY_MEDIA_TYPE}) "
-                      "body only; a JSON shot carries them in the body, an upload in form "
-                      "fields", kind="invalid-input", field=name)
+                      "body only (POST /v1/measurements/raw); a JSON shot carries them in the "
+                      "body, an upload in form fields", kind="invalid-input", field=name)
     if media not in ("application/json", BINARY_MEDIA_TYPE, "multipart/form-data"):
         raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
-                      f"application/json, {BINARY_MEDIA_TYPE}, multipart/form-data)",
+                      "application/json, multipart/form-data; a raw binary shot goes to "
+                      "/v1/measurements/raw)", kind="unsupported-media-type",
+                      field="content-type")
+    return await _post(request, media)
+
+
+@router.post(
+    "/measurements/raw",
+    status_code=201,
+    response_model=MeasurementOut,
+    responses={**ERRORS, **_POST_LINKS},
+    operation_id="post_raw_shot",
+    summary="Post one shot's raw samples (binary body, what they are in the query)",
+    openapi_extra={"requestBody": {"required": True, "content": {
+        BINARY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
+        "parameters": [*binary_parameters(), _IDEMPOTENCY_HEADER]},
+)
+async def post_raw_shot(request: Request) -> JSONResponse:
+    """One shot's samples as little-endian float32 or float64 without a header (the acquisition
+    PC's own buffer); ``dtype`` and ``dt`` (and optionally ``t0``, ``units``, ``calibration``,
+    ``plate_id``, ``position``, ``sphere_diameter``, ``shot``) in the query. Returns 201 with the
+    stored measurement and its id."""
+    media = _media_type(request)
+    if media != BINARY_MEDIA_TYPE:
+        raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
+                      f"{BINARY_MEDIA_TYPE}; JSON shots and files go to /v1/measurements)",
                       kind="unsupported-media-type", field="content-type")
+    return await _post(request, media)
+
+
+async def _post(request: Request, media: str) -> JSONResponse:
+    """Ingest a JSON, binary or multipart body (idempotent with a key) and answer 201."""
+    from .app import service
+
+    svc = service(request)
     key = idempotency_key(request)
     try:
         if media == "multipart/form-data":
@@ -625,7 +649,7 @@ def _missing(measurement_id: int) -> Problem:
     return Problem(404, f"id: no measurement {measurement_id}", kind="not-found", field="id")
 
 
-@router.get("/measurements/{measurement_id}", response_model=MeasurementOut,
+@router.get("/measurements/{measurement_id:int}", response_model=MeasurementOut,
             responses={**ERRORS, 404: _PROBLEM}, summary="One stored measurement",
             operation_id="get_measurement")
 async def get_measurement(request: Request, measurement_id: MeasurementId) -> dict[str, Any]:
@@ -638,7 +662,7 @@ async def get_measurement(request: Request, measurement_id: MeasurementId) -> di
     return measurement_dict(record)
 
 
-@router.delete("/measurements/{measurement_id}", status_code=204, response_class=Response,
+@router.delete("/measurements/{measurement_id:int}", status_code=204, response_class=Response,
                responses={**ERRORS, 404: _PROBLEM}, summary="Remove a measurement and its shots",
                operation_id="delete_measurement")
 async def delete_measurement(request: Request, measurement_id: MeasurementId) -> Response:
@@ -651,7 +675,7 @@ async def delete_measurement(request: Request, measurement_id: MeasurementId) ->
     return Response(status_code=204)
 
 
-@router.get("/measurements/{measurement_id}/shots/{shot_index}",
+@router.get("/measurements/{measurement_id:int}/shots/{shot_index:int}",
             responses={**ERRORS, 404: _PROBLEM}, operation_id="get_shot",
             summary="One stored shot with its samples (as stored, bit for bit)")
 async def get_shot(request: Request, measurement_id: MeasurementId,
@@ -668,7 +692,7 @@ async def get_shot(request: Request, measurement_id: MeasurementId,
             "features": shot.features}
 
 
-@router.get("/measurements/{measurement_id}/plot.png", response_class=Response,
+@router.get("/measurements/{measurement_id:int}/plot.png", response_class=Response,
             operation_id="plot_measurement",
             responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
             summary="PNG of a shot's trace with the incident and reflected pulses marked")

@@ -54,6 +54,7 @@ def _map(svc: Any, plate_id: str) -> dict[str, Any]:
 
 
 @router.get("/plates/{plate_id}/map", responses={**ERRORS, 404: _PROBLEM},
+            operation_id="plate_map",
             summary="A plate's map: positions, estimates, the located support")
 async def get_map(request: Request, plate_id: str = PlateId) -> dict[str, Any]:
     """Per position: coordinates, shot count, thickness and distance (median, intervals,
@@ -66,6 +67,7 @@ async def get_map(request: Request, plate_id: str = PlateId) -> dict[str, Any]:
 
 @router.get("/plates/{plate_id}/map.png", response_class=Response,
             responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
+            operation_id="plate_map_png",
             summary="PNG of a plate's thickness and distance-to-support maps")
 async def get_map_png(request: Request, plate_id: str = PlateId) -> Response:
     from .app import service

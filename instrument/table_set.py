@@ -174,6 +174,7 @@ class TableSet:
 
 
 def _covers(est: Estimator, diameters: Sequence[float]) -> bool:
-    """Whether the table has every sphere size (within 1 %), or any when none is known."""
+    """Whether the table has every sphere size (within 1 % of its own size, the rule of
+    :meth:`ModelTable.diameter_index`), or any when none is known."""
     have = est.table.axes["diameter_m"]
-    return all(any(abs(h - d) <= 0.01 * d for h in have) for d in diameters)
+    return all(any(abs(h - d) <= 0.01 * h for h in have) for d in diameters)

@@ -106,6 +106,10 @@ MATERIALS: dict[str, Material] = {
 }
 """The bundled library: spheres (440C, 52100, tungsten carbide, glass, brass) and plates."""
 PROPERTY_KEYS = ("name", "youngs_modulus", "poisson_ratio", "density")
+PROPERTY_RANGES = {"youngs_modulus": (1e6, 1e13, "Pa"), "density": (1.0, 1e5, "kg/m^3")}
+"""Physical bounds of a material given by its properties: from soft rubber (1 MPa) past diamond
+(1.05 TPa), from foams to beyond osmium (22,590 kg/m^3). Outside them no solid is meant, and the
+contact laws under- or overflow (a modulus of 1e-300 Pa)."""
 
 
 def properties_from(value: object) -> dict[str, object]:
@@ -128,9 +132,9 @@ def properties_from(value: object) -> dict[str, object]:
     if unknown:
         raise ValueError(f"[{unknown[0]}] unknown key (allowed: {', '.join(PROPERTY_KEYS)})")
     out: dict[str, object] = {"name": str(value.get("name") or "custom")[:80]}
-    rules = {"youngs_modulus": ("Pa > 0", lambda v: v > 0.0),
-             "poisson_ratio": ("-1 < nu < 0.5", lambda v: -1.0 < v < 0.5),
-             "density": ("kg/m^3 > 0", lambda v: v > 0.0)}
+    rules = {key: (f"{low:g} <= {key} <= {high:g} {unit}", lambda v, lo=low, hi=high: lo <= v <= hi)
+             for key, (low, high, unit) in PROPERTY_RANGES.items()}
+    rules["poisson_ratio"] = ("-1 < nu < 0.5", lambda v: -1.0 < v < 0.5)
     for key, (allowed, ok) in rules.items():
         if key not in value:
             raise ValueError(f"[{key}] missing (allowed: {allowed})")

@@ -15,7 +15,15 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    StrictBool,
+    ValidationError,
+    model_validator,
+)
 
 from .contact import hertz_sphere_flat, hertz_sphere_sphere, plate_impedance, sphere_mass
 from .errors import SceneError
@@ -133,7 +141,7 @@ class ChainSpec(_Section):
     n_particles: Integer = Field(
         20, ge=1, le=100_000, description="spheres in the chain (striker not counted)"
     )
-    diameter: Number = Field(9.53e-3, gt=0.0, le=1.0, description="sphere diameter D, m")
+    diameter: Number = Field(9.53e-3, ge=1e-4, le=1.0, description="sphere diameter D, m")
     material: MaterialName = Field("steel_440c", description="sphere material: a library name "
                                    "or {name, youngs_modulus, poisson_ratio, density} (SI)")
     sensor_index: Integer = Field(
@@ -154,8 +162,9 @@ class ChainSpec(_Section):
 class StrikerSpec(_Section):
     """The striker, identical to the chain spheres: a drop height or an impact velocity."""
 
-    drop_height: Number = Field(5e-3, gt=0.0, le=100.0, description="free-fall height, m")
-    velocity: Number | None = Field(None, gt=0.0, le=100.0, description="impact velocity, m/s")
+    drop_height: Number = Field(5e-3, ge=1e-6, le=100.0, description="free-fall height, m")
+    velocity: Annotated[Number, Field(ge=1e-4, le=100.0)] | None = Field(
+        None, description="impact velocity, m/s")
 
     @model_validator(mode="after")
     def _one_of(self) -> StrikerSpec:
@@ -174,7 +183,7 @@ class StrikerSpec(_Section):
 class PlateSpec(_Section):
     """The plate: thickness, in-plane size, material, clamped supports, chain position."""
 
-    thickness: Number = Field(3.18e-3, gt=0.0, le=1.0, description="plate thickness t, m")
+    thickness: Number = Field(3.18e-3, ge=1e-5, le=1.0, description="plate thickness t, m")
     size: tuple[PlateSide, PlateSide] = Field(
         (0.914, 0.914), description="in-plane size (along the centre line, across), m"
     )
@@ -205,8 +214,8 @@ class PlateSpec(_Section):
 class EffectsSpec(_Section):
     """Which physical effects to simulate; each costs nothing when off."""
 
-    gravity: bool = Field(True, description="static preload m g per particle (paper Eq. 1)")
-    dissipation: bool = Field(False, description="contact damping (off in the paper's model)")
+    gravity: StrictBool = Field(True, description="static preload m g per particle (paper Eq. 1)")
+    dissipation: StrictBool = Field(False, description="contact damping (off in the paper's model)")
     plate_model: Literal["rigid", "halfspace", "infinite", "sem", "greens", "auto"] = Field(
         "auto", description="bottom boundary; auto picks the cheapest model that is right"
     )
@@ -227,11 +236,13 @@ class EffectsSpec(_Section):
 class OutputSpec(_Section):
     """What to record."""
 
-    sample_rate: Number = Field(2e6, gt=0.0, le=1e10, description="sensor sampling rate, Hz")
+    sample_rate: Number = Field(2e6, ge=1e3, le=1e10,
+                                description="sensor sampling rate, Hz (at least 1 kHz)")
     duration: Annotated[Literal["auto"] | float, BeforeValidator(_duration)] = Field(
         "auto", description="'auto' (until the reflection has passed the sensor) or seconds"
     )
-    traces: bool = Field(False, description="also record particle positions, velocities, forces")
+    traces: StrictBool = Field(False,
+                               description="also record particle positions, velocities, forces")
 
 
 class SemSpec(_Section):
@@ -248,9 +259,9 @@ class SemSpec(_Section):
     order: tuple[Integer, Integer, Integer] = Field(
         (4, 4, 2), description="GLL polynomial order along x, y, z"
     )
-    symmetry: bool = Field(True, description="mesh half the plate, mirror plane y = Ly/2")
+    symmetry: StrictBool = Field(True, description="mesh half the plate, mirror plane y = Ly/2")
     step_factor: Number = Field(
-        0.9, gt=0.0, le=1.0, description="time step as a fraction of the stable limit"
+        0.9, ge=1e-3, le=1.0, description="time step as a fraction of the stable limit"
     )
     auto_margin: Number = Field(
         2.0, gt=0.0, le=100.0,

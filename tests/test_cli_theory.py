@@ -99,4 +99,4 @@ def test_scene_error_in_a_real_process_has_no_traceback(tmp_path):
     out = _run("theory", "--set", "chain.diameter=0", cwd=tmp_path)
     assert out.returncode == 2
     assert out.stderr.strip().splitlines() == [
-        "error: chain.diameter: must be > 0.0, got 0"]
+        "error: chain.diameter: must be >= 0.0001, got 0"]

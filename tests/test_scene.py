@@ -48,12 +48,12 @@ def test_load_file_and_overrides(tmp_path, suffix):
 
 BAD = [
     # non-positive sizes
-    ({"chain": {"diameter": 0}}, "chain.diameter", "> 0"),
-    ({"chain": {"diameter": -1e-3}}, "chain.diameter", "> 0"),
-    ({"plate": {"thickness": 0}}, "plate.thickness", "> 0"),
+    ({"chain": {"diameter": 0}}, "chain.diameter", ">= 0.0001"),
+    ({"chain": {"diameter": -1e-3}}, "chain.diameter", ">= 0.0001"),
+    ({"plate": {"thickness": 0}}, "plate.thickness", ">= 1e-05"),
     ({"plate": {"size": [0, 0.9]}}, "plate.size", "positive"),
     ({"chain": {"n_particles": 0}}, "chain.n_particles", ">= 1"),
-    ({"striker": {"drop_height": 0}}, "striker.drop_height", "> 0"),
+    ({"striker": {"drop_height": 0}}, "striker.drop_height", ">= 1e-06"),
     # sensor outside the chain
     ({"chain": {"sensor_index": 21}}, "chain.sensor_index", "1..20"),
     ({"chain": {"n_particles": 5, "sensor_index": 6}}, "chain.sensor_index", "1..5"),

@@ -494,7 +494,8 @@ def test_simulate_runs_and_prices_scenes(client: TestClient) -> None:
 
 
 def test_openapi_states_the_limits(tmp_path: Path) -> None:
-    """The schema carries the configured limits (maxItems) and both request content types."""
+    """The schema carries the configured limits (maxItems), the JSON and multipart bodies of
+    /v1/measurements, and the binary body with its query parameters at /v1/measurements/raw."""
     with make_client(tmp_path, max_samples_per_shot=12_345, max_shots_per_request=7) as client:
         schema = client.get("/openapi.json").json()
     shots = schema["components"]["schemas"]["MeasurementIn"]["properties"]["shots"]
@@ -502,13 +503,14 @@ def test_openapi_states_the_limits(tmp_path: Path) -> None:
     shot = schema["components"]["schemas"]["ShotIn"]["properties"]["samples"]
     assert shot["maxItems"] == 12_345
     content = schema["paths"]["/v1/measurements"]["post"]["requestBody"]["content"]
-    assert set(content) == {"application/json", "application/octet-stream",
-                            "multipart/form-data"}
-    params = {p["name"]: p for p in schema["paths"]["/v1/measurements"]["post"]["parameters"]}
-    # Parameters belong to the whole operation (JSON bodies must not send them): none is
-    # "required" there; the description says which ones a binary body needs.
-    assert not any(p["required"] for p in params.values())
-    assert params["dt"]["description"].startswith("binary shots only, required")
+    assert set(content) == {"application/json", "multipart/form-data"}
+    assert [p["name"] for p in schema["paths"]["/v1/measurements"]["post"]["parameters"]] == [
+        "Idempotency-Key"]  # no query parameters: a JSON or multipart body must not send any
+    raw = schema["paths"]["/v1/measurements/raw"]["post"]
+    assert set(raw["requestBody"]["content"]) == {"application/octet-stream"}
+    params = {p["name"]: p for p in raw["parameters"]}
+    assert params["dt"]["required"] and params["dtype"]["required"]
+    assert not params["t0"]["required"]
     assert params["dtype"]["schema"]["enum"] == ["float32", "float64"]
     assert "12,345 samples per shot" in schema["info"]["description"]
 

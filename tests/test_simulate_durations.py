@@ -26,13 +26,14 @@ def test_wall_duration_ignores_plate_thickness(plate_model: str) -> None:
     assert durations[0] == durations[1] < 1.5e-3
 
 
-def test_a_sample_interval_longer_than_the_record_says_raise_the_rate() -> None:
-    """At 0.001 Hz the record runs to the end of one 1000 s interval: the advice is to raise the
-    sample rate (it said to lower it); a long record at a fine rate still says to lower it."""
-    from solitonde.model.errors import SimulationError
+def test_a_rate_too_low_to_sample_a_pulse_is_a_scene_error_and_a_long_record_says_shorten():
+    """Below 1 kHz (a sample per millisecond, ten times a solitary pulse's width) the scene is
+    refused naming output.sample_rate: at 0.001 Hz one sample interval ran for 1000 s of
+    simulated time. A long record at a fine rate says to shorten it or lower the rate."""
+    from solitonde.model.errors import SceneError, SimulationError
 
-    with pytest.raises(SimulationError, match=r"raise output.sample_rate: one sample interval"):
-        simulate(scene_from_dict({"output": {"sample_rate": 1e-3}}))
+    with pytest.raises(SceneError, match=r"output.sample_rate: must be >= 1000"):
+        scene_from_dict({"output": {"sample_rate": 1e-3}})
     with pytest.raises(SimulationError, match=r"shorten output.duration, lower output.sample_rate"):
         simulate(scene_from_dict({"output": {"sample_rate": 1e9, "duration": 1.0}}))
 

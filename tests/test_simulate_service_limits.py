@@ -75,7 +75,7 @@ def test_plate_step_floor_is_below_the_real_step_count(sem: dict, plate: dict) -
 
 
 def test_a_huge_mesh_at_a_low_sample_rate_is_refused_before_it_is_built(monkeypatch) -> None:
-    """[512, 512, 1] elements (19 million degrees of freedom, 1.1 GB and 4 s to build) at 500 Hz:
+    """[512, 512, 1] elements (19 million degrees of freedom, 1.1 GB and 4 s to build) at 1 kHz:
     one plate step per sample priced it under the budget, so the mesh was built to be refused."""
     from solitonde.model import boundary
 
@@ -85,7 +85,7 @@ def test_a_huge_mesh_at_a_low_sample_rate_is_refused_before_it_is_built(monkeypa
     monkeypatch.setattr(boundary, "make_boundary", refuse)
     scene = scene_from_dict({"effects": {"plate_model": "sem"},
                              "sem": {"elements": [512, 512, 1]},
-                             "output": {"sample_rate": 500.0}})
+                             "output": {"sample_rate": 1000.0}})
     budget = Settings().max_simulation_cost
     cost = simulation_cost(scene, budget)
     assert cost["cost"] > budget and cost["estimate"].startswith("floor")
