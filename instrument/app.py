@@ -31,6 +31,7 @@ from .uploads import UploadDir
 log = logging.getLogger("solitonde.instrument")
 
 INGEST_THREADS = 1
+PLOT_THREADS = 2
 LARGE_UPLOAD_BYTES = 4 * 1024 * 1024
 """Uploads above this size (4 MiB) have a lane of their own (:attr:`Service.lane_for`)."""
 """Worker threads per process that parse, measure and store posted shots (one FIFO lane).
@@ -65,6 +66,9 @@ class Service:
     large_upload_lane: Any = None
     """Uploads larger than :data:`LARGE_UPLOAD_BYTES`, one at a time: a 60 MB file takes a
     second or two and a few hundred MB to read, and an ordinary upload does not wait for it."""
+    plot_lane: Any = None
+    """Plots (PNG of a trace or a map), :data:`PLOT_THREADS` at a time; a plot whose client
+    left while it waited is skipped (:func:`.heavy.run_for_client`)."""
 
     def lane_for(self, size: int | None) -> Any:
         """The lane an upload of ``size`` bytes is parsed in."""
@@ -177,7 +181,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
             log.info("model tables: %s", ", ".join(estimator.estimators))
         svc = Service(settings, store, estimator, UploadDir(), shot_model, measurement_model,
                       anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS),
-                      anyio.CapacityLimiter(1))
+                      anyio.CapacityLimiter(1), anyio.CapacityLimiter(PLOT_THREADS))
         app.state.service = svc
         # Everything loaded so far (numpy, pandas, matplotlib, the table: ~170k objects) lives
         # as long as the process; a full collection walks all of it (50-150 ms measured), a

@@ -25,6 +25,7 @@ from .api_models import (
     SimulateOut,
 )
 from .estimates import EstimateUnavailable, _jsonable
+from .heavy import run_for_client
 from .problems import Problem, from_pydantic
 from .routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
 from .table_set import TableChoiceError
@@ -183,9 +184,8 @@ async def simulate(request: Request) -> dict[str, Any]:
         payload = SimulateIn.model_validate_json(body or b"null")
     except ValidationError as exc:
         raise from_pydantic(exc, SimulateIn) from None
-    async with _SIMULATIONS:
-        return await run_in_threadpool(_simulate, payload, svc.settings.max_simulation_cost,
-                                       svc.settings.max_samples_per_shot)
+    return await run_for_client(request, _SIMULATIONS, _simulate, payload,
+                                svc.settings.max_simulation_cost, svc.settings.max_samples_per_shot)
 
 
 def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str, Any]:

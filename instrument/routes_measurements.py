@@ -17,6 +17,7 @@ import logging
 import math
 import threading
 import time
+from functools import partial
 from typing import Annotated, Any
 
 import anyio.to_thread
@@ -38,6 +39,7 @@ from .api_models import (
     MeasurementPage,
     Strict,
 )
+from .heavy import run_for_client
 from .ingest import (
     check_counts,
     measure_and_store,
@@ -467,9 +469,8 @@ async def _ingest_upload(svc: Any, request: Request, key: str | None = None) -> 
             replay = await _replay(svc, *idem)
             if replay is not None:
                 return replay
-        return await anyio.to_thread.run_sync(_ingest_file, svc, upload.file, fmt, opts,
-                                              client_name(upload.filename), idem,
-                                              limiter=svc.lane_for(upload.size))
+        return await run_for_client(request, svc.lane_for(upload.size), _ingest_file, svc,
+                                    upload.file, fmt, opts, client_name(upload.filename), idem)
     finally:
         await form.close()
 
@@ -720,6 +721,6 @@ async def plot_measurement(
     samples = record.samples
     if record.units == "V" and record.calibration:  # features are in newtons: draw the force
         samples = samples * record.calibration
-    png = await run_in_threadpool(trace_png, record.t0, record.dt, samples, record.features,
-                                  units="N", title=title)
+    png = await run_for_client(request, svc.plot_lane, partial(
+        trace_png, record.t0, record.dt, samples, record.features, units="N", title=title))
     return Response(png, media_type="image/png")

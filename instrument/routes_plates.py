@@ -13,6 +13,7 @@ from fastapi import APIRouter, Path, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
+from .heavy import run_for_client
 from .problems import Problem
 from .routes_measurements import _PROBLEM, AUTH, ERRORS
 
@@ -75,5 +76,5 @@ async def get_map_png(request: Request, plate_id: str = PlateId) -> Response:
 
     svc = service(request)
     data = await run_in_threadpool(_map, svc, plate_id)
-    png = await run_in_threadpool(map_png, data)
+    png = await run_for_client(request, svc.plot_lane, map_png, data)
     return Response(png, media_type="image/png")

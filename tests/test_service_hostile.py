@@ -238,3 +238,38 @@ def test_a_file_cut_short_in_any_format_is_refused_and_nothing_is_stored(client,
         assert r.json()["field"].startswith("file"), r.text[:300]
         assert f"cut{suffix}" in r.json()["detail"], r.text[:300]
     assert _count(client) == 1
+
+
+def test_a_plot_whose_client_left_while_it_waited_is_not_drawn(client, monkeypatch):
+    """Eleven browser tabs closed while their plots queued kept the CPU busy for minutes: now a
+    plot's turn comes, the client is checked, and a gone client's plot is skipped (499 logged)."""
+    import anyio
+
+    from solitonde.instrument import plotting
+
+    drawn = []
+    real = plotting.trace_png
+    monkeypatch.setattr(plotting, "trace_png", lambda *a, **k: drawn.append(1) or real(*a, **k))
+    r = client.post("/v1/measurements", json={"shots": [shot_json()]})
+    path = f"/v1/measurements/{r.json()['id']}/plot.png"
+    assert client.get(path).status_code == 200 and len(drawn) == 1
+
+    async def gone_client() -> int:
+        sent = []
+
+        async def receive():
+            return {"type": "http.disconnect"}
+
+        async def send(message):
+            sent.append(message)
+
+        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
+                 "method": "GET", "scheme": "http", "path": path, "raw_path": path.encode(),
+                 "query_string": b"", "headers": [(b"host", b"testserver")],
+                 "client": ("127.0.0.1", 5000), "server": ("testserver", 80),
+                 "app": client.app, "state": {}}
+        await client.app(scope, receive, send)
+        return sent[0]["status"]
+
+    assert anyio.run(gone_client) == 499
+    assert len(drawn) == 1, "the gone client's plot was drawn"
