@@ -66,7 +66,7 @@ def shot_request(n: int = 10_000, body: str = "json") -> tuple[str, bytes, str]:
     query = urlencode({"dtype": "float32", "dt": shot["dt"], "t0": shot["t0"],
                        "units": shot["units"], **meta})
     samples = np.asarray(shot["samples"], dtype="<f4")  # an acquisition PC's float32 buffer
-    return f"/v1/measurements?{query}", samples.tobytes(), "application/octet-stream"
+    return f"/v1/measurements/raw?{query}", samples.tobytes(), "application/octet-stream"
 
 
 def free_port() -> int:
