@@ -31,7 +31,6 @@ from service_support import DT, shot_samples, start_uvicorn, stop_group  # noqa:
 
 from solitonde.instrument.store import Store  # noqa: E402
 
-
 UNEXPECTED: list[str] = []
 """Answers other than 201 (or 503 while stopping): each one fails the run."""
 
