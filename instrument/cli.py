@@ -1,37 +1,50 @@
 """The `solitonde` command line: one Typer app assembled from one module per command.
 
-Each ``cmd_*.py`` module in this folder defines ``register(app)`` that adds its commands; list it
-in ``COMMAND_MODULES`` to make it part of the CLI.
+Each ``cmd_*.py`` module in this folder defines ``register(app)`` that adds its commands; list
+it in :data:`COMMANDS` with its one-line help to make it part of the CLI.
+
+The console script loads only what a call needs: ``solitonde theory ...`` imports the theory
+command's module and nothing of the others (no numba kernels, no scipy.stats, no pandas), and
+``solitonde --help`` or ``--version`` imports none of them, listing the commands from
+:data:`COMMANDS` (a test holds that list to the commands' own help). :func:`build_app` assembles
+everything, for tests and for a name that is no command (Click then suggests the nearest).
 """
 
 from __future__ import annotations
 
 import importlib
+import sys
 
 import typer
 
-COMMAND_MODULES: list[str] = [
-    "cmd_analyze",
-    "cmd_samples",
-    "cmd_simulate",
-    "cmd_theory",
-    "cmd_serve",
-    "cmd_table",
-    "cmd_invert",
-    "cmd_map",
-    "cmd_calibrate",
-    "cmd_validate",
-    "cmd_reproduce",
-    "cmd_bench",
-]
+COMMANDS: dict[str, tuple[str, str]] = {
+    "analyze": ("cmd_analyze", "Measure TOF, ARR, SNR and quality flags of every shot; aggregate "
+                               "per position."),
+    "samples": ("cmd_samples", "Regenerate the synthetic sample waveforms and their truth table "
+                               "(data_samples/waveforms/), or with --scan the simulated scan of a "
+                               "plate near its clamped edge (data_samples/scan/)."),
+    "simulate": ("cmd_simulate", "Simulate one shot (striker, chain, plate) and report TOF, ARR "
+                                 "and diagnostics."),
+    "theory": ("cmd_theory", "Closed-form predictions (Zener impact, ARR, TOF, critical "
+                             "distance) for a scene."),
+    "serve": ("cmd_serve", "Start the REST service (OpenAPI docs at /docs); Ctrl-C stops it "
+                           "cleanly."),
+    "invert": ("cmd_invert", "Estimate plate thickness and distance to the nearest support from "
+                             "TOF and ARR."),
+    "map": ("cmd_map", "Map a plate: thickness and distance to support at each position, the "
+                       "support located."),
+    "calibrate": ("cmd_calibrate", "Fit ARR factor and TOF offset per sphere size on a reference "
+                                   "plate; write them as JSON."),
+    "validate": ("cmd_validate", "Simulate random plates with noise and dissipation, invert, and "
+                                 "score the answers."),
+    "reproduce": ("cmd_reproduce", "Regenerate the paper's figures 3-10 (PNG + CSV each) and "
+                                   "summary.json with the checks."),
+    "table": ("cmd_table", "Build and inspect model tables."),
+    "bench": ("cmd_bench", "Benchmarks of the model."),
+}
+"""Every command: the module that registers it and its one-line help, in the order listed."""
 
-app = typer.Typer(
-    name="solitonde",
-    help="Plate NDE with highly nonlinear solitary waves: theory, simulation, analysis, service.",
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-)
+HELP = "Plate NDE with highly nonlinear solitary waves: theory, simulation, analysis, service."
 
 
 def _version(value: bool) -> None:
@@ -45,7 +58,6 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
 def _root(
     _show_version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
                                        help="Print the version and exit."),
@@ -54,18 +66,49 @@ def _root(
     # A callback keeps `solitonde <command>` a group even while only one command is registered.
 
 
+def new_app() -> typer.Typer:
+    """An empty `solitonde` app: the name, the help, ``--version``, shell completion."""
+    app = typer.Typer(name="solitonde", help=HELP, no_args_is_help=True,
+                      pretty_exceptions_enable=False)
+    app.callback()(_root)
+    return app
+
+
+app = new_app()
+
+
 def build_app() -> typer.Typer:
     """Attach every command module's commands to the app (idempotent)."""
     if not getattr(app, "_solitonde_registered", False):
-        for name in COMMAND_MODULES:
-            importlib.import_module(f"solitonde.instrument.{name}").register(app)
+        for module, _help in COMMANDS.values():
+            importlib.import_module(f"solitonde.instrument.{module}").register(app)
         app._solitonde_registered = True  # type: ignore[attr-defined]
     return app
 
 
+def app_for(args: list[str]) -> typer.Typer:
+    """The smallest app that answers ``solitonde ARGS``: one command's module, or the listing."""
+    name = next((a for a in args if not a.startswith("-")), None)
+    if name in COMMANDS:
+        one = new_app()
+        importlib.import_module(f"solitonde.instrument.{COMMANDS[name][0]}").register(one)
+        return one
+    if name is None:  # --help, --version, completion, or nothing: the listing is enough
+        listing = new_app()
+        for command, (_module, text) in COMMANDS.items():
+            listing.command(command, help=text)(_listed)
+        return listing
+    return build_app()
+
+
+def _listed() -> None:
+    """Stands for a command in the listing; never run (a command's name loads its module)."""
+    raise RuntimeError("a listed command was run without its module")
+
+
 def main() -> None:
     """Console-script entry point."""
-    build_app()()
+    app_for(sys.argv[1:])()
 
 
 if __name__ == "__main__":

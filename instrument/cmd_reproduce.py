@@ -25,7 +25,7 @@ def reproduce_command(
                                     "contact patch, the default model) or 'paper' (the paper's "
                                     "single-node load; faster, not mesh-convergent in ARR)."),
 ) -> None:
-    """Regenerate the paper's Figs. 3-10 (PNG + CSV each) and summary.json with the checks."""
+    """Regenerate the paper's figures 3-10 (PNG + CSV each) and summary.json with the checks."""
     from solitonde.instrument.reproduce import reproduce
 
     console = Console(stderr=True)
