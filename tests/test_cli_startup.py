@@ -23,7 +23,7 @@ def _loaded_after(*args: str) -> set[str]:
             "print(sorted(m for m in sys.modules if m.startswith('solitonde.instrument.cmd_')))")
     out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
                          check=True).stdout.strip().splitlines()
-    return set(eval(out[-2])) | set(eval(out[-1]))  # noqa: S307 - our own printed lists
+    return set(eval(out[-2])) | set(eval(out[-1]))
 
 
 def test_help_and_version_load_no_command_and_no_heavy_library():
