@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from typing import Any
 
 import typer
 
@@ -44,7 +45,41 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 """Every command: the module that registers it and its one-line help, in the order listed."""
 
+HELP_MARKUP = None
+"""Click's plain help: option names with NUMBER / PATH / TEXT metavars, flags without one, wrapped
+to the terminal (typer's rich panels print raw labels such as ``<bool>`` and ``<list[str]>``)."""
+
 HELP = "Plate NDE with highly nonlinear solitary waves: theory, simulation, analysis, service."
+
+
+_LABELS = {"str": "TEXT", "int": "INTEGER", "float": "NUMBER", "path": "PATH", "Path": "PATH",
+           "file": "FILE", "dir": "DIR", "int range": "INTEGER", "float range": "NUMBER"}
+
+
+def _conventional_labels() -> None:
+    """Help shows value types as Click always did (``--port INTEGER``, ``--out PATH``, a flag
+    with no label) instead of typer's raw ``<int range>``, ``<list[Path]>``, ``<bool>``. Typer
+    offers no setting for it, so its one label method is wrapped; unknown labels pass through."""
+    from typer.core import TyperArgument, TyperOption
+
+    for cls in (TyperOption, TyperArgument):
+        raw = cls.display_type
+        if getattr(raw, "_solitonde", False):
+            continue
+
+        def display_type(self: Any, ctx: Any, _raw: Any = raw) -> str | None:
+            if getattr(self, "is_flag", False):
+                return None
+            label = _raw(self, ctx)
+            inner = label[1:-1] if label.startswith("<") and label.endswith(">") else label
+            if inner.startswith("list[") and inner.endswith("]"):
+                inner = inner[5:-1]
+            if "|" in inner:
+                return f"[{inner}]"
+            return _LABELS.get(inner, inner.upper())
+
+        display_type._solitonde = True  # type: ignore[attr-defined]
+        cls.display_type = display_type  # type: ignore[method-assign]
 
 
 def _version(value: bool) -> None:
@@ -68,8 +103,9 @@ def _root(
 
 def new_app() -> typer.Typer:
     """An empty `solitonde` app: the name, the help, ``--version``, shell completion."""
+    _conventional_labels()
     app = typer.Typer(name="solitonde", help=HELP, no_args_is_help=True,
-                      pretty_exceptions_enable=False)
+                      pretty_exceptions_enable=False, rich_markup_mode=HELP_MARKUP)
     app.callback()(_root)
     return app
 

@@ -11,6 +11,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from .cli import HELP_MARKUP
+
 
 def accuracy_command(
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON."),
@@ -70,6 +72,7 @@ def _print(result: dict[str, Any]) -> None:
 
 def register(app: typer.Typer) -> None:
     """Add the `bench` command group."""
-    group = typer.Typer(help="Benchmarks of the model.", no_args_is_help=True)
+    group = typer.Typer(help="Benchmarks of the model.", no_args_is_help=True,
+                        rich_markup_mode=HELP_MARKUP)
     group.command("accuracy")(accuracy_command)
     app.add_typer(group, name="bench")

@@ -136,8 +136,11 @@ def _table(data: dict[str, Any]) -> Table:
 
 
 def simulate_command(
-    scene_file: Path | None = typer.Argument(
-        None, help="Scene file (YAML or JSON); the paper's setup when omitted."
+    scene_arg: Path | None = typer.Argument(
+        None, metavar="SCENE", help="The scene file, as --scene (kept for older scripts)."
+    ),
+    scene_file: Path | None = typer.Option(
+        None, "--scene", help="Scene file (YAML or JSON); the paper's setup when omitted."
     ),
     overrides: list[str] | None = typer.Option(
         None, "--set", help="Override a scene value, e.g. --set plate.thickness=3.18e-3."
@@ -147,6 +150,11 @@ def simulate_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
+    if scene_arg is not None and scene_file is not None and scene_arg != scene_file:
+        typer.echo(f"error: --scene: {scene_file} and the positional scene {scene_arg} differ; "
+                   "give one", err=True)
+        raise typer.Exit(code=2)
+    scene_file = scene_file or scene_arg
     for flag, path in (("--out", out), ("--plot", plot)):
         if path is not None and path.is_dir():  # before the run, which may take minutes
             typer.echo(f"error: {flag}: {str(path)!r} is a folder; give a file name", err=True)

@@ -20,6 +20,7 @@ import typer
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import apply_overrides, load_scene_file
 
+from .cli import HELP_MARKUP
 from .settings import DEFAULT_TABLE
 from .table import ModelTable, TableError
 from .table_build import (
@@ -158,7 +159,8 @@ def info_command(
 
 def register(app: typer.Typer) -> None:
     """Add the `table` command group to the CLI."""
-    group = typer.Typer(help="Build and inspect model tables.", no_args_is_help=True)
+    group = typer.Typer(help="Build and inspect model tables.", no_args_is_help=True,
+                        rich_markup_mode=HELP_MARKUP)
     group.command("build")(build_command)
     group.command("info")(info_command)
     app.add_typer(group, name="table")

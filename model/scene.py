@@ -439,7 +439,8 @@ def parse_value(text: str) -> Any:
 def apply_overrides(
     data: Mapping[str, Any], overrides: Iterable[str] | Mapping[str, Any]
 ) -> dict[str, Any]:
-    """A deep copy of ``data`` with ``section.key=value`` overrides applied (not validated)."""
+    """A deep copy of ``data`` with ``section.key=value`` overrides applied (not validated);
+    ``section.key=null`` removes the key, so its default applies."""
     result = json.loads(json.dumps(dict(data)))
     items: Iterable[tuple[str, Any]]
     if isinstance(overrides, Mapping):
@@ -461,7 +462,10 @@ def apply_overrides(
             if not isinstance(child, dict):
                 raise SceneError(".".join(parts[: i + 1]), "is a value, not a section")
             node = child
-        node[parts[-1]] = value
+        if value is None:  # key=null clears the key: the scene file's value gives way to the default
+            node.pop(parts[-1], None)
+        else:
+            node[parts[-1]] = value
     return result
 
 
