@@ -462,7 +462,7 @@ def apply_overrides(
             if not isinstance(child, dict):
                 raise SceneError(".".join(parts[: i + 1]), "is a value, not a section")
             node = child
-        if value is None:  # key=null clears the key: the scene file's value gives way to the default
+        if value is None:  # key=null clears the key: the default applies again
             node.pop(parts[-1], None)
         else:
             node[parts[-1]] = value
