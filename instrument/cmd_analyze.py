@@ -33,7 +33,6 @@ from typing import Any
 
 import typer
 from rich.console import Console
-from rich.table import Table
 
 from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
@@ -41,6 +40,7 @@ from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import FEATURES, aggregate, extract_many
 from solitonde.signal.waveform import UNITS
 
+from .console_tables import Column, fitted_table
 from .manifest import ManifestError, Row
 
 OUT_SUFFIXES = (".csv", ".parquet")
@@ -478,30 +478,38 @@ def _write_estimates(out: Path, estimates: list[dict[str, Any]]) -> None:
 
 def _print(console: Console, rows: list[dict[str, Any]], aggs: list[dict[str, Any]],
            skipped: list[dict[str, Any]], errors: list[dict[str, Any]]) -> None:
-    table = Table(title="Shots")
-    for col in ("source", "shot", "TOF (us)", "ARR", "t_inc (us)", "t_ref (us)", "F_inc (N)",
-                "F_ref (N)", "SNR (dB)", "flags"):
-        table.add_column(col)
+    shot_rows = []
     for r in rows:
         if "error" in r:
             continue
         arr = _fmt(r["arr"]) if r["arr"] is not None else f"< {_fmt(r['arr_upper_bound'], 1, 3)}"
-        table.add_row(Path(r["source"]).name, str(r["shot"]), _fmt(r["tof_s"], 1e6, 5), arr,
-                      _fmt(r["incident_time_s"], 1e6, 5), _fmt(r["reflected_time_s"], 1e6, 5),
-                      _fmt(r["incident_peak_N"]), _fmt(r["reflected_peak_N"]),
-                      _fmt(r["snr_db"], 1, 3), ",".join(r["flags"]))
-    console.print(table)
-    agg_table = Table(title="Per position")
-    for col in ("plate", "position", "D (m)", "shots", "TOF mean (us)", "TOF std (us)",
-                "ARR mean", "ARR std", "rejected"):
-        agg_table.add_column(col)
+        shot_rows.append([Path(r["source"]).name, str(r["shot"]), _fmt(r["tof_s"], 1e6, 5), arr,
+                          _fmt(r["incident_time_s"], 1e6, 5), _fmt(r["reflected_time_s"], 1e6, 5),
+                          _fmt(r["incident_peak_N"]), _fmt(r["reflected_peak_N"]),
+                          _fmt(r["snr_db"], 1, 3), ",".join(r["flags"])])
+    shot_columns = [Column("source", text=True), Column("shot"), Column("TOF (us)"),
+                    Column("ARR"), Column("t_inc (us)", drop_order=3),
+                    Column("t_ref (us)", drop_order=3), Column("F_inc (N)", drop_order=2),
+                    Column("F_ref (N)", drop_order=2), Column("SNR (dB)", drop_order=1),
+                    Column("flags", text=True)]
+    agg_rows = []
     for a in aggs:
         tof, arr = a["tof_s"], a["arr"]
         position = a["position"] if a.get("source") is None else f"(file {Path(a['source']).name})"
-        agg_table.add_row(str(a["plate_id"]), str(position), str(a["sphere_diameter"]),
-                          str(a["n_shots"]), _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3),
-                          _fmt(arr["mean"]), _fmt(arr["std"], 1, 3), str(len(a["rejected"])))
-    console.print(agg_table)
+        diameter = "-" if a["sphere_diameter"] is None else f"{a['sphere_diameter'] * 1e3:.4g}"
+        agg_rows.append([str(a["plate_id"] or "-"), str(position), diameter, str(a["n_shots"]),
+                         _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3), _fmt(arr["mean"]),
+                         _fmt(arr["std"], 1, 3), str(len(a["rejected"]))])
+    agg_columns = [Column("plate", text=True), Column("position", text=True), Column("D (mm)"),
+                   Column("shots"), Column("TOF mean (us)"), Column("TOF std (us)", drop_order=1),
+                   Column("ARR mean"), Column("ARR std", drop_order=1),
+                   Column("rejected", drop_order=2)]
+    for title, columns, table_rows in (("Shots", shot_columns, shot_rows),
+                                       ("Per position", agg_columns, agg_rows)):
+        table, note = fitted_table(console, title, columns, table_rows, hint="--json or --out")
+        console.print(table)
+        if note:
+            console.print(note, style="dim", highlight=False)
     for sk in skipped:
         console.print(f"skipped: {Path(sk['source']).name} channel {sk['channel']}: "
                       f"{sk['reason']}", highlight=False)

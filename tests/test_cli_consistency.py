@@ -55,3 +55,27 @@ def test_help_shows_conventional_labels():
             command, text)
     serve = _run("serve", "--help").output
     assert re.search(r"--port INTEGER", serve) and re.search(r"--insecure\s+serve", serve)
+
+
+def test_a_wide_table_leaves_out_columns_instead_of_cutting_numbers():
+    import io
+
+    from rich.console import Console
+
+    from solitonde.instrument.console_tables import Column, fitted_table
+
+    columns = [Column("source", text=True), Column("TOF (us)"), Column("ARR"),
+               Column("t_inc (us)", drop_order=2), Column("F_inc (N)", drop_order=1)]
+    rows = [["synthetic_D19.05_t4.83_snr30.tdms", "1270.5", "0.1203", "272.09", "134.6"]] * 3
+    for width, kept in ((80, 5), (50, 3), (20, 3)):
+        out = io.StringIO()
+        console = Console(file=out, width=width, color_system=None)
+        table, note = fitted_table(console, "Shots", columns, rows)
+        console.print(table)
+        text = out.getvalue()
+        assert "…" not in text, text
+        assert len(table.columns) == kept, (width, text)
+        assert "1270.5" in text.replace("\n", "") or width == 20
+        assert (note is None) == (kept == 5)
+        if note:
+            assert "t_inc (us)" in note and "--json" in note
