@@ -11,7 +11,6 @@ import contextlib
 import gc
 import logging
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
@@ -20,74 +19,21 @@ from fastapi import FastAPI, Request
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from . import openapi_doc, problems
-from .api_models import Health, Ready, Strict, TableOut, request_models
+from .api_models import Health, Ready, TableOut, request_models
 from .ingest import warm_up
 from .problems import Problem
 from .settings import Settings
+from .state import INGEST_THREADS, PLOT_THREADS, Service, service
 from .store import Store
 from .table_set import TableSet
 from .uploads import UploadDir
 
 log = logging.getLogger("solitonde.instrument")
 
-INGEST_THREADS = 1
-PLOT_THREADS = 2
-LARGE_UPLOAD_BYTES = 4 * 1024 * 1024
-"""Uploads above this size (4 MiB) have a lane of their own (:attr:`Service.lane_for`)."""
-"""Worker threads per process that parse, measure and store posted shots (one FIFO lane).
-
-The ingest holds the GIL most of the time, so more threads add no throughput: they only share
-the interpreter in 5 ms switch slices in no particular order, so a request can wait behind
-later ones. One lane serves them in arrival order (equal shots wait about equally long) and
-costs less switching; the event loop still reads bodies and answers ``/healthz`` meanwhile.
-Uploaded files get a lane of their own (:attr:`Service.upload_lane`).
-"""
-
 try:
     __version__ = version("solitonde")
 except PackageNotFoundError:  # running from a source tree without an install
     __version__ = "0+unknown"
-
-
-@dataclass
-class Service:
-    """What the routes share: settings, store, estimator, request models, upload folder."""
-
-    settings: Settings
-    store: Store
-    estimator: TableSet
-    uploads: UploadDir
-    shot_model: type[Strict]
-    measurement_model: type[Strict]
-    ingest_lane: Any = None
-    """``anyio.CapacityLimiter`` the JSON and binary ingest runs under (made in the lifespan)."""
-    upload_lane: Any = None
-    """The same for uploaded files, which can take seconds: shots never queue behind them."""
-    large_upload_lane: Any = None
-    """Uploads larger than :data:`LARGE_UPLOAD_BYTES`, one at a time: a 60 MB file takes a
-    second or two and a few hundred MB to read, and an ordinary upload does not wait for it."""
-    plot_lane: Any = None
-    """Plots (PNG of a trace or a map), :data:`PLOT_THREADS` at a time; a plot whose client
-    left while it waited is skipped (:func:`.heavy.run_for_client`)."""
-
-    def lane_for(self, size: int | None) -> Any:
-        """The lane an upload of ``size`` bytes is parsed in."""
-        if size is not None and size > LARGE_UPLOAD_BYTES and self.large_upload_lane is not None:
-            return self.large_upload_lane
-        return self.upload_lane
-
-    def close(self) -> None:
-        self.store.close()
-        self.uploads.close()
-
-
-def service(request: Request) -> Service:
-    """The running service (the lifespan put it on the app)."""
-    svc = getattr(request.app.state, "service", None)
-    if svc is None:
-        raise Problem(503, "the service is starting or stopping; retry shortly")
-    return svc
-
 
 class Options:
     """ASGI middleware: ``OPTIONS`` on any route answers 204 with ``Allow`` listing the methods

@@ -15,7 +15,8 @@ import typer
 
 from solitonde.signal.errors import WaveformError
 
-from .calibration import CalibrationError, Reference, fit_calibration
+from .calibration import CalibrationError
+from .calibration_fit import Reference, fit_calibration
 from .cmd_invert import table_path
 from .inversion import FeatureSummary, InversionError
 from .table import ModelTable, TableError

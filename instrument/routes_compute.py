@@ -28,6 +28,7 @@ from .estimates import EstimateUnavailable, _jsonable
 from .heavy import run_for_client
 from .problems import Problem, from_pydantic
 from .routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
+from .state import service
 from .table_set import TableChoiceError
 
 router = APIRouter(tags=["compute"], dependencies=[AUTH])
@@ -60,7 +61,6 @@ def _json_body(model: Any) -> dict[str, Any]:
 async def invert(request: Request) -> dict[str, Any]:
     """Per sphere size: mean TOF and ARR with their scatter and shot count. Needs a loaded table
     (503 otherwise)."""
-    from .app import service
 
     require_json(request)
     svc = service(request)
@@ -175,7 +175,6 @@ async def simulate(request: Request) -> dict[str, Any]:
     The scene has the keys of a scene file (chain, striker, plate, effects, output, ...). A scene
     whose cost (steps x degrees of freedom) exceeds the service's budget is refused with 422.
     """
-    from .app import service
 
     require_json(request)
     svc = service(request)

@@ -49,6 +49,7 @@ from .ingest import (
     waveforms_from_shots,
 )
 from .problems import PROBLEM_MEDIA_TYPE, Problem, ProblemModel, from_pydantic
+from .state import service
 from .store import KeyTaken
 from .uploads import FORMATS, check_self_contained, declared_values, pick_format
 
@@ -117,7 +118,6 @@ async def require_key(request: Request) -> None:
     Reads the two headers itself (one dependency instead of FastAPI's two security classes: this
     runs on every request).
     """
-    from .app import service
 
     expected = service(request).settings.api_key
     if expected is None:
@@ -304,7 +304,6 @@ async def post_raw_shot(request: Request) -> JSONResponse:
 
 async def _post(request: Request, media: str) -> JSONResponse:
     """Ingest a JSON, binary or multipart body (idempotent with a key) and answer 201."""
-    from .app import service
 
     svc = service(request)
     key = idempotency_key(request)
@@ -537,7 +536,6 @@ async def list_measurements(
     limit: int = Query(50, ge=1, le=500, description="page size"),
 ) -> dict[str, Any]:
     """Measurements in id order; ``next`` gives the following page."""
-    from .app import service
 
     svc = service(request)
     limit = min(limit, svc.settings.page_size_max)
@@ -576,7 +574,6 @@ async def export_measurements(
                       "per measurement (one position), bounds and status in flat columns"),
 ) -> Response:
     """Stored measurements, oldest first; timestamps in ISO 8601 UTC."""
-    from .app import service
 
     svc = service(request)
     exporter = _export if kind == "shots" else _export_estimates
@@ -655,7 +652,6 @@ def _missing(measurement_id: int) -> Problem:
             operation_id="get_measurement")
 async def get_measurement(request: Request, measurement_id: MeasurementId) -> dict[str, Any]:
     """Features per shot, aggregates and estimate as stored."""
-    from .app import service
 
     record = await run_in_threadpool(service(request).store.get, measurement_id)
     if record is None:
@@ -669,7 +665,6 @@ async def get_measurement(request: Request, measurement_id: MeasurementId) -> di
 async def delete_measurement(request: Request, measurement_id: MeasurementId) -> Response:
     """Removes the measurement and every shot of it in one transaction; 404 when there is none
     (also the second time). The plate's map follows."""
-    from .app import service
 
     if not await run_in_threadpool(service(request).store.delete, measurement_id):
         raise _missing(measurement_id)
@@ -682,7 +677,6 @@ async def delete_measurement(request: Request, measurement_id: MeasurementId) ->
 async def get_shot(request: Request, measurement_id: MeasurementId,
                    shot_index: ShotIndex) -> dict[str, Any]:
     """The trace of one shot: t0, dt, samples, units, calibration, metadata, features."""
-    from .app import service
 
     shot = await run_in_threadpool(service(request).store.get_shot, measurement_id, shot_index)
     if shot is None:
@@ -701,7 +695,6 @@ async def plot_measurement(
     request: Request, measurement_id: MeasurementId,
     shot: int = Query(0, ge=0, le=100_000, description="shot index within the measurement"),
 ) -> Response:
-    from .app import service
 
     svc = service(request)
     record = await run_in_threadpool(svc.store.get_shot, measurement_id, shot)

@@ -16,6 +16,7 @@ from fastapi.responses import Response
 from .heavy import run_for_client
 from .problems import Problem
 from .routes_measurements import _PROBLEM, AUTH, ERRORS
+from .state import service
 
 router = APIRouter(tags=["plates"], dependencies=[AUTH])
 MAP_POSITIONS_MAX = 5_000
@@ -28,7 +29,6 @@ PlateId = Path(..., min_length=1, max_length=200, description="the plate's plate
 async def list_plates(request: Request) -> dict[str, Any]:
     """Every plate_id with its measurement, shot and position counts and last activity (ISO
     8601 UTC)."""
-    from .app import service
     from .estimate_rows import iso_utc
 
     plates = await run_in_threadpool(service(request).store.plates)
@@ -61,7 +61,6 @@ async def get_map(request: Request, plate_id: str = PlateId) -> dict[str, Any]:
     """Per position: coordinates, shot count, thickness and distance (median, intervals,
     status); then ``support`` (``normal_angle_deg``, ``offset_m``, ``ci95_offset_m``,
     ``n_positions``, ``residual_m``) or null with ``support_reason``."""
-    from .app import service
 
     return await run_in_threadpool(_map, service(request), plate_id)
 
@@ -71,7 +70,6 @@ async def get_map(request: Request, plate_id: str = PlateId) -> dict[str, Any]:
             operation_id="plate_map_png",
             summary="PNG of a plate's thickness and distance-to-support maps")
 async def get_map_png(request: Request, plate_id: str = PlateId) -> Response:
-    from .app import service
     from .plotting import map_png
 
     svc = service(request)

@@ -50,7 +50,8 @@ from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import aggregate, extract
 from solitonde.signal.synth import degrade
 
-from .calibration import Calibration, Reference, fit_calibration
+from .calibration import Calibration
+from .calibration_fit import Reference, fit_calibration
 from .inversion import FeatureSummary, fine_grid, invert
 from .table import ModelTable
 from .table_build import _TASK_CACHE, measured_waveform, run_tasks

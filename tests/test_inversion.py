@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from solitonde.instrument.calibration import Calibration, Reference, fit_calibration
+from solitonde.instrument.calibration import Calibration
+from solitonde.instrument.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inversion import (
     FLOOR_ARR_MAX,
     FeatureSummary,

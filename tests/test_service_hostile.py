@@ -212,7 +212,7 @@ def test_options_lists_every_method_a_path_takes(client):
 
 def test_a_large_upload_is_parsed_in_a_lane_of_its_own(client):
     """One large file at a time, and never in the lane ordinary uploads take."""
-    from solitonde.instrument.app import LARGE_UPLOAD_BYTES
+    from solitonde.instrument.state import LARGE_UPLOAD_BYTES
 
     svc = client.app.state.service
     assert svc.lane_for(1000) is svc.upload_lane
