@@ -1,1 +1,13 @@
-"""solitonde.instrument: the application (CLI, model table, inversion, REST service, store)."""
+"""solitonde.instrument: the application around the physics.
+
+Sub-packages, by concern (each one's docstring says what it may import):
+
+- :mod:`.cli`: the ``solitonde`` command line;
+- :mod:`.service`: the REST service, its store and web page;
+- :mod:`.tables`: model tables, their build and the plate-response cache;
+- :mod:`.inference`: inversion, calibration, table choice, plate maps;
+- :mod:`.studies`: reproduction of the paper, accuracy against cost, validation;
+- :mod:`.plotting`: PNG figures of traces and maps, shared by the others.
+
+No import cycles (``tests/test_import_graph.py``).
+"""

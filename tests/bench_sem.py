@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from solitonde.instrument.table_build import default_sweep
+from solitonde.instrument.tables.table_build import default_sweep
 from solitonde.model import greens
 from solitonde.model.scene import load_scene
 from solitonde.model.sem import single_threaded_blas

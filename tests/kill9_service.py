@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 from service_support import DT, shot_samples, start_uvicorn, stop_group  # noqa: E402
 
-from solitonde.instrument.store import Store  # noqa: E402
+from solitonde.instrument.service.store import Store  # noqa: E402
 
 UNEXPECTED: list[str] = []
 """Answers other than 201 (or 503 while stopping): each one fails the run."""

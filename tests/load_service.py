@@ -106,7 +106,7 @@ def start_server(workers: int, store: Path, extra_env: dict[str, str] | None = N
     env = {**os.environ, "SOLITONDE_STORE": str(store), **(extra_env or {})}
     env.pop("SOLITONDE_TABLE", None) if "SOLITONDE_TABLE" not in (extra_env or {}) else None
     cmd = [sys.executable, "-m", "uvicorn", "--factory",
-           "solitonde.instrument.app:build_app_from_env", "--host", "127.0.0.1",
+           "solitonde.instrument.service.app:build_app_from_env", "--host", "127.0.0.1",
            "--port", str(port), "--workers", str(workers), "--no-access-log",
            "--log-level", "warning"]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, start_new_session=True)

@@ -72,7 +72,7 @@ def start_uvicorn(store: Path, workers: int = 1, env: dict[str, str] | None = No
     full_env = {k: v for k, v in os.environ.items() if not k.startswith("SOLITONDE_")}
     full_env.update({"SOLITONDE_STORE": str(store), **(env or {})})
     cmd = [sys.executable, "-m", "uvicorn", "--factory",
-           "solitonde.instrument.app:build_app_from_env", "--host", "127.0.0.1", "--port",
+           "solitonde.instrument.service.app:build_app_from_env", "--host", "127.0.0.1", "--port",
            str(port), "--workers", str(workers), "--no-access-log", "--log-level", "warning"]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=full_env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -104,7 +104,7 @@ TABLE_DISTANCES = (0.3, 0.4)
 def build_tiny_table(path: Path) -> Path:
     """A 1 x 5 x 2 model table (D 9.53 mm, t 2-4.83 mm, L 0.3-0.4 m, infinite plate): about a
     second to build, enough to exercise the estimate path end to end."""
-    from solitonde.instrument.table_build import Sweep, build_table
+    from solitonde.instrument.tables.table_build import Sweep, build_table
 
     sweep = Sweep([TABLE_DIAMETER], list(TABLE_THICKNESSES), list(TABLE_DISTANCES),
                   scene={"effects": {"plate_model": "infinite"}})
@@ -116,7 +116,7 @@ def simulated_shots(thickness: float, n_shots: int = 3, snr_db: float = 40.0,
                     distance: float = 0.35) -> list[dict[str, Any]]:
     """Shots of the model itself at ``thickness`` (infinite plate), as an acquisition records
     them (pre-trigger, noise, 12 bits), in the REST body shape."""
-    from solitonde.instrument.table_build import measured_waveform
+    from solitonde.instrument.tables.table_build import measured_waveform
     from solitonde.model.scene import scene_from_dict
     from solitonde.model.simulate import simulate
 

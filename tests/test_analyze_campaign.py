@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 from solitonde.signal import io as signal_io
 
 DATA = Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.calibration import Calibration, CalibrationError
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.inference.calibration import Calibration, CalibrationError
 
 TABLE = Path(__file__).resolve().parents[1] / "data_samples" / "default_table.h5"
 REFERENCE = ["--thickness", "0.003312", "--distance", "0.05", "--diameter", "0.00953",
@@ -65,7 +65,7 @@ def test_save_removes_its_temp_file_when_the_rename_fails(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """A directory appearing at the target after the check (os.replace then fails): the
     temporary file is removed and the error names the path."""
-    from solitonde.instrument import calibration
+    from solitonde.instrument.inference import calibration
 
     def replace(src: Path, dst: Path) -> None:
         raise IsADirectoryError(21, "Is a directory")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 
 DATA = Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"
 CSV = DATA / "synthetic_D9.53_t4.83_snr40.csv"  # two shots, plate and position in its metadata

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 from solitonde.model.scene import load_scene
 
 SCENE = Path(__file__).resolve().parents[1] / "data_samples" / "scenes" / "steel_plate.yaml"
@@ -62,7 +62,7 @@ def test_a_wide_table_leaves_out_columns_instead_of_cutting_numbers():
 
     from rich.console import Console
 
-    from solitonde.instrument.console_tables import Column, fitted_table
+    from solitonde.instrument.cli.console_tables import Column, fitted_table
 
     columns = [Column("source", text=True), Column("TOF (us)"), Column("ARR"),
                Column("t_inc (us)", drop_order=2), Column("F_inc (N)", drop_order=1)]

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 
 
 @pytest.mark.parametrize("command", [["samples"], ["bench", "accuracy", "--quick"]])

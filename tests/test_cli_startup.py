@@ -10,17 +10,18 @@ import sys
 import click
 import typer
 
-from solitonde.instrument.cli import COMMANDS, app_for, build_app
+from solitonde.instrument.cli.main import COMMANDS, app_for, build_app
 
 HEAVY = ("numba", "scipy", "pandas", "matplotlib", "h5py", "fastapi", "solitonde.signal.kernels")
 
 
 def _loaded_after(*args: str) -> set[str]:
     code = ("import sys\nsys.argv = ['solitonde', *sys.argv[1:]]\n"
-            "from solitonde.instrument.cli import main\n"
+            "from solitonde.instrument.cli.main import main\n"
             "try:\n    main()\nexcept SystemExit:\n    pass\n"
             f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))\n"
-            "print(sorted(m for m in sys.modules if m.startswith('solitonde.instrument.cmd_')))")
+            "print(sorted(m for m in sys.modules\n"
+            "             if m.startswith('solitonde.instrument.cli.cmd_')))")
     out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
                          check=True).stdout.strip().splitlines()
     return set(eval(out[-2])) | set(eval(out[-1]))
@@ -33,7 +34,7 @@ def test_help_and_version_load_no_command_and_no_heavy_library():
 
 def test_a_command_loads_its_own_module_only():
     loaded = _loaded_after("map", "--help")
-    assert loaded == {"solitonde.instrument.cmd_map"}, loaded
+    assert loaded == {"solitonde.instrument.cli.cmd_map"}, loaded
 
 
 def test_the_listing_says_what_the_commands_say():
@@ -48,6 +49,6 @@ def test_the_listing_says_what_the_commands_say():
 
 
 def test_an_unknown_command_still_gets_clicks_suggestion():
-    result = subprocess.run([sys.executable, "-m", "solitonde.instrument.cli", "anlyze"],
+    result = subprocess.run([sys.executable, "-m", "solitonde.instrument.cli.main", "anlyze"],
                             capture_output=True, text=True)
     assert result.returncode == 2 and "analyze" in result.stderr, result.stderr

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
-from solitonde.instrument.store import SCHEMA_VERSION, ShotRecord, Store, StoreError
+from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.service.store import SCHEMA_VERSION, ShotRecord, Store, StoreError
 
 
 def _shot() -> ShotRecord:

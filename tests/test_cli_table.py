@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument import cmd_table
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli import cmd_table
+from solitonde.instrument.cli.main import build_app
 
 GRID = ["--diameters", "4.76e-3", "--thicknesses", "3e-3", "--distances", "0.3", "--workers",
         "1", "--no-progress"]

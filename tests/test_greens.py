@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solitonde.instrument.greens_cache import DiskGreensCache, LayeredCache
+from solitonde.instrument.tables.greens_cache import DiskGreensCache, LayeredCache
 from solitonde.model import greens
 from solitonde.model.materials import MATERIALS
 from solitonde.model.mesh import plate_mesh

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from solitonde.instrument.calibration import Calibration
-from solitonde.instrument.calibration_fit import Reference, fit_calibration
-from solitonde.instrument.inversion import (
+from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+from solitonde.instrument.inference.inversion import (
     FLOOR_ARR_MAX,
     FeatureSummary,
     InversionError,
@@ -17,7 +17,12 @@ from solitonde.instrument.inversion import (
     invert,
     predict,
 )
-from solitonde.instrument.table import STATUS_NO_REFLECTION, STATUS_OK, ModelTable, TableError
+from solitonde.instrument.tables.table import (
+    STATUS_NO_REFLECTION,
+    STATUS_OK,
+    ModelTable,
+    TableError,
+)
 
 DIAMETERS = np.array([5e-3, 10e-3])
 THICKNESS = np.geomspace(1.5e-3, 6e-3, 10)
@@ -256,7 +261,7 @@ def test_noise_free_table_nodes_are_inside_their_intervals() -> None:
     clamp), and the marginal over L favours thick plates: those are not scored."""
     from pathlib import Path
 
-    from solitonde.instrument.inversion import predict
+    from solitonde.instrument.inference.inversion import predict
 
     table = ModelTable.load(Path(__file__).resolve().parents[1] / "data_samples"
                             / "default_table.h5")

@@ -16,7 +16,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 from solitonde.model.errors import SceneError
 from solitonde.model.materials import MATERIALS
 from solitonde.model.scene import load_scene, scene_from_dict

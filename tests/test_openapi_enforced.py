@@ -11,8 +11,8 @@ import pytest
 from fastapi.testclient import TestClient
 from service_support import shot_samples
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.settings import Settings
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 from solitonde.model.materials import MATERIALS
 
 TABLE = Path(__file__).resolve().parents[1] / "data_samples" / "default_table.h5"

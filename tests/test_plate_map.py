@@ -19,10 +19,10 @@ import pytest
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.cli import build_app as build_cli
-from solitonde.instrument.settings import Settings
-from solitonde.instrument.support import locate
+from solitonde.instrument.cli.main import build_app as build_cli
+from solitonde.instrument.inference.support import locate
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[1]
 SCAN = ROOT / "data_samples" / "scan"
@@ -212,7 +212,7 @@ def test_map_from_the_services_store(scanned, tmp_path):
 @pytest.mark.slow
 def test_a_freshly_simulated_scan_locates_the_edge_within_10_mm(tmp_path):
     """The scan simulated anew (about a minute): the bundled files are what this produces."""
-    from solitonde.instrument.cmd_samples import make_scan
+    from solitonde.instrument.cli.cmd_samples import make_scan
 
     truth = {row["position"]: row for row in make_scan(tmp_path / "scan", seed=7)}
     est = tmp_path / "est.csv"

@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
-from solitonde.instrument.reproduce import (
+from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.studies.reproduce import (
     CENTRE_M,
     DIAMETERS_M,
     PLATES_M,
@@ -208,8 +208,8 @@ def test_a_failed_check_has_its_own_exit_code(tmp_path, monkeypatch) -> None:
     them apart)."""
     from typer.testing import CliRunner
 
-    from solitonde.instrument import reproduce as reproduce_module
-    from solitonde.instrument.cli import build_app
+    from solitonde.instrument.cli.main import build_app
+    from solitonde.instrument.studies import reproduce as reproduce_module
 
     def failing(out, quick, **kwargs):
         return {"quick": quick, "wall_s": 1.0, "all_passed": False,

@@ -8,8 +8,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.accuracy import BUDGETS, Config, combined_error, pareto, recommend
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.studies.accuracy import BUDGETS, Config, combined_error, pareto, recommend
 
 
 def _frame(rows):
@@ -71,7 +71,7 @@ def test_a_run_missing_a_feature_is_not_accurate():
 
 def test_quick_table_says_it_is_not_advice(capsys):
     """--quick's printed table and recommendation say the tiny-mesh numbers are not converged."""
-    from solitonde.instrument.cmd_bench import _print
+    from solitonde.instrument.cli.cmd_bench import _print
 
     f = _frame(ROWS).assign(tof_s=6.9e-4, arr=0.085)
     f["pareto"] = pareto(f)

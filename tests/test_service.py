@@ -21,8 +21,8 @@ from service_support import (
     shot_samples,
 )
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.settings import Settings
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 
 PROBLEM = "application/problem+json"
 
@@ -368,7 +368,7 @@ def test_upload_of_many_arrays_is_sized_by_their_sum(tmp_path: Path, monkeypatch
                                                      name: str, build) -> None:
     """Five arrays each within the per-shot limit but over the request limit together: 413 from
     the headers, the reader never runs (it decoded everything before); one array is read."""
-    from solitonde.instrument import routes_measurements
+    from solitonde.instrument.service import routes_measurements
 
     calls: list[str] = []
     real = routes_measurements.read_file
@@ -517,7 +517,7 @@ def test_openapi_states_the_limits(tmp_path: Path) -> None:
 
 def test_shots_are_float32_when_exact_else_float64(client: TestClient) -> None:
     """Lossless either way: 12-bit ADC steps fit float32; full float64 noise is kept as float64."""
-    from solitonde.instrument.store import decode_samples, encode_samples
+    from solitonde.instrument.service.store import decode_samples, encode_samples
 
     adc = np.round(shot_samples(1) * 64) / 64
     wide = shot_samples(1) + 1e-9 * np.random.default_rng(1).normal(size=4000)

@@ -12,9 +12,9 @@ import pytest
 from fastapi.testclient import TestClient
 from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.estimate_rows import ESTIMATE_COLUMNS
-from solitonde.instrument.settings import Settings
+from solitonde.instrument.inference.estimate_rows import ESTIMATE_COLUMNS
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 from solitonde.signal import io as signal_io
 
 ROOT = Path(__file__).resolve().parents[1]

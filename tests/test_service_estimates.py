@@ -14,8 +14,8 @@ from service_support import (
     simulated_shots,
 )
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.settings import Settings
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 
 
 @pytest.fixture(scope="module")
@@ -103,7 +103,7 @@ def test_invert_takes_the_per_size_calibration_file_calibrate_writes(client: Tes
     """The JSON ``solitonde calibrate`` writes posts as it is: its per-size entry is applied (an
     ARR factor of 0.5 halves the model ARR the measurement is compared with, so doubling the
     measured ARR gives back the uncalibrated answer), a duplicate size is a 422 naming it."""
-    from solitonde.instrument.calibration import Calibration as FileCalibration
+    from solitonde.instrument.inference.calibration import Calibration as FileCalibration
 
     body = client.post("/v1/measurements", json={"shots": simulated_shots(4.0e-3)}).json()
     (agg,) = body["aggregates"]

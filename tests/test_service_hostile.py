@@ -17,8 +17,8 @@ from fastapi.testclient import TestClient
 from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 from service_support import shot_json, shot_samples
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.settings import Settings, SettingsError
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings, SettingsError
 
 
 @pytest.fixture
@@ -135,7 +135,7 @@ def test_readiness_does_not_show_where_the_store_is(client, tmp_path):
 def test_serving_another_address_without_a_key_needs_insecure(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
-    from solitonde.instrument.cli import build_app as build_cli
+    from solitonde.instrument.cli.main import build_app as build_cli
 
     monkeypatch.delenv("SOLITONDE_API_KEY", raising=False)
     res = CliRunner().invoke(build_cli(), ["serve", "--host", "0.0.0.0", "--store",
@@ -183,7 +183,7 @@ def test_a_retry_with_the_same_idempotency_key_returns_the_first_answer(client):
 
 
 def test_failed_key_attempts_are_logged_sparingly_and_then_refused(tmp_path, caplog):
-    from solitonde.instrument.routes_measurements import FAILED_KEYS, FailedKeys
+    from solitonde.instrument.service.routes_measurements import FAILED_KEYS, FailedKeys
 
     key = "k" * 20
     caplog.set_level("WARNING", logger="solitonde.instrument")
@@ -212,7 +212,7 @@ def test_options_lists_every_method_a_path_takes(client):
 
 def test_a_large_upload_is_parsed_in_a_lane_of_its_own(client):
     """One large file at a time, and never in the lane ordinary uploads take."""
-    from solitonde.instrument.state import LARGE_UPLOAD_BYTES
+    from solitonde.instrument.service.state import LARGE_UPLOAD_BYTES
 
     svc = client.app.state.service
     assert svc.lane_for(1000) is svc.upload_lane

@@ -33,12 +33,12 @@ from service_support import (
     wait_ready,
 )
 
-from solitonde.instrument.store import Store
+from solitonde.instrument.service.store import Store
 
 
 def _sample_file(tmp_path: Path) -> Path:
     """A bundled sample waveform file when there is one, else one written the same way."""
-    from solitonde.instrument.cmd_serve import sample_file
+    from solitonde.instrument.cli.cmd_serve import sample_file
 
     found = sample_file(ROOT)
     if found is not None:
@@ -55,7 +55,7 @@ def _sample_file(tmp_path: Path) -> Path:
 
 def _serve(tmp_path: Path, *extra: str) -> tuple[subprocess.Popen, str, list[str]]:
     port = free_port()
-    cmd = [sys.executable, "-m", "solitonde.instrument.cli", "serve", "--port", str(port),
+    cmd = [sys.executable, "-m", "solitonde.instrument.cli.main", "serve", "--port", str(port),
            "--store", str(tmp_path / "store.sqlite"), "--table",
            str(tmp_path / "no_table.h5"), *extra]
     proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -204,7 +204,7 @@ def test_store_open_retries_a_busy_journal_mode_switch() -> None:
     """Workers opening the store while another recovers a killed process's WAL can get
     SQLITE_BUSY on the journal-mode switch without SQLite's busy handler (seen once in CI as a
     failed worker start): the switch is retried until it succeeds, and only that error is."""
-    from solitonde.instrument.store import _journal_mode_wal
+    from solitonde.instrument.service.store import _journal_mode_wal
 
     class Busy:
         """A connection whose first two statements find the database locked."""
@@ -232,7 +232,7 @@ def test_store_open_retries_a_busy_journal_mode_switch() -> None:
 def test_serve_finds_the_bundled_table_from_any_folder(tmp_path: Path, monkeypatch) -> None:
     """`serve` without --table uses the bundled table wherever it is started (it looked for
     data_samples/ under the current folder and, elsewhere, served without estimates)."""
-    from solitonde.instrument.settings import DEFAULT_TABLE
+    from solitonde.instrument.service.settings import DEFAULT_TABLE
 
     monkeypatch.chdir(tmp_path)
     assert DEFAULT_TABLE.is_absolute() and DEFAULT_TABLE.is_file()

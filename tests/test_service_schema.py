@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, settings
 from schemathesis.checks import not_a_server_error
 from service_support import build_tiny_table
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.settings import Settings
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 
 _DIR = Path(tempfile.mkdtemp(prefix="solitonde-schema-"))
 # A real (tiny) model table, so that /v1/invert and the estimate path run their real code.

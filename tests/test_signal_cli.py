@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 from solitonde.signal import io
 from solitonde.signal.synth import degrade, pulse_train
 from solitonde.signal.waveform import Waveform

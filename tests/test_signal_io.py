@@ -329,8 +329,8 @@ def test_to_json_is_what_the_service_accepts(tmp_path):
     identifiers as text and the extras; from_json reads the shape back."""
     from fastapi.testclient import TestClient
 
-    from solitonde.instrument.app import build_app
-    from solitonde.instrument.settings import Settings
+    from solitonde.instrument.service.app import build_app
+    from solitonde.instrument.service.settings import Settings
 
     data = (Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"
             / "synthetic_D9.53_t4.83_snr40.csv")

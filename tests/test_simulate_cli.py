@@ -7,7 +7,7 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 from solitonde.model.scene import scene_from_dict
 from solitonde.signal import io as signal_io
 

@@ -10,14 +10,14 @@ import h5py
 import numpy as np
 import pytest
 
-from solitonde.instrument.table import (
+from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,
     SECONDARY_FEATURES,
     STATUS_OK,
     ModelTable,
     TableError,
 )
-from solitonde.instrument.table_build import (
+from solitonde.instrument.tables.table_build import (
     Sweep,
     build_table,
     measured_waveform,

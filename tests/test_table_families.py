@@ -15,11 +15,11 @@ import pytest
 from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.cli import build_app as build_cli
-from solitonde.instrument.settings import Settings
-from solitonde.instrument.table_build import measured_waveform
-from solitonde.instrument.table_set import TableChoiceError, TableSet
+from solitonde.instrument.cli.main import build_app as build_cli
+from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
+from solitonde.instrument.tables.table_build import measured_waveform
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.synth import degrade

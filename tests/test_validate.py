@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
-from solitonde.instrument.table import ModelTable
-from solitonde.instrument.table_build import Sweep, build_table
-from solitonde.instrument.validate import validate
+from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.studies.validate import validate
+from solitonde.instrument.tables.table import ModelTable
+from solitonde.instrument.tables.table_build import Sweep, build_table
 
 FAST = {"sem": {"elements": [6, 6, 1], "order": [2, 2, 2]}}
 
@@ -120,7 +120,7 @@ def test_validate_measurements_of_the_draw_but_malformed_plates_is_refused(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A file whose key matches this draw but whose plates were edited: an error, not a
     KeyError in the scoring."""
-    from solitonde.instrument import validate as module
+    from solitonde.instrument.studies import validate as module
 
     seen: dict[str, object] = {}
 
@@ -148,7 +148,7 @@ def test_validate_output_paths_are_checked_before_simulating(tmp_path: Path, fla
 
 
 def test_validate_function_refuses_a_negative_seed() -> None:
-    from solitonde.instrument.validate import ValidationInputError
+    from solitonde.instrument.studies.validate import ValidationInputError
 
     with pytest.raises(ValidationInputError) as info:
         validate(ModelTable.load(DEFAULT_TABLE), 1, seed=-1)

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from solitonde.instrument.cli import build_app
+from solitonde.instrument.cli.main import build_app
 from solitonde.signal import io as signal_io
 from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform

@@ -18,8 +18,8 @@ import pytest
 from fastapi.testclient import TestClient
 from service_support import start_uvicorn, stop_group
 
-from solitonde.instrument.app import build_app
-from solitonde.instrument.settings import Settings
+from solitonde.instrument.service.app import build_app
+from solitonde.instrument.service.settings import Settings
 from solitonde.signal import io as signal_io
 
 ROOT = Path(__file__).resolve().parents[1]

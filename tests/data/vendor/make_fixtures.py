@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
-from solitonde.instrument.table_build import measured_waveform
+from solitonde.instrument.tables.table_build import measured_waveform
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import simulate
 

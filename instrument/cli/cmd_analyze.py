@@ -1,0 +1,522 @@
+"""`solitonde analyze`: TOF, ARR, SNR and flags for every shot in waveform files or folders.
+
+One row per shot, an aggregate per position (plate, position, coordinates, sphere diameter); a
+file that names neither plate nor position is a position of its own. A file that fails, for
+whatever reason, is reported with its error and the others go on; the exit code says whether all
+succeeded (0 all, 1 some files or shots failed, 2 usage: a missing file, a bad option or
+manifest).
+
+Files come from the vendors' software as they are (scope CSVs, DAQ TDMS, HDF5 ...). A file with
+several channels is analysed on the channels named by ``--channel``/``--group``, or else on those
+that are sensor traces (signal.channels): a trigger step or a flat line is never a shot, and is
+reported as skipped. Where a file does not carry them, the sphere size, plate, position and its
+coordinates come from the command line (``--sphere-diameter`` ...) or a campaign manifest
+(``--manifest``, instrument.manifest); a file's own metadata must agree with them.
+
+The global reader options apply where they make sense: ``--sample-rate`` gives the rate of data
+without a time axis and must agree with any file's own; ``--units`` says what data that do not
+state their units are in, and must agree with any file that does; ``--calibration`` converts the
+files in volts that carry no calibration (a run in which no file used it reports that).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import re
+import sys
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.console import Console
+
+from solitonde.instrument.cli.console_tables import Column, fitted_table
+from solitonde.instrument.cli.manifest import ManifestError, Row
+from solitonde.signal import channels as signal_channels
+from solitonde.signal import io as signal_io
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.features import FEATURES, aggregate, extract_many
+from solitonde.signal.waveform import UNITS
+
+OUT_SUFFIXES = (".csv", ".parquet")
+LOCATION_KEYS = ("plate_id", "position", "x_m", "y_m", "sphere_diameter")
+"""The metadata that say where a shot was taken and with which spheres."""
+ROW_KEYS = ("source", "shot", "channel", *FEATURES, "flags", "arr_upper_bound", *LOCATION_KEYS,
+            "error")
+FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
+         "sphere_diameter": "--sphere-diameter", "sample_rate": "--sample-rate",
+         "dt": "--sample-rate", "units": "--units", "calibration": "--calibration",
+         "channel": "--channel", "group": "--group", "format": "--format"}
+"""Command-line flags by the option or metadata key they set (for messages)."""
+
+
+def collect(paths: Iterable[Path], fmt: str | None = None
+            ) -> tuple[list[Path], list[dict[str, Any]]]:
+    """Files to analyse, each once, and the paths that gave none (missing, or a folder with no
+    files).
+
+    Folders are searched recursively: for the known extensions, or, with ``fmt`` given, every
+    regular file whose name does not start with a dot.
+    """
+    files: list[Path] = []
+    missing: list[dict[str, Any]] = []
+    for p in paths:
+        if p.is_dir():
+            found = sorted(f for f in p.rglob("*") if f.is_file() and (
+                not f.name.startswith(".") if fmt is not None
+                else f.suffix.lower() in signal_io.EXTENSIONS))
+            if not found:
+                what = ("no files" if fmt is not None else "no files with the extensions " +
+                        ", ".join(sorted(signal_io.EXTENSIONS)) + " (use --format for others)")
+                missing.append({"source": str(p), "error": f"{p}: {what}"})
+            files.extend(found)
+        elif p.exists():
+            files.append(p)
+        else:
+            missing.append({"source": str(p), "error": f"no such file or folder: {p}"})
+    seen: set[Path] = set()
+    unique = []
+    for f in files:  # a file named twice (itself and in its folder) is one set of shots
+        key = f.resolve()
+        if key not in seen:
+            seen.add(key)
+            unique.append(f)
+    return unique, missing
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def flag_message(text: str) -> str:
+    """A reader's message with its option names (``sample_rate=``, a leading ``units:``) as the
+    command line's flags (``--sample-rate``)."""
+    text = text.replace("sample_rate= in Hz (or dt= in s)", "--sample-rate in Hz")
+    for key, flag in FLAGS.items():
+        text = re.sub(rf"(?<![\w-]){key}=", flag + " ", text)
+        if text.startswith(f"{key}: "):
+            text = f"{flag}: {text[len(key) + 2:]}"
+    return text
+
+
+@dataclass(frozen=True)
+class Choice:
+    """What the command line says about every file: channels, group and location metadata."""
+
+    channels: tuple[str, ...] = ()
+    group: str | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+def read_file(path: Path, fmt: str | None, options: dict[str, Any],
+              calibration: float | None = None) -> tuple[list[Any], bool]:
+    """The shots of ``path`` and whether ``calibration`` was used.
+
+    Only the options the file's reader accepts are passed; ``calibration`` only when the file
+    holds volts without a calibration of its own.
+    """
+    accepted = signal_io.READER_OPTIONS[signal_io.detect_format(path, fmt)]
+    opts = {k: v for k, v in options.items() if k in accepted and v is not None}
+    try:
+        return signal_io.read(path, format=fmt, **opts), False
+    except signal_io.OptionNeeded as exc:
+        if exc.option != "calibration" or calibration is None or "calibration" not in accepted:
+            raise
+    return signal_io.read(path, format=fmt, **opts, calibration=calibration), True
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    return str(a).strip() == str(b).strip()
+
+
+def located(meta: dict[str, Any], sources: list[tuple[str, dict[str, Any]]],
+            where: str) -> dict[str, Any]:
+    """``meta`` with the location keys the ``sources`` (name, metadata) state; a key two of them
+    (the file included) state differently is a WaveformError naming both."""
+    out = dict(meta)
+    for key in LOCATION_KEYS:
+        stated = [(f"the file ({where})", meta[key])] if meta.get(key) is not None else []
+        stated += [(name, m[key]) for name, m in sources if m.get(key) is not None]
+        for name, value in stated[1:]:
+            if not _same(stated[0][1], value):
+                raise WaveformError(key, f"{stated[0][0]} says {key} = {stated[0][1]!r}, "
+                                    f"{name} says {value!r}", "one value, or leave one out")
+        if stated:
+            out[key] = stated[0][1]
+    return out
+
+
+def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
+                 calibration: float | None = None, choice: Choice | None = None,
+                 row: Row | None = None) -> tuple[list[dict[str, Any]], bool]:
+    """One row per shot of ``path`` and whether ``calibration`` was used; raises on a file that
+    cannot be read, whose channels cannot be told apart, or whose metadata contradict the
+    command line (``choice``) or its manifest ``row``.
+
+    The channels left out are rows with ``skipped`` set (and no features)."""
+    choice = choice or Choice()
+    own = row.calibration if row is not None and row.calibration is not None else None
+    waves, used = read_file(path, fmt, options, own if own is not None else calibration)
+    used = used and own is None  # `used` tells whether --calibration served
+    waves, skipped = signal_channels.select(waves, choice.channels or None, choice.group,
+                                            path.name)
+    sources = [(FLAGS[k], {k: v}) for k, v in choice.metadata.items()]
+    if row is not None and row.metadata:
+        sources.append((row.where, row.metadata))
+    rows: list[dict[str, Any]] = [{"source": str(path), "channel": s["channel"],
+                                   "skipped": s["reason"]} for s in skipped]
+    for w in waves:
+        meta = located(w.metadata, sources, path.name)
+        row_out: dict[str, Any] = {"source": str(path), "shot": meta.get("shot"),
+                                   "channel": signal_channels.channel_name(w)
+                                   if meta.get("channel") is not None else None,
+                                   **{k: meta.get(k) for k in LOCATION_KEYS}}
+        try:
+            (feat,) = extract_many([w])
+        except WaveformError as exc:
+            row_out["error"] = str(exc)
+            rows.append(row_out)
+            continue
+        d = feat.to_dict()
+        row_out.update({k: _clean(d[k]) for k in FEATURES})
+        row_out["flags"] = d["flags"]
+        row_out["arr_upper_bound"] = _clean(d["arr_upper_bound"])
+        row_out["features"] = feat
+        row_out["waveform"] = w
+        rows.append(row_out)
+    return rows, used
+
+
+def aggregates(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Aggregate per (plate_id, position, x_m, y_m, sphere_diameter) over the measured shots.
+
+    Shots whose file names neither plate nor position are aggregated per file (``source`` is
+    then set), never pooled with other files' shots: nothing says they are one position.
+    """
+    groups: dict[tuple[Any, ...], list[Any]] = {}
+    for r in rows:
+        if "features" in r:
+            plate, position = r.get("plate_id"), r.get("position")
+            source = r["source"] if plate is None and position is None else None
+            key = (*(r.get(k) for k in LOCATION_KEYS), source)
+            groups.setdefault(key, []).append(r)
+    out = []
+    for key, members in groups.items():
+        agg = aggregate([m["features"] for m in members]).to_dict()
+        for rej in agg["rejected"]:
+            m = members[rej["index"]]
+            rej.update(source=m["source"], shot=m["shot"])
+        out.append({**dict(zip(LOCATION_KEYS, key[:-1], strict=True)), "source": key[-1],
+                    **agg})
+    return out
+
+
+def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
+    import pandas as pd
+
+    table = pd.DataFrame([{k: r.get(k) for k in ROW_KEYS} for r in rows], columns=list(ROW_KEYS))
+    table["flags"] = table["flags"].map(lambda f: ";".join(f) if isinstance(f, list) else "")
+    table["shot"] = table["shot"].astype("Int64")
+    for col in ("plate_id", "position", "sphere_diameter", "error", "source", "channel"):
+        table[col] = table[col].map(lambda v: None if v is None else str(v))
+    from solitonde.instrument.inference.estimate_rows import neutralised
+    from solitonde.instrument.studies.figures import write_bytes
+
+    if out.suffix.lower() == ".parquet":
+        buf = io.BytesIO()
+        table.to_parquet(buf, index=False)
+        write_bytes(out, buf.getvalue())
+    else:
+        write_bytes(out, neutralised(table).to_csv(index=False).encode())
+
+
+def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
+    """One PNG per measured shot, named ``<stem>_shot<k>.png`` after its file and shot number.
+
+    Files that share a stem (``x.csv`` and ``x.npy``, or ``a/x.csv`` and ``b/x.csv``) keep the
+    extension in the name and then a counter, so no shot's plot overwrites another's.
+    """
+    from solitonde.instrument.plotting import trace_png
+    from solitonde.instrument.studies.figures import write_bytes
+
+    folder.mkdir(parents=True, exist_ok=True)
+    used: set[str] = set()
+    for r in rows:
+        if "features" not in r:
+            continue
+        w = r["waveform"]
+        shot = r["shot"] if r["shot"] is not None else 0
+        name = f"{Path(r['source']).stem}_shot{shot}.png"
+        if name in used:
+            base, k = f"{Path(r['source']).name}_shot{shot}", 2
+            name = f"{base}.png"
+            while name in used:
+                name, k = f"{base}_{k}.png", k + 1
+        used.add(name)
+        png = trace_png(w.t0, w.dt, w.samples, r["features"].to_dict(), units="N",
+                        title=f"{Path(r['source']).name}, shot {r['shot']}")
+        write_bytes(folder / name, png)
+
+
+def _fmt(value: Any, scale: float = 1.0, digits: int = 4) -> str:
+    return "-" if value is None else f"{value * scale:.{digits}g}"
+
+
+def analyze(
+    files: list[Path] = typer.Argument(None, help="Waveform files or folders (recursive); "
+                                       "optional with --manifest.", show_default=False),
+    fmt: str | None = typer.Option(None, "--format", help="Force a format: " +
+                                   ", ".join(signal_io.FORMATS) + "."),
+    out: Path | None = typer.Option(None, "--out", help="Write the per-shot rows to a .csv or "
+                                    ".parquet file."),
+    as_json: bool = typer.Option(False, "--json", help="Print shots, aggregates and errors as "
+                                 "JSON."),
+    sample_rate: float | None = typer.Option(None, "--sample-rate", help="Hz, for data without a "
+                                             "time axis (a file's own time axis must agree)."),
+    calibration: float | None = typer.Option(None, "--calibration", help="N/V, for files in "
+                                             "volts that carry no calibration."),
+    units: str | None = typer.Option(None, "--units", help="N or V, for data that do not state "
+                                     "their units (a file that states them must agree)."),
+    channel: list[str] = typer.Option([], "--channel", help="Analyse this channel (repeat): a "
+                                      "column name, or a TDMS channel as group/channel or "
+                                      "channel. Default: the channels that are sensor traces."),
+    group: str | None = typer.Option(None, "--group", help="Only the channels of this TDMS "
+                                     "group."),
+    sphere_diameter: float | None = typer.Option(None, "--sphere-diameter", min=1e-6, max=1.0,
+                                                 help="m, for every file (a file's own must "
+                                                 "agree)."),
+    plate_id: str | None = typer.Option(None, "--plate-id", help="Plate, for every file."),
+    position: str | None = typer.Option(None, "--position", help="Position name, for every "
+                                        "file."),
+    x: float | None = typer.Option(None, "--x", help="m, the position's x on the plate."),
+    y: float | None = typer.Option(None, "--y", help="m, the position's y on the plate."),
+    manifest: Path | None = typer.Option(None, "--manifest", help="Campaign manifest (.csv or "
+                                         ".yaml): per file or glob, plate_id, position, x_m, "
+                                         "y_m, sphere_diameter_m, calibration_N_per_V."),
+    invert: bool = typer.Option(False, "--invert", help="Also estimate thickness and distance "
+                                "to support per position (sphere sizes combined)."),
+    estimates_out: Path | None = typer.Option(None, "--estimates-out", help="Write the "
+                                              "estimates, one row per plate and position, to a "
+                                              ".csv or .parquet file (implies --invert)."),
+    table: list[Path] = typer.Option([], "--table", help="Model table (or folder of tables) for "
+                                     "--invert; repeat for several plate families."),
+    plate_material: str | None = typer.Option(None, "--plate-material", help="The plate's "
+                                              "material (a library name): --invert uses the "
+                                              "table of that family, refuses another."),
+    calibration_file: Path | None = typer.Option(None, "--calibration-file", help="Calibration "
+                                                 "JSON (solitonde calibrate) for --invert."),
+    plots: Path | None = typer.Option(None, "--plots", help="Folder for one PNG per shot (trace "
+                                      "with the detected pulses marked)."),
+) -> None:
+    """Measure TOF, ARR, SNR and quality flags of every shot; aggregate per position."""
+    console = Console(stderr=as_json)
+
+    def usage(message: str) -> None:
+        typer.echo(f"error: {message}", err=True)  # unwrapped, one line for scripts and logs
+        raise typer.Exit(code=2)
+
+    for flag, path in (("--out", out), ("--estimates-out", estimates_out)):
+        if path is not None and path.suffix.lower() not in OUT_SUFFIXES:
+            usage(f"{flag}: {path.name} must end in {' or '.join(OUT_SUFFIXES)}")
+    for flag, path, want in (("--out", out, "file"), ("--estimates-out", estimates_out, "file"),
+                             ("--plots", plots, "folder")):
+        if path is not None and (path.is_dir() if want == "file"
+                                 else path.exists() and not path.is_dir()):
+            usage(f"{flag}: {str(path)!r} is a {'folder' if want == 'file' else 'file'}; "
+                  f"give a {want}")
+    if fmt is not None:
+        try:
+            signal_io.detect_format("x", fmt)
+        except WaveformError as exc:
+            usage(f"--format: {exc.message} (allowed: {exc.allowed})")
+    if units is not None and units not in UNITS:
+        usage(f"--units: {units!r} is not N or V")
+    for flag, value in (("--x", x), ("--y", y), ("--sample-rate", sample_rate),
+                        ("--calibration", calibration)):
+        if value is not None and not math.isfinite(value):
+            usage(f"{flag}: {value} is not a finite number")
+    for flag, value in (("--sample-rate", sample_rate), ("--calibration", calibration)):
+        if value is not None and value <= 0:
+            usage(f"{flag}: {value:g} must be > 0")
+    given = {k: v for k, v in (("plate_id", plate_id), ("position", position), ("x_m", x),
+                               ("y_m", y), ("sphere_diameter", sphere_diameter))
+             if v is not None}
+    choice = Choice(tuple(channel), group, given)
+    files = list(files or [])
+    if not files and manifest is None:
+        usage("give waveform files or folders, or --manifest")
+    paths, missing = collect(files, fmt)
+    if missing:
+        usage("; ".join(m["error"] for m in missing))
+    jobs: list[tuple[Path, Row | None]] = [(p, None) for p in paths]
+    if manifest is not None:
+        jobs = _manifest_jobs(manifest, paths if files else None, fmt, usage)
+    invert = invert or estimates_out is not None
+    options = {"sample_rate": sample_rate, "units": units}
+    calibration_used = False
+    rows: list[dict[str, Any]] = []
+    errors: list[dict[str, Any]] = []
+    from tqdm import tqdm
+
+    for path, row in tqdm(jobs, desc="analyze", unit="file", file=sys.stderr,
+                          disable=len(jobs) < 5 or not sys.stderr.isatty()):
+        try:
+            file_rows, used = analyse_file(path, fmt, options, calibration, choice, row)
+        except WaveformError as exc:
+            errors.append({"source": str(path), "error": flag_message(str(exc))})
+            continue
+        except Exception as exc:  # any broken file is its own error; Ctrl-C still stops the run
+            errors.append({"source": str(path), "error": f"{type(exc).__name__}: {exc}"})
+            continue
+        rows.extend(file_rows)
+        calibration_used = calibration_used or used
+    if calibration is not None and jobs and not calibration_used and not errors:
+        errors.append({"source": "--calibration", "error": "no file holds volts without a "
+                       "calibration of its own; --calibration was not used"})
+    skipped = [{"source": r["source"], "channel": r["channel"], "reason": r["skipped"]}
+               for r in rows if "skipped" in r]
+    rows = [r for r in rows if "skipped" not in r]
+    for r in rows:
+        if "error" in r:
+            errors.append({"source": r["source"], "shot": r["shot"],
+                           "error": flag_message(r["error"])})
+    aggs = aggregates(rows)
+    estimates = None
+    if invert:
+        from solitonde.instrument.cli.cmd_invert import estimates_for_aggregates, table_path
+        from solitonde.instrument.inference.calibration import CalibrationError
+        from solitonde.instrument.tables.table import TableError
+
+        try:
+            estimates = estimates_for_aggregates(aggs, table, calibration_file, plate_material)
+        except CalibrationError as exc:
+            errors.append({"source": str(calibration_file), "error": str(exc)})
+        except (TableError, ValueError, OSError) as exc:  # table unreadable
+            errors.append({"source": ", ".join(map(str, table)) or str(table_path(None)),
+                           "error": str(exc)})
+        for est in estimates or []:
+            if est.get("error"):  # an inversion that failed (e.g. a size the table lacks)
+                errors.append({"source": f"estimate for plate {est['plate_id']}, position "
+                               f"{est['position']}", "error": est["error"]})
+    outputs = [("--out", out, lambda target: _write_rows(target, rows)),
+               ("--plots", plots, lambda target: _write_plots(target, rows))]
+    if estimates is not None:
+        outputs.append(("--estimates-out", estimates_out,
+                        lambda target: _write_estimates(target, estimates)))
+    for flag, target, write in outputs:
+        if target is None:
+            continue
+        try:
+            write(target)
+        except OSError as exc:  # the analysis stands; say what could not be written
+            errors.append({"source": flag, "error": f"cannot write {str(target)!r}: "
+                           f"{exc.strerror or exc}"})
+    shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
+    if as_json:
+        json.dump({"shots": shots, "aggregates": aggs, "skipped_channels": skipped,
+                   "errors": errors, **({"estimates": estimates} if invert else {})},
+                  sys.stdout, indent=1, default=str)
+        sys.stdout.write("\n")
+    else:
+        _print(console, rows, aggs, skipped, errors)
+        if estimates is not None:
+            from solitonde.instrument.cli.cmd_invert import describe_row
+
+            for est in estimates:
+                console.print(describe_row(est), highlight=False)
+    raise typer.Exit(code=1 if errors or not jobs else 0)
+
+
+def _manifest_jobs(manifest: Path, given: list[Path] | None, fmt: str | None,
+                   usage: Any) -> list[tuple[Path, Row | None]]:
+    """The files a manifest names, each with its row; with files given on the command line
+    too, every one of them must have a row (the manifest's other rows are then not read)."""
+    from solitonde.instrument.cli import manifest as campaign
+
+    if not manifest.is_file():
+        usage(f"--manifest: no such file: {manifest}")
+    try:
+        rows = campaign.load(manifest)
+        matched = campaign.match(rows, manifest.parent,
+                                 None if fmt is not None else signal_io.EXTENSIONS)
+    except ManifestError as exc:
+        usage(str(exc))
+        return []
+    if given is None:
+        return list(matched)
+    by_file = {p.resolve(): (p, r) for p, r in matched}
+    unmatched = [str(p) for p in given if p.resolve() not in by_file]
+    if unmatched:
+        usage(f"--manifest: no row of {manifest.name} matches {unmatched[0]}"
+              + (f" (and {len(unmatched) - 1} more)" if len(unmatched) > 1 else ""))
+    return [(p, by_file[p.resolve()][1]) for p in given]
+
+
+def _write_estimates(out: Path, estimates: list[dict[str, Any]]) -> None:
+    """One row per plate and position (instrument.estimate_rows' columns)."""
+    from solitonde.instrument.inference.estimate_rows import estimate_row, to_bytes
+    from solitonde.instrument.studies.figures import write_bytes
+
+    table = []
+    for est in estimates:
+        result = est.get("estimate")
+        reason = est.get("error") or ("; ".join(s["reason"] for s in est.get("skipped", []))
+                                      if result is None else None)
+        table.append(estimate_row(est, est.get("diameters_m", []), est.get("n_shots", 0),
+                                  result, reason))
+    write_bytes(out, to_bytes(table, "parquet" if out.suffix.lower() == ".parquet" else "csv"))
+
+
+def _print(console: Console, rows: list[dict[str, Any]], aggs: list[dict[str, Any]],
+           skipped: list[dict[str, Any]], errors: list[dict[str, Any]]) -> None:
+    shot_rows = []
+    for r in rows:
+        if "error" in r:
+            continue
+        arr = _fmt(r["arr"]) if r["arr"] is not None else f"< {_fmt(r['arr_upper_bound'], 1, 3)}"
+        shot_rows.append([Path(r["source"]).name, str(r["shot"]), _fmt(r["tof_s"], 1e6, 5), arr,
+                          _fmt(r["incident_time_s"], 1e6, 5), _fmt(r["reflected_time_s"], 1e6, 5),
+                          _fmt(r["incident_peak_N"]), _fmt(r["reflected_peak_N"]),
+                          _fmt(r["snr_db"], 1, 3), ",".join(r["flags"])])
+    shot_columns = [Column("source", text=True), Column("shot"), Column("TOF (us)"),
+                    Column("ARR"), Column("t_inc (us)", drop_order=3),
+                    Column("t_ref (us)", drop_order=3), Column("F_inc (N)", drop_order=2),
+                    Column("F_ref (N)", drop_order=2), Column("SNR (dB)", drop_order=1),
+                    Column("flags", text=True)]
+    agg_rows = []
+    for a in aggs:
+        tof, arr = a["tof_s"], a["arr"]
+        position = a["position"] if a.get("source") is None else f"(file {Path(a['source']).name})"
+        diameter = "-" if a["sphere_diameter"] is None else f"{a['sphere_diameter'] * 1e3:.4g}"
+        agg_rows.append([str(a["plate_id"] or "-"), str(position), diameter, str(a["n_shots"]),
+                         _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3), _fmt(arr["mean"]),
+                         _fmt(arr["std"], 1, 3), str(len(a["rejected"]))])
+    agg_columns = [Column("plate", text=True), Column("position", text=True), Column("D (mm)"),
+                   Column("shots"), Column("TOF mean (us)"), Column("TOF std (us)", drop_order=1),
+                   Column("ARR mean"), Column("ARR std", drop_order=1),
+                   Column("rejected", drop_order=2)]
+    for title, columns, table_rows in (("Shots", shot_columns, shot_rows),
+                                       ("Per position", agg_columns, agg_rows)):
+        table, note = fitted_table(console, title, columns, table_rows, hint="--json or --out")
+        console.print(table)
+        if note:
+            console.print(note, style="dim", highlight=False)
+    for sk in skipped:
+        console.print(f"skipped: {Path(sk['source']).name} channel {sk['channel']}: "
+                      f"{sk['reason']}", highlight=False)
+    for e in errors:
+        where = e["source"] + (f" shot {e['shot']}" if e.get("shot") is not None else "")
+        console.print(f"[red]failed: {where}: {e['error']}[/red]")
+
+
+def register(app: typer.Typer) -> None:
+    """Add `analyze` to the CLI."""
+    app.command("analyze")(analyze)

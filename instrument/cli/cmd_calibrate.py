@@ -1,0 +1,117 @@
+"""`solitonde calibrate`: fit the ARR factor and TOF offset from shots on a reference plate.
+
+The reference plate's thickness and the chain's distance to the support are known; the shots are
+waveform files (analysed and aggregated per sphere size, as `analyze` does) or, with ``--tof``,
+``--arr`` and ``--diameter`` (repeatable, same order), already measured means. The result is
+written as JSON (``--out``) for `invert --calibration` and the service.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from solitonde.instrument.cli.cmd_invert import table_path
+from solitonde.instrument.inference.calibration import CalibrationError
+from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+from solitonde.instrument.inference.inversion import FeatureSummary, InversionError
+from solitonde.instrument.tables.table import ModelTable, TableError
+from solitonde.signal.errors import WaveformError
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+def summaries_from_files(files: list[Path], diameter: float | None) -> list[FeatureSummary]:
+    """Per sphere size: the aggregate of every shot in ``files``."""
+    from solitonde.instrument.cli.cmd_analyze import aggregates, analyse_file, collect
+
+    paths, missing = collect(files)
+    if missing:
+        raise CalibrationError("files", missing[0]["error"])
+    rows = []
+    for p in paths:
+        try:
+            file_rows, _ = analyse_file(p, None, {})
+        except WaveformError as exc:
+            raise CalibrationError("files", f"{p}: {exc}") from None
+        rows.extend(file_rows)
+    if diameter is not None:
+        for r in rows:
+            r["sphere_diameter"] = diameter
+    out = []
+    for a in aggregates(rows):
+        d, tof, arr = a.get("sphere_diameter"), a["tof_s"], a["arr"]
+        if d is None:
+            raise CalibrationError("sphere_diameter", "the shots carry no sphere_diameter "
+                                   "metadata; give --diameter")
+        if tof["mean"] is None or arr["mean"] is None:
+            raise CalibrationError("files", f"no shot with D = {d} m has a detected reflection")
+        out.append(FeatureSummary(float(d), tof["mean"], arr["mean"], tof["std"], arr["std"],
+                                  int(tof["count"])))
+    if not out:
+        raise CalibrationError("files", "no shot could be analysed")
+    return out
+
+
+def calibrate_command(
+    files: list[Path] = typer.Argument(None, help="waveform files or folders of reference shots"),
+    thickness: float = typer.Option(..., "--thickness", help="reference plate thickness, m"),
+    distance: float = typer.Option(..., "--distance", help="reference distance to support, m"),
+    diameter: list[float] = typer.Option([], "--diameter", help="sphere diameter, m (for files "
+                                         "without metadata: one value; with --tof: repeat)"),
+    tof: list[float] = typer.Option([], "--tof", help="mean TOF, s (instead of files; repeat)"),
+    arr: list[float] = typer.Option([], "--arr", help="mean ARR (instead of files; repeat)"),
+    tof_std: list[float] = typer.Option([], "--tof-std", help="TOF shot scatter, s"),
+    arr_std: list[float] = typer.Option([], "--arr-std", help="ARR shot scatter"),
+    shots: list[int] = typer.Option([], "--shots", help="shots per mean"),
+    table: Path | None = typer.Option(None, "--table", help="model table"),
+    out: Path = typer.Option(Path("calibration.json"), "--out", help="calibration JSON to write"),
+    as_json: bool = typer.Option(False, "--json", help="print the calibration as JSON"),
+) -> None:
+    """Fit ARR factor and TOF offset per sphere size on a reference plate; write them as JSON."""
+    if out.is_dir():  # before any work: the fit would be lost
+        _fail(f"--out: {str(out)!r} is a directory; give the name of the JSON file to write")
+    try:
+        if tof or arr:
+            n = len(tof)
+            if len(arr) != n or len(diameter) != n:
+                _fail("--tof, --arr and --diameter must be given the same number of times")
+            items = [FeatureSummary(diameter[i], tof[i], arr[i],
+                                    tof_std[i] if tof_std else None,
+                                    arr_std[i] if arr_std else None,
+                                    shots[i] if shots else 1) for i in range(n)]
+        elif files:
+            if len(diameter) > 1:
+                _fail("with files give at most one --diameter")
+            items = summaries_from_files(files, diameter[0] if diameter else None)
+        else:
+            _fail("give reference shot files, or --tof/--arr/--diameter")
+            return
+        model = ModelTable.load(table_path(table))
+        cal = fit_calibration(model, [Reference(thickness, distance, s) for s in items])
+    except (CalibrationError, InversionError, TableError) as exc:
+        _fail(str(exc))
+        return
+    try:
+        cal.save(out)
+    except CalibrationError as exc:
+        _fail(f"--out: {str(exc).partition(': ')[2]}")
+        return
+    if as_json:
+        typer.echo(json.dumps(cal.to_dict(), indent=2))
+    else:
+        for e in cal.to_dict()["per_diameter"]:
+            typer.echo(f"D = {e['diameter_m'] * 1e3:.4g} mm: arr_factor {e['arr_factor']:.4f} "
+                       f"+- {e['arr_factor_std']:.4f}, tof_offset {e['tof_offset_s'] * 1e6:.3f} "
+                       f"+- {e['tof_offset_std_s'] * 1e6:.3f} us")
+        typer.echo(f"wrote {out}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add `calibrate` to the CLI."""
+    app.command("calibrate")(calibrate_command)

@@ -1,0 +1,220 @@
+"""`solitonde invert`: thickness and distance to the support from TOF and ARR.
+
+One ``--tof/--arr/--diameter`` triple per sphere size (repeat the options, in the same order, to
+combine sizes). Without ``--tof-std``/``--arr-std`` the inversion's stated defaults are used
+(1 % of TOF, 0.03 in ARR per shot).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from solitonde.instrument.cli.cmd_table import DEFAULT_TABLE_PATH
+from solitonde.instrument.inference.calibration import Calibration, CalibrationError
+from solitonde.instrument.inference.inversion import (
+    Estimate,
+    FeatureSummary,
+    InversionError,
+    invert,
+)
+from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
+from solitonde.instrument.tables.table import TableError
+
+
+def table_path(option: Path | None) -> Path:
+    """``--table``, else ``$SOLITONDE_TABLE``, else the default table in data_samples/."""
+    if option is not None:
+        return option
+    env = os.environ.get("SOLITONDE_TABLE")
+    return Path(env) if env else DEFAULT_TABLE_PATH
+
+
+def table_set(options: Sequence[Path] | None) -> TableSet:
+    """The tables ``--table`` names (files or folders, repeatable), else the default one.
+
+    Raises TableError when one cannot be loaded (a command line names only tables it means)."""
+    paths = list(options or []) or [table_path(None)]
+    tables = TableSet(paths, warm_up=False)
+    if tables.problems:
+        raise TableError("table", "; ".join(tables.problems))
+    return tables
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+def _fmt_mm(v: float | None) -> str:
+    return "-" if v is None else f"{v * 1e3:.3f}"
+
+
+def describe(est: Estimate) -> str:
+    """Human-readable lines for an estimate."""
+    if est.out_of_range:
+        return f"out of range: {est.reason}"
+    lines = []
+    for name, p in (("thickness", est.thickness_m), ("distance to support", est.distance_m)):
+        if p.status == "constrained":
+            lines.append(f"{name}: {_fmt_mm(p.median)} mm (MAP {_fmt_mm(p.map)}; 68 % "
+                         f"{_fmt_mm(p.ci68[0])}..{_fmt_mm(p.ci68[1])}; 95 % "
+                         f"{_fmt_mm(p.ci95[0])}..{_fmt_mm(p.ci95[1])} mm)")
+        elif p.status == "lower_bound_only":
+            lines.append(f"{name}: at least {_fmt_mm(p.ci95[0])} mm (95 %); the data do not "
+                         "bound it from above")
+        elif p.status == "upper_bound_only":
+            lines.append(f"{name}: at most {_fmt_mm(p.ci95[1])} mm (95 %); the data do not "
+                         "bound it from below")
+        else:
+            lines.append(f"{name}: unconstrained by these data")
+    return "\n".join(lines)
+
+
+def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]],
+                             table_files: Sequence[Path] | None,
+                             calibration_file: Path | None,
+                             plate_material: str | None = None) -> list[dict[str, Any]]:
+    """Estimates per (plate_id, position) from `analyze` aggregates, sphere sizes combined, each
+    against the table of its family (instrument.table_set's rule).
+
+    Raises TableError/CalibrationError when a table or the calibration cannot be read.
+    """
+    tables = table_set(table_files)
+    cal = Calibration.load(calibration_file) if calibration_file else None
+    groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
+    for a in aggs:
+        key = (a.get("plate_id"), a.get("position"), a.get("x_m"), a.get("y_m"))
+        groups.setdefault(key, []).append(a)
+    out = []
+    for (plate, position, x_m, y_m), members in groups.items():
+        row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
+        inputs, skipped = [], []
+        for a in members:
+            d, tof, arr = a.get("sphere_diameter"), a.get("tof_s") or {}, a.get("arr") or {}
+            if d is None or tof.get("mean") is None or arr.get("mean") is None:
+                skipped.append({"sphere_diameter": d, "reason": "no sphere_diameter in metadata"
+                                if d is None else "no shot with a detected reflection"})
+                continue
+            try:
+                diameter = float(d)
+            except (TypeError, ValueError):
+                skipped.append({"sphere_diameter": d, "reason": f"sphere_diameter {d!r} in the "
+                                "metadata is not a number"})
+                continue
+            inputs.append(FeatureSummary(diameter, float(tof["mean"]), float(arr["mean"]),
+                                         tof.get("std"), arr.get("std"),
+                                         int(tof.get("count") or 1)))
+        row["skipped"] = skipped
+        row["diameters_m"] = [i.diameter_m for i in inputs]
+        row["n_shots"] = sum(i.n_shots for i in inputs)
+        if not inputs:
+            row["estimate"] = None
+        else:
+            try:
+                chosen = tables.choose([i.diameter_m for i in inputs], None, plate_material)
+                row["estimate"] = {**invert(chosen.table, inputs, cal).to_dict(),
+                                   "table": chosen.table.table_id}
+            except TableChoiceError as exc:
+                row["estimate"] = None
+                flag = "--plate-material" if exc.field == "plate_material" else "--table"
+                row["error"] = f"{flag}: {exc.message}"
+            except (InversionError, TableError) as exc:
+                row["estimate"] = None
+                row["error"] = str(exc)
+        out.append(row)
+    return out
+
+
+def invert_command(
+    tof: list[float] = typer.Option(..., "--tof", help="mean time of flight, s (repeat per "
+                                    "sphere size)"),
+    arr: list[float] = typer.Option(..., "--arr", help="mean amplitude ratio (repeat)"),
+    diameter: list[float] = typer.Option(..., "--diameter", help="sphere diameter, m (repeat)"),
+    tof_std: list[float] = typer.Option([], "--tof-std", help="shot scatter of TOF, s"),
+    arr_std: list[float] = typer.Option([], "--arr-std", help="shot scatter of ARR"),
+    shots: list[int] = typer.Option([], "--shots", help="number of shots averaged"),
+    table: list[Path] = typer.Option([], "--table", help="model table or folder of tables "
+                                     "(repeat for several plate families; default: "
+                                     "$SOLITONDE_TABLE, else data_samples/default_table.h5)"),
+    plate_material: str | None = typer.Option(None, "--plate-material", help="the plate's "
+                                              "material (a library name): picks the table of "
+                                              "that family; another family is refused"),
+    calibration: Path | None = typer.Option(None, "--calibration", help="calibration JSON from "
+                                            "`solitonde calibrate`"),
+    posterior: bool = typer.Option(False, "--posterior", help="include the 2-D posterior (JSON)"),
+    as_json: bool = typer.Option(False, "--json", help="print JSON"),
+) -> None:
+    """Estimate plate thickness and distance to the nearest support from TOF and ARR."""
+    n = len(tof)
+    if len(arr) != n or len(diameter) != n:
+        _fail(f"--tof, --arr and --diameter must be given the same number of times "
+              f"(got {n}, {len(arr)}, {len(diameter)})")
+    for name, values in (("--tof-std", tof_std), ("--arr-std", arr_std), ("--shots", shots)):
+        if values and len(values) != n:
+            _fail(f"{name} must be given once per sphere size ({n}) or not at all")
+    try:
+        items = [FeatureSummary(diameter[i], tof[i], arr[i],
+                                tof_std[i] if tof_std else None, arr_std[i] if arr_std else None,
+                                shots[i] if shots else 1) for i in range(n)]
+        tables = table_set(table)
+        chosen = tables.choose(diameter, None, plate_material)
+        cal = Calibration.load(calibration) if calibration else None
+        est = invert(chosen.table, items, cal, return_posterior=posterior)
+    except TableChoiceError as exc:
+        flag = "--plate-material" if exc.field == "plate_material" else "--table"
+        _fail(f"{flag}: {exc.message}")
+        return
+    except (InversionError, TableError, CalibrationError) as exc:
+        _fail(str(exc))
+        return
+    if as_json:
+        typer.echo(json.dumps(_clean(est.to_dict(posterior=posterior))))
+    else:
+        typer.echo(describe(est))
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def register(app: typer.Typer) -> None:
+    """Add `invert` to the CLI."""
+    app.command("invert")(invert_command)
+
+
+def describe_row(row: Mapping[str, Any]) -> str:
+    """One `analyze --invert` estimate as text."""
+    head = f"estimate for plate {row.get('plate_id')}, position {row.get('position')}"
+    if row.get("x_m") is not None and row.get("y_m") is not None:
+        head += f" (x {row['x_m']:g} m, y {row['y_m']:g} m)"
+    head += ":"
+    est = row.get("estimate")
+    if est is None:
+        why = row.get("error") or "; ".join(s["reason"] for s in row.get("skipped", [])) or "-"
+        return f"{head} none ({why})"
+    lines = [head]
+    for key, name in (("thickness_m", "thickness"), ("distance_m", "distance to support")):
+        p = est[key]
+        if p["status"] == "constrained":
+            lines.append(f"  {name}: {_fmt_mm(p['median'])} mm (95 % {_fmt_mm(p['ci95'][0])}.."
+                         f"{_fmt_mm(p['ci95'][1])} mm)")
+        elif p["status"] == "lower_bound_only":
+            lines.append(f"  {name}: at least {_fmt_mm(p['ci95'][0])} mm (95 %)")
+        elif p["status"] == "upper_bound_only":
+            lines.append(f"  {name}: at most {_fmt_mm(p['ci95'][1])} mm (95 %)")
+        else:
+            lines.append(f"  {name}: {p['status']}")
+    return "\n".join(lines)

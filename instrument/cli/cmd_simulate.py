@@ -1,0 +1,212 @@
+"""`solitonde simulate`: run one scene through the chain model and measure its sensor trace.
+
+The model (``solitonde.model``) makes the trace; the features (TOF, ARR, pulse peaks) are
+measured by ``solitonde.signal`` exactly as a recorded waveform would be, so simulated and
+measured shots share one extractor and its biases.
+
+``--out`` writes the trace with ``solitonde.signal.io`` as CSV: ``# key: <JSON>`` comment lines
+first (``scene``, ``plate_model``, ``plate_model_reason``, ``source``), then the header
+``time_s,force_N`` and one row per sample; ``solitonde.signal.io.read`` reads it back with the
+scene in ``metadata["scene"]``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from solitonde.instrument.tables import greens_cache
+from solitonde.model.errors import SceneError, SimulationError
+from solitonde.model.scene import load_scene
+from solitonde.model.simulate import SimulationResult, simulate
+from solitonde.signal import io as signal_io
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.features import Features, extract
+from solitonde.signal.waveform import Waveform
+
+
+def to_waveform(result: SimulationResult) -> Waveform:
+    """The simulated sensor trace as a signal Waveform, with the scene as metadata."""
+    return Waveform(
+        result.t0, result.dt, result.samples, "N",
+        metadata={
+            "scene": result.scene.to_dict(),
+            "plate_model": result.plate_model,
+            "plate_model_reason": result.plate_model_reason,
+            "source": "solitonde simulate",
+        },
+    )
+
+
+def _nan(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def summary(
+    result: SimulationResult, features: Features | None, feature_error: str | None = None
+) -> dict[str, Any]:
+    """The JSON of ``solitonde simulate --json`` (the first twelve keys are a public contract).
+
+    Pulse quantities the trace does not support (no reflection found, or no pulse the signal
+    extractor could detect: ``features`` None, ``feature_error`` says why) are NaN here, null in
+    JSON.
+    """
+    d = result.diagnostics
+    if features is None:
+        features = Features(None, None, math.nan, None, math.nan, None, math.nan, ["no_features"])
+    return {
+        "plate_model": result.plate_model,
+        "tof_s": _nan(features.tof_s),
+        "arr": _nan(features.arr),
+        "incident_peak_N": _nan(features.incident_peak_N),
+        "reflected_peak_N": _nan(features.reflected_peak_N),
+        "incident_time_s": _nan(features.incident_time_s),
+        "reflected_time_s": _nan(features.reflected_time_s),
+        "energy_drift": d["energy_drift"],
+        "steps": d["steps"],
+        "dt_s": d["dt_s"],
+        "wall_s": d["wall_s"],
+        "status": d["status"],
+        "plate_model_reason": result.plate_model_reason,
+        "sample_rate_hz": 1.0 / result.dt,
+        "n_samples": int(result.samples.size),
+        "duration_s": d["duration_s"],
+        "plate_work_J": d["plate_work_J"],
+        "dissipated_J": d["dissipated_J"],
+        "snr_db": features.snr_db,
+        "flags": list(features.flags),
+        "feature_error": feature_error,
+        "model_truth": result.truth,
+        # spectral-element plate models (sem, greens) only
+        **{k: d[k] for k in ("mesh", "dt_stability_ratio", "chain_dt_s", "greens_cached")
+           if k in d},
+    }
+
+
+def _finite(value: float) -> float | None:
+    return value if isinstance(value, float) and math.isfinite(value) else None
+
+
+def _json_safe(data: Any) -> Any:
+    """NaN and inf are not JSON: they become null."""
+    if isinstance(data, dict):
+        return {k: _json_safe(v) for k, v in data.items()}
+    if isinstance(data, float):
+        return _finite(data)
+    return data
+
+
+def write_plot(path: Path, result: SimulationResult, data: dict[str, Any]) -> None:
+    """Sensor trace with the detected incident and reflected pulses marked (PNG)."""
+    from solitonde.instrument.plotting import trace_png
+    from solitonde.instrument.studies.figures import write_bytes
+
+    s = result.scene
+    title = (f"D = {s.chain.diameter * 1e3:.2f} mm, t = {s.plate.thickness * 1e3:.2f} mm, "
+             f"L = {s.plate.distance_to_support * 1e3:.0f} mm, {result.plate_model}")
+    write_bytes(path, trace_png(result.t0, result.dt, result.samples, data, title=title))
+
+
+def _table(data: dict[str, Any]) -> Table:
+    table = Table(title="Chain simulation", show_header=True)
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    rows = [
+        ("plate model", data["plate_model"]),
+        ("TOF (ms)", data["tof_s"] * 1e3 if _finite(data["tof_s"]) is not None else "n/a"),
+        ("ARR", data["arr"]),
+        ("incident peak (N)", data["incident_peak_N"]),
+        ("reflected peak (N)", data["reflected_peak_N"]),
+        ("energy drift", data["energy_drift"]),
+        ("steps", data["steps"]),
+        ("dt (s)", data["dt_s"]),
+        ("wall (s)", data["wall_s"]),
+        ("status", data["status"]),
+    ]
+    for name, value in rows:
+        table.add_row(name, f"{value:.6g}" if isinstance(value, float) else str(value))
+    table.caption = data["plate_model_reason"]
+    return table
+
+
+def simulate_command(
+    scene_arg: Path | None = typer.Argument(
+        None, metavar="SCENE", help="The scene file, as --scene (kept for older scripts)."
+    ),
+    scene_file: Path | None = typer.Option(
+        None, "--scene", help="Scene file (YAML or JSON); the paper's setup when omitted."
+    ),
+    overrides: list[str] | None = typer.Option(
+        None, "--set", help="Override a scene value, e.g. --set plate.thickness=3.18e-3."
+    ),
+    out: Path | None = typer.Option(None, "--out", help="Write the sensor trace as CSV."),
+    plot: Path | None = typer.Option(None, "--plot", help="Draw the trace (PNG) with pulses."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
+    if scene_arg is not None and scene_file is not None and scene_arg != scene_file:
+        typer.echo(f"error: --scene: {scene_file} and the positional scene {scene_arg} differ; "
+                   "give one", err=True)
+        raise typer.Exit(code=2)
+    scene_file = scene_file or scene_arg
+    for flag, path in (("--out", out), ("--plot", plot)):
+        if path is not None and path.is_dir():  # before the run, which may take minutes
+            typer.echo(f"error: {flag}: {str(path)!r} is a folder; give a file name", err=True)
+            raise typer.Exit(code=2)
+    try:
+        scene = load_scene(scene_file, overrides or [])
+        greens_cache.install()
+        result = simulate(scene)
+    except SceneError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+    except SimulationError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=1) from None
+    try:
+        waveform = to_waveform(result)
+    except WaveformError as exc:  # e.g. fewer samples than a shot needs
+        typer.echo(f"error: output.sample_rate / output.duration: the simulated trace cannot be "
+                   f"measured: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+    features: Features | None = None
+    feature_error = None
+    try:
+        features = extract(waveform)
+    except WaveformError as exc:
+        feature_error = str(exc)
+        typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
+    data = summary(result, features, feature_error)
+    failed = []
+    def write_csv(path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        signal_io.write(path, waveform, format="csv")
+
+    writers = (("--out", out, write_csv),
+               ("--plot", plot, lambda path: write_plot(path, result, data)))
+    for flag, path, write in writers:
+        if path is None:
+            continue
+        try:
+            write(path)
+        except OSError as exc:  # the result is still printed; the exit code says what failed
+            failed.append(f"error: {flag}: cannot write {str(path)!r}: {exc.strerror or exc}")
+    if as_json:
+        typer.echo(json.dumps(_json_safe(data), indent=2))
+    else:
+        Console().print(_table(data))
+    for line in failed:
+        typer.echo(line, err=True)
+    if failed:
+        raise typer.Exit(code=1)
+
+
+def register(app: typer.Typer) -> None:
+    """Add `simulate` to the CLI."""
+    app.command("simulate")(simulate_command)

@@ -1,0 +1,165 @@
+"""`solitonde table build` and `solitonde table info`: make and inspect model tables.
+
+Axes are given as comma lists (``4.76e-3,9.53e-3``) or as ``geom:START:STOP:N`` /
+``lin:START:STOP:N``; without them the default table's grid is used (the paper's three spheres,
+t = 1.5..6 mm, L = 0..457 mm dense within 200 mm).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import typer
+
+from solitonde.instrument.cli.main import HELP_MARKUP
+from solitonde.instrument.service.settings import DEFAULT_TABLE
+from solitonde.instrument.tables.table import ModelTable, TableError
+from solitonde.instrument.tables.table_build import (
+    PAPER_DIAMETERS_M,
+    Sweep,
+    build_table,
+    default_distances_m,
+    default_thicknesses_m,
+    partial_path,
+)
+from solitonde.model.errors import SceneError
+from solitonde.model.scene import apply_overrides, load_scene_file
+
+DEFAULT_TABLE_PATH = DEFAULT_TABLE
+
+
+def parse_axis(text: str | None, name: str, default: list[float]) -> list[float]:
+    """An axis from ``a,b,c``, ``lin:a:b:n`` or ``geom:a:b:n``; ``default`` when not given."""
+    if text is None:
+        return list(default)
+    try:
+        if text.startswith(("lin:", "geom:")):
+            kind, a, b, n = text.split(":")
+            fn = np.linspace if kind == "lin" else np.geomspace
+            return [float(round(x, 9)) for x in fn(float(a), float(b), int(n))]
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise typer.BadParameter(f"{text!r}: expected a comma list of numbers in m, or "
+                                 "lin:START:STOP:N / geom:START:STOP:N", param_hint=name) from None
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Ctrl-C, also when it arrived inside compiled code (numba re-raises it as a SystemError
+    caused by the KeyboardInterrupt)."""
+    seen: BaseException | None = exc
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+def build_command(
+    out: Path = typer.Option(DEFAULT_TABLE_PATH, "--out", "-o", help="table file to write"),
+    diameters: str | None = typer.Option(None, help="sphere diameters D, m (default: the paper's "
+                                         "4.76e-3,9.53e-3,19.05e-3)"),
+    thicknesses: str | None = typer.Option(None, help="plate thicknesses t, m "
+                                           "(default: geom:1.5e-3:6e-3:8)"),
+    distances: str | None = typer.Option(None, help="distances to the support L, m "
+                                         "(default: 0..0.457, dense within 0.2)"),
+    scene: Path | None = typer.Option(None, help="base scene file (YAML/JSON)"),
+    set_: list[str] = typer.Option([], "--set", help="scene override key=value (repeatable)"),
+    traces: bool = typer.Option(False, "--traces", help="also store every sensor trace"),
+    workers: int | None = typer.Option(None, help="local worker processes (default: one per "
+                                       "core); 1 runs serially without Dask"),
+    scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
+    as_json: bool = typer.Option(False, "--json", help="print the build report as JSON"),
+    overwrite: bool = typer.Option(False, "--overwrite", help="replace an existing table file "
+                                   "(without --out: the bundled table)"),
+    table_id: str | None = typer.Option(None, "--id", help="the table's id, which measurements "
+                                        "and the service name it by (default: the file's stem)"),
+) -> None:
+    """Simulate the sweep (resuming an interrupted build) and write the table atomically."""
+    if table_id is not None and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", table_id):
+        _fail(f"--id: {table_id!r} is not an id (allowed: 1-64 letters, digits, '.', '_', '-', "
+              "starting with a letter or digit)")
+    if out.is_file() and not partial_path(out).exists() and not overwrite:
+        which = " (the bundled table: --out was not given)" if out == DEFAULT_TABLE_PATH else ""
+        _fail(f"--out: {str(out)!r} exists{which}; give another --out, or --overwrite to "
+              "replace it")
+    try:
+        base: dict[str, Any] = load_scene_file(scene) if scene is not None else {}
+        base = apply_overrides(base, set_)
+        sweep = Sweep(
+            parse_axis(diameters, "--diameters", list(PAPER_DIAMETERS_M)),
+            parse_axis(thicknesses, "--thicknesses", default_thicknesses_m()),
+            parse_axis(distances, "--distances", default_distances_m()),
+            scene=base, traces=traces,
+        )
+        command = "solitonde " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
+                             command=command, table_id=table_id)
+    except (TableError, SceneError) as exc:
+        _fail(str(exc))
+        return
+    except (KeyboardInterrupt, SystemError) as exc:
+        if not _interrupted(exc):
+            raise
+        part = partial_path(out)
+        kept = (f"the points done so far are kept in {str(part)!r}; run the same command again "
+                "to resume" if part.exists() else "nothing was written")
+        typer.echo(f"interrupted: {kept}", err=True)
+        raise typer.Exit(130) from None
+    data = {"path": str(report.path), "complete": report.complete,
+            "points_written": report.points_written, "plates_written": report.plates_written,
+            "wall_s": report.wall_s, "scenes_per_s": report.scenes_per_s, "runner": report.runner}
+    if as_json:
+        typer.echo(json.dumps(data, indent=2))
+    else:
+        typer.echo(f"wrote {report.path}: {report.points_written} scenes on "
+                   f"{report.plates_written} plates in {report.wall_s:.1f} s "
+                   f"({report.scenes_per_s:.2f} scenes/s, {report.runner})")
+
+
+def info_command(
+    file: Path = typer.Argument(DEFAULT_TABLE_PATH, help="table file"),
+    as_json: bool = typer.Option(False, "--json", help="print JSON"),
+) -> None:
+    """Axes, point status and provenance of a table."""
+    try:
+        table = ModelTable.load(file)
+    except TableError as exc:
+        _fail(str(exc))
+        return
+    data = table.summary()
+    if as_json:
+        typer.echo(json.dumps(data, indent=2))
+        return
+    typer.echo(f"{file}: {'complete' if data['complete'] else 'INCOMPLETE'}, "
+               f"shape {data['shape']} ({data['n_points']} points)")
+    for name, axis in data["axes"].items():
+        vals = ", ".join(f"{v * 1e3:.4g}" for v in axis["values"])
+        typer.echo(f"  {name}: {axis['n']} values, mm: {vals}")
+    typer.echo(f"  status: {data['status_counts']}")
+    typer.echo(f"  plate models: {data['plate_models']}")
+    prov = data["provenance"]
+    if prov:
+        typer.echo(f"  built {prov.get('built_at')} in {prov.get('build_wall_s', 0):.0f} s "
+                   f"({prov.get('runner')}) on {prov.get('machine', {}).get('node')}, "
+                   f"solitonde {prov.get('solitonde_version')} git {prov.get('git_revision')}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `table` command group to the CLI."""
+    group = typer.Typer(help="Build and inspect model tables.", no_args_is_help=True,
+                        rich_markup_mode=HELP_MARKUP)
+    group.command("build")(build_command)
+    group.command("info")(info_command)
+    app.add_typer(group, name="table")

@@ -1,0 +1,101 @@
+"""`solitonde validate`: synthetic validation of the table and the inversion (see
+:mod:`solitonde.instrument.studies.validate` for exactly what is simulated and scored)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import NoReturn
+
+import typer
+
+from solitonde.instrument.cli.cmd_invert import table_path
+from solitonde.instrument.studies.validate import ValidationInputError, validate
+from solitonde.instrument.tables.table import ModelTable, TableError
+from solitonde.instrument.tables.table_build import default_workers
+
+
+def _fail(message: str) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(2)
+
+
+def parse_diameters(text: str | None, model: ModelTable) -> list[float] | None:
+    """``--diameters``: a comma list of sphere sizes in m, each one of the table's, each once."""
+    if text is None:
+        return None
+    out: list[float] = []
+    for item in text.split(","):
+        try:
+            d = float(item)
+        except ValueError:
+            _fail(f"--diameters: {item.strip()!r} is not a number (give sphere sizes in m, "
+                  "comma-separated, e.g. 4.76e-3,9.53e-3)")
+        try:
+            d = float(model.axes["diameter_m"][model.diameter_index(d)])
+        except TableError as exc:
+            _fail(f"--diameters: {str(exc).partition(': ')[2]}")
+        if d in out:
+            _fail(f"--diameters: {item.strip()} is listed twice")
+        out.append(d)
+    return out
+
+
+def validate_command(
+    n: int = typer.Option(200, "--n", min=1, help="number of random plates"),
+    seed: int = typer.Option(0, "--seed", help="random seed"),
+    table: Path | None = typer.Option(None, "--table", help="model table"),
+    workers: int | None = typer.Option(None, help="local worker processes (default: one per "
+                                       "core); 1 runs serially"),
+    scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
+    diameters: list[str] | None = typer.Option(None, "--diameters", help="sphere sizes to "
+                                               "measure, m: a comma list, or the option repeated "
+                                               "(default: all of the table's)"),
+    measurements: Path | None = typer.Option(None, "--measurements", help="JSON file keeping the "
+                                             "simulated shots; reused when it matches the draw"),
+    out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
+    as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
+) -> None:
+    """Simulate random plates with noise and dissipation, invert, and score the answers."""
+    if seed < 0:
+        _fail(f"--seed: must be an integer >= 0, got {seed}")
+    # checked before the simulations: a bad path would only show after all of them
+    for flag, path in (("--out", out), ("--measurements", measurements)):
+        if path is not None and path.is_dir():
+            _fail(f"{flag}: {str(path)!r} is a directory; give the name of a JSON file")
+        if path is not None and not path.parent.is_dir():
+            _fail(f"{flag}: the folder {str(path.parent)!r} does not exist")
+    try:
+        model = ModelTable.load(table_path(table))
+    except TableError as exc:
+        _fail(str(exc))
+    sizes = parse_diameters(",".join(diameters) if diameters else None, model)
+    try:
+        report = validate(model, n, seed,
+                          workers=default_workers() if workers is None else workers,
+                          scheduler=scheduler, progress=progress, diameters=sizes,
+                          measurements=measurements)
+    except ValidationInputError as exc:
+        _fail(f"--{exc.field}: {str(exc).partition(': ')[2]}")
+    m = report.metrics
+    if out is not None:
+        try:
+            out.write_text(json.dumps({"metrics": m, "scenes": report.scenes}, indent=1) + "\n")
+        except OSError as exc:
+            _fail(f"--out: cannot write {str(out)!r}: {exc.strerror or exc}")
+    if as_json:
+        typer.echo(json.dumps(m, indent=2))
+        return
+    typer.echo(f"validation on {m['table']}: {m['n']} plates, seed {m['seed']}")
+    typer.echo(f"  thickness error (relative): median {m['thickness_error_median']:.4f}, "
+               f"90th percentile {m['thickness_error_p90']:.4f} ({m['n_estimated']} estimated)")
+    typer.echo(f"  coverage of the 95 % interval: thickness {m['coverage_95']:.3f}, "
+               f"distance {m['distance_coverage_95']:.3f}")
+    typer.echo(f"  status right: {m['status_accuracy']:.3f}; distance statuses "
+               f"{m['distance_status_counts']}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add `validate` to the CLI."""
+    app.command("validate")(validate_command)

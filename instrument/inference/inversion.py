@@ -1,0 +1,654 @@
+"""Invert measured TOF and ARR against a model table: thickness and distance to the support.
+
+Bayesian grid inversion. The table's features are interpolated (linear in log t and in L, the
+axes along which TOF and ARR vary smoothly) onto a fine (log t, L) grid once per table and
+sphere size; a prior uniform in log t (thickness is a scale) and in L over the table's range;
+independent Gaussian errors on the mean TOF and mean ARR of each sphere size:
+
+    sigma_tof^2 = s_tof^2 / n + sigma_model_tof(t, L)^2,   likewise for ARR
+
+with s the shot scatter (or the stated defaults :data:`DEFAULT_TOF_REL_STD`,
+:data:`DEFAULT_ARR_STD` when not given; floored at :data:`MIN_TOF_STD_S`, :data:`MIN_ARR_STD`) and
+sigma_model the table's own interpolation error where the cell lies (leave-one-out at each node
+along both axes, scaled to the grid spacing, interpolated like the features): large where TOF and
+ARR oscillate with L near a support, small where they are smooth. A calibration multiplies the
+model ARR by ``arr_factor`` (experiments lose energy the model does not) and adds ``tof_offset_s``
+to the model TOF; its stated uncertainties (``arr_factor_std``, ``tof_offset_std_s``) enter the
+variances. Beyond D/t = 5, where the paper finds ARR near 0 and the model's "reflection" is a
+train at the detection floor whose features wander between table positions (table nodes with ARR
+below :data:`FLOOR_ARR_MAX`; near a support the reflection is whole), the model error also holds
+10 % of TOF and the whole ARR (:data:`FLOOR_TOF_REL_STD`, :data:`FLOOR_ARR_REL_STD`),
+so such a size weighs little there. Where the model detects no reflection in that regime, the
+reflection is below the detector's floor (the table's ``arr_upper_bound``, ~0.02), and a noisy
+shot can still pick a floor-level "reflection" out of the noise: such a node is a floor node too,
+its ARR that bound and its TOF that of the nearest reflection in its thickness row (far from a
+support TOF hardly depends on L), so cells next to it explain a weak measured reflection instead
+of being ruled out (which pinned thin plates far from a support to the few cells near it that
+had one). Elsewhere, grid points where the model detects no reflection cannot explain a measured
+one and get zero posterior. Sphere sizes multiply their likelihoods.
+
+Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
+status: when the posterior still carries at least :data:`EDGE_FRACTION` of its peak density at an
+end of the table that is not a physical limit, the data do not bound the parameter on that side
+(``lower_bound_only``: e.g. L beyond the critical distance, where TOF and ARR no longer depend on
+L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
+bound (``ci95 = [lower, null]``), no MAP or median: the table's end is not an estimate; the bound
+is where the density falls to the level of a likelihood-ratio interval (:data:`LR_LEVELS`), since a
+quantile of a density flat out to the table's end would follow the table's extent. A measurement no
+table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no numbers at all. With
+several sphere sizes, when all together are out of range but the others are not once one size is
+left out, that answer is given, with the size left out named (``excluded_diameters_m``,
+``reason``): one disagreeing channel does not void the others.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from itertools import pairwise
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+
+from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.tables.table import (
+    STATUS_NO_REFLECTION,
+    STATUS_OK,
+    ModelTable,
+    TableError,
+)
+
+DEFAULT_TOF_REL_STD = 0.01
+"""Per-shot TOF scatter assumed when none is given: 1 % of the TOF."""
+DEFAULT_ARR_STD = 0.03
+"""Per-shot ARR scatter assumed when none is given (absolute)."""
+MIN_TOF_STD_S = 0.2e-6
+"""Floor of the per-shot TOF scatter (a tenth of a 2 MHz sample): a scatter of 0 from few
+identical shots must not make the likelihood infinitely sharp."""
+MIN_ARR_STD = 0.003
+"""Floor of the per-shot ARR scatter."""
+EDGE_FRACTION = 0.2
+"""A marginal posterior with at least this fraction of its peak density at a table end is open
+there (the data do not bound the parameter on that side)."""
+OUT_OF_RANGE_TAIL = 1e-6
+"""Tail probability of the best chi^2 beyond which no table point explains the data."""
+REFLECTION_D_OVER_T = 5.0
+"""Above this D/t the paper finds ARR near 0: the model's "reflection" is a train at the
+detection floor whose features wander from one table position to the next (TOF by ~10 %)."""
+FLOOR_TOF_REL_STD = 0.1
+FLOOR_ARR_REL_STD = 1.0
+"""Model uncertainty at table nodes beyond :data:`REFLECTION_D_OVER_T` whose reflection is weak
+(ARR below :data:`FLOOR_ARR_MAX`): TOF known to 10 %, ARR only as "small" (its own size), so
+such a size barely weighs there instead of pinning (t, L) to a wandering value."""
+FLOOR_ARR_MAX = 0.3
+"""A reflection with ARR above this is a clear pulse even beyond D/t = 5 (near a support the
+clamp returns the wave whole, ARR up to 0.99): its features are as exact as anywhere, and the
+floor uncertainty would wrongly make such cells unlikely through the likelihood's log-variance."""
+FINE_THICKNESS_STEPS = 32
+"""Fine cells per table interval in thickness (log-uniform within each interval)."""
+FINE_DISTANCE_STEP_M = 0.0025
+"""Largest fine cell in distance (each table interval is split evenly)."""
+LR_LEVELS = (math.exp(-0.5), math.exp(-0.5 * 3.841458820694124))
+"""Ratios of the marginal posterior density to its peak that bound a one-sided 68 % and 95 %
+answer, the levels of a likelihood-ratio interval for one parameter (chi^2_1 of 1 and 3.84): the
+bound then follows the data, not how far the table extends."""
+PARAMETERS = ("thickness_m", "distance_m")
+LOG_BATCH = 8
+"""Variances multiplied before one log. A variance lies between about 1e-19 s^2 (the TOF floor
+over 1e5 shots) and 1e2 (an ARR scatter of 10, the most an input may state): a product of 8
+stays between 1e-152 and 1e16, far from underflow and overflow."""
+
+
+class InversionError(ValueError):
+    """Bad inversion input; ``field`` names it."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+@dataclass(frozen=True)
+class FeatureSummary:
+    """The shots of one sphere size: mean TOF and ARR, their scatter and the shot count."""
+
+    diameter_m: float
+    tof_s: float
+    arr: float
+    tof_std_s: float | None = None
+    arr_std: float | None = None
+    n_shots: int = 1
+
+    def __post_init__(self) -> None:
+        def check(name: str, value: Any, ok: bool, allowed: str) -> None:
+            if not ok:
+                raise InversionError(name, f"got {value!r} (allowed: {allowed})")
+
+        for name in ("diameter_m", "tof_s", "arr"):
+            v = getattr(self, name)
+            check(name, v, isinstance(v, int | float) and not isinstance(v, bool)
+                  and math.isfinite(v), "a finite number")
+        check("diameter_m", self.diameter_m, self.diameter_m > 0, "> 0 m")
+        check("tof_s", self.tof_s, self.tof_s > 0, "> 0 s")
+        check("arr", self.arr, self.arr >= 0, ">= 0")
+        for name in ("tof_std_s", "arr_std"):
+            v = getattr(self, name)
+            check(name, v, v is None or (isinstance(v, int | float) and math.isfinite(v)
+                                         and v >= 0), ">= 0, or null for the default")
+        check("n_shots", self.n_shots, isinstance(self.n_shots, int) and self.n_shots >= 1,
+              "an integer >= 1")
+
+    @classmethod
+    def from_any(cls, item: FeatureSummary | Mapping[str, Any]) -> FeatureSummary:
+        if isinstance(item, FeatureSummary):
+            return item
+        if not isinstance(item, Mapping):
+            raise InversionError("inputs", f"expected a mapping, got {type(item).__name__}")
+        known = {"diameter_m", "tof_s", "arr", "tof_std_s", "arr_std", "n_shots"}
+        extra = set(item) - known
+        if extra:
+            raise InversionError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
+        for key in ("diameter_m", "tof_s", "arr"):
+            if item.get(key) is None:
+                raise InversionError(key, "missing")
+        n = item.get("n_shots", 1)
+        if isinstance(n, float) and n.is_integer():
+            n = int(n)
+        return cls(float(item["diameter_m"]), float(item["tof_s"]), float(item["arr"]),
+                   None if item.get("tof_std_s") is None else float(item["tof_std_s"]),
+                   None if item.get("arr_std") is None else float(item["arr_std"]),
+                   1 if n is None else n)
+
+    def sigmas(self) -> tuple[float, float]:
+        """Standard errors of the mean TOF (s) and mean ARR, before the model error."""
+        s_tof = self.tof_std_s if self.tof_std_s is not None else DEFAULT_TOF_REL_STD * self.tof_s
+        s_arr = self.arr_std if self.arr_std is not None else DEFAULT_ARR_STD
+        root = math.sqrt(self.n_shots)
+        return max(s_tof, MIN_TOF_STD_S) / root, max(s_arr, MIN_ARR_STD) / root
+
+
+# The fine grid ----------------------------------------------------------------------------
+
+
+def _refine(nodes: np.ndarray, steps: Any) -> np.ndarray:
+    """The nodes with ``steps(width)`` even sub-intervals inserted between each neighbour pair."""
+    if nodes.size == 1:
+        return nodes.astype(float).copy()
+    parts = [np.linspace(a, b, steps(b - a) + 1)[:-1] for a, b in pairwise(nodes)]
+    return np.concatenate([*parts, nodes[-1:]])
+
+
+def _cell_widths(x: np.ndarray) -> np.ndarray:
+    """Width of each point's cell (midpoint to midpoint, half cells at the ends): the prior mass
+    of a point under a prior uniform in x."""
+    if x.size == 1:
+        return np.ones(1)
+    mid = 0.5 * (x[1:] + x[:-1])
+    edges = np.concatenate([x[:1], mid, x[-1:]])
+    return np.diff(edges)
+
+
+def _interp_matrix(nodes: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Linear-interpolation weights W (len(x), len(nodes)): f(x) = W @ f(nodes)."""
+    w = np.zeros((x.size, nodes.size))
+    if nodes.size == 1:
+        w[:, 0] = 1.0
+        return w
+    j = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, nodes.size - 2)
+    frac = np.clip((x - nodes[j]) / (nodes[j + 1] - nodes[j]), 0.0, 1.0)
+    rows = np.arange(x.size)
+    w[rows, j] = 1.0 - frac
+    w[rows, j + 1] += frac
+    return w
+
+
+def _node_variance(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
+                   coord_l: np.ndarray) -> np.ndarray:
+    """Variance of the table's interpolation error at each node, from leave-one-out.
+
+    Along each axis, an interior node is predicted linearly from its two neighbours; linear
+    interpolation over twice the spacing errs about four times as much as over the spacing
+    itself (error ~ h^2 f''), so (LOO error / 4)^2 is the variance there. End nodes take their
+    neighbour's value, nodes without valid neighbours the mean over the table; the two axes add.
+    Rough regions (near a support, where guided waves make TOF and ARR oscillate with L) so get
+    large errors and smooth ones small errors.
+    """
+    total = np.zeros(values.shape)
+    for axis, c in ((0, coord_t), (1, coord_l)):
+        v = np.moveaxis(values, axis, 0)
+        ok = np.moveaxis(valid, axis, 0)
+        e2 = np.full(v.shape, np.nan)
+        if v.shape[0] >= 3:
+            cc = c.reshape((-1,) + (1,) * (v.ndim - 1))
+            a = (cc[1:-1] - cc[:-2]) / (cc[2:] - cc[:-2])
+            pred = v[:-2] * (1 - a) + v[2:] * a
+            good = ok[:-2] & ok[1:-1] & ok[2:]
+            e2[1:-1] = np.where(good, ((v[1:-1] - pred) / 4.0) ** 2, np.nan)
+            e2[0], e2[-1] = e2[1], e2[-2]
+        fill = float(np.nanmean(e2)) if np.isfinite(e2).any() else 0.0
+        total += np.moveaxis(np.where(np.isfinite(e2), e2, fill), 0, axis)
+    return np.where(valid, total, 0.0)
+
+
+@dataclass
+class FineGrid:
+    """One sphere size's table features on the fine (t, L) grid, ready for likelihoods."""
+
+    diameter_m: float
+    thickness_m: np.ndarray
+    distance_m: np.ndarray
+    tof_s: np.ndarray
+    arr: np.ndarray
+    valid: np.ndarray
+    penalty: np.ndarray
+    model_tof_var: np.ndarray
+    model_arr_var: np.ndarray
+    weight_t: np.ndarray
+    weight_l: np.ndarray
+
+    @property
+    def model_tof_std_s(self) -> float:
+        """RMS interpolation error of TOF over the valid cells, s."""
+        return float(np.sqrt(self.model_tof_var[self.valid].mean())) if self.valid.any() else 0.0
+
+    @property
+    def model_arr_std(self) -> float:
+        """RMS interpolation error of ARR over the valid cells."""
+        return float(np.sqrt(self.model_arr_var[self.valid].mean())) if self.valid.any() else 0.0
+
+
+def _row_nearest(values: np.ndarray, ok: np.ndarray, l_nodes: np.ndarray) -> np.ndarray:
+    """Each node's value replaced by that of the nearest node in L (same thickness) with
+    ``ok``; rows without one keep theirs. Far from a support TOF hardly depends on L, so a
+    floor node's unseen reflection is given its nearest neighbour's time."""
+    out = values.copy()
+    for i in range(values.shape[0]):
+        good = np.flatnonzero(ok[i])
+        if good.size:
+            nearest = good[np.abs(l_nodes[good][None, :] - l_nodes[:, None]).argmin(axis=1)]
+            out[i] = values[i, nearest]
+    return out
+
+
+def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
+    """The fine grid of sphere size ``i_d`` (computed once per table and kept on it)."""
+    key = f"fine:{i_d}"
+    cached = table._cache.get(key)
+    if cached is not None:
+        return cached
+    t_nodes, l_nodes = table.axes["thickness_m"], table.axes["distance_m"]
+    # Every table node is a fine point (a measurement at a node is judged on the node's own
+    # features); log-uniform in t inside each interval, as the prior is uniform in log t.
+    log_t = _refine(np.log(t_nodes), lambda width: FINE_THICKNESS_STEPS)
+    t_f = np.exp(log_t)
+    l_f = _refine(l_nodes, lambda width: max(1, math.ceil(width / FINE_DISTANCE_STEP_M - 1e-9)))
+    wt = _interp_matrix(np.log(t_nodes), log_t)
+    wl = _interp_matrix(l_nodes, l_f)
+    ok = table.status[i_d] == STATUS_OK
+    tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
+    arr = np.where(ok, table.features["arr"][i_d], 0.0)
+    diameter = float(table.axes["diameter_m"][i_d])
+    beyond = (diameter / t_nodes > REFLECTION_D_OVER_T)[:, None]
+    # no-reflection nodes there take floor-level features, given a reflection in their row to
+    # borrow a TOF from
+    quiet = (beyond & (table.status[i_d] == STATUS_NO_REFLECTION)
+             & ok.any(axis=1, keepdims=True))
+    has = ok | quiet  # nodes with features (measured, or filled in at the floor)
+    bound = np.nan_to_num(table.features["arr_upper_bound"][i_d])
+    arr = np.where(quiet, bound, arr)
+    tof = np.where(quiet, _row_nearest(tof, ok, l_nodes), tof)
+    floor = (beyond & (arr < FLOOR_ARR_MAX) & has).astype(float)
+    # A cell whose interpolation touches a node without features has none itself.
+    touched = (wt > 1e-12).astype(float) @ (~has).astype(float) @ (wl > 1e-12).astype(float).T
+    valid = touched == 0
+    grid = FineGrid(
+        diameter_m=diameter,
+        thickness_m=t_f,
+        distance_m=l_f,
+        tof_s=wt @ tof @ wl.T,
+        arr=wt @ arr @ wl.T,
+        valid=valid,
+        penalty=np.where(valid, 0.0, np.inf),
+        model_tof_var=wt @ (_node_variance(tof, ok, np.log(t_nodes), l_nodes)
+                            + floor * (FLOOR_TOF_REL_STD * tof) ** 2) @ wl.T,
+        model_arr_var=wt @ (_node_variance(arr, ok, np.log(t_nodes), l_nodes)
+                            + floor * (FLOOR_ARR_REL_STD * arr) ** 2) @ wl.T,
+        weight_t=_cell_widths(log_t),
+        weight_l=_cell_widths(l_f),
+    )
+    table._cache[key] = grid
+    return grid
+
+
+def predict(table: ModelTable, diameter_m: float, thickness_m: float,
+            distance_m: float, *, with_error: bool = False) -> tuple[float, ...]:
+    """Model (TOF s, ARR) at one (D, t, L) inside the table, interpolated as the inversion does;
+    with ``with_error`` also the interpolation error's standard deviations (TOF s, ARR).
+
+    Raises
+    ------
+    InversionError
+        Outside the table's range, or where the model detects no reflection.
+    """
+    i_d = table.diameter_index(diameter_m)
+    t_nodes, l_nodes = table.axes["thickness_m"], table.axes["distance_m"]
+    for name, x, nodes in (("thickness_m", thickness_m, t_nodes), ("distance_m", distance_m,
+                                                                    l_nodes)):
+        if not nodes[0] <= x <= nodes[-1]:
+            raise InversionError(name, f"{x!r} m is outside the table "
+                                 f"({nodes[0]:g}..{nodes[-1]:g} m)")
+    wt = _interp_matrix(np.log(t_nodes), np.array([math.log(thickness_m)]))
+    wl = _interp_matrix(l_nodes, np.array([distance_m]))
+    ok = table.status[i_d] == STATUS_OK
+    if ((wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T)[0, 0]:
+        raise InversionError("thickness_m", "the model detects no reflection next to this point")
+    tof_n = np.where(ok, table.features["tof_s"][i_d], 0.0)
+    arr_n = np.where(ok, table.features["arr"][i_d], 0.0)
+    tof = float((wt @ tof_n @ wl.T)[0, 0])
+    arr = float((wt @ arr_n @ wl.T)[0, 0])
+    if not with_error:
+        return tof, arr
+    ct, cl = np.log(t_nodes), l_nodes
+    tof_sd = math.sqrt(float((wt @ _node_variance(tof_n, ok, ct, cl) @ wl.T)[0, 0]))
+    arr_sd = math.sqrt(float((wt @ _node_variance(arr_n, ok, ct, cl) @ wl.T)[0, 0]))
+    return tof, arr, tof_sd, arr_sd
+
+
+# The estimate -----------------------------------------------------------------------------
+
+
+@dataclass
+class ParameterEstimate:
+    """One parameter's answer. Numbers the data do not support are None."""
+
+    map: float | None
+    median: float | None
+    ci68: tuple[float | None, float | None] | None
+    ci95: tuple[float | None, float | None] | None
+    status: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"map": self.map, "median": self.median,
+                "ci68": None if self.ci68 is None else list(self.ci68),
+                "ci95": None if self.ci95 is None else list(self.ci95), "status": self.status}
+
+
+@dataclass
+class Estimate:
+    """Thickness and distance to the support, with what the inversion used."""
+
+    thickness_m: ParameterEstimate
+    distance_m: ParameterEstimate
+    inputs: list[FeatureSummary]
+    calibration: Calibration | None
+    chi2_min: float
+    n_terms: int
+    reason: str | None = None
+    posterior: dict[str, np.ndarray] | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def out_of_range(self) -> bool:
+        return self.thickness_m.status == "out_of_range"
+
+    def to_dict(self, posterior: bool = False) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "thickness_m": self.thickness_m.to_dict(),
+            "distance_m": self.distance_m.to_dict(),
+            "chi2_min": self.chi2_min,
+            "n_terms": self.n_terms,
+            "reason": self.reason,
+            "inputs": [vars(i).copy() for i in self.inputs],
+            "excluded_diameters_m": list(self.extra.get("excluded_diameters_m", [])),
+            "calibration": None if self.calibration is None else self.calibration.to_dict(),
+        }
+        if posterior and self.posterior is not None:
+            out["posterior"] = {k: v.tolist() for k, v in self.posterior.items()}
+        return out
+
+
+def _quantiles(x: np.ndarray, mass: np.ndarray, qs: Sequence[float]) -> list[float]:
+    """Quantiles of a distribution given as the mass of each point's cell (cells from midpoint
+    to midpoint between the points, half cells at the ends; mass spread evenly in a cell)."""
+    if x.size == 1:
+        return [float(x[0])] * len(qs)
+    edges = np.concatenate([x[:1], 0.5 * (x[1:] + x[:-1]), x[-1:]])
+    cdf = np.concatenate([[0.0], np.cumsum(mass)])
+    cdf /= cdf[-1]
+    return [float(np.interp(q, cdf, edges)) for q in qs]
+
+
+def _crossing(x: np.ndarray, density: np.ndarray, level: float, from_left: bool) -> float:
+    """Where ``density`` first reaches ``level`` walking in from one end (linear between points)."""
+    order = range(x.size) if from_left else range(x.size - 1, -1, -1)
+    prev = None
+    for i in order:
+        if density[i] >= level:
+            if prev is None:
+                return float(x[i])
+            f = (level - density[prev]) / (density[i] - density[prev])
+            return float(x[prev] + f * (x[i] - x[prev]))
+        prev = i
+    return float(x[-1] if from_left else x[0])
+
+
+def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physical: bool,
+               transform: Any = None, profile: np.ndarray | None = None) -> ParameterEstimate:
+    """MAP, median, intervals and status of a marginal posterior given as the mass of each point
+    of ``x`` (cells of ``widths``); ``transform`` maps x back to the parameter (exp for log t)."""
+    est = _summarise_x(x, mass, widths, lower_physical, profile)
+    if transform is None:
+        return est
+
+    def f(v: float | None) -> float | None:
+        return None if v is None else float(transform(v))
+
+    Pair = tuple[float | None, float | None] | None
+
+    def pair(c: Pair) -> Pair:
+        return None if c is None else (f(c[0]), f(c[1]))
+
+    return ParameterEstimate(f(est.map), f(est.median), pair(est.ci68), pair(est.ci95), est.status)
+
+
+def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
+                 lower_physical: bool, profile: np.ndarray | None = None) -> ParameterEstimate:
+    """The summary of :func:`_summarise` on the grid's own axis.
+
+    A side is open (the data do not bound the parameter there) when the density at the table's end
+    is at least :data:`EDGE_FRACTION` of its peak, or when the profile likelihood there (the best
+    fit over the other parameter, relative to the overall best) is above the 95 % likelihood-ratio
+    level: a marginal can fall towards an end only because less of the other parameter's range
+    fits there (near a support thickness and distance trade off, and thin plates fit a narrower
+    band of L), which is prior volume, not evidence against that end. A physical limit (L = 0) is
+    never open. A one-
+    sided answer reports the likelihood-ratio bound (:data:`LR_LEVELS`), not a quantile: with the
+    density flat out to the table's end, a quantile would follow the table's extent, not the data.
+    At a physical limit an interval whose end falls in the limit's own cell starts there.
+    """
+    density = mass / widths
+    peak = density.max()
+    q = _quantiles(x, mass, (0.025, 0.16, 0.5, 0.84, 0.975))
+    ends = np.zeros(2, dtype=bool) if profile is None else profile[[0, -1]] >= LR_LEVELS[1]
+    lower_open = x.size > 1 and not lower_physical and (density[0] >= EDGE_FRACTION * peak
+                                                         or bool(ends[0]))
+    upper_open = x.size > 1 and (density[-1] >= EDGE_FRACTION * peak or bool(ends[1]))
+    if lower_open and upper_open:
+        return ParameterEstimate(None, None, None, None, "unconstrained")
+    if upper_open:
+        b68, b95 = (_crossing(x, density, lv * peak, from_left=True) for lv in LR_LEVELS)
+        if lower_physical:
+            b68, b95 = (float(x[0]) if b <= 0.5 * (x[0] + x[1]) else b for b in (b68, b95))
+        return ParameterEstimate(None, None, (b68, None), (b95, None), "lower_bound_only")
+    if lower_open:
+        b68, b95 = (_crossing(x, density, lv * peak, from_left=False) for lv in LR_LEVELS)
+        return ParameterEstimate(None, None, (None, b68), (None, b95), "upper_bound_only")
+    if lower_physical and x.size > 1:
+        first_cell = 0.5 * (x[0] + x[1])
+        q = [float(x[0]) if (k < 2 and v <= first_cell) else v for k, v in enumerate(q)]
+    return ParameterEstimate(float(x[int(np.argmax(density))]), q[2], (q[1], q[3]), (q[0], q[4]),
+                             "constrained")
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_limit(n_terms: int) -> float:
+    """The chi^2 beyond which no table point explains ``n_terms`` terms (scipy's isf costs a
+    quarter of a millisecond, an eighth of an inversion)."""
+    return float(chi2_dist.isf(OUT_OF_RANGE_TAIL, n_terms))
+
+
+def _out_of_range(inputs: list[FeatureSummary], cal: Calibration | None, chi2_min: float,
+                  n_terms: int, reason: str) -> Estimate:
+    nothing = ParameterEstimate(None, None, None, None, "out_of_range")
+    return Estimate(nothing, ParameterEstimate(None, None, None, None, "out_of_range"), inputs,
+                    cal, chi2_min, n_terms, reason)
+
+
+def _misfit(items: Sequence[FeatureSummary], grids: Sequence[FineGrid], cal: Calibration | None,
+            cell: tuple[Any, ...]) -> float:
+    """chi^2 (residuals over sigma, squared and summed) at one cell of the fine grid."""
+    total = 0.0
+    for item, g in zip(items, grids, strict=True):
+        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
+        s_tof, s_arr = item.sigmas()
+        total += (item.tof_s - offset - g.tof_s[cell]) ** 2 / (s_tof**2 + o_std**2
+                                                               + g.model_tof_var[cell])
+        total += (item.arr - factor * g.arr[cell]) ** 2 / (
+            s_arr**2 + factor**2 * g.model_arr_var[cell] + (f_std * g.arr[cell]) ** 2)
+    return float(total)
+
+
+def invert(
+    table: ModelTable,
+    inputs: Sequence[FeatureSummary | Mapping[str, Any]],
+    calibration: Calibration | Mapping[str, Any] | None = None,
+    *,
+    return_posterior: bool = False,
+) -> Estimate:
+    """Posterior estimate of plate thickness and distance to the support.
+
+    Parameters
+    ----------
+    table: the model table.
+    inputs: one summary per sphere size (:class:`FeatureSummary` or a mapping with its fields).
+    calibration: ARR factor and TOF offset (:class:`Calibration` or its dict).
+    return_posterior: keep the 2-D posterior (``Estimate.posterior``: axes and density).
+
+    Raises
+    ------
+    InversionError, TableError
+        Bad input, or a sphere size the table does not hold.
+    """
+    if isinstance(inputs, Mapping | FeatureSummary) or not inputs:
+        raise InversionError("inputs", "give a non-empty list of per-sphere-size summaries")
+    items = [FeatureSummary.from_any(i) for i in inputs]
+    cal = Calibration.from_any(calibration)
+    est = _invert_items(table, items, cal, return_posterior)
+    if not est.out_of_range or len(items) < 2:
+        return est
+    # One sphere size may disagree with the others and the table (e.g. a large sphere on a thin
+    # plate whose "reflection" is a train at the detection floor): leave each out in turn and
+    # keep the best in-range answer of the others, saying which size was left out and why.
+    kept: list[tuple[float, int, Estimate]] = []
+    for skip in range(len(items)):
+        rest = items[:skip] + items[skip + 1:]
+        trial = _invert_items(table, rest, cal, return_posterior)
+        if not trial.out_of_range:
+            tail = float(chi2_dist.sf(trial.chi2_min, trial.n_terms))
+            kept.append((tail, skip, trial))
+    if not kept:
+        return est
+    _, skip, best = max(kept, key=lambda k: k[0])
+    left_out = items[skip]
+    best.reason = (f"sphere size D = {left_out.diameter_m * 1e3:.2f} mm left out: with it no "
+                   f"table point explains the measurement ({est.reason}); the other sizes agree "
+                   "with the table")
+    best.extra["excluded_diameters_m"] = [left_out.diameter_m]
+    best.inputs = items
+    return best
+
+
+def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibration | None,
+                  return_posterior: bool) -> Estimate:
+    """The grid posterior of :func:`invert` for exactly these sphere sizes."""
+    grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
+    # -2 log likelihood, up to a constant: sum of r^2 / var + log var (the variance differs from
+    # cell to cell through the model error, so its log-determinant matters)
+    chi2 = np.zeros_like(grids[0].tof_s)
+    var = np.empty_like(chi2)
+    r = np.empty_like(chi2)
+    # the log-variances as one log of a running product, taken every LOG_BATCH terms (a log
+    # over the grid costs as much as the rest of a term)
+    det = np.ones_like(chi2)
+    terms = 0
+    for item, g in zip(items, grids, strict=True):
+        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
+        s_tof, s_arr = item.sigmas()
+        for model, obs, scale, s2, model_var, rel2 in (
+            (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + o_std**2, g.model_tof_var, 0.0),
+            (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
+        ):
+            # the calibration's own uncertainty: offset adds, factor scales the model ARR
+            if scale == 1.0:
+                np.add(model_var, s2, out=var)
+                np.subtract(obs, model, out=r)
+            else:
+                np.multiply(model_var, scale * scale, out=var)
+                var += s2
+                np.multiply(model, -scale, out=r)
+                r += obs
+            if rel2:
+                rel = np.multiply(model, model)
+                rel *= rel2
+                var += rel
+            r *= r
+            r /= var
+            chi2 += r
+            det *= var
+            terms += 1
+            if terms % LOG_BATCH == 0:
+                chi2 += np.log(det, out=det)
+                det.fill(1.0)
+        chi2 += g.penalty
+    if terms % LOG_BATCH:
+        chi2 += np.log(det, out=det)
+    n_terms = 2 * len(items)
+    best = float(chi2.min())
+    i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
+    if not math.isfinite(best):
+        return _out_of_range(items, cal, best, n_terms,
+                             "the model detects no reflection anywhere in the table for these "
+                             "sphere sizes, but one was measured")
+    limit = _chi2_limit(n_terms)
+    fit = _misfit(items, grids, cal, i_best)
+    if fit > limit:
+        return _out_of_range(items, cal, fit, n_terms,
+                             f"no table point explains the measurement (best chi^2 {fit:.3g} > "
+                             f"{limit:.3g} for {n_terms} terms): outside the table's range or "
+                             "not this kind of plate; no extrapolated number is given")
+    chi2 -= best
+    chi2 *= -0.5
+    post = np.exp(chi2, out=chi2)
+    # the profile likelihood of each parameter (the best over the other), before the prior
+    profile_t, profile_l = post.max(axis=1), post.max(axis=0)
+    g0 = grids[0]
+    post *= g0.weight_t[:, None]  # prior mass of each cell: uniform in log t and in L
+    post *= g0.weight_l[None, :]
+    post /= post.sum()
+    thickness = _summarise(np.log(g0.thickness_m), post.sum(axis=1), g0.weight_t,
+                           lower_physical=False, transform=np.exp, profile=profile_t)
+    distance = _summarise(g0.distance_m, post.sum(axis=0), g0.weight_l,
+                          lower_physical=bool(g0.distance_m[0] <= 0.0), profile=profile_l)
+    est = Estimate(thickness, distance, items, cal, fit, n_terms)
+    if return_posterior:
+        est.posterior = {"thickness_m": g0.thickness_m, "distance_m": g0.distance_m,
+                         "density": post}
+    return est
+
+
+__all__ = ["Estimate", "FeatureSummary", "InversionError", "ParameterEstimate", "TableError",
+           "fine_grid", "invert", "predict"]

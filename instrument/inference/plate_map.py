@@ -1,0 +1,158 @@
+"""A plate's map: its positions with their estimates, and the clamped edge they locate.
+
+The service and `solitonde map` build the same JSON: per position (a plate's measurements that
+share a position name and coordinates) the coordinates, shot count and estimate, then the support
+the positions' distance answers imply (instrument.support) or null with the reason. In the
+service the shots of every measurement at a position are pooled per sphere size and inverted
+once; from an estimates file each row is already one position.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from solitonde.instrument.inference.support import locate
+
+PARAMETERS = ("thickness_m", "distance_m")
+
+
+def pool(aggregates: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Aggregates of several measurements of one position, combined per sphere diameter: the
+    count-weighted mean and the pooled sample deviation of TOF and ARR."""
+    groups: dict[Any, list[Mapping[str, Any]]] = {}
+    for agg in aggregates:
+        groups.setdefault(agg.get("sphere_diameter"), []).append(agg)
+    out = []
+    for diameter, members in groups.items():
+        entry: dict[str, Any] = {"sphere_diameter": diameter,
+                                 "n_shots": sum(int(m.get("n_shots") or 0) for m in members)}
+        for name in ("tof_s", "arr"):
+            stats = [m.get(name) or {} for m in members]
+            stats = [s for s in stats if s.get("mean") is not None and s.get("count")]
+            n = sum(int(s["count"]) for s in stats)
+            if not n:
+                entry[name] = {"mean": None, "std": None, "count": 0}
+                continue
+            mean = sum(s["mean"] * s["count"] for s in stats) / n
+            within = sum((s["count"] - 1) * (s.get("std") or 0.0) ** 2 for s in stats)
+            between = sum(s["count"] * (s["mean"] - mean) ** 2 for s in stats)
+            std = math.sqrt((within + between) / (n - 1)) if n > 1 else None
+            entry[name] = {"mean": mean, "std": std, "count": n}
+        out.append(entry)
+    return out
+
+
+def position_key(plate_position: Any, x: Any, y: Any) -> tuple[Any, Any, Any]:
+    return (plate_position, None if x is None else float(x), None if y is None else float(y))
+
+
+def from_records(records: Sequence[Any], estimator: Any) -> list[dict[str, Any]]:
+    """One entry per position of a plate's stored measurements (oldest first), the pooled
+    shots inverted with ``estimator`` (instrument.estimates.Estimator)."""
+    groups: dict[tuple[Any, Any, Any], list[Any]] = {}
+    for r in records:
+        loc = r.result.get("location") or {}
+        groups.setdefault(position_key(r.position, loc.get("x_m"), loc.get("y_m")),
+                          []).append(r)
+    out = []
+    for (name, x, y), members in groups.items():
+        pooled = pool([a for m in members for a in m.result.get("aggregates", [])])
+        table = next((m.result["table"] for m in reversed(members) if m.result.get("table")),
+                     None)
+        try:
+            estimate, reason = estimator.estimate(pooled, table=table) if table else \
+                estimator.estimate(pooled)
+        except Exception as exc:  # an inversion refusing these features: say why, go on
+            estimate, reason = None, f"inversion failed: {exc}"
+        out.append(position_entry(name, x, y, sum(m.n_shots for m in members), estimate, reason,
+                                  [m.id for m in members],
+                                  max(m.created_at for m in members)))
+    return out
+
+
+def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,
+                   estimate: Mapping[str, Any] | None, reason: str | None,
+                   measurement_ids: Sequence[int] = (), last: float | None = None
+                   ) -> dict[str, Any]:
+    """One position of the map, its estimate reduced to what a map shows."""
+    entry: dict[str, Any] = {"position": name, "x_m": x, "y_m": y, "n_shots": int(n_shots)}
+    if measurement_ids:
+        entry["measurement_ids"] = list(measurement_ids)
+    if last is not None:
+        from solitonde.instrument.inference.estimate_rows import iso_utc
+
+        entry["last_activity"] = iso_utc(last)
+    for p in PARAMETERS:
+        value = (estimate or {}).get(p)
+        entry[p] = None if value is None else {k: value.get(k) for k in
+                                               ("map", "median", "ci68", "ci95", "status")}
+    entry["reason"] = reason if estimate is None else estimate.get("reason")
+    return entry
+
+
+def from_estimate_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Map positions from the flat rows an estimates file holds (instrument.estimate_rows)."""
+    out = []
+    for row in rows:
+        estimate: dict[str, Any] = {}
+        for p in PARAMETERS:
+            status = _text(row.get(f"{p}_status"))
+            if status is None:
+                continue
+            lo68, hi68, lo95, hi95 = (_num(row.get(f"{p}_{k}")) for k in
+                                      ("ci68_low", "ci68_high", "ci95_low", "ci95_high"))
+            estimate[p] = {"map": _num(row.get(f"{p}_map")), "median": _num(row.get(f"{p}_median")),
+                           "ci68": [lo68, hi68], "ci95": [lo95, hi95], "status": status}
+        n = _num(row.get("n_shots"))
+        out.append(position_entry(_text(row.get("position")), _num(row.get("x_m")),
+                                  _num(row.get("y_m")), int(n) if n is not None else 0,
+                                  estimate or None, _text(row.get("reason"))))
+    return out
+
+
+def _num(value: Any) -> float | None:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
+
+
+def _text(value: Any) -> str | None:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return None
+    text = str(value)
+    return text if text and text != "<NA>" else None
+
+
+def build(plate_id: str, positions: list[dict[str, Any]],
+          plate_size_m: Sequence[float] | None = None) -> dict[str, Any]:
+    """The map JSON: the positions, the located support (or null and why), the plate's size."""
+    scan = [p for p in positions if p["x_m"] is not None and p["y_m"] is not None]
+    fit, reason = locate([_open_sides_filled(p) for p in scan])
+    support = None
+    if fit is not None:
+        support = fit.to_dict()
+        for p in scan:  # where the located edge puts each position, beside its own answer
+            p["distance_to_located_support_m"] = fit.distance(p["x_m"], p["y_m"])
+    return {"plate_id": plate_id, "plate_size_m": list(plate_size_m) if plate_size_m else None,
+            "n_positions": len(positions), "n_scan_positions": len(scan),
+            "positions": positions, "support": support,
+            "support_reason": None if fit is not None else reason}
+
+
+def _open_sides_filled(position: Mapping[str, Any]) -> dict[str, Any]:
+    """A position whose one-sided answer left its open bound empty (an estimates file) as
+    :func:`~.support.answers` reads it: the open side is never used."""
+    out = dict(position)
+    d = position.get("distance_m")
+    if d and d.get("status") in ("lower_bound_only", "upper_bound_only"):
+        lo68, hi68 = d["ci68"]
+        lo95, hi95 = d["ci95"]
+        out["distance_m"] = {**d, "ci68": [lo68 if lo68 is not None else -math.inf,
+                                           hi68 if hi68 is not None else math.inf],
+                             "ci95": [lo95 if lo95 is not None else -math.inf,
+                                      hi95 if hi95 is not None else math.inf]}
+    return out

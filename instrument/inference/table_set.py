@@ -1,0 +1,180 @@
+"""Several model tables, one per plate family, and the rule that picks one for a measurement.
+
+The service and the command line may hold tables for several families (the paper's aluminium
+plate, a steel plate ...). A measurement names its table (``table``, an id) or its plate material
+(``plate_material``, a library name); otherwise the tables that cover its sphere sizes are the
+candidates, and more than one is an error listing them, never a guess. A measurement whose stated
+plate material differs from the named table's is refused, naming the key.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from solitonde.instrument.inference.estimates import Estimator
+from solitonde.instrument.tables.family import describe, differences
+
+log = logging.getLogger("solitonde.instrument")
+
+
+class TableChoiceError(ValueError):
+    """No table, or more than one, fits a measurement; ``field`` names the metadata key."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+        self.message = message
+
+
+def table_files(paths: Iterable[Path]) -> list[Path]:
+    """The table files given: files as they are, a folder's ``*.h5`` files in name order."""
+    out: list[Path] = []
+    for p in paths:
+        out.extend(sorted(p.glob("*.h5")) if p.is_dir() else [p])
+    return out
+
+
+class TableSet:
+    """The loaded tables by id; with one table it behaves as that table's Estimator."""
+
+    def __init__(self, paths: Sequence[str | Path | None], warm_up: bool = True) -> None:
+        files = table_files(Path(p) for p in paths if p is not None)
+        self.estimators: dict[str, Estimator] = {}
+        self.problems: list[str] = []
+        for f in files:
+            est = Estimator(f, warm_up)
+            if not est.loaded:
+                self.problems.append(est.reason or f"model table {str(f)!r} not loaded")
+                continue
+            tid = est.table.table_id
+            if tid in self.estimators:
+                self.problems.append(f"model table {str(f)!r} has the id {tid!r} of "
+                                     f"{str(self.estimators[tid].path)!r}; give it another "
+                                     "(table build --id) or file name")
+                continue
+            self.estimators[tid] = est
+        for p in self.problems:
+            log.warning(p)
+        if not files:
+            self.problems.append("no model table configured (start with --table FILE)")
+
+    # --- what the routes ask of "the estimator" ------------------------------------------------
+    @property
+    def loaded(self) -> bool:
+        return bool(self.estimators)
+
+    @property
+    def reason(self) -> str | None:
+        return None if self.loaded else "; ".join(self.problems)
+
+    @property
+    def default(self) -> Estimator | None:
+        return next(iter(self.estimators.values()), None)
+
+    @property
+    def path(self) -> Path | None:
+        return self.default.path if self.default else None
+
+    def summary(self) -> dict[str, Any] | None:
+        return self.default.summary() if self.default else None
+
+    def plate_size(self) -> list[float] | None:
+        """The plate size the tables share, or None when they differ or there is none."""
+        sizes = {tuple(e.plate_size() or ()) for e in self.estimators.values()}
+        return list(sizes.pop()) if len(sizes) == 1 and () not in sizes else None
+
+    def listing(self) -> list[dict[str, Any]]:
+        """Every table's id, family, sphere sizes and axes' ranges (``GET /v1/tables``)."""
+        out = []
+        for tid, est in self.estimators.items():
+            t = est.table
+            out.append({"id": tid, "path": str(est.path), "family": t.family,
+                        "diameters_m": t.axes["diameter_m"].tolist(),
+                        "thickness_range_m": [float(t.axes["thickness_m"][0]),
+                                              float(t.axes["thickness_m"][-1])],
+                        "distance_range_m": [float(t.axes["distance_m"][0]),
+                                             float(t.axes["distance_m"][-1])],
+                        "complete": t.complete})
+        return out
+
+    # --- choosing -------------------------------------------------------------------------------
+    def choose(self, diameters: Iterable[float], table: str | None = None,
+               plate_material: Any = None) -> Estimator:
+        """The table for a measurement with these sphere sizes and what it says of itself.
+
+        Raises TableChoiceError (field ``table`` or ``plate_material``) for an unknown id or
+        material, a family mismatch, no table covering the sizes, or several that could serve.
+        """
+        from solitonde.model.materials import properties_from
+
+        if not self.loaded:
+            raise TableChoiceError("table", self.reason or "no model table loaded")
+        stated: dict[str, Any] = {}
+        if plate_material is not None:
+            try:
+                stated["plate_material"] = properties_from(plate_material)
+            except ValueError as exc:
+                raise TableChoiceError("plate_material", str(exc)) from None
+        ids = ", ".join(self.estimators)
+        if table is not None:
+            est = self.estimators.get(str(table))
+            if est is None:
+                raise TableChoiceError("table", f"no table {table!r} (tables: {ids})")
+            self._check_family(est, stated)
+            return est
+        sizes = [float(d) for d in diameters]
+        candidates = [e for e in self.estimators.values() if _covers(e, sizes)
+                      and not (stated and e.table.family and differences(stated, e.table.family))]
+        if len(candidates) == 1:
+            return candidates[0]
+        if not candidates and not stated and len(self.estimators) == 1:
+            return self.default  # type: ignore[return-value]  # its inversion names the size
+        if not candidates:
+            what = f"plate_material {describe(stated['plate_material'])}" if stated else \
+                f"sphere sizes {', '.join(f'{d:g} m' for d in sizes)}"
+            raise TableChoiceError("plate_material" if stated else "table",
+                                   f"no table serves {what} (tables: {ids})")
+        raise TableChoiceError("table", "more than one table could serve this measurement: "
+                               f"{', '.join(e.table.table_id for e in candidates)}; name one "
+                               "in metadata.table (or give metadata.plate_material)")
+
+    @staticmethod
+    def _check_family(est: Estimator, stated: Mapping[str, Any]) -> None:
+        family = est.table.family
+        if not stated or family is None:
+            return
+        keys = differences(stated, family)
+        if keys:
+            detail = "; ".join(f"{k}: measurement {describe(stated[k])}, table "
+                               f"{describe(family[k])}" for k in keys)
+            raise TableChoiceError(keys[0], f"table {est.table.table_id!r} was built for "
+                                   f"another plate family ({detail}); it is not inverted")
+
+    def estimate(self, aggregates: Sequence[Mapping[str, Any]], table: str | None = None,
+                 plate_material: Any = None) -> tuple[dict[str, Any] | None, str | None]:
+        """The chosen table's estimate; ``(None, reason)`` when there is no table at all."""
+        if not self.loaded:
+            return None, self.reason
+        diameters = [a["sphere_diameter"] for a in aggregates
+                     if a.get("sphere_diameter") is not None]
+        est = self.choose(diameters, table, plate_material)
+        estimate, reason = est.estimate(aggregates)
+        if estimate is not None:
+            estimate = {**estimate, "table": est.table.table_id}
+        return estimate, reason
+
+    def invert(self, inputs: Sequence[Mapping[str, Any]],
+               calibration: Mapping[str, Any] | None = None, table: str | None = None,
+               plate_material: Any = None) -> dict[str, Any]:
+        est = self.choose([i["diameter_m"] for i in inputs], table, plate_material)
+        return {**est.invert(inputs, calibration), "table": est.table.table_id}
+
+
+def _covers(est: Estimator, diameters: Sequence[float]) -> bool:
+    """Whether the table has every sphere size (within 1 % of its own size, the rule of
+    :meth:`ModelTable.diameter_index`), or any when none is known."""
+    have = est.table.axes["diameter_m"]
+    return all(any(abs(h - d) <= 0.01 * h for h in have) for d in diameters)

@@ -1,0 +1,733 @@
+"""``/v1/measurements``: post shots (JSON or an uploaded file), read them back, plot, export.
+
+The POST route reads the raw body and validates it with pydantic's JSON parser directly (one
+pass, no intermediate Python objects), which is what keeps a 10,000-sample shot in the low
+milliseconds; the request schemas are added to the OpenAPI document by the app factory. A shot
+can also come as its raw samples (``application/octet-stream``, float32 or float64, with ``dt``
+and the metadata in the query), which skips text parsing altogether.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import hmac
+import io
+import logging
+import math
+import threading
+import time
+from functools import partial
+from typing import Annotated, Any
+
+import anyio.to_thread
+import numpy as np
+from fastapi import APIRouter, Depends, Path, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse, Response
+from pydantic import ConfigDict, Field, ValidationError
+
+from solitonde.instrument.service.api_models import (
+    BINARY_DTYPES,
+    BINARY_MEDIA_TYPE,
+    BinaryShotParams,
+    MeasurementOut,
+    MeasurementPage,
+    Strict,
+)
+from solitonde.instrument.service.heavy import run_for_client
+from solitonde.instrument.service.ingest import (
+    check_counts,
+    measure_and_store,
+    measurement_dict,
+    read_file,
+    waveform_error,
+    waveforms_from_shots,
+)
+from solitonde.instrument.service.problems import (
+    PROBLEM_MEDIA_TYPE,
+    Problem,
+    ProblemModel,
+    from_pydantic,
+)
+from solitonde.instrument.service.state import service
+from solitonde.instrument.service.store import KeyTaken
+from solitonde.instrument.service.uploads import (
+    FORMATS,
+    check_self_contained,
+    declared_values,
+    pick_format,
+)
+from solitonde.signal import channels as signal_channels
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.waveform import Waveform
+
+SECURITY_SCHEMES = {
+    "APIKeyHeader": {"type": "apiKey", "in": "header", "name": "X-API-Key",
+                     "description": "the server's SOLITONDE_API_KEY (when it has one)"},
+    "HTTPBearer": {"type": "http", "scheme": "bearer",
+                   "description": "the server's SOLITONDE_API_KEY (when it has one)"},
+}
+"""Declared in the OpenAPI document by the app factory; checked by :func:`require_key`."""
+
+
+class FailedKeys:
+    """Failed API key attempts per client address, in this worker process: after
+    :attr:`LIMIT` within :attr:`WINDOW_S` seconds a client gets 429 until the window passes
+    (a key is not guessed at request speed), and a warning is logged at most once per
+    :attr:`LOG_EVERY_S` per client, with the count (a flood does not flood the log)."""
+
+    LIMIT = 10
+    WINDOW_S = 60.0
+    LOG_EVERY_S = 10.0
+    CLIENTS_MAX = 10_000
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._seen: dict[str, list[float]] = {}
+        self._logged: dict[str, float] = {}
+
+    def _recent(self, client: str, now: float) -> list[float]:
+        times = [t for t in self._seen.get(client, []) if now - t < self.WINDOW_S]
+        if times:
+            self._seen[client] = times
+        else:
+            self._seen.pop(client, None)
+        return times
+
+    def blocked_for(self, client: str) -> float:
+        """Seconds until ``client`` may try again (0: now)."""
+        now = time.monotonic()
+        with self._lock:
+            times = self._recent(client, now)
+            return self.WINDOW_S - (now - times[0]) if len(times) >= self.LIMIT else 0.0
+
+    def failed(self, client: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            if len(self._seen) >= self.CLIENTS_MAX and client not in self._seen:
+                self._seen.clear()  # bounded memory under a spray of addresses
+                self._logged.clear()
+            times = self._recent(client, now)
+            times.append(now)
+            self._seen[client] = times
+            if now - self._logged.get(client, -math.inf) >= self.LOG_EVERY_S:
+                self._logged[client] = now
+                log.warning("api key: %d failed attempt(s) from %s in the last %.0f s",
+                            len(times), client, self.WINDOW_S)
+
+
+FAILED_KEYS = FailedKeys()
+
+
+async def require_key(request: Request) -> None:
+    """With SOLITONDE_API_KEY set, the request must carry it (header or bearer token); a client
+    that failed too often is refused for a while (:class:`FailedKeys`).
+
+    Reads the two headers itself (one dependency instead of FastAPI's two security classes: this
+    runs on every request).
+    """
+
+    expected = service(request).settings.api_key
+    if expected is None:
+        return
+    client = request.client.host if request.client else "unknown"
+    wait = FAILED_KEYS.blocked_for(client)
+    if wait > 0:
+        raise Problem(429, f"api_key: too many failed attempts from {client}; try again in "
+                      f"{math.ceil(wait)} s", kind="too-many-requests", field="api_key",
+                      headers={"Retry-After": str(math.ceil(wait))})
+    given = request.headers.get("x-api-key")
+    if given is None:
+        scheme, _, token = request.headers.get("authorization", "").partition(" ")
+        given = token.strip() if scheme.lower() == "bearer" and token.strip() else None
+    if given is None:  # not counted: a client that does not know a key is needed is no guesser
+        raise Problem(401, "api_key: this server needs an API key (X-API-Key header or "
+                      "Authorization: Bearer)", kind="unauthorized", field="api_key",
+                      headers={"WWW-Authenticate": 'Bearer realm="solitonde"'})
+    if not hmac.compare_digest(given.encode(), expected.encode()):
+        FAILED_KEYS.failed(client)
+        raise Problem(401, "api_key: the key given is not this server's key",
+                      kind="unauthorized", field="api_key",
+                      headers={"WWW-Authenticate": 'Bearer realm="solitonde"'})
+
+
+AUTH = Depends(require_key)
+
+_PROBLEM = {"model": ProblemModel, "content": {PROBLEM_MEDIA_TYPE: {}}}
+ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {**_PROBLEM, "description": "missing or wrong API key"},
+    413: {**_PROBLEM, "description": "body larger than the limit"},
+    415: {**_PROBLEM, "description": "unsupported content type"},
+    422: {**_PROBLEM, "description": "invalid input; 'field' names it"},
+}
+
+router = APIRouter(tags=["measurements"], dependencies=[AUTH])
+log = logging.getLogger("solitonde.instrument")
+IDEMPOTENCY_KEY_MAX = 200
+
+
+
+class UploadFields(Strict):
+    """Form fields that come with an uploaded file (all optional)."""
+
+    # Form values arrive as text: numbers are parsed from it (still no NaN, no unknown fields).
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
+
+    format: str | None = Field(None, description=f"one of {', '.join(FORMATS)}; "
+                               "default: from the file name's suffix")
+    plate_id: str | None = Field(None, max_length=200)
+    position: str | None = Field(None, max_length=200)
+    sphere_diameter: float | None = Field(None, gt=0, le=1.0, description="m")
+    x_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, x, m")
+    y_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, y, m")
+    table: str | None = Field(None, max_length=64, description="model table id")
+    plate_material: str | None = Field(None, max_length=80, description="plate material name")
+    units: str | None = Field(None, description="N or V, for files that do not say")
+    calibration: float | None = Field(None, description="sensor sensitivity, N/V")
+    sample_rate: float | None = Field(None, gt=0, le=1e10,
+                                      description="Hz, for files without a time column")
+    dt: float | None = Field(None, gt=0, le=1.0, description="s, instead of sample_rate")
+    t0: float | None = Field(None, ge=-1e3, le=1e3, description="s, time of the first sample")
+    group: str | None = Field(None, max_length=200, description="TDMS group: only its channels")
+    channel: str | None = Field(None, max_length=200, description="the channel to analyse: a "
+                                "column name, or a TDMS channel as group/channel or channel; "
+                                "default: the file's channels that are sensor traces (a "
+                                "trigger step or a flat line is skipped, and listed)")
+    dataset: str | None = Field(None, max_length=200, description="HDF5 dataset")
+
+
+MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
+ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 0")]
+
+_READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "dataset")
+
+
+def binary_parameters() -> list[dict[str, Any]]:
+    """OpenAPI query parameters of ``POST /v1/measurements/raw`` (``dtype`` and ``dt`` required)."""
+    schema = BinaryShotParams.model_json_schema()
+    required = set(schema.get("required", []))
+    return [{"name": name, "in": "query", "required": name in required,
+             "description": prop.get("description", name),
+             "schema": {k: v for k, v in prop.items() if k not in ("title", "description")}}
+            for name, prop in schema["properties"].items()]
+
+
+def upload_schema() -> dict[str, Any]:
+    """OpenAPI schema of the multipart body: a file plus :class:`UploadFields`."""
+    schema = UploadFields.model_json_schema(ref_template="#/components/schemas/{model}")
+    schema["title"] = "MeasurementUpload"
+    schema["properties"] = {"file": {"type": "string", "format": "binary",
+                                     "description": "CSV, NPY, NPZ, HDF5 or TDMS"},
+                            **schema["properties"]}
+    schema["required"] = ["file"]
+    return schema
+
+
+def _media_type(request: Request) -> str:
+    return request.headers.get("content-type", "").split(";")[0].strip().lower()
+
+
+def require_json(request: Request) -> None:
+    """415 unless the body is declared ``application/json``."""
+    media = _media_type(request)
+    if media != "application/json":
+        raise Problem(415, f"content-type: {media or 'none'} is not accepted here "
+                      "(allowed: application/json)", kind="unsupported-media-type",
+                      field="content-type")
+
+
+_POST_LINKS = {201: {"description": "the stored measurement", "links": {
+    name: {"operationId": op, "parameters": {"measurement_id": "$response.body#/id", **extra}}
+    for name, op, extra in (("GetMeasurement", "get_measurement", {}),
+                            ("GetShot", "get_shot", {"shot_index": 0}),
+                            ("PlotMeasurement", "plot_measurement", {}),
+                            ("DeleteMeasurement", "delete_measurement", {}))}}}
+_IDEMPOTENCY_HEADER = {
+    "name": "Idempotency-Key", "in": "header", "required": False,
+    "schema": {"type": "string", "minLength": 1, "maxLength": IDEMPOTENCY_KEY_MAX},
+    "description": "a key the client makes per measurement (a UUID): a retry with the same key "
+                   "and content returns the first answer (same id, header Idempotent-Replayed) "
+                   "instead of storing again; the same key with other content is a 422"}
+
+
+@router.post(
+    "/measurements",
+    status_code=201,
+    response_model=MeasurementOut,
+    responses={**ERRORS, **_POST_LINKS},
+    operation_id="post_measurement",
+    summary="Post one or more shots (JSON) or a waveform file (multipart)",
+    openapi_extra={"requestBody": {"required": True, "content": {
+        "application/json": {"schema": {"$ref": "#/components/schemas/MeasurementIn"}},
+        "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MeasurementUpload"}},
+    }}, "parameters": [_IDEMPOTENCY_HEADER]},
+)
+async def post_measurement(request: Request) -> JSONResponse:
+    """Measure TOF and ARR on every shot, aggregate per sphere size, estimate, store.
+
+    JSON body: ``{"shots": [{"t0", "dt", "samples", "units", "calibration", "metadata"}]}``.
+    Multipart: a ``file`` field (CSV, NPY, NPZ, HDF5, TDMS, JSON) and optional metadata fields;
+    the file is written to a private temporary file the server names. All shots of a request
+    share ``plate_id`` and ``position``. Returns 201 with the stored measurement and its id.
+    No query parameters. (A raw binary body is also taken here, as at ``/v1/measurements/raw``,
+    for clients written before that route.)
+    """
+    media = _media_type(request)
+    if media in ("application/json", "multipart/form-data") and request.query_params:
+        name = next(iter(request.query_params))
+        raise Problem(422, f"{name}: query parameters describe a binary ({BINARY_MEDIA_TYPE}) "
+                      "body only (POST /v1/measurements/raw); a JSON shot carries them in the "
+                      "body, an upload in form fields", kind="invalid-input", field=name)
+    if media not in ("application/json", BINARY_MEDIA_TYPE, "multipart/form-data"):
+        raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
+                      "application/json, multipart/form-data; a raw binary shot goes to "
+                      "/v1/measurements/raw)", kind="unsupported-media-type",
+                      field="content-type")
+    return await _post(request, media)
+
+
+@router.post(
+    "/measurements/raw",
+    status_code=201,
+    response_model=MeasurementOut,
+    responses={**ERRORS, **_POST_LINKS},
+    operation_id="post_raw_shot",
+    summary="Post one shot's raw samples (binary body, what they are in the query)",
+    openapi_extra={"requestBody": {"required": True, "content": {
+        BINARY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
+        "parameters": [*binary_parameters(), _IDEMPOTENCY_HEADER]},
+)
+async def post_raw_shot(request: Request) -> JSONResponse:
+    """One shot's samples as little-endian float32 or float64 without a header (the acquisition
+    PC's own buffer); ``dtype`` and ``dt`` (and optionally ``t0``, ``units``, ``calibration``,
+    ``plate_id``, ``position``, ``sphere_diameter``, ``shot``) in the query. Returns 201 with the
+    stored measurement and its id."""
+    media = _media_type(request)
+    if media != BINARY_MEDIA_TYPE:
+        raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
+                      f"{BINARY_MEDIA_TYPE}; JSON shots and files go to /v1/measurements)",
+                      kind="unsupported-media-type", field="content-type")
+    return await _post(request, media)
+
+
+async def _post(request: Request, media: str) -> JSONResponse:
+    """Ingest a JSON, binary or multipart body (idempotent with a key) and answer 201."""
+
+    svc = service(request)
+    key = idempotency_key(request)
+    try:
+        if media == "multipart/form-data":
+            result = await _ingest_upload(svc, request, key)
+            if isinstance(result, JSONResponse):  # a replayed answer
+                return result
+        else:
+            body = await request.body()
+            query = request.query_params.multi_items()
+            idem = None
+            if key is not None:
+                idem = (key, _digest(media.encode(), str(sorted(query)).encode(), body))
+                replay = await _replay(svc, *idem)
+                if replay is not None:
+                    return replay
+            # In a worker thread: the event loop keeps reading other requests (and answering
+            # /healthz) while this one is parsed, measured and waits for the store's writer lock.
+            if media == "application/json":
+                result = await anyio.to_thread.run_sync(_ingest_json, svc, body, idem,
+                                                        limiter=svc.ingest_lane)
+            else:
+                result = await anyio.to_thread.run_sync(_ingest_binary, svc, body, query, idem,
+                                                        limiter=svc.ingest_lane)
+    except KeyTaken:  # the same request, retried while the first was being stored
+        replay = await _replay(svc, key or "", None)
+        if replay is None:
+            raise Problem(409, "Idempotency-Key: the request that took this key was removed "
+                          "meanwhile; retry", kind="conflict", field="Idempotency-Key") from None
+        return replay
+    return JSONResponse(result, status_code=201,
+                        headers={"Location": f"/v1/measurements/{result['id']}"})
+
+
+def idempotency_key(request: Request) -> str | None:
+    """The request's ``Idempotency-Key`` header (1-200 printable characters), if any."""
+    key = request.headers.get("idempotency-key")
+    if key is None:
+        return None
+    key = key.strip()
+    if not key or len(key) > IDEMPOTENCY_KEY_MAX or not key.isprintable():
+        raise Problem(422, "Idempotency-Key: not a key (allowed: 1-200 printable characters, "
+                      "e.g. a UUID the client makes per measurement)", kind="invalid-input",
+                      field="Idempotency-Key")
+    return key
+
+
+def _digest(*parts: bytes) -> str:
+    """SHA-256 over the parts, each length-prefixed (so no two splits hash alike)."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return h.hexdigest()
+
+
+async def _replay(svc: Any, key: str, digest: str | None) -> JSONResponse | None:
+    """The measurement stored under ``key`` as the first answer gave it, or None when the key
+    is new; a 422 when the key came with another request (``digest``; None skips the check)."""
+    found = await run_in_threadpool(svc.store.idempotent, key)
+    if found is None:
+        return None
+    stored_digest, measurement_id = found
+    if digest is not None and stored_digest != digest:
+        raise Problem(422, "Idempotency-Key: this key was used with another request body; a "
+                      "new measurement needs a new key", kind="invalid-input",
+                      field="Idempotency-Key")
+    record = await run_in_threadpool(svc.store.get, measurement_id)
+    if record is None:
+        return None
+    return JSONResponse(measurement_dict(record), status_code=201,
+                        headers={"Location": f"/v1/measurements/{record.id}",
+                                 "Idempotent-Replayed": "true"})
+
+
+JSON_VALUES_SLACK = 10_000
+"""Commas a JSON body may hold beyond one per allowed sample (metadata, keys)."""
+
+
+def _ingest_json(svc: Any, body: bytes, idem: tuple[str, str] | None = None) -> dict[str, Any]:
+    if not body:
+        raise Problem(422, "body: empty; send {\"shots\": [...]}", kind="invalid-input",
+                      field="body")
+    # Every sample needs a comma: more commas than allowed samples is refused before parsing,
+    # which would build a Python float per value (64 MiB of "0," is 3 GB of objects).
+    limit = svc.settings.max_samples_per_request
+    if body.count(b",") > limit + JSON_VALUES_SLACK:
+        raise Problem(413, f"body: more than {limit:,} values; at most {limit:,} samples per "
+                      "request", kind="content-too-large", field="body")
+    try:
+        request = svc.measurement_model.model_validate_json(body)
+    except ValidationError as exc:
+        raise from_pydantic(exc, svc.measurement_model) from None
+    waveforms = waveforms_from_shots(request.shots, request.metadata)
+    check_counts(waveforms, svc.settings, "shots")
+    return measure_and_store(waveforms, svc.store, svc.estimator, "json", "shots", idem)
+
+
+def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]],
+                   idem: tuple[str, str] | None = None) -> dict[str, Any]:
+    """One shot from its raw little-endian samples; what they are comes from the query."""
+    seen: set[str] = set()
+    for name, _ in query:
+        if name in seen:
+            raise Problem(422, f"{name}: given more than once", kind="invalid-input", field=name)
+        seen.add(name)
+    try:
+        params = BinaryShotParams.model_validate(dict(query))
+    except ValidationError as exc:
+        raise from_pydantic(exc, BinaryShotParams) from None
+    dtype = np.dtype(BINARY_DTYPES[params.dtype])
+    if not body:
+        raise Problem(422, f"body: empty; send the samples as little-endian {params.dtype}",
+                      kind="invalid-input", field="body")
+    if len(body) % dtype.itemsize:
+        raise Problem(422, f"body: {len(body):,} bytes is not a whole number of {params.dtype} "
+                      f"samples ({dtype.itemsize} bytes each)", kind="invalid-input",
+                      field="body")
+    n = len(body) // dtype.itemsize
+    limit = min(svc.settings.max_samples_per_shot, svc.settings.max_samples_per_request)
+    if n > limit:
+        raise Problem(422, f"samples: {n:,} samples; at most {limit:,} per shot", kind="limit",
+                      field="samples")
+    meta = {k: getattr(params, k) for k in ("plate_id", "position", "sphere_diameter", "shot")
+            if getattr(params, k) is not None}
+    try:
+        waveform = Waveform(t0=params.t0, dt=params.dt, samples=np.frombuffer(body, dtype),
+                            units=params.units, calibration=params.calibration, metadata=meta)
+    except WaveformError as exc:
+        raise waveform_error(exc, "") from None
+    return measure_and_store([waveform], svc.store, svc.estimator, "binary", "", idem)
+
+
+async def _ingest_upload(svc: Any, request: Request, key: str | None = None) -> Any:
+    try:
+        form = await request.form(max_files=1, max_fields=len(UploadFields.model_fields) + 1)
+    except Problem:
+        raise
+    except Exception as exc:  # malformed multipart, too many parts
+        raise Problem(422, f"body: not a valid multipart form ({exc})", kind="invalid-input",
+                      field="body") from None
+    try:
+        upload = form.get("file")
+        if upload is None or isinstance(upload, str):
+            raise Problem(422, "file: missing; send the waveform file in a 'file' field",
+                          kind="invalid-input", field="file")
+        fields = {k: v for k, v in form.multi_items() if k != "file"}
+        if any(not isinstance(v, str) for v in fields.values()):
+            raise Problem(422, "file: only one file per request", kind="invalid-input",
+                          field="file")
+        try:
+            opts = UploadFields.model_validate({k: v for k, v in fields.items() if v != ""})
+        except ValidationError as exc:
+            raise from_pydantic(exc, UploadFields) from None
+        fmt = pick_format(opts.format, upload.filename)
+        idem = None
+        if key is not None:  # the content, not the bytes: a retry has a new multipart boundary
+            content = await anyio.to_thread.run_sync(_file_bytes, upload.file)
+            idem = (key, _digest(b"multipart", str(sorted(fields.items())).encode(),
+                                 (upload.filename or "").encode(), content))
+            replay = await _replay(svc, *idem)
+            if replay is not None:
+                return replay
+        return await run_for_client(request, svc.lane_for(upload.size), _ingest_file, svc,
+                                    upload.file, fmt, opts, client_name(upload.filename), idem)
+    finally:
+        await form.close()
+
+
+def client_name(filename: str | None) -> str | None:
+    """The upload's file name as a label (never used as a path): last component, printable."""
+    if not filename:
+        return None
+    name = filename.replace("\\", "/").rsplit("/", 1)[-1]
+    name = "".join(ch for ch in name if ch.isprintable())[:200]
+    return name or None
+
+
+def _file_bytes(stream: Any) -> bytes:
+    """An upload's content (the body limit bounds it), the stream rewound for the reader."""
+    stream.seek(0)
+    data = stream.read()
+    stream.seek(0)
+    return bytes(data)
+
+
+def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
+                 filename: str | None = None,
+                 idem: tuple[str, str] | None = None) -> dict[str, Any]:
+    settings = svc.settings
+    path = svc.uploads.write(stream, fmt)
+    try:
+        check_self_contained(path, fmt)
+        declared = declared_values(path, fmt, opts.dataset)
+        limit = settings.max_samples_per_request
+        if declared is not None and declared > limit:
+            raise Problem(413, f"file: declares {declared:,} samples; at most {limit:,} per "
+                          f"request ({settings.max_samples_per_shot:,} per shot)",
+                          kind="content-too-large", field="file")
+        options = {k: getattr(opts, k) for k in _READER_OPTIONS if getattr(opts, k) is not None}
+        waveforms = read_file(path, fmt, options, filename)
+    finally:
+        path.unlink(missing_ok=True)
+    try:
+        waveforms, skipped = signal_channels.select(
+            waveforms, [opts.channel] if opts.channel else None, opts.group,
+            filename or "the upload")
+    except WaveformError as exc:
+        raise waveform_error(exc, "") from None
+    meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter", "x_m",
+                                          "y_m", "table", "plate_material")
+            if getattr(opts, k) is not None}
+    if filename:
+        meta["source"] = filename  # the reader named it after the server's temporary file
+    if meta:
+        waveforms = [wf.with_metadata(**meta) for wf in waveforms]
+    check_counts(waveforms, settings, "file.shots")
+    stored = measure_and_store(waveforms, svc.store, svc.estimator, f"upload:{fmt}", "file.shots",
+                               idem)
+    return {**stored, "skipped_channels": skipped}
+
+
+@router.get("/measurements", response_model=MeasurementPage, responses=ERRORS,
+            summary="List measurements, optionally of one plate (paged)")
+async def list_measurements(
+    request: Request,
+    plate_id: str | None = Query(None, max_length=200, description="only this plate"),
+    after: int = Query(0, ge=0, le=2**62, description="return ids greater than this"),
+    limit: int = Query(50, ge=1, le=500, description="page size"),
+) -> dict[str, Any]:
+    """Measurements in id order; ``next`` gives the following page."""
+
+    svc = service(request)
+    limit = min(limit, svc.settings.page_size_max)
+    records = await run_in_threadpool(svc.store.list, plate_id, after, limit + 1)
+    more = len(records) > limit
+    records = records[:limit]
+    items = [{"id": r.id, "created_at": r.created_at, "plate_id": r.plate_id,
+              "position": r.position, "n_shots": r.n_shots, "source": r.source,
+              "aggregates": r.result.get("aggregates", []),
+              "estimate": r.result.get("estimate"),
+              "location": r.result.get("location")} for r in records]
+    next_url = None
+    if more and records:
+        from urllib.parse import urlencode
+
+        query = {"after": records[-1].id, "limit": limit}
+        if plate_id is not None:
+            query["plate_id"] = plate_id
+        next_url = f"/v1/measurements?{urlencode(query)}"
+    return {"items": items, "next": next_url}
+
+
+@router.get(
+    "/measurements/export",
+    responses={**ERRORS, 200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}},
+                               "description": "one row per shot, or per measurement"}},
+    response_class=Response,
+    summary="Export measured features (one row per shot) or estimates (one row per measurement)",
+)
+async def export_measurements(
+    request: Request,
+    format: str = Query("csv", pattern="^(csv|parquet)$", description="csv or parquet"),
+    plate_id: str | None = Query(None, max_length=200, description="only this plate"),
+    kind: str = Query("shots", pattern="^(shots|estimates)$",
+                      description="shots: features per shot; estimates: thickness and distance "
+                      "per measurement (one position), bounds and status in flat columns"),
+) -> Response:
+    """Stored measurements, oldest first; timestamps in ISO 8601 UTC."""
+
+    svc = service(request)
+    exporter = _export if kind == "shots" else _export_estimates
+    data, media = await run_in_threadpool(exporter, svc, format, plate_id)
+    suffix = "parquet" if format == "parquet" else "csv"
+    name = f"{'measurements' if kind == 'shots' else 'estimates'}.{suffix}"
+    return Response(data, media_type=media,
+                    headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+_MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
+
+
+def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+    import pandas as pd
+
+    from solitonde.instrument.inference.estimate_rows import iso_utc, neutralised
+
+    limit = svc.settings.export_rows_max
+    rows = list(svc.store.shot_rows(plate_id, limit + 1))
+    if len(rows) > limit:  # never a silently cut export
+        raise Problem(422, f"export: more than {limit:,} shots match; export at most {limit:,} "
+                      "rows at a time (ask for one plate_id)", kind="limit", field="plate_id")
+    frame = pd.DataFrame(rows)
+    if not rows:  # still the columns, so a script reading an empty export finds them
+        from solitonde.signal.features import Features
+
+        frame = pd.DataFrame(columns=[*svc.store.EXPORT_COLUMNS,
+                                      *(f.name for f in dataclasses.fields(Features))])
+    frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")
+    for col in ("measurement_id", "shot_index", "shot", "n_samples"):
+        numbers = pd.to_numeric(frame[col], errors="coerce")
+        if numbers.notna().sum() == frame[col].notna().sum():  # a file's text shot labels stay
+            frame[col] = numbers.astype("Int64")
+    if fmt == "parquet":
+        buf = io.BytesIO()
+        frame.to_parquet(buf, index=False)
+        return buf.getvalue(), _MEDIA[fmt]
+    return neutralised(frame).to_csv(index=False).encode(), _MEDIA[fmt]
+
+
+def _export_estimates(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+    """One row per stored measurement: where, from what, and its estimate's columns."""
+    from solitonde.instrument.inference.estimate_rows import (
+        ESTIMATE_COLUMNS,
+        estimate_row,
+        iso_utc,
+        to_bytes,
+    )
+
+    limit = svc.settings.export_rows_max
+    rows: list[dict[str, Any]] = []
+    after = 0
+    while True:
+        page = svc.store.list(plate_id, after, 1000)
+        for r in page:
+            diameters = [a["sphere_diameter"] for a in r.result.get("aggregates", [])
+                         if a.get("sphere_diameter") is not None]
+            location = {"plate_id": r.plate_id, "position": r.position,
+                        **(r.result.get("location") or {})}
+            rows.append({"measurement_id": r.id, "created_at": iso_utc(r.created_at),
+                         **estimate_row(location, diameters, r.n_shots, r.result.get("estimate"),
+                                        r.result.get("estimate_reason"))})
+        if len(rows) > limit:
+            raise Problem(422, f"export: more than {limit:,} measurements match; export at most "
+                          f"{limit:,} rows at a time (ask for one plate_id)", kind="limit",
+                          field="plate_id")
+        if len(page) < 1000:
+            break
+        after = page[-1].id
+    columns = ("measurement_id", "created_at", *ESTIMATE_COLUMNS)
+    return to_bytes(rows, fmt, columns), _MEDIA[fmt]
+
+
+def _missing(measurement_id: int) -> Problem:
+    return Problem(404, f"id: no measurement {measurement_id}", kind="not-found", field="id")
+
+
+@router.get("/measurements/{measurement_id:int}", response_model=MeasurementOut,
+            responses={**ERRORS, 404: _PROBLEM}, summary="One stored measurement",
+            operation_id="get_measurement")
+async def get_measurement(request: Request, measurement_id: MeasurementId) -> dict[str, Any]:
+    """Features per shot, aggregates and estimate as stored."""
+
+    record = await run_in_threadpool(service(request).store.get, measurement_id)
+    if record is None:
+        raise _missing(measurement_id)
+    return measurement_dict(record)
+
+
+@router.delete("/measurements/{measurement_id:int}", status_code=204, response_class=Response,
+               responses={**ERRORS, 404: _PROBLEM}, summary="Remove a measurement and its shots",
+               operation_id="delete_measurement")
+async def delete_measurement(request: Request, measurement_id: MeasurementId) -> Response:
+    """Removes the measurement and every shot of it in one transaction; 404 when there is none
+    (also the second time). The plate's map follows."""
+
+    if not await run_in_threadpool(service(request).store.delete, measurement_id):
+        raise _missing(measurement_id)
+    return Response(status_code=204)
+
+
+@router.get("/measurements/{measurement_id:int}/shots/{shot_index:int}",
+            responses={**ERRORS, 404: _PROBLEM}, operation_id="get_shot",
+            summary="One stored shot with its samples (as stored, bit for bit)")
+async def get_shot(request: Request, measurement_id: MeasurementId,
+                   shot_index: ShotIndex) -> dict[str, Any]:
+    """The trace of one shot: t0, dt, samples, units, calibration, metadata, features."""
+
+    shot = await run_in_threadpool(service(request).store.get_shot, measurement_id, shot_index)
+    if shot is None:
+        raise Problem(404, f"shot_index: measurement {measurement_id} has no shot {shot_index}",
+                      kind="not-found", field="shot_index")
+    return {"t0": shot.t0, "dt": shot.dt, "samples": shot.samples.tolist(), "units": shot.units,
+            "calibration": shot.calibration, "metadata": shot.metadata,
+            "features": shot.features}
+
+
+@router.get("/measurements/{measurement_id:int}/plot.png", response_class=Response,
+            operation_id="plot_measurement",
+            responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
+            summary="PNG of a shot's trace with the incident and reflected pulses marked")
+async def plot_measurement(
+    request: Request, measurement_id: MeasurementId,
+    shot: int = Query(0, ge=0, le=100_000, description="shot index within the measurement"),
+) -> Response:
+
+    svc = service(request)
+    record = await run_in_threadpool(svc.store.get_shot, measurement_id, shot)
+    if record is None:
+        if await run_in_threadpool(svc.store.get, measurement_id) is None:
+            raise _missing(measurement_id)
+        raise Problem(404, f"shot: measurement {measurement_id} has no shot {shot}",
+                      kind="not-found", field="shot")
+    from solitonde.instrument.plotting import trace_png
+
+    title = f"measurement {measurement_id}, shot {shot}"
+    meta = record.metadata
+    if meta.get("plate_id") is not None:
+        title += f" - plate {meta['plate_id']}"
+    if meta.get("position") is not None:
+        title += f", position {meta['position']}"
+    samples = record.samples
+    if record.units == "V" and record.calibration:  # features are in newtons: draw the force
+        samples = samples * record.calibration
+    png = await run_for_client(request, svc.plot_lane, partial(
+        trace_png, record.t0, record.dt, samples, record.features, units="N", title=title))
+    return Response(png, media_type="image/png")

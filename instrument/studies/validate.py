@@ -1,0 +1,408 @@
+"""Synthetic validation: random plates simulated, measured as real shots are, and inverted.
+
+For each of ``n`` scenes (seeded): a thickness drawn log-uniformly and a distance to the support
+drawn uniformly inside the table's range (so almost surely between its grid points), simulated
+for every sphere size of the table with the plate model ``auto`` picks and with a known
+dissipation the table does not have (Kuwabara-Kono contact damping, :data:`DAMPING_S`). Each
+size's noise-free trace becomes :data:`SHOTS` shots with white noise at :data:`SNR_DB`; the signal
+package extracts and aggregates them exactly as for measured files; the sizes with a detected
+reflection are inverted together. The dissipation is compensated as an operator would: a
+calibration (ARR factor and TOF offset per size, with their uncertainty) fitted by
+:func:`~solitonde.instrument.inference.calibration_fit.fit_calibration` from shots simulated
+the same way on two reference plates far from the supports (:data:`REFERENCE_THICKNESS_M`,
+:data:`REFERENCE2_THICKNESS_M` at :data:`REFERENCE_DISTANCE_M`): the dissipation's effect is
+nearly but not exactly a constant factor and delay, and the spread between the two plates is what
+the calibration states as its transfer uncertainty.
+
+Scored: relative thickness error of the posterior median (median and 90th percentile, over the
+plates where thickness comes back ``constrained``), coverage of the 95 % interval (thickness;
+distance too, one-sided bounds counted as such), and the status. The expected status is what the
+noise-free model says the data can tell. For each end of each parameter's range, ``d`` is how
+many standard errors (the inversion's own sigmas, :func:`separations`) separate the truth's
+features from the closest table point on that end: along a slice (the other parameter at its true
+value) and along the profile (any value of the other parameter). A side is open (the parameter is
+not bounded there) when ``d < 1.5``, closed when ``d > 3``, either in between. The slice misses
+joint (t, L) degeneracies (a thin plate near a support can mimic a thicker one far from it); the
+profile flags every one however little posterior mass it carries; a status supported by either
+counts as right (``status_accuracy``), and each is scored on its own as well
+(``status_accuracy_slice``, ``status_accuracy_profile``).
+L = 0 is a physical end and never open. So far from the support the distance must come back
+``lower_bound_only``, and right at the support, where TOF and ARR no longer depend on the plate,
+thickness may honestly come back unbounded.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
+from solitonde.instrument.tables.table import ModelTable
+from solitonde.instrument.tables.table_build import _TASK_CACHE, measured_waveform, run_tasks
+from solitonde.model.scene import apply_overrides, scene_from_dict
+from solitonde.model.simulate import simulate
+from solitonde.signal.errors import WaveformError
+from solitonde.signal.features import aggregate, extract
+from solitonde.signal.synth import degrade
+
+DAMPING_S = 1e-7
+"""Known dissipation added to every validation shot: Kuwabara-Kono time constant tau, s (lowers
+ARR by about 13 % for D = 4.76 mm, 7 % for 9.53 mm, 2 % for 19.05 mm)."""
+SHOTS = 5
+SNR_DB = 40.0
+REFERENCE_THICKNESS_M = 5.5e-3
+REFERENCE2_THICKNESS_M = 2.5e-3
+REFERENCE_DISTANCE_M = 0.457
+OPEN_BELOW = 1.5
+CLOSED_ABOVE = 3.0
+
+
+class ValidationInputError(ValueError):
+    """A validation request that cannot be run; ``field`` names what is wrong."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> dict[str, Any]:
+    return apply_overrides(dict(base), {
+        "chain.diameter": d, "plate.thickness": t, "plate.distance_to_support": length,
+        "effects.dissipation": True, "effects.damping": DAMPING_S,
+    })
+
+
+def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness_m: float,
+                  distance_m: float, seed: int, shots: int = SHOTS,
+                  snr_db: float = SNR_DB) -> dict[str, Any]:
+    """Simulate one plate for every sphere size (largest first, one Green's function) and measure
+    ``shots`` noisy shots of each: per-size summaries (None where no reflection was detected)."""
+    from solitonde.model import greens
+
+    rng = np.random.default_rng(seed)
+    previous = greens.default_cache()
+    greens.set_default_cache(_TASK_CACHE)
+    _TASK_CACHE.clear()
+    summaries: dict[float, dict[str, Any] | None] = {}
+    started = time.perf_counter()
+    try:
+        for d in sorted(diameters, reverse=True):
+            result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)))
+            clean = result.samples
+            reference = float(clean.max() - clean[0])
+            feats = []
+            for _ in range(shots):
+                noisy = degrade(clean, snr_db, rng, reference)
+                # pre-trigger noise too: the same noise level over the padded segment
+                wf = measured_waveform(result, samples=noisy)
+                pad = wf.samples.size - clean.size
+                samples = wf.samples.copy()
+                samples[:pad] += rng.normal(0.0, reference / 10 ** (snr_db / 20), pad)
+                try:
+                    feats.append(extract(type(wf)(wf.t0, wf.dt, samples)))
+                except WaveformError:
+                    continue
+            agg = aggregate(feats) if feats else None
+            if agg is None or agg["tof_s"].mean is None or agg["arr"].mean is None:
+                summaries[d] = None
+                continue
+            summaries[d] = {"diameter_m": d, "tof_s": agg["tof_s"].mean,
+                            "tof_std_s": agg["tof_s"].std, "arr": agg["arr"].mean,
+                            "arr_std": agg["arr"].std, "n_shots": agg["tof_s"].count,
+                            "plate_model": result.plate_model}
+    finally:
+        _TASK_CACHE.clear()
+        greens.set_default_cache(previous)
+    return {"thickness_m": thickness_m, "distance_m": distance_m, "summaries": summaries,
+            "wall_s": time.perf_counter() - started}
+
+
+def _inputs(summaries: Mapping[float, Any]) -> list[FeatureSummary]:
+    return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"], s["arr_std"],
+                           int(s["n_shots"])) for s in summaries.values() if s is not None]
+
+
+def separations(table: ModelTable, inputs: Sequence[FeatureSummary], thickness_m: float,
+                distance_m: float, calibration: Calibration | None) -> dict[str, np.ndarray]:
+    """How far, in standard errors, the features of the closest point at each table end are
+    from the truth's (profile over the other parameter).
+
+    ``d(t, L) = sqrt(sum over sizes of (dTOF/sigma_tof)^2 + (dARR/sigma_arr)^2)`` between the
+    noise-free model at the truth and at (t, L), with the inversion's own sigmas; for thickness
+    the ends are the smallest ``d`` along t = t_min and t = t_max (any L), for distance along
+    L = L_min and L = L_max (any t). Returns ``{"thickness_m": [d_low, d_high],
+    "distance_m": [...]}``.
+    """
+    d2: np.ndarray | None = None
+    for item in inputs:
+        g = fine_grid(table, table.diameter_index(item.diameter_m))
+        i = int(np.argmin(np.abs(np.log(g.thickness_m / thickness_m))))
+        j = int(np.argmin(np.abs(g.distance_m - distance_m)))
+        factor = 1.0 if calibration is None else calibration.for_diameter(g.diameter_m)[0]
+        f_std, o_std = (0.0, 0.0) if calibration is None else calibration.uncertainty_for(
+            g.diameter_m)
+        s_tof, s_arr = item.sigmas()
+        var_tof = s_tof**2 + o_std**2 + g.model_tof_var
+        var_arr = s_arr**2 + factor**2 * g.model_arr_var + (f_std * g.arr) ** 2
+        term = (g.tof_s - g.tof_s[i, j]) ** 2 / var_tof
+        term += (factor * (g.arr - g.arr[i, j])) ** 2 / var_arr
+        term[~g.valid] = np.inf
+        d2 = term if d2 is None else d2 + term
+        truth = (i, j)
+    assert d2 is not None
+    i, j = truth
+    d = np.sqrt(d2)
+    return {"thickness_m": np.array([d[0].min(), d[-1].min()]),
+            "distance_m": np.array([d[:, 0].min(), d[:, -1].min()]),
+            "thickness_m_slice": np.array([d[0, j], d[-1, j]]),
+            "distance_m_slice": np.array([d[i, 0], d[i, -1]])}
+
+
+def expected_statuses(d: np.ndarray, lower_physical: bool) -> set[str]:
+    """Statuses the data support, from the separations at the two ends (:func:`separations`):
+    an end is open below :data:`OPEN_BELOW` standard errors, closed above :data:`CLOSED_ABOVE`,
+    and either in between."""
+    def states(x: float, physical: bool) -> set[bool]:
+        if physical or x > CLOSED_ABOVE:
+            return {False}
+        return {True} if x < OPEN_BELOW else {True, False}
+
+    names = {(False, False): "constrained", (False, True): "lower_bound_only",
+             (True, False): "upper_bound_only", (True, True): "unconstrained"}
+    return {names[(lo, hi)] for lo in states(float(d[0]), lower_physical)
+            for hi in states(float(d[1]), False)}
+
+
+@dataclass
+class ValidationReport:
+    """Scores and per-scene rows."""
+
+    metrics: dict[str, Any]
+    scenes: list[dict[str, Any]]
+    calibration: Calibration
+
+
+def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
+             scheduler: str | None = None, progress: bool = False,
+             diameters: Sequence[float] | None = None,
+             measurements: str | Path | None = None) -> ValidationReport:
+    """Run the synthetic validation on ``table`` (see the module doc).
+
+    ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
+    names a JSON file that keeps the simulated, measured plates: when it holds the same draw
+    (n, seed, sizes, table grid range and scene) they are reused and only the inversion runs.
+
+    Raises
+    ------
+    ValidationInputError
+        (``seed``, ``diameters``, ``measurements``) A negative seed, a sphere size listed twice,
+        or a measurements file that is not one this function wrote.
+    TableError
+        (``diameter_m``) A sphere size the table does not hold.
+    """
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValidationInputError("seed", f"must be an integer >= 0, got {seed!r}")
+    rng = np.random.default_rng(seed)
+    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
+    if diameters is None:
+        diameters = [float(d) for d in table.axes["diameter_m"]]
+    else:
+        diameters = [float(table.axes["diameter_m"][table.diameter_index(d)]) for d in diameters]
+        if len(set(diameters)) < len(diameters):
+            raise ValidationInputError("diameters", "a sphere size is listed twice (each table "
+                                       "size at most once)")
+    base = table.sweep.get("scene", {})
+    lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
+    draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_axis[-1])))
+             for _ in range(n)]
+    seeds = rng.integers(0, 2**31, size=n + 1)
+    t_ref = float(np.clip(REFERENCE_THICKNESS_M, t_axis[0], t_axis[-1]))
+    l_ref = float(np.clip(REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
+    tasks = [(base, diameters, t_ref, l_ref, int(seeds[0]))]
+    tasks += [(base, diameters, t, length, int(s)) for (t, length), s in zip(draws, seeds[1:],
+                                                                             strict=True)]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), unit="plate", desc="validate")
+    key = {"n": n, "seed": seed, "diameters_m": diameters, "scene": base,
+           "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
+           "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
+           "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB}
+    stored = _load_measurements(measurements, key)
+    started = time.perf_counter()
+    if stored is not None:
+        measured, wall = stored
+    else:
+        measured = []
+        for res in run_tasks(measure_plate, tasks, workers, scheduler):
+            measured.append(res)
+            if bar is not None:
+                bar.update(1)
+        wall = time.perf_counter() - started
+        if measurements is not None:
+            _save_measurements(measurements, key, measured, wall)
+    if bar is not None:
+        bar.close()
+    ref = next(m for m in measured if m["thickness_m"] == t_ref and m["distance_m"] == l_ref)
+    measured.remove(ref)
+    # the second reference plate (far from the supports: a cheap run) shows how far the fitted
+    # factor and offset carry over between plates
+    t_ref2 = float(np.clip(REFERENCE2_THICKNESS_M, t_axis[0], t_axis[-1]))
+    ref2 = measure_plate(base, diameters, t_ref2, l_ref,
+                         int(np.random.default_rng([seed, 2]).integers(0, 2**31)))
+    refs = [Reference(t_ref, l_ref, s) for s in _inputs(ref["summaries"])]
+    refs += [Reference(t_ref2, l_ref, s) for s in _inputs(ref2["summaries"])]
+    calibration = fit_calibration(table, refs)
+    order = {(t, length): i for i, (t, length) in enumerate(draws)}
+    measured.sort(key=lambda m: order[(m["thickness_m"], m["distance_m"])])
+
+    rows = []
+    for m in measured:
+        inputs = _inputs(m["summaries"])
+        row: dict[str, Any] = {"thickness_m": m["thickness_m"], "distance_m": m["distance_m"],
+                               "n_sizes": len(inputs), "wall_s": m["wall_s"]}
+        if not inputs:
+            row.update(status_ok=False, reason="no reflection detected for any sphere size")
+            rows.append(row)
+            continue
+        est = invert(table, inputs, calibration)
+        t_est, l_est = est.thickness_m, est.distance_m
+        true_l = m["distance_m"]
+        # What the data the inversion used can tell: a size it left out as disagreeing with the
+        # others (see :func:`invert`) does not count towards the expected status either.
+        excluded = est.extra.get("excluded_diameters_m", [])
+        used = [i for i in inputs if i.diameter_m not in excluded]
+        sep = separations(table, used, m["thickness_m"], true_l, calibration)
+        phys = bool(l_axis[0] <= 0.0)
+        # a slice (the other parameter at its true value) misses joint (t, L) degeneracies, the
+        # profile flags every one however little posterior mass it carries: both are answers
+        # the noise-free model supports, and both are scored separately too
+        exp_ts = expected_statuses(sep["thickness_m_slice"], lower_physical=False)
+        exp_ls = expected_statuses(sep["distance_m_slice"], lower_physical=phys)
+        exp_tp = expected_statuses(sep["thickness_m"], lower_physical=False)
+        exp_lp = expected_statuses(sep["distance_m"], lower_physical=phys)
+        exp_t, exp_l = exp_ts | exp_tp, exp_ls | exp_lp
+        row.update(
+            thickness=t_est.to_dict(), distance=l_est.to_dict(), excluded_diameters_m=excluded,
+            separations={k: v.tolist() for k, v in sep.items()},
+            expected_thickness_status=sorted(exp_t), expected_distance_status=sorted(exp_l),
+            status_ok=t_est.status in exp_t and l_est.status in exp_l,
+            status_ok_slice=t_est.status in exp_ts and l_est.status in exp_ls,
+            status_ok_profile=t_est.status in exp_tp and l_est.status in exp_lp,
+            thickness_error=(abs(t_est.median - m["thickness_m"]) / m["thickness_m"]
+                             if t_est.median is not None else None),
+            thickness_covered=(t_est.ci95 is not None and t_est.ci95[0] is not None
+                               and t_est.ci95[1] is not None
+                               and t_est.ci95[0] <= m["thickness_m"] <= t_est.ci95[1]),
+            distance_covered=_covered(l_est.ci95, true_l),
+        )
+        rows.append(row)
+    errors = np.array([r["thickness_error"] for r in rows if r.get("thickness_error") is not None])
+    t_cov = [r["thickness_covered"] for r in rows if "thickness_covered" in r]
+    l_cov = [r["distance_covered"] for r in rows if r.get("distance_covered") is not None]
+    metrics = {
+        "n": n,
+        "seed": seed,
+        "thickness_error_median": float(np.median(errors)) if errors.size else None,
+        "thickness_error_p90": float(np.percentile(errors, 90)) if errors.size else None,
+        "coverage_95": float(np.mean(t_cov)) if t_cov else None,
+        "distance_coverage_95": float(np.mean(l_cov)) if l_cov else None,
+        "status_accuracy": float(np.mean([r["status_ok"] for r in rows])) if rows else None,
+        "status_accuracy_slice": float(np.mean([r.get("status_ok_slice", False) for r in rows])),
+        "status_accuracy_profile": float(np.mean([r.get("status_ok_profile", False)
+                                                  for r in rows])),
+        "thickness_constrained": float(np.mean([r.get("thickness", {}).get("status")
+                                                == "constrained" for r in rows])),
+        "thickness_status_counts": _counts(r.get("thickness", {}).get("status") for r in rows),
+        "distance_status_counts": _counts(r.get("distance", {}).get("status") for r in rows),
+        "n_estimated": int(errors.size),
+        "damping_s": DAMPING_S,
+        "shots": SHOTS,
+        "snr_db": SNR_DB,
+        "reference": {"thickness_m": [t_ref, t_ref2], "distance_m": l_ref},
+        "calibration": calibration.to_dict()["per_diameter"],
+        "diameters_m": diameters,
+        "simulation_wall_s": wall,
+        "table": str(table.path) if table.path else None,
+    }
+    return ValidationReport(metrics, rows, calibration)
+
+
+def _load_measurements(path: str | Path | None,
+                       key: Mapping[str, Any]) -> tuple[list[dict[str, Any]], float] | None:
+    """The stored plates when ``path`` holds this draw; None when absent or another draw (it is
+    then overwritten). Anything else is an error, never silently replaced: the file may be the
+    user's."""
+    if path is None:
+        return None
+    path = Path(path)
+    if path.is_dir():
+        raise ValidationInputError("measurements", f"{str(path)!r} is a directory; give the "
+                                   "name of a JSON file")
+    if not path.exists():
+        return None
+
+    def bad(why: str) -> ValidationInputError:
+        return ValidationInputError("measurements", f"{str(path)!r} is not a measurements file "
+                                    f"written by `solitonde validate` ({why}); delete it or "
+                                    "give another path")
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ValidationInputError("measurements", f"cannot read {str(path)!r}: "
+                                   f"{exc.strerror or exc}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise bad(f"not JSON: {exc}") from None
+    if not isinstance(data, Mapping) or not {"key", "plates", "wall_s"} <= set(data):
+        raise bad("needs the keys key, plates, wall_s")
+    if data["key"] != json.loads(json.dumps(key)):
+        return None
+    plates = data["plates"]
+    try:
+        if not isinstance(plates, list) or len(plates) != int(key["n"]) + 1:
+            raise TypeError(f"plates must be a list of {int(key['n']) + 1}")
+        for m in plates:  # JSON keys are strings
+            float(m["thickness_m"]), float(m["distance_m"])
+            m["summaries"] = {float(d): s for d, s in m["summaries"].items()}
+            for s in m["summaries"].values():
+                if s is not None:
+                    FeatureSummary(float(s["diameter_m"]), float(s["tof_s"]), float(s["arr"]))
+        wall = float(data["wall_s"])
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise bad(f"{type(exc).__name__}: {exc}") from None
+    return plates, wall
+
+
+def _save_measurements(path: str | Path, key: Mapping[str, Any], plates: list[dict[str, Any]],
+                       wall: float) -> None:
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps({"key": key, "plates": plates, "wall_s": wall}))
+    os.replace(tmp, path)
+
+
+def _covered(ci: Any, truth: float) -> bool | None:
+    if ci is None:
+        return None
+    lo, hi = ci
+    return (lo is None or lo <= truth) and (hi is None or truth <= hi)
+
+
+def _counts(values: Any) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[str(v)] = out.get(str(v), 0) + 1
+    return out

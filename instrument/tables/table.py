@@ -1,0 +1,277 @@
+"""The model table: simulated features over a grid of sphere diameter, plate thickness and distance.
+
+One HDF5 file (h5py) holds
+
+``axes/``        ``diameter_m``, ``thickness_m``, ``distance_m`` (increasing), the grid
+``features/``    per point (shape ``(nD, nT, nL)``): ``tof_s``, ``arr``, ``incident_time_s``,
+                 ``incident_peak_N``, ``reflected_peak_N``, ``snr_db``, ``arr_upper_bound``; and
+                 ``secondary_times_s`` / ``secondary_ratios`` (shape ``(nD, nT, nL, K)``,
+                 NaN-padded): what :func:`solitonde.signal.features.extract` reads from the
+                 simulated sensor trace, exactly as from a measurement
+``status``       per point: 0 ok, 1 no reflection detected, 2 failed (``messages`` says why),
+                 -1 not computed yet
+``done``         per point: the build's resume mask
+``flags``        per point: bitmask of the signal package's quality flags (``attrs['flag_names']``)
+``plate_model``  per point: index into ``attrs['plate_model_names']`` (the tier ``auto`` chose)
+``diagnostics/`` ``wall_s``, ``energy_drift`` per point
+``traces/``      optional: per point the sensor samples (variable length) with ``t0_s``, ``dt_s``
+
+and, in the root attributes, the sweep that defines the grid and the provenance (JSON strings):
+solitonde version, scene defaults, tiers, mesh, step, build time, machine, git revision.
+Missing values are NaN, never a number made up.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+FORMAT = "solitonde-model-table"
+FORMAT_VERSION = 1
+AXES = ("diameter_m", "thickness_m", "distance_m")
+SCALAR_FEATURES = (
+    "tof_s",
+    "arr",
+    "incident_time_s",
+    "incident_peak_N",
+    "reflected_peak_N",
+    "snr_db",
+    "arr_upper_bound",
+)
+SECONDARY_FEATURES = ("secondary_times_s", "secondary_ratios")
+MAX_SECONDARY = 4
+STATUS_PENDING, STATUS_OK, STATUS_NO_REFLECTION, STATUS_FAILED = -1, 0, 1, 2
+STATUS_NAMES = {
+    STATUS_PENDING: "pending",
+    STATUS_OK: "ok",
+    STATUS_NO_REFLECTION: "no_reflection",
+    STATUS_FAILED: "failed",
+}
+PLATE_MODEL_NAMES = ("rigid", "halfspace", "infinite", "sem", "greens", "unknown")
+
+
+class TableError(ValueError):
+    """A table file that cannot be used; ``field`` names what is wrong."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+@dataclass
+class ModelTable:
+    """A loaded model table (everything in memory; a table is a few MB).
+
+    Attributes
+    ----------
+    axes: grid axes by name (:data:`AXES`), increasing, SI units.
+    features: per-point arrays by name (:data:`SCALAR_FEATURES`, :data:`SECONDARY_FEATURES`).
+    status: per-point status codes (:data:`STATUS_NAMES`).
+    flags: per-point bitmask over ``flag_names``.
+    plate_model: per-point index into ``plate_model_names``.
+    diagnostics: per-point ``wall_s`` and ``energy_drift``.
+    sweep: the sweep definition the table was built from.
+    provenance: how and where it was built.
+    complete: every point was computed.
+    """
+
+    axes: dict[str, np.ndarray]
+    features: dict[str, np.ndarray]
+    status: np.ndarray
+    flags: np.ndarray
+    plate_model: np.ndarray
+    diagnostics: dict[str, np.ndarray]
+    sweep: dict[str, Any]
+    provenance: dict[str, Any]
+    complete: bool
+    flag_names: tuple[str, ...] = ()
+    plate_model_names: tuple[str, ...] = PLATE_MODEL_NAMES
+    path: Path | None = None
+    _cache: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.axes[a].size for a in AXES)
+
+    @property
+    def table_id(self) -> str:
+        """The id given at build (``table build --id``), else the file's stem."""
+        given = self.provenance.get("table_id")
+        return str(given) if given else (self.path.stem if self.path else "table")
+
+    @property
+    def family(self) -> dict[str, Any] | None:
+        """The plate family the table was built for (instrument.family), None if unrecorded."""
+        if "family" not in self._cache:
+            from solitonde.instrument.tables.family import family_of_table
+
+            self._cache["family"] = family_of_table(self.provenance)
+        return self._cache["family"]
+
+    @classmethod
+    def load(cls, path: str | Path) -> ModelTable:
+        """Read a table file written by :mod:`solitonde.instrument.tables.table_build`.
+
+        Raises
+        ------
+        TableError
+            When the file is missing, is not a model table, has a newer format, or lacks a
+            dataset or attribute, has one of the wrong shape, or an axis that is not finite and
+            strictly increasing (the field names the dataset, e.g. ``features/arr``).
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise TableError("table", f"no such file: {str(path)!r}")
+        try:
+            fh = h5py.File(path, "r")
+        except OSError as exc:
+            raise TableError("table", f"{str(path)!r} is not an HDF5 file ({exc})") from None
+        with fh:
+            if fh.attrs.get("format") != FORMAT:
+                raise TableError("table", f"{str(path)!r} is not a solitonde model table")
+            try:
+                version = int(fh.attrs.get("format_version", 0))
+            except (TypeError, ValueError):
+                raise TableError("format_version", f"expected an integer, got "
+                                 f"{fh.attrs.get('format_version')!r}") from None
+            if version > FORMAT_VERSION:
+                raise TableError("format_version", f"table format {version} is newer than this "
+                                 f"solitonde reads (up to {FORMAT_VERSION})")
+            axes = {a: _axis(fh, a) for a in AXES}
+            grid = tuple(axes[a].size for a in AXES)
+            features = {k: _dataset(fh, f"features/{k}", float, grid) for k in SCALAR_FEATURES}
+            features |= {k: _dataset(fh, f"features/{k}", float, grid, trailing=True)
+                         for k in SECONDARY_FEATURES}
+            diag = {}
+            if "diagnostics" in fh:
+                diag = {k: _dataset(fh, f"diagnostics/{k}", None, grid)
+                        for k in fh["diagnostics"]}
+            return cls(
+                axes=axes,
+                features=features,
+                status=_dataset(fh, "status", np.int8, grid),
+                flags=_dataset(fh, "flags", np.int32, grid),
+                plate_model=_dataset(fh, "plate_model", np.int8, grid),
+                diagnostics=diag,
+                sweep=_json_attr(fh, "sweep", None, dict),
+                provenance=_json_attr(fh, "provenance", "{}", dict),
+                complete=bool(fh.attrs.get("complete", False)),
+                flag_names=tuple(_json_attr(fh, "flag_names", "[]", list)),
+                plate_model_names=tuple(_json_attr(fh, "plate_model_names", "[]", list))
+                or PLATE_MODEL_NAMES,
+                path=path,
+            )
+
+    def diameter_index(self, diameter: float, rel_tol: float = 0.01) -> int:
+        """Index of ``diameter`` (m) on the diameter axis.
+
+        Raises
+        ------
+        TableError
+            When no table diameter lies within ``rel_tol`` of it (the table is not interpolated
+            across sphere sizes: that would be extrapolating the physics).
+        """
+        d = self.axes["diameter_m"]
+        i = int(np.argmin(np.abs(d - diameter)))
+        if not np.isfinite(diameter) or abs(d[i] - diameter) > rel_tol * d[i]:
+            listed = ", ".join(f"{x * 1e3:.4g}" for x in d)
+            raise TableError("diameter_m", f"{diameter!r} m is not a sphere size of this table "
+                             f"(table diameters: {listed} mm)")
+        return i
+
+    def status_counts(self) -> dict[str, int]:
+        values, counts = np.unique(self.status, return_counts=True)
+        return {STATUS_NAMES.get(int(v), str(int(v))): int(c) for v, c in zip(values, counts,
+                                                                              strict=True)}
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready description: axes (values and ranges), point counts, provenance."""
+        models, counts = np.unique(self.plate_model, return_counts=True)
+        return {
+            "id": self.table_id,
+            "path": str(self.path) if self.path else None,
+            "family": self.family,
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "complete": self.complete,
+            "shape": list(self.shape),
+            "n_points": int(np.prod(self.shape)),
+            "axes": {a: {"values": self.axes[a].tolist(), "min": float(self.axes[a][0]),
+                         "max": float(self.axes[a][-1]), "n": int(self.axes[a].size)}
+                     for a in AXES},
+            "features": [*SCALAR_FEATURES, *SECONDARY_FEATURES],
+            "status_counts": self.status_counts(),
+            "plate_models": {self.plate_model_names[int(m)] if 0 <= m < len(self.plate_model_names)
+                             else str(int(m)): int(c) for m, c in zip(models, counts, strict=True)},
+            "sweep": self.sweep,
+            "provenance": self.provenance,
+        }
+
+
+# Reading and checking a table file ---------------------------------------------------------------
+
+
+def _read(fh: h5py.File, name: str, dtype: Any) -> np.ndarray:
+    """Dataset ``name`` as an array of ``dtype`` (None: as stored); TableError naming it when it
+    is absent or cannot be read so."""
+    obj = fh.get(name)
+    if not isinstance(obj, h5py.Dataset):
+        raise TableError(name, "missing from the table file (not a complete solitonde table; "
+                         "rebuild it with `solitonde table build`)")
+    try:
+        return np.asarray(obj[...], dtype=dtype)
+    except (TypeError, ValueError, OSError) as exc:
+        kind = "numbers" if dtype is None else np.dtype(dtype).name
+        raise TableError(name, f"cannot be read as {kind} ({exc})") from None
+
+
+def _dataset(fh: h5py.File, name: str, dtype: Any, grid: tuple[int, ...],
+             trailing: bool = False) -> np.ndarray:
+    """Dataset ``name`` as an array of ``dtype`` (None: as stored) with shape ``grid`` (plus one
+    trailing axis when ``trailing``); TableError naming it when absent or of another shape."""
+    data = _read(fh, name, dtype)
+    if data.shape[:3] != grid or data.ndim != (4 if trailing else 3):
+        want = f"{grid} + (K,)" if trailing else str(grid)
+        raise TableError(name, f"has shape {data.shape}, but the axes give {want} "
+                         "(diameter_m, thickness_m, distance_m)")
+    return data
+
+
+def _axis(fh: h5py.File, name: str) -> np.ndarray:
+    """Axis ``name``: one or more finite values, strictly increasing; sizes positive, distances
+    non-negative."""
+    field_name = f"axes/{name}"
+    values = _read(fh, field_name, float)
+    if values.ndim != 1 or values.size < 1:
+        raise TableError(field_name, f"must be a 1-D axis of at least one value, got shape "
+                         f"{values.shape}")
+    if not np.all(np.isfinite(values)):
+        raise TableError(field_name, "holds a non-finite value")
+    if np.any(np.diff(values) <= 0):
+        raise TableError(field_name, f"must be strictly increasing, got {values.tolist()}")
+    if name == "distance_m" and values[0] < 0:
+        raise TableError(field_name, f"must be >= 0 m, got {values[0]!r}")
+    if name != "distance_m" and values[0] <= 0:
+        raise TableError(field_name, f"must be > 0 m, got {values[0]!r}")
+    return values
+
+
+def _json_attr(fh: h5py.File, name: str, default: str | None, kind: type) -> Any:
+    """Root attribute ``name`` decoded from JSON, of type ``kind``; required when no default."""
+    raw = fh.attrs.get(name, default)
+    if raw is None:
+        raise TableError(name, "attribute missing from the table file (not a complete solitonde "
+                         "table; rebuild it with `solitonde table build`)")
+    try:
+        value = json.loads(raw)
+    except (TypeError, ValueError) as exc:
+        raise TableError(name, f"attribute is not JSON ({exc})") from None
+    if not isinstance(value, kind):
+        raise TableError(name, f"attribute must be a JSON {'object' if kind is dict else 'list'},"
+                         f" got {type(value).__name__}")
+    return value
