@@ -1,7 +1,9 @@
 """Numba kernels behind pulse detection: the whole search-and-measure pass of one shot.
 
 :func:`analyze` does everything that touches the samples: pre-trigger segment, baseline and noise,
-smoothing, peak search, drift, and the template fit of every pulse. It returns plain arrays
+smoothing, peak search, drift, and the template fit of every pulse. Its parts live beside it:
+:mod:`.smoothing` (prefix-sum filters), :mod:`.robust` (medians and MAD), :mod:`.pulse_fit` (the
+pulse model and its fit); the names are re-exported here. It returns plain arrays
 (:data:`HEAD` and :data:`PULSE` name their columns), so a 10,000-sample shot costs a few O(n)
 passes and no Python work per sample or per pulse; :mod:`solitonde.signal.pulses` only turns the
 arrays into objects.
@@ -10,16 +12,22 @@ arrays into objects.
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
 from numba import njit
-from numba.core import cgutils, types
-from numba.extending import intrinsic
+
+from .extrema import vargmax, vmax, vmin
+from .pulse_fit import R_MAX, R_MIN, fit_pulse, parabola_top, solve_spd, template  # noqa: F401
+from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
+from .smoothing import (  # noqa: F401
+    boxcar,
+    prefix_and_triangle,
+    prefix_sum,
+    smoother_gain,
+    triangle,
+    triangle_prefix,
+)
 
 MAX_FIT_POINTS = 64
 """A longer fit window is block-averaged down to this (the pulse is smooth on that scale)."""
-
-R_MIN, R_MAX = 1.2, 8.0
-"""Bounds on the shape exponent r of the template A exp(-|u|^r)."""
 
 MIN_PRETRIGGER = 16
 MAD_TO_SIGMA = 1.4826
@@ -47,56 +55,6 @@ HEAD = 10
 (P_TIME, P_AMP, P_BASE, P_WIDTH, P_ONSET, P_END, P_INDEX, P_METHOD, P_TRUNC, P_MERGED,
  P_LEVEL) = range(11)
 PULSE = 11
-
-
-def _fp_extremum(name: str) -> object:
-    """``llvm.maxnum``/``llvm.minnum`` with fast-math flags: a max or min reduction written with it
-    vectorises (numba's ``max`` does not). Exact for finite input, so the order is free."""
-
-    @intrinsic
-    def extremum(typingctx, a, b):  # typing context and operand types, as numba passes them
-        def codegen(context, builder, signature, args):
-            double = ir.DoubleType()
-            fn = cgutils.get_or_insert_function(
-                builder.module, ir.FunctionType(double, [double, double]), f"llvm.{name}.f64"
-            )
-            return builder.call(fn, args, fastmath=("fast",))
-
-        return types.float64(types.float64, types.float64), codegen
-
-    return extremum
-
-
-_fmax = _fp_extremum("maxnum")
-_fmin = _fp_extremum("minnum")
-
-
-@njit(cache=True)
-def vmax(a: np.ndarray) -> float:
-    """Largest value of a non-empty finite array (vectorised; equals ``a.max()``)."""
-    m = a[0]
-    for i in range(a.size):
-        m = _fmax(m, a[i])
-    return m
-
-
-@njit(cache=True)
-def vmin(a: np.ndarray) -> float:
-    """Smallest value of a non-empty finite array (vectorised; equals ``a.min()``)."""
-    m = a[0]
-    for i in range(a.size):
-        m = _fmin(m, a[i])
-    return m
-
-
-@njit(cache=True)
-def vargmax(a: np.ndarray) -> int:
-    """Index of the first largest value, as ``np.argmax`` (vectorised maximum, then a scan)."""
-    m = vmax(a)
-    i = 0
-    while a[i] != m:
-        i += 1
-    return i
 
 
 MAX_ABS_SAMPLE = 1e12
@@ -127,252 +85,6 @@ def first_invalid(x: np.ndarray) -> int:
     while (bits[i] & ABS_BITS) <= LIMIT_BITS:
         i += 1
     return i
-
-
-@njit(cache=True)
-def prefix_sum(x: np.ndarray) -> np.ndarray:
-    """``c[0] = 0``, ``c[i + 1] = c[i] + x[i]``: the running sum every moving average here uses."""
-    c = np.empty(x.size + 1)
-    c[0] = 0.0
-    acc = 0.0  # the sum stays in a register: no store-to-load round trip on the chain
-    for i in range(x.size):
-        acc += x[i]
-        c[i + 1] = acc
-    return c
-
-
-@njit(cache=True)
-def _box_from_prefix(c: np.ndarray, h: int, out: np.ndarray) -> None:
-    """Centred moving average over 2h+1 samples from the running sum ``c``; shrinks at the ends."""
-    n = out.size
-    inv = 1.0 / (2 * h + 1)
-    for i in range(min(h, n)):
-        hi = min(n, i + h + 1)
-        out[i] = c[hi] / hi
-    m = n - 2 * h
-    if m > 0:  # out[i] = (c[i + h + 1] - c[i - h]) * inv, on views so the loop vectorises
-        upper = c[2 * h + 1 : 2 * h + 1 + m]
-        lower = c[:m]
-        mid = out[h : h + m]
-        for k in range(m):
-            mid[k] = (upper[k] - lower[k]) * inv
-    for i in range(max(n - h, h), n):
-        lo = i - h
-        out[i] = (c[n] - c[lo]) / (n - lo)
-
-
-@njit(cache=True)
-def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
-    """Centred moving average over 2h+1 samples by a running (prefix) sum; shrinks at the ends."""
-    n = x.size
-    c[0] = 0.0
-    acc = 0.0
-    for i in range(n):
-        acc += x[i]
-        c[i + 1] = acc
-    _box_from_prefix(c, h, out)
-
-
-@njit(cache=True)
-def boxcar(x: np.ndarray, h: int) -> np.ndarray:
-    """Centred moving average over 2h+1 samples (zero phase); the window shrinks at the ends."""
-    out = np.empty(x.size)
-    if h < 1:
-        out[:] = x
-        return out
-    _box_into(x, h, np.empty(x.size + 1), out)
-    return out
-
-
-@njit(cache=True)
-def triangle(x: np.ndarray, h: int) -> np.ndarray:
-    """Two boxcars in a row: a zero-phase triangular smoother of half-width about 2h."""
-    out = np.empty(x.size)
-    if h < 1:
-        out[:] = x
-        return out
-    c = np.empty(x.size + 1)
-    mid = np.empty(x.size)
-    _box_into(x, h, c, mid)
-    _box_into(mid, h, c, out)
-    return out
-
-
-@njit(cache=True)
-def prefix_and_triangle(x: np.ndarray, h: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(prefix_sum(x), triangle(x, h))``, bit for bit, with the two running sums in one loop.
-
-    A running sum is a chain of dependent additions; two independent chains side by side cost
-    about what one does. The first box's value at ``j`` is ready once the first sum reaches
-    ``j + h + 1``, so the second sum trails the first by ``h + 1`` samples.
-    """
-    n = x.size
-    if h < 1 or n <= 2 * h:
-        c = prefix_sum(x)
-        return c, triangle_prefix(x, c, h, 1.0)
-    c = np.empty(n + 1)
-    c2 = np.empty(n + 1)
-    c[0] = 0.0
-    c2[0] = 0.0
-    inv = 1.0 / (2 * h + 1)
-    acc = 0.0
-    acc2 = 0.0
-    for i in range(h):
-        acc += x[i]
-        c[i + 1] = acc
-    for i in range(h, 2 * h):  # box values that shrink at the start
-        acc += x[i]
-        c[i + 1] = acc
-        acc2 += acc / (i + 1)
-        c2[i - h + 1] = acc2
-    lower = c[: n - 2 * h]
-    for k in range(n - 2 * h):  # sample i = k + 2h; box value at j = k + h
-        acc += x[k + 2 * h]
-        c[k + 2 * h + 1] = acc
-        acc2 += (acc - lower[k]) * inv
-        c2[k + h + 1] = acc2
-    for j in range(n - h, n):  # and at the end
-        lo = j - h
-        acc2 += (acc - c[lo]) / (n - lo)
-        c2[j + 1] = acc2
-    out = np.empty(n)
-    _box_from_prefix(c2, h, out)
-    return c, out
-
-
-@njit(cache=True)
-def triangle_prefix(x: np.ndarray, c: np.ndarray, h: int, sign: float) -> np.ndarray:
-    """``triangle(sign * x, h)`` from ``c = prefix_sum(x)``, bit for bit, with ``sign`` = +-1.
-
-    Negation commutes with rounding, so the running sum of ``-x`` is ``-c`` and every smoothed
-    value just changes sign: one running sum of the record serves every width and polarity.
-    """
-    n = x.size
-    out = np.empty(n)
-    if h < 1:
-        for i in range(n):
-            out[i] = sign * x[i]
-        return out
-    mid = np.empty(n)
-    _box_from_prefix(c, h, mid)
-    if sign < 0:
-        for i in range(n):
-            mid[i] = -mid[i]
-    _box_into(mid, h, np.empty(n + 1), out)
-    return out
-
-
-@njit(cache=True)
-def smoother_gain(h: int) -> float:
-    """Standard deviation of white noise after :func:`triangle` with half-width ``h``."""
-    if h < 1:
-        return 1.0
-    width = 2 * h + 1
-    acc = 0.0
-    for k in range(-2 * h, 2 * h + 1):
-        tap = width - abs(k)
-        acc += tap * tap
-    return np.sqrt(acc) / width**2
-
-
-SELECT_ROUNDS = 64
-"""Partition rounds after which :func:`select` sorts what is left (a median-of-three killer
-input; noise never gets there: about 2 log2(n) rounds are typical)."""
-
-
-@njit(cache=True)
-def _partition(a: np.ndarray, lo: int, hi: int, pivot: float, inclusive: bool) -> int:
-    """Moves the values of ``a[lo:hi]`` below ``pivot`` (or not above it, when ``inclusive``) to
-    the front of that range and returns where they end. Branch-free: on noise every comparison
-    is a coin toss, which would cost a mispredicted branch per element."""
-    i = lo
-    for j in range(lo, hi):
-        v = a[j]
-        t = a[i]
-        small = v <= pivot if inclusive else v < pivot
-        a[j] = t if small else v
-        a[i] = v if small else t
-        i += small
-    return i
-
-
-@njit(cache=True)
-def select(a: np.ndarray, k: int) -> float:
-    """The ``k``-th smallest value of ``a`` (0-based), leaving ``a`` partially reordered so that
-    ``a[:k]`` holds the ``k`` smallest values.
-
-    Quickselect with a median-of-three pivot, three-way (values equal to the pivot are set aside
-    in one step, so a quantised or noise-free flat trace costs a pass, not a pass per value).
-    numba's ``np.median`` spends most of its time on mispredicted branches here.
-    """
-    lo, hi = 0, a.size  # the k-th value lies in a[lo:hi]
-    for _ in range(SELECT_ROUNDS):
-        if hi - lo <= 1:
-            return a[k]
-        x, y, z = a[lo], a[(lo + hi) >> 1], a[hi - 1]
-        pivot = max(min(x, y), min(max(x, y), z))  # the median of the three
-        i = _partition(a, lo, hi, pivot, False)
-        if k < i:
-            hi = i
-            continue
-        j = _partition(a, i, hi, pivot, True)  # a[i:j] == pivot
-        if k < j:
-            return pivot
-        lo = j
-    a[lo:hi].sort()
-    return a[k]
-
-
-@njit(cache=True)
-def median_inplace(a: np.ndarray) -> float:
-    """Median of a non-empty finite array, equal to ``np.median`` (the mean of the two middle
-    values for an even size); reorders ``a``."""
-    n = a.size
-    k = n // 2
-    upper = select(a, k)
-    if n % 2:
-        return upper
-    lower = a[0]  # after select, a[:k] holds the k smallest values
-    for i in range(1, k):
-        lower = _fmax(lower, a[i])
-    return 0.5 * (lower + upper)
-
-
-@njit(cache=True)
-def median(x: np.ndarray) -> float:
-    """:func:`median_inplace` of a copy: ``np.median(x)`` for finite ``x``, faster on noise."""
-    return median_inplace(x.copy())
-
-
-MAD_POINTS = 512
-"""The MAD is taken over at most this many evenly spread samples (5 % precision on the noise,
-which sets thresholds and the reported SNR; every pulse's own baseline uses all samples)."""
-
-
-@njit(cache=True)
-def detrended_mad(x: np.ndarray) -> float:
-    """MAD of ``x`` about its least-squares line, so slow drift does not count as noise."""
-    n = x.size
-    tm = 0.5 * (n - 1)
-    sx = 0.0
-    sxx = 0.0
-    sy = 0.0
-    for i in range(n):
-        sy += x[i]
-        sx += (i - tm) * x[i]
-        sxx += (i - tm) * (i - tm)
-    slope = sx / sxx if sxx > 0 else 0.0
-    mean = sy / n
-    stride = (n + MAD_POINTS - 1) // MAD_POINTS
-    m = (n + stride - 1) // stride
-    r = np.empty(m)
-    for k in range(m):
-        i = k * stride
-        r[k] = x[i] - mean - slope * (i - tm)
-    med = median_inplace(r)
-    for k in range(m):
-        r[k] = abs(r[k] - med)
-    return median_inplace(r)
 
 
 SKIP_BLOCK = 16
@@ -584,183 +296,6 @@ def block_average(t: np.ndarray, y: np.ndarray, m: int) -> tuple[np.ndarray, np.
         tb[j] = st / q
         yb[j] = sy / q
     return tb, yb
-
-
-@njit(cache=True)
-def template(t: np.ndarray, p: np.ndarray, skew: float, f: np.ndarray, jac: np.ndarray) -> None:
-    """Skewed super-Gaussian and its Jacobian in (A, tc, w, r).
-
-    ``A exp(-|u|^r)`` with ``u = (t - tc) / (w (1 + skew sign(t - tc)))``: the peak is at ``tc``
-    whatever the skew, and the half-widths on the two sides differ by the factor
-    ``(1 + skew) / (1 - skew)``.
-    """
-    amp, tc, w, r = p[0], p[1], p[2], p[3]
-    nfree = jac.shape[1]
-    for i in range(t.size):
-        d = t[i] - tc
-        side = 1.0 + skew if d > 0 else 1.0 - skew
-        ws = w * side
-        a = abs(d) / ws
-        if a > 0:
-            la = np.log(a)
-            g = np.exp(r * la)
-            e = np.exp(-g)
-            f[i] = amp * e
-            jac[i, 0] = e
-            jac[i, 1] = amp * e * r * g / a / ws * (1.0 if d > 0 else -1.0)
-            jac[i, 2] = amp * e * r * g / w
-            if nfree > 3:
-                jac[i, 3] = -amp * e * g * la
-        else:
-            f[i] = amp
-            jac[i, 0] = 1.0
-            for k in range(1, nfree):
-                jac[i, k] = 0.0
-
-
-@njit(cache=True)
-def solve_spd(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> bool:
-    """Solves ``a x = b`` for a small symmetric positive definite ``a`` by Cholesky, overwriting
-    ``a`` with its factor; False (``x`` undefined) when ``a`` is not positive definite. The LM
-    step's 3x3 or 4x4 system: a LAPACK call costs ten times the arithmetic here."""
-    m = a.shape[0]
-    for i in range(m):
-        for j in range(i + 1):
-            acc = a[i, j]
-            for k in range(j):
-                acc -= a[i, k] * a[j, k]
-            if i == j:
-                if not acc > 0.0:
-                    return False
-                a[i, i] = np.sqrt(acc)
-            else:
-                a[i, j] = acc / a[j, j]
-    for i in range(m):
-        acc = b[i]
-        for k in range(i):
-            acc -= a[i, k] * x[k]
-        x[i] = acc / a[i, i]
-    for i in range(m - 1, -1, -1):
-        acc = x[i]
-        for k in range(i + 1, m):
-            acc -= a[k, i] * x[k]
-        x[i] = acc / a[i, i]
-    return True
-
-
-@njit(cache=True)
-def fit_pulse(
-    t: np.ndarray, y: np.ndarray, p0: np.ndarray, skew: float, nfree: int, max_iter: int
-) -> tuple[np.ndarray, bool]:
-    """Levenberg-Marquardt fit of the skewed super-Gaussian to (t, y): (params, converged).
-
-    Parameters are amplitude, peak time, width and shape exponent r; with ``nfree = 3`` the
-    exponent stays at ``p0[3]``. ``t`` should be centred and in sample units and ``y`` scaled to
-    the peak, so the normal equations are well conditioned. The whole pulse informs the peak time
-    (both flanks), which makes it far less noisy than a parabola through the top.
-    """
-    n = t.size
-    p = p0.copy()
-    f = np.empty(n)
-    jac = np.empty((n, nfree))
-    template(t, p, skew, f, jac)
-    cost = 0.0
-    for i in range(n):
-        cost += (y[i] - f[i]) ** 2
-    lam = 1e-3
-    trial = p.copy()
-    ft = np.empty(n)
-    jt = np.empty((n, nfree))
-    jtj = np.empty((nfree, nfree))
-    g = np.empty(nfree)
-    a = np.empty((nfree, nfree))
-    step = np.empty(nfree)
-    tmin, tmax = t[0], t[n - 1]
-    for _ in range(max_iter):
-        for k in range(nfree):
-            acc = 0.0
-            for i in range(n):
-                acc += jac[i, k] * (y[i] - f[i])
-            g[k] = acc
-            for q in range(k, nfree):
-                acc = 0.0
-                for i in range(n):
-                    acc += jac[i, k] * jac[i, q]
-                jtj[k, q] = acc
-                jtj[q, k] = acc
-        improved = False
-        for _inner in range(8):
-            a[:, :] = jtj
-            for k in range(nfree):
-                a[k, k] += lam * (jtj[k, k] + 1e-12)
-            if not solve_spd(a, g, step):
-                lam *= 10.0
-                continue
-            for k in range(nfree):
-                trial[k] = p[k] + step[k]
-            trial[1] = min(max(trial[1], tmin), tmax)
-            trial[2] = max(trial[2], 0.25)
-            trial[3] = min(max(trial[3], R_MIN), R_MAX)
-            template(t, trial, skew, ft, jt)
-            c = 0.0
-            for i in range(n):
-                c += (y[i] - ft[i]) ** 2
-            if c <= cost:
-                rel = abs(step[1]) + abs(step[0]) / max(abs(p[0]), 1e-12)
-                p[:] = trial
-                f[:] = ft
-                jac[:, :] = jt
-                small = cost - c <= 1e-10 * cost + 1e-300
-                cost = c
-                lam = max(lam * 0.3, 1e-9)
-                improved = True
-                if rel < 1e-7 or small:
-                    return p, True
-                break
-            lam *= 10.0
-        if not improved:
-            return p, True  # no descent direction left: at a (local) minimum
-    return p, False
-
-
-@njit(cache=True)
-def parabola_top(tb: np.ndarray, yb: np.ndarray) -> tuple[float, float, bool]:
-    """Least-squares parabola through the top 30 % of (tb, yb): (peak time, peak value, ok)."""
-    top = yb.max()
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    s4 = 0.0
-    r0 = 0.0
-    r1 = 0.0
-    r2 = 0.0
-    lo = np.inf
-    hi = -np.inf
-    count = 0
-    for i in range(tb.size):
-        if yb[i] > 0.7 * top:
-            u = tb[i]
-            s0 += 1
-            s1 += u
-            s2 += u * u
-            s3 += u * u * u
-            s4 += u * u * u * u
-            r0 += yb[i]
-            r1 += u * yb[i]
-            r2 += u * u * yb[i]
-            lo = min(lo, u)
-            hi = max(hi, u)
-            count += 1
-    if count >= 3:
-        m = np.array([[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]])
-        if abs(np.linalg.det(m)) > 1e-12 * max(s4, 1.0) ** 3:
-            c0, c1, c2 = np.linalg.solve(m, np.array([r0, r1, r2]))
-            if c2 < 0:
-                tc = -c1 / (2 * c2)
-                if lo <= tc <= hi:
-                    return tc, c0 - c1 * c1 / (4 * c2), True
-    return 0.0, 1.0, False
 
 
 @njit(cache=True)

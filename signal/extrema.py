@@ -1,0 +1,62 @@
+"""Vectorised extrema of float arrays: ``llvm.maxnum``/``llvm.minnum`` as numba intrinsics, and the
+largest, smallest and first-largest of an array with them (numba's own ``max`` does not
+vectorise). Used by :mod:`.kernels` and :mod:`.robust`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from llvmlite import ir
+from numba import njit
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+
+def _fp_extremum(name: str) -> object:
+    """``llvm.maxnum``/``llvm.minnum`` with fast-math flags: a max or min reduction written with it
+    vectorises (numba's ``max`` does not). Exact for finite input, so the order is free."""
+
+    @intrinsic
+    def extremum(typingctx, a, b):  # typing context and operand types, as numba passes them
+        def codegen(context, builder, signature, args):
+            double = ir.DoubleType()
+            fn = cgutils.get_or_insert_function(
+                builder.module, ir.FunctionType(double, [double, double]), f"llvm.{name}.f64"
+            )
+            return builder.call(fn, args, fastmath=("fast",))
+
+        return types.float64(types.float64, types.float64), codegen
+
+    return extremum
+
+
+_fmax = _fp_extremum("maxnum")
+_fmin = _fp_extremum("minnum")
+
+
+@njit(cache=True)
+def vmax(a: np.ndarray) -> float:
+    """Largest value of a non-empty finite array (vectorised; equals ``a.max()``)."""
+    m = a[0]
+    for i in range(a.size):
+        m = _fmax(m, a[i])
+    return m
+
+
+@njit(cache=True)
+def vmin(a: np.ndarray) -> float:
+    """Smallest value of a non-empty finite array (vectorised; equals ``a.min()``)."""
+    m = a[0]
+    for i in range(a.size):
+        m = _fmin(m, a[i])
+    return m
+
+
+@njit(cache=True)
+def vargmax(a: np.ndarray) -> int:
+    """Index of the first largest value, as ``np.argmax`` (vectorised maximum, then a scan)."""
+    m = vmax(a)
+    i = 0
+    while a[i] != m:
+        i += 1
+    return i
