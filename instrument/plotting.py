@@ -1,4 +1,4 @@
-"""Figures as PNG bytes: a sensor trace with its detected pulses marked.
+"""Figures as PNG bytes: a sensor trace with its detected pulses marked, a plate's maps.
 
 Uses matplotlib's object API on the Agg canvas (no pyplot state), so it is safe to call from the
 service's worker threads; a lock still serialises drawing because some matplotlib caches
@@ -60,36 +60,63 @@ def trace_png(
         ``reflected_time_s``/``reflected_peak_N`` are marked, secondary pulses too when listed,
         and ``tof_s``, ``arr`` and ``flags`` go in the legend.
     """
+    with _LOCK:
+        fig = trace_figure(t0, dt, samples, features, units=units, title=title,
+                           width_px=width_px, height_px=height_px)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+    return buf.getvalue()
+
+
+def trace_figure(t0: float, dt: float, samples: np.ndarray,
+                 features: Mapping[str, Any] | None = None, *, units: str = "N",
+                 title: str = "", width_px: int = 1000, height_px: int = 450) -> Figure:
+    """The figure :func:`trace_png` renders. The legend and the TOF/ARR summary stand to the right
+    of the axes, so they never cover a marked peak, whatever the pulse shape."""
     y = np.asarray(samples, dtype=float)
     t = t0 + dt * np.arange(y.size)
     tt, yy = _decimate(t, y)
     scale, unit = _time_scale(t[-1] - t[0] if y.size > 1 else dt)
     features = dict(features or {})
-    with _LOCK:
-        fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
-        FigureCanvasAgg(fig)
-        ax = fig.add_subplot(1, 1, 1)
-        ax.plot(tt * scale, yy, lw=0.8, color="0.25", label="sensor")
-        _mark(ax, features, "incident", "tab:blue", scale, unit)
-        _mark(ax, features, "reflected", "tab:red", scale, unit)
-        for k, (ts, amp) in enumerate(_secondary(features)):
-            ax.axvline(ts * scale, color="tab:green", lw=0.8, ls=":",
-                       label="secondary" if k == 0 else None)
-            if amp is not None:
-                ax.plot([ts * scale], [amp], "v", color="tab:green", ms=5)
-        ax.set_xlabel(f"time ({unit})")
-        ax.set_ylabel(f"sensor ({units})")
-        ax.set_title(title or "sensor trace", fontsize=10)
-        note = _summary(features)
-        if note:
-            ax.text(0.99, 0.97, note, transform=ax.transAxes, ha="right", va="top", fontsize=8,
-                    family="monospace", bbox={"fc": "white", "ec": "0.8", "alpha": 0.9})
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper left", fontsize=8)
-        fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-    return buf.getvalue()
+    fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.plot(tt * scale, yy, lw=0.8, color="0.25", label="sensor")
+    _mark(ax, features, "incident", "tab:blue", scale, unit)
+    _mark(ax, features, "reflected", "tab:red", scale, unit)
+    for k, (ts, amp) in enumerate(_secondary(features)):
+        ax.axvline(ts * scale, color="tab:green", lw=0.8, ls=":",
+                   label="secondary" if k == 0 else None)
+        if amp is not None:
+            ax.plot([ts * scale], [amp], "v", color="tab:green", ms=5)
+    ax.set_xlabel(f"time ({unit})")
+    ax.set_ylabel(f"sensor ({units})")
+    ax.set_title(title or "sensor trace", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)
+    note = _summary(features)
+    if note:
+        ax.text(1.01, 0.45, note, transform=ax.transAxes, ha="left", va="top", fontsize=8,
+                family="monospace", bbox={"fc": "white", "ec": "0.8", "alpha": 0.9})
+    fig.subplots_adjust(left=0.08, right=0.78, bottom=0.13, top=0.9)
+    return fig
+
+
+def spread_labels(ax: Any, texts: Sequence[Any], step_pt: float = 8.0, tries: int = 12) -> None:
+    """Move text labels (``ax.annotate`` with offset points) apart until none overlaps another:
+    each, in turn, steps down (then up) by ``step_pt`` from its place while it overlaps one
+    already placed."""
+    renderer = ax.figure.canvas.get_renderer()
+    placed: list[Any] = []
+    for text in texts:
+        x0, y0 = text.xyann
+        for k in range(tries + 1):
+            dy = (k + 1) // 2 * step_pt * (-1 if k % 2 else 1)
+            text.xyann = (x0, y0 + dy)
+            box = text.get_window_extent(renderer).expanded(1.02, 1.05)
+            if not any(box.overlaps(other) for other in placed):
+                break
+        placed.append(text.get_window_extent(renderer))
 
 
 def _time_scale(span: float) -> tuple[float, str]:
@@ -162,7 +189,8 @@ _MAP_PARAMETERS = (("thickness_m", "plate thickness", "thickness", "viridis"),
                    ("distance_m", "distance to the nearest support", "distance", "plasma"))
 
 
-def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: int = 560) -> bytes:
+def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
+               height_px: int = 560) -> Figure:
     """Thickness and distance-to-support maps of a plate (``instrument.plate_map.build``).
 
     Each position is a marker coloured by its median (mm, colour bar beside each panel): filled
@@ -176,95 +204,107 @@ def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: in
                  if p.get("x_m") is not None and p.get("y_m") is not None]
     size = plate_map.get("plate_size_m")
     support = plate_map.get("support")
-    with _LOCK:
-        fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
-        FigureCanvasAgg(fig)
-        axes = fig.subplots(1, 2)
-        xs = [p["x_m"] * 1e3 for p in positions]
-        ys = [p["y_m"] * 1e3 for p in positions]
-        if size:  # a margin, so that an edge and positions on it stay in sight
-            mx, my = 0.04 * size[0] * 1e3, 0.04 * size[1] * 1e3
-            xlim, ylim = (-mx, size[0] * 1e3 + mx), (-my, size[1] * 1e3 + my)
-        elif positions:
-            pad = max(20.0, 0.1 * max(np.ptp(xs), np.ptp(ys)))
-            xlim = (min(xs) - pad, max(xs) + pad)
-            ylim = (min(ys) - pad, max(ys) + pad)
-        else:
-            xlim = ylim = (0.0, 1.0)
-        for ax, (key, label, short, cmap) in zip(axes, _MAP_PARAMETERS, strict=True):
-            values = []
-            for p in positions:
-                est = p.get(key) or {}
-                status = est.get("status")
-                if status == "constrained":
-                    values.append(est["median"] * 1e3)
-                elif status == "lower_bound_only" and est.get("ci95"):
-                    values.append(est["ci95"][0] * 1e3)
-                elif status == "upper_bound_only" and est.get("ci95"):
-                    values.append(est["ci95"][1] * 1e3)
-                else:
-                    values.append(np.nan)
-            finite = [v for v in values if np.isfinite(v)]
-            vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
-            if vmax - vmin < 1e-9:
-                vmin, vmax = vmin - 0.5, vmax + 0.5
-            from matplotlib import colormaps
-            from matplotlib.cm import ScalarMappable
-            from matplotlib.colors import Normalize
+    fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2)
+    xs = [p["x_m"] * 1e3 for p in positions]
+    ys = [p["y_m"] * 1e3 for p in positions]
+    if size:  # a margin, so that an edge and positions on it stay in sight
+        mx, my = 0.04 * size[0] * 1e3, 0.04 * size[1] * 1e3
+        xlim, ylim = (-mx, size[0] * 1e3 + mx), (-my, size[1] * 1e3 + my)
+    elif positions:
+        pad = max(20.0, 0.1 * max(np.ptp(xs), np.ptp(ys)))
+        xlim = (min(xs) - pad, max(xs) + pad)
+        ylim = (min(ys) - pad, max(ys) + pad)
+    else:
+        xlim = ylim = (0.0, 1.0)
+    labels_of: list[tuple[Any, list[Any]]] = []
+    for ax, (key, label, short, cmap) in zip(axes, _MAP_PARAMETERS, strict=True):
+        values = []
+        for p in positions:
+            est = p.get(key) or {}
+            status = est.get("status")
+            if status == "constrained":
+                values.append(est["median"] * 1e3)
+            elif status == "lower_bound_only" and est.get("ci95"):
+                values.append(est["ci95"][0] * 1e3)
+            elif status == "upper_bound_only" and est.get("ci95"):
+                values.append(est["ci95"][1] * 1e3)
+            else:
+                values.append(np.nan)
+        finite = [v for v in values if np.isfinite(v)]
+        vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
+        if vmax - vmin < 1e-9:
+            vmin, vmax = vmin - 0.5, vmax + 0.5
+        from matplotlib import colormaps
+        from matplotlib.cm import ScalarMappable
+        from matplotlib.colors import Normalize
 
-            mappable = ScalarMappable(Normalize(vmin, vmax), colormaps[cmap])
-            for p, v, x, y in zip(positions, values, xs, ys, strict=True):
-                status = (p.get(key) or {}).get("status")
-                if not np.isfinite(v):
-                    ax.plot(x, y, "x", color="0.5", ms=9, mew=2)
-                    continue
-                colour = mappable.to_rgba(v)
-                if status == "constrained":
-                    ax.scatter([x], [y], color=[colour], marker="o", s=160, edgecolors="black",
-                               linewidths=1.0, zorder=3)
-                else:  # hollow: the colour is the edge's
-                    ax.scatter([x], [y], marker="^" if status == "lower_bound_only" else "v",
-                               s=170, facecolors="none", edgecolors=[colour], linewidths=2.5,
-                               zorder=3)
-            if finite:
-                bar = fig.colorbar(mappable, ax=ax)
-                bar.set_label(f"{short}, mm")
-            if size:
-                ax.add_patch(_outline(size))
-            if support:
-                _draw_support(ax, support, xlim, ylim)
-            for p, x, y in zip(positions, xs, ys, strict=True):
-                if p.get("position"):
-                    ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
-                                xytext=(7, 7), fontsize=7, color="0.25")
-            ax.set_xlim(*xlim)
-            ax.set_ylim(*ylim)
-            ax.set_aspect("equal", adjustable="box")
-            ax.set_xlabel("x on the plate, mm")
-            ax.set_ylabel("y on the plate, mm")
-            ax.set_title(label)
-        handles = [Line2D([], [], marker="o", ls="", color="0.3", label="median (constrained)"),
-                   Line2D([], [], marker="^", ls="", mfc="none", color="0.3",
-                          label="at least (95 % bound)"),
-                   Line2D([], [], marker="v", ls="", mfc="none", color="0.3",
-                          label="at most (95 % bound)"),
-                   Line2D([], [], marker="x", ls="", color="0.5", label="no answer")]
+        mappable = ScalarMappable(Normalize(vmin, vmax), colormaps[cmap])
+        for p, v, x, y in zip(positions, values, xs, ys, strict=True):
+            status = (p.get(key) or {}).get("status")
+            if not np.isfinite(v):
+                ax.plot(x, y, "x", color="0.5", ms=9, mew=2)
+                continue
+            colour = mappable.to_rgba(v)
+            if status == "constrained":
+                ax.scatter([x], [y], color=[colour], marker="o", s=160, edgecolors="black",
+                           linewidths=1.0, zorder=3)
+            else:  # hollow: the colour is the edge's, over a dark outline that a pale
+                # colour (the map's light end) still stands out against
+                marker = "^" if status == "lower_bound_only" else "v"
+                ax.scatter([x], [y], marker=marker, s=170, facecolors="none",
+                           edgecolors="black", linewidths=4.0, zorder=3)
+                ax.scatter([x], [y], marker=marker, s=170, facecolors="none",
+                           edgecolors=[colour], linewidths=2.2, zorder=4)
+        if finite:
+            bar = fig.colorbar(mappable, ax=ax)
+            bar.set_label(f"{short}, mm")
+        if size:
+            ax.add_patch(_outline(size))
         if support:
-            handles.append(Line2D([], [], ls="--", color="crimson", label="located support"))
-        fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False,
-                   fontsize=8)
-        title = f"plate {plate_map.get('plate_id')}: {len(positions)} positions"
-        if support:
-            lo, hi = support["ci95_offset_m"]
-            title += (f"; support at {support['normal_angle_deg']:.1f} deg, offset "
-                      f"{support['offset_m'] * 1e3:.1f} mm (95 % {_mm(lo)}..{_mm(hi)} mm)")
-        elif plate_map.get("support_reason"):
-            title += f"; support not located: {plate_map['support_reason'][:70]}"
-        fig.suptitle(title, fontsize=10)
-        fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=0.88, wspace=0.25)
+            _draw_support(ax, support, xlim, ylim)
+        labels = [ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
+                              xytext=(7, 7), fontsize=7, color="0.25")
+                  for p, x, y in zip(positions, xs, ys, strict=True) if p.get("position")]
+        ax.set_xlim(*xlim)
+        ax.set_ylim(*ylim)
+        ax.set_aspect("equal", adjustable="box")
+        labels_of.append((ax, labels))
+        ax.set_xlabel("x on the plate, mm")
+        ax.set_ylabel("y on the plate, mm")
+        ax.set_title(label)
+    handles = [Line2D([], [], marker="o", ls="", color="0.3", label="median (constrained)"),
+               Line2D([], [], marker="^", ls="", mfc="none", color="0.3",
+                      label="at least (95 % bound)"),
+               Line2D([], [], marker="v", ls="", mfc="none", color="0.3",
+                      label="at most (95 % bound)"),
+               Line2D([], [], marker="x", ls="", color="0.5", label="no answer")]
+    if support:
+        handles.append(Line2D([], [], ls="--", color="crimson", label="located support"))
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False,
+               fontsize=8)
+    title = f"plate {plate_map.get('plate_id')}: {len(positions)} positions"
+    if support:
+        lo, hi = support["ci95_offset_m"]
+        title += (f"; support at {support['normal_angle_deg']:.1f} deg, offset "
+                  f"{support['offset_m'] * 1e3:.1f} mm (95 % {_mm(lo)}..{_mm(hi)} mm)")
+    elif plate_map.get("support_reason"):
+        title += f"; support not located: {plate_map['support_reason'][:70]}"
+    fig.suptitle(title, fontsize=10)
+    fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=0.88, wspace=0.25)
+    for ax, labels in labels_of:  # after the layout, which moves the axes
+        spread_labels(ax, labels)
+    return fig
+
+
+def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: int = 560) -> bytes:
+    """:func:`map_figure` as PNG bytes."""
+    with _LOCK:
+        fig = map_figure(plate_map, width_px=width_px, height_px=height_px)
         buf = io.BytesIO()
         fig.savefig(buf, format="png")
-        return buf.getvalue()
+    return buf.getvalue()
 
 
 def _mm(value: float | None) -> str:

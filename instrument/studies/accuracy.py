@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from solitonde.instrument.plotting import spread_labels
 from solitonde.instrument.studies.figures import new_figure, save_csv, save_json, save_png
 from solitonde.model import greens, sem_tier
 from solitonde.model.scene import Scene, scene_from_dict
@@ -289,6 +290,7 @@ def write_outputs(result: dict[str, Any], out: Path) -> None:
     save_json(result, out / "accuracy.json")
     fig, axes = new_figure(2)
     colours = {"infinite": "tab:blue", "sem": "tab:red", "greens": "tab:green"}
+    labelled: list[tuple[Any, list[Any]]] = []
     for ax, scene in zip(axes, SCENES_M, strict=True):
         g = frame[frame["scene"] == scene]
         for tier, h in g.groupby("tier"):
@@ -300,18 +302,22 @@ def write_outputs(result: dict[str, Any], out: Path) -> None:
         front = g[g["pareto"]].assign(cost=lambda d: d["wall_warm_s"].fillna(d["wall_s"]))
         front = front.sort_values("cost")
         ax.plot(front["cost"], front["error"].clip(lower=1e-5), "k:", lw=1, label="Pareto front")
-        for row in g.itertuples():
-            ax.annotate(row.config.replace("sem ", "").replace("greens ", "")
-                        .replace("resolved ", ""),
-                        (row.wall_s, max(row.error, 1e-5)), fontsize=5, alpha=0.7)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        labels = [ax.annotate(row.config.replace("sem ", "").replace("greens ", "")
+                              .replace("resolved ", ""), (row.wall_s, max(row.error, 1e-5)),
+                              textcoords="offset points", xytext=(4, 2), fontsize=6, alpha=0.8)
+                  for row in g.sort_values("error").itertuples()]
+        labelled.append((ax, labels))
         ax.set_xlabel("wall time per shot (s)")
-        ax.set_ylabel("max(TOF, ARR) relative error")
+        ax.set_ylabel("max(TOF, ARR) relative error (-)")
         ax.set_title(f"{scene.replace('_', ' ')}, L = {SCENES_M[scene] * 1e3:g} mm", fontsize=9)
         ax.legend(fontsize=6)
     fig.suptitle(f"What accuracy costs (D = 9.53 mm, t = 2.29 mm; reference "
                  f"{result['reference']['config']})", fontsize=9)
+    fig.tight_layout()
+    for ax, labels in labelled:  # config names of nearby runs would print over one another
+        spread_labels(ax, labels)
     save_png(fig, out / "accuracy_pareto.png")
 
 

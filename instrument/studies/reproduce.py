@@ -415,13 +415,13 @@ def fig4(out: Path, grid_theory: pd.DataFrame, points: int) -> None:
     frame = pd.DataFrame({"lambda": lam, "e": e, "tau_c": tau})
     fig, ax = new_figure()
     ax.plot(lam, e, color="tab:blue", label="restitution e")
-    ax.set_xlabel("inelasticity parameter lambda")
-    ax.set_ylabel("e", color="tab:blue")
+    ax.set_xlabel("inelasticity parameter lambda (-)")
+    ax.set_ylabel("coefficient of restitution e (-)", color="tab:blue")
     ax.plot(grid_theory["lambda"], grid_theory["e"], "o", color="tab:blue", ms=4,
             label="the 3 x 3 grid")
     ax2 = ax.twinx()
     ax2.plot(lam, tau, color="tab:orange")
-    ax2.set_ylabel("dimensionless contact time tau_c", color="tab:orange")
+    ax2.set_ylabel("dimensionless contact time tau_c (-)", color="tab:orange")
     ax.set_title("Fig. 4: Zener impact, e and tau_c against lambda")
     ax.legend(loc="center right")
     save_png(fig, out / "fig4_zener.png")
@@ -441,8 +441,8 @@ def fig5(out: Path, curve: pd.DataFrame, grid_inf: pd.DataFrame, centre: pd.Data
         ax.plot(g["d_over_t"], _arr_or_bound(g), DIAMETER_MARKERS.get(d, "o"), color="tab:red",
                 label=f"chain + SEM plate (centre), D = {d * 1e3:.2f} mm")
     ax.axvline(5.0, color="0.7", ls=":")
-    ax.set_xlabel("D/t")
-    ax.set_ylabel("ARR")
+    ax.set_xlabel("D/t (-)")
+    ax.set_ylabel("ARR (-)")
     ax.set_title("Fig. 5: amplitude ratio against D/t")
     ax.legend(fontsize=7)
     save_png(fig, out / "fig5_arr.png")
@@ -472,11 +472,11 @@ def fig6(out: Path, curves: pd.DataFrame, grid_inf: pd.DataFrame, centre: pd.Dat
     for d, g in collapse[collapse["gravity"]].groupby("diameter_m"):
         b.plot(g["d_over_t"], g["tof_s"] / g["diameter_m"], "x", color="0.3", ms=5,
                label="dashpot, equal D/t" if d == DIAMETERS_M[0] else None)
-    a.set_xlabel("D/t")
+    a.set_xlabel("D/t (-)")
     a.set_ylabel("TOF (ms)")
     a.set_title("Fig. 6a: TOF (lines: theory per D)")
     a.legend(fontsize=6)
-    b.set_xlabel("D/t")
+    b.set_xlabel("D/t (-)")
     b.set_ylabel("TOF/D (s/m)")
     b.set_title("Fig. 6b: TOF/D on one curve")
     b.set_ylim(0, 0.2)
@@ -495,7 +495,7 @@ def fig6(out: Path, curves: pd.DataFrame, grid_inf: pd.DataFrame, centre: pd.Dat
 def fig7_8(out: Path, sweep: pd.DataFrame, grid_theory: pd.DataFrame) -> None:
     """ARR (Fig. 7) and TOF (Fig. 8) against the distance to the support."""
     shown = [d for d in (9.53e-3, 19.05e-3) if np.isclose(sweep["diameter_m"], d).any()]
-    for name, column, scale, unit in (("fig7_arr_vs_distance", "arr", 1.0, ""),
+    for name, column, scale, unit in (("fig7_arr_vs_distance", "arr", 1.0, " (-)"),
                                       ("fig8_tof_vs_distance", "tof_s", 1e3, " (ms)")):
         fig, axes = new_figure(len(shown))
         axes = np.atleast_1d(axes)
