@@ -1,7 +1,7 @@
 """The chain's bottom boundary: one interface, several plate models ("tiers").
 
 The last particle N touches the plate through a Hertz contact ``F = A_b [u_N - w]_+^(3/2)``
-(PHYSICS.md section 3). A tier decides two things: the Hertz constant ``A_b`` and how the plate's
+(the paper's Sec. 3). A tier decides two things: the Hertz constant ``A_b`` and how the plate's
 top surface ``w`` under the chain moves. Tiers here:
 
 ``rigid``
@@ -11,10 +11,11 @@ top surface ``w`` under the chain moves. Tiers here:
     The plate material's sphere-on-flat constant ``A_p``; the plate does not move, ``w = 0``.
 ``infinite``
     Zener's infinite thin plate: a dashpot behind the Hertz spring, ``w' = (F - F_static) / Z``
-    with ``Z = 8 sqrt(rho_p t D_p)`` (PHYSICS.md section 5). With gravity on, the plate already
-    carries the chain's static weight ``F_static = N m g`` through its supports before the impact,
-    so the dashpot answers only to the change of force ``F - F_static``. An infinite plate has no
-    static stiffness, so this is the only reading under which the chain can start at rest.
+    with ``Z = 8 sqrt(rho_p t D_p)`` (Zener's model, the paper's Sec. 4.1.1). With gravity on,
+    the plate already carries the chain's static weight ``F_static = N m g`` through its
+    supports before the impact, so the dashpot answers only to the change of force
+    ``F - F_static``. An infinite plate has no static stiffness, so this is the only reading
+    under which the chain can start at rest.
 
 The interface (what a new tier such as ``sem`` or ``greens`` implements)
 ------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Compiled per-step kernels of the discrete element chain (PHYSICS.md sections 2-3, paper Eq. 1-2).
+"""Compiled per-step kernels of the discrete element chain (the paper's Sec. 3.1, Eqs. 1-2).
 
 Particles are numbered 0..N: 0 is the striker, 1..N the chain, N stands on the plate. ``u[n]`` is
 the downward displacement of particle n from a reference in which neighbours just touch, so the

@@ -1,4 +1,4 @@
-"""Hertz contact constants and sphere properties (PHYSICS.md section 2).
+"""Hertz contact constants and sphere properties (the paper's Sec. 3.1).
 
 ``F = A [delta]_+^(3/2)`` with delta the approach of the two bodies.
 """

@@ -1,7 +1,7 @@
 """Gauss-Lobatto-Legendre (GLL) points, weights and Lagrange derivative matrices, any order.
 
 Spectral elements put their nodes on the GLL points of each reference interval [-1, 1]; the same
-points serve as quadrature, which makes the mass matrix diagonal (PHYSICS.md section 9).
+points serve as quadrature, which makes the mass matrix diagonal (the paper's Sec. 3.2).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Rayleigh-Lamb dispersion of a free plate: A0, S0 and A1 (PHYSICS.md section 8, paper Fig. 9).
+"""Rayleigh-Lamb dispersion of a free plate: A0, S0 and A1 (the paper's Sec. 4.2.2 and Fig. 9).
 
 With half-thickness h, p^2 = w^2/c_L^2 - k^2 and q^2 = w^2/c_T^2 - k^2 the Rayleigh-Lamb equations
 

@@ -1,8 +1,8 @@
 """Fused compiled driver for the elastic chain on a wall or a Zener dashpot (the fast path).
 
 It integrates exactly the scheme of :func:`solitonde.model.boundary.integrate_dashpot` (velocity
-Verlet for the chain inside a Strang splitting with the dashpot, PHYSICS.md sections 3 and 5) for
-the common case without dissipation, but arranged for speed:
+Verlet for the chain inside a Strang splitting with the dashpot, the paper's Secs. 3.1 and
+4.1.1) for the common case without dissipation, but arranged for speed:
 
 * the closing half kick of one step and the opening half kick of the next are merged into one full
   kick (leapfrog form), so velocities are synchronous only at samples, where they are read;

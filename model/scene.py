@@ -1,4 +1,4 @@
-"""The scene: one validated description of an experiment (PHYSICS.md section 1 as defaults).
+"""The scene: one validated description of an experiment (the paper's Sec. 2 set-up as defaults).
 
 A scene has the sections ``chain``, ``striker``, ``plate``, ``effects``, ``output`` (and the
 optional ``sem`` and ``solver``). It is loaded from YAML or JSON, overridden with dotted keys

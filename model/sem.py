@@ -1,6 +1,6 @@
 """The spectral-element plate: isotropic elasticity, diagonal mass, matrix-free stiffness.
 
-Nodes on GLL points and GLL quadrature give a diagonal mass matrix (PHYSICS.md section 9), so
+Nodes on GLL points and GLL quadrature give a diagonal mass matrix (the paper's Sec. 3.2), so
 central differences (Newmark beta = 0, gamma = 1/2) are explicit. The stiffness is never assembled
 for time stepping: K u is applied element by element by sum factorisation (1-D GLL derivative
 matrices along each axis of the box elements, see ``sem_kernels``); the dense element matrices,

@@ -1,4 +1,4 @@
-"""Zener's sphere-on-plate impact and the paper's closed-form predictions (PHYSICS.md sections 4-7).
+"""Zener's sphere-on-plate impact and the paper's closed-form predictions (the paper's Sec. 4.1).
 
 The impact of the last chain particle on an infinite thin plate is Zener's problem
 

@@ -1,9 +1,10 @@
 """Features of a shot (TOF, ARR, SNR, flags) and their aggregate over repeated shots.
 
-TOF = t_reflected - t_incident and ARR = F_reflected / F_incident (PHYSICS.md section 6), both
-from :func:`solitonde.signal.pulses.detect`. A shot without a detectable reflection has no TOF and
-no ARR; it carries ``arr_upper_bound`` instead (the largest excursion after the incident, or the
-detection threshold, over the incident peak), so a number is never made up from noise.
+TOF = t_reflected - t_incident and ARR = F_reflected / F_incident (the paper's Secs.
+4.1.2-4.1.3), both from :func:`solitonde.signal.pulses.detect`. A shot without a detectable
+reflection has no TOF and no ARR; it carries ``arr_upper_bound`` instead (the largest
+excursion after the incident, or the detection threshold, over the incident peak), so a number
+is never made up from noise.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Materials and Hertz contact constants (PHYSICS.md sections 1-2, 5)."""
+"""Materials and Hertz contact constants (the paper's Secs. 2, 3.1 and 4.1.1)."""
 
 from __future__ import annotations
 

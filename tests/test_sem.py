@@ -17,7 +17,7 @@ AL = MATERIALS["al_6061"]
 
 
 def test_paper_preset_counts() -> None:
-    """16 x 16 x 1 elements of order 4 x 4 x 2: 12,675 nodes and 38,025 dofs (PHYSICS.md 9)."""
+    """16 x 16 x 1 elements of order 4 x 4 x 2: 12,675 nodes and 38,025 dofs (paper, Sec. 3.2)."""
     mesh = plate_mesh((0.914, 0.914), 3.18e-3, (16, 16, 1), (4, 4, 2), contact_x=0.457)
     assert mesh.n_nodes == 12_675
     assert mesh.n_dofs == 38_025

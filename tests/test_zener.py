@@ -1,4 +1,4 @@
-"""Zener impact theory: closed-form limits, scaling laws, derived constants (PHYSICS.md 4-7)."""
+"""Zener impact theory: closed-form limits, scaling laws, derived constants (paper, Sec. 4.1)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ Points near a support use the ``greens`` plate (the spectral-element plate's cac
 response; the disk cache of :mod:`.greens_cache` makes a second run reuse every plate run); the
 3 x 3 grid at the centre is also run on the ``infinite`` plate (chain on Zener's dashpot).
 
-``summary.json`` holds the checks the paper's statements imply (PHYSICS.md section 10) with the
+``summary.json`` holds the checks the paper's statements imply (its Secs. 4 and 5) with the
 numbers behind them:
 
 - ``arr_falls_with_d_over_t``: Spearman rank correlation of simulated ARR with D/t <= -0.9 and
@@ -697,7 +697,7 @@ def reproduce(out: str | Path, quick: bool = False, *, workers: int | None = Non
 
 def paper_statements(trace_info: dict[str, Any], sweep: pd.DataFrame,
                      crit: pd.DataFrame) -> dict[str, Any]:
-    """Our numbers for each statement of PHYSICS.md section 10."""
+    """Our numbers for each statement of the paper's Secs. 4 and 5."""
     near: dict[str, Any] = {}
     for d, g in sweep.groupby("diameter_m"):
         g = g.sort_values(["thickness_m", "distance_m"])  # each list below in thickness_m order
