@@ -50,7 +50,7 @@ def position_key(plate_position: Any, x: Any, y: Any) -> tuple[Any, Any, Any]:
 
 def from_records(records: Sequence[Any], estimator: Any) -> list[dict[str, Any]]:
     """One entry per position of a plate's stored measurements (oldest first), the pooled
-    shots inverted with ``estimator`` (instrument.estimates.Estimator)."""
+    shots inverted with ``estimator`` (a :class:`~.table_set.TableSet`)."""
     groups: dict[tuple[Any, Any, Any], list[Any]] = {}
     for r in records:
         loc = r.result.get("location") or {}
@@ -62,8 +62,7 @@ def from_records(records: Sequence[Any], estimator: Any) -> list[dict[str, Any]]
         table = next((m.result["table"] for m in reversed(members) if m.result.get("table")),
                      None)
         try:
-            estimate, reason = estimator.estimate(pooled, table=table) if table else \
-                estimator.estimate(pooled)
+            estimate, reason = estimator.estimate(pooled, table=table)
         except Exception as exc:  # an inversion refusing these features: say why, go on
             estimate, reason = None, f"inversion failed: {exc}"
         out.append(position_entry(name, x, y, sum(m.n_shots for m in members), estimate, reason,

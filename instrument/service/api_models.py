@@ -14,9 +14,12 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_mod
 from solitonde.signal.waveform import MIN_SAMPLES
 
 TEXT_MAX = 1000
+IDENTIFIER_MAX = 200
+"""Longest ``plate_id`` or ``position``."""
+KEY_MAX = 100
 """Longest text value of free-form metadata; a key is at most 100 characters."""
 SCALAR = Annotated[str, StringConstraints(max_length=TEXT_MAX)] | float | int | bool | None
-Key = Annotated[str, StringConstraints(max_length=100)]
+Key = Annotated[str, StringConstraints(max_length=KEY_MAX)]
 
 
 class Strict(BaseModel):
@@ -29,8 +32,8 @@ class Strict(BaseModel):
 class ShotMetadata(Strict):
     """Where and how a shot was taken."""
 
-    plate_id: str | None = Field(None, max_length=200, description="plate identifier")
-    position: str | None = Field(None, max_length=200,
+    plate_id: str | None = Field(None, max_length=IDENTIFIER_MAX, description="plate identifier")
+    position: str | None = Field(None, max_length=IDENTIFIER_MAX,
                                  description="measurement position label on the plate")
     sphere_diameter: float | None = Field(None, gt=0, le=1.0,
                                           description="chain sphere diameter D, m")

@@ -17,7 +17,12 @@ import numpy as np
 
 from solitonde.instrument.inference.estimates import _jsonable
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
-from solitonde.instrument.service.api_models import ShotMetadata
+from solitonde.instrument.service.api_models import (
+    IDENTIFIER_MAX,
+    KEY_MAX,
+    TEXT_MAX,
+    ShotMetadata,
+)
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.service.store import MeasurementRecord, ShotRecord, Store
@@ -153,8 +158,6 @@ def check_metadata(waveforms: Sequence[Waveform], prefix: str,
 
 
 METADATA_KEYS_MAX = 100
-IDENTIFIER_MAX = 200
-TEXT_MAX = 1000
 NESTED_MAX = 16_384
 
 
@@ -169,9 +172,9 @@ def check_sizes(meta: Mapping[str, Any], field_of: Any) -> None:
                       f"{METADATA_KEYS_MAX}", kind="limit", field=field_of("")[:-1] or "metadata")
     for key, value in meta.items():
         key = str(key)
-        if len(key) > 100:
+        if len(key) > KEY_MAX:
             raise Problem(422, f"{field_of(key[:40])}...: a key of {len(key)} characters; at "
-                          "most 100", kind="limit", field=field_of(key[:40]))
+                          f"most {KEY_MAX}", kind="limit", field=field_of(key[:40]))
         if isinstance(value, str):
             limit = IDENTIFIER_MAX if key in ("plate_id", "position") else TEXT_MAX
             if len(value) > limit:

@@ -50,6 +50,16 @@ fits the cache (1e5 steps) and 2e9/s beyond it (4e5 steps, 39 s), against ~3.5e8
 (0.175 at the slower rate, rounded up)."""
 
 
+async def _payload(request: Request, model: type[Any]) -> Any:
+    """The request's JSON body validated as ``model``: 415 unless JSON, 422 naming the field."""
+    require_json(request)
+    body = await request.body()
+    try:
+        return model.model_validate_json(body or b"null")
+    except ValidationError as exc:
+        raise from_pydantic(exc, model) from None
+
+
 def _json_body(model: Any) -> dict[str, Any]:
     return {"requestBody": {"required": True, "content": {
         "application/json": {"schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}
@@ -62,13 +72,8 @@ async def invert(request: Request) -> dict[str, Any]:
     """Per sphere size: mean TOF and ARR with their scatter and shot count. Needs a loaded table
     (503 otherwise)."""
 
-    require_json(request)
     svc = service(request)
-    body = await request.body()
-    try:
-        payload = InvertIn.model_validate_json(body or b"null")
-    except ValidationError as exc:
-        raise from_pydantic(exc, InvertIn) from None
+    payload = await _payload(request, InvertIn)
     inputs = [i.model_dump() for i in payload.inputs]
     calibration = payload.calibration.model_dump(exclude_none=True) if payload.calibration \
         else None
@@ -176,13 +181,8 @@ async def simulate(request: Request) -> dict[str, Any]:
     whose cost (steps x degrees of freedom) exceeds the service's budget is refused with 422.
     """
 
-    require_json(request)
     svc = service(request)
-    body = await request.body()
-    try:
-        payload = SimulateIn.model_validate_json(body or b"null")
-    except ValidationError as exc:
-        raise from_pydantic(exc, SimulateIn) from None
+    payload = await _payload(request, SimulateIn)
     return await run_for_client(request, _SIMULATIONS, _simulate, payload,
                                 svc.settings.max_simulation_cost, svc.settings.max_samples_per_shot)
 
