@@ -14,7 +14,6 @@ from math import isfinite, sqrt
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
 from pydantic import (
     BaseModel,
     BeforeValidator,
@@ -429,6 +428,8 @@ def parse_value(text: str) -> Any:
         return json.loads(text)
     except json.JSONDecodeError:
         pass
+    import yaml  # here, not at the top: `solitonde theory` starts without it
+
     try:
         value = yaml.safe_load(text)
     except yaml.YAMLError:
@@ -482,6 +483,8 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
             f"scene file {str(path)!r} is not UTF-8 text ({exc.reason} at byte {exc.start})",
             allowed="a YAML or JSON file in UTF-8",
         ) from None
+    import yaml
+
     try:
         data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as exc:

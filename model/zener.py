@@ -22,8 +22,9 @@ end (dr/ds = -e/2). The contact ends at that crossing: tau_c = tau(s_end), e = -
 Runge-Kutta method keeps its full order on it, and the event is a simple root.
 
 Two paths use it: :func:`restitution_and_contact_time` (scipy DOP853, rtol 1e-12, the reference)
-and :func:`restitution_and_contact_time_many` (a Chebyshev table in x = ln(1 + lambda), built once
-per process by a numba-compiled DOP853 at rtol 1e-12; see there for the accuracy argument).
+and :func:`restitution_and_contact_time_many` / ``_one`` (a Chebyshev table in x = ln(1 + lambda),
+built by a numba-compiled DOP853 at rtol 1e-12 and shipped as ``zener_table.json``, so the theory
+starts without numba or scipy; the integrators live in :mod:`solitonde.model.zener_ode`).
 
 Very inelastic impacts (lambda > ASYMPTOTIC_LAMBDA)
 ---------------------------------------------------
@@ -44,19 +45,17 @@ ASYMPTOTIC_LAMBDA: e = e_0 (lambda_0 / lambda)^5, tau_c = lambda (tau_0 / lambda
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass
 from functools import lru_cache
-from itertools import pairwise
-from math import exp, log1p, pi, sqrt
+from math import exp, gamma, isfinite, log1p, pi, sqrt
+from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
-from scipy.integrate import DOP853, solve_ivp
-from scipy.special import beta
 
-from .errors import SceneError, SimulationError
+from .errors import SceneError
 from .scene import Scene
 
 CHATTERJEE_RATIO = 0.682
@@ -78,6 +77,7 @@ TABLE_PANELS = 12  # panels of the fast-path table in x = ln(1 + lambda)
 TABLE_DEGREE = 20  # Chebyshev degree per panel (convergence checked at build time, see _table)
 ASYMPTOTIC_LAMBDA = 1000.0  # beyond it the large-lambda law of the module docstring
 REFERENCE_LAMBDA_MAX = 100.0  # the scipy reference integrates up to here (~1 s at 100)
+TABLE_FILE = Path(__file__).with_name("zener_table.json")  # written by write_table()
 
 
 # --- closed forms and the constants the paper prints --------------------------------------------
@@ -85,7 +85,8 @@ REFERENCE_LAMBDA_MAX = 100.0  # the scipy reference integrates up to here (~1 s 
 
 def halfspace_contact_time() -> float:
     """tau_c(0) in closed form: 2 (5/4)^(2/5) (2/5) B(2/5, 1/2) = 3.2181 (Hertz, lambda = 0)."""
-    return 2.0 * 1.25**0.4 * 0.4 * float(beta(0.4, 0.5))
+    beta = gamma(0.4) * gamma(0.5) / gamma(0.9)  # B(2/5, 1/2)
+    return 2.0 * 1.25**0.4 * 0.4 * beta
 
 
 def travel_time_coefficient() -> float:
@@ -116,34 +117,23 @@ def nesterenko_force_coefficient() -> float:
     return sqrt(24.0 / (5.0 * pi)) / 6.0 ** (1.0 / 3.0)
 
 
-# --- the reference integrator (scipy) ------------------------------------------------------------
-
-
-def _regular_rhs(_s: float, u: np.ndarray, lam: float) -> list[float]:
-    r, y, _tau = u
-    return [0.5 * (y - lam * r**3), -(r**4), r]
-
-
-def _contact_end(_s: float, u: np.ndarray, _lam: float) -> float:
-    return u[0]
-
-
-_contact_end.terminal = True  # type: ignore[attr-defined]
-_contact_end.direction = -1  # type: ignore[attr-defined]
+# --- e and tau_c: the reference path and the shipped table -------------------------------------
 
 
 def _check_lambda(lam: float) -> float:
     lam = float(lam)
-    if not np.isfinite(lam) or lam < 0.0:
+    if not isfinite(lam) or lam < 0.0:
         raise ValueError(f"lambda must be a finite number >= 0, got {lam!r}")
     return lam
 
 
 def restitution_and_contact_time(lam: float, rtol: float = REFERENCE_RTOL) -> tuple[float, float]:
-    """Restitution coefficient e and dimensionless contact time tau_c for one lambda.
+    """Restitution coefficient e and dimensionless contact time tau_c for one lambda (reference).
 
     Integrates the regularised system of the module docstring with scipy's DOP853 and a terminal
-    event at r = 0; relative error about 1e-11 at the default tolerance.
+    event at r = 0; relative error about 1e-11 at the default tolerance. Slow (milliseconds to a
+    second): the theory and the simulations read :func:`restitution_and_contact_time_one`
+    instead, and tests compare the two.
 
     Parameters
     ----------
@@ -162,139 +152,18 @@ def restitution_and_contact_time(lam: float, rtol: float = REFERENCE_RTOL) -> tu
         # compiled DOP853 at the same tolerance, or the large-lambda law beyond its range.
         e_many, tau_many = restitution_and_contact_time_many([lam])
         return float(e_many[0]), float(tau_many[0])
-    # The contact lasts s ~ 5 for lambda = 0 and grows fast with lambda; the bound only caps work.
-    sol = solve_ivp(
-        _regular_rhs, (0.0, 1e12), [0.0, 1.0, 0.0], method="DOP853", args=(lam,),
-        rtol=rtol, atol=1e-30, events=_contact_end,
-    )
-    if sol.status != 1 or len(sol.t_events[0]) == 0:
-        raise SimulationError(f"Zener contact for lambda={lam} did not end: {sol.message}")
-    _r, y, tau = sol.y_events[0][0]
-    return float(-y), float(tau)
+    from .zener_ode import integrate_reference  # scipy: only where the reference is asked for
 
-
-# --- the compiled integrator (builds the table, handles lambdas beyond it) ----------------------
-
-_A = np.ascontiguousarray(DOP853.A[: DOP853.n_stages, : DOP853.n_stages], dtype=np.float64)
-_B = np.ascontiguousarray(DOP853.B, dtype=np.float64)
-_C = np.ascontiguousarray(DOP853.C[: DOP853.n_stages], dtype=np.float64)
-_E3 = np.ascontiguousarray(DOP853.E3, dtype=np.float64)
-_E5 = np.ascontiguousarray(DOP853.E5, dtype=np.float64)
-
-
-@njit(cache=True)
-def _rk_step(u, h, lam, k, a, b, c):
-    """One DOP853 step of size h from u; fills k[0..12] (k[12] = f(u_new)), returns u_new."""
-    n_stages = b.shape[0]
-    for i in range(n_stages):
-        r = u[0]
-        y = u[1]
-        t = u[2]
-        for j in range(i):
-            r += h * a[i, j] * k[j, 0]
-            y += h * a[i, j] * k[j, 1]
-            t += h * a[i, j] * k[j, 2]
-        k[i, 0] = 0.5 * (y - lam * r * r * r)
-        k[i, 1] = -(r * r) * (r * r)
-        k[i, 2] = r
-    out = np.empty(3)
-    for m in range(3):
-        acc = 0.0
-        for i in range(n_stages):
-            acc += b[i] * k[i, m]
-        out[m] = u[m] + h * acc
-    r = out[0]
-    k[n_stages, 0] = 0.5 * (out[1] - lam * r * r * r)
-    k[n_stages, 1] = -(r * r) * (r * r)
-    k[n_stages, 2] = r
-    return out
-
-
-@njit(cache=True)
-def _integrate_one(lam, rtol, a, b, c, e3, e5):
-    """Adaptive DOP853 (scipy's step control) to the first r = 0 crossing; returns (e, tau_c, ok).
-
-    The end of contact is refined by the Illinois method on h -> r(step(u, h)): every trial is a
-    full DOP853 step from the last accepted state, so the located end keeps the method's order.
-    """
-    k = np.empty((b.shape[0] + 1, 3))
-    u = np.zeros(3)
-    u[1] = 1.0
-    h = 1e-3
-    started = False
-    for _ in range(10_000_000):
-        new = _rk_step(u, h, lam, k, a, b, c)
-        err5 = 0.0
-        err3 = 0.0
-        for m in range(3):
-            s5 = 0.0
-            s3 = 0.0
-            for i in range(k.shape[0]):
-                s5 += e5[i] * k[i, m]
-                s3 += e3[i] * k[i, m]
-            scale = 1e-30 + max(abs(u[m]), abs(new[m])) * rtol
-            err5 += (s5 / scale) ** 2
-            err3 += (s3 / scale) ** 2
-        if err5 == 0.0 and err3 == 0.0:
-            norm = 0.0
-        else:
-            norm = abs(h) * err5 / np.sqrt((err5 + 0.01 * err3) * 3.0)
-        if norm >= 1.0:
-            h *= max(0.2, 0.9 * norm**-0.125)
-            continue
-        if started and new[0] <= 0.0:
-            lo, hi = 0.0, h
-            f_lo, f_hi = u[0], new[0]
-            side = 0
-            for _it in range(200):
-                mid = hi - f_hi * (hi - lo) / (f_hi - f_lo)
-                trial = _rk_step(u, mid, lam, k, a, b, c)
-                f_mid = trial[0]
-                if f_mid == 0.0 or abs(hi - lo) <= 1e-15 * hi:
-                    lo = hi = mid
-                    new = trial
-                    break
-                if f_mid > 0.0:
-                    lo, f_lo = mid, f_mid
-                    if side == -1:
-                        f_hi *= 0.5
-                    side = -1
-                else:
-                    hi, f_hi = mid, f_mid
-                    if side == 1:
-                        f_lo *= 0.5
-                    side = 1
-                new = trial
-            return -new[1], new[2], True
-        started = True
-        u = new
-        h *= 10.0 if norm == 0.0 else min(10.0, 0.9 * norm**-0.125)
-    return np.nan, np.nan, False
-
-
-@njit(cache=True)
-def _integrate_many(lams, rtol, a, b, c, e3, e5):
-    n = lams.shape[0]
-    e = np.empty(n)
-    tau = np.empty(n)
-    ok = True
-    for i in range(n):
-        e[i], tau[i], good = _integrate_one(lams[i], rtol, a, b, c, e3, e5)
-        ok = ok and good
-    return e, tau, ok
+    return integrate_reference(lam, rtol)
 
 
 def _integrate_compiled(
     lams: np.ndarray, rtol: float = REFERENCE_RTOL
 ) -> tuple[np.ndarray, np.ndarray]:
-    e, tau, ok = _integrate_many(np.ascontiguousarray(lams, dtype=np.float64), rtol,
-                                 _A, _B, _C, _E3, _E5)
-    if not ok:
-        raise SimulationError("Zener contact did not end within the step budget")
-    return e, tau
+    """(e, tau_c) by the compiled DOP853 (numba loads on the first call)."""
+    from .zener_ode import integrate_compiled
 
-
-# --- the fast path: a Chebyshev table -----------------------------------------------------------
+    return integrate_compiled(np.asarray(lams, dtype=np.float64), rtol)
 
 
 @dataclass(frozen=True)
@@ -305,59 +174,67 @@ class _ChebTable:
     log_e: np.ndarray  # (TABLE_PANELS, TABLE_DEGREE + 1) coefficients per panel
     log_tau: np.ndarray
     tail: float  # largest |coefficient| among the last three of any panel and series
+    anchor_e: float  # e and tau_c at ASYMPTOTIC_LAMBDA, where the large-lambda law starts
+    anchor_tau: float
 
 
-def _chebyshev_nodes(a: float, b: float, degree: int) -> np.ndarray:
-    """Chebyshev points of the first kind mapped to [a, b]."""
-    t = np.cos(pi * (np.arange(degree + 1) + 0.5) / (degree + 1))
-    return a + 0.5 * (b - a) * (t + 1.0)
+def _table_settings() -> dict[str, float]:
+    return {"lambda_max": TABLE_LAMBDA_MAX, "panels": TABLE_PANELS, "degree": TABLE_DEGREE,
+            "rtol": REFERENCE_RTOL}
+
+
+def build_table() -> dict[str, Any]:
+    """A fresh table from the compiled integrator (about 0.05 s once numba has compiled)."""
+    from .zener_ode import chebyshev_table
+
+    return chebyshev_table(TABLE_LAMBDA_MAX, TABLE_PANELS, TABLE_DEGREE, ASYMPTOTIC_LAMBDA,
+                           REFERENCE_RTOL)
+
+
+def write_table(path: Path = TABLE_FILE) -> Path:
+    """Rebuild the shipped table (after changing a TABLE_* setting); tests check it is current.
+
+    ``python -c "from solitonde.model.zener import write_table; write_table()"``
+    """
+    path.write_text(json.dumps(build_table(), indent=1) + "\n", encoding="utf-8")
+    return path
+
+
+def _cheb_table(data: dict[str, Any]) -> _ChebTable:
+    log_e = np.array(data["log_e"], dtype=np.float64)
+    log_tau = np.array(data["log_tau"], dtype=np.float64)
+    shape = (TABLE_PANELS, TABLE_DEGREE + 1)
+    if log_e.shape != shape or log_tau.shape != shape:
+        raise ValueError(f"coefficient arrays are not {shape}")
+    return _ChebTable(log1p(TABLE_LAMBDA_MAX), log_e, log_tau, float(data["tail"]),
+                      float(data["anchor"]["e"]), float(data["anchor"]["tau_c"]))
 
 
 @lru_cache(maxsize=1)
 def _table() -> _ChebTable:
-    """Chebyshev interpolants of ln e and ln tau_c in x = ln(1 + lambda) on [0, TABLE_LAMBDA_MAX].
+    """The table of :func:`restitution_and_contact_time_many`, read from ``zener_table.json``.
 
-    Both functions are real-analytic in lambda (the ODE is polynomial in lambda and the end of
-    contact is a transversal root), so on each panel their Chebyshev coefficients decay
-    geometrically and the interpolation error is about the size of the first neglected
-    coefficient. The build checks that the last three coefficients of every panel are below 1e-10
-    (they come out near 1e-14, the noise of the rtol 1e-12 node values), which bounds the error of
-    ln e and ln tau_c, i.e. the relative error of e and tau_c, far below 1e-6. A single global
-    series converges much more slowly (coefficient 60 is still 1e-7), hence the panels. Tests
-    compare the table with the reference path.
+    How the table is built and why it is accurate is in
+    :func:`solitonde.model.zener_ode.chebyshev_table`. Reading it costs well under a millisecond
+    and needs neither numba nor scipy; a file missing, damaged or written for other TABLE_*
+    settings is ignored and the table rebuilt in this process (numba then compiles once).
     """
-    x_max = log1p(TABLE_LAMBDA_MAX)
-    edges = np.linspace(0.0, x_max, TABLE_PANELS + 1)
-    panels = list(pairwise(edges))
-    x = np.concatenate([_chebyshev_nodes(a, b, TABLE_DEGREE) for a, b in panels])
-    e, tau = _integrate_compiled(np.expm1(x))
-    n = TABLE_DEGREE + 1
-    log_e = np.empty((TABLE_PANELS, n))
-    log_tau = np.empty((TABLE_PANELS, n))
-    for p, (a, b) in enumerate(panels):
-        xs = x[p * n:(p + 1) * n]
-        cheb = np.polynomial.chebyshev
-        t = (2.0 * xs - a - b) / (b - a)
-        log_e[p] = cheb.chebfit(t, np.log(e[p * n:(p + 1) * n]), TABLE_DEGREE)
-        log_tau[p] = cheb.chebfit(t, np.log(tau[p * n:(p + 1) * n]), TABLE_DEGREE)
-    tail = float(max(np.abs(log_e[:, -3:]).max(), np.abs(log_tau[:, -3:]).max()))
-    if tail > 1e-10:
-        raise SimulationError(f"Zener table did not converge (tail coefficient {tail:.1e})")
-    return _ChebTable(x_max, log_e, log_tau, tail)
-
-
-@lru_cache(maxsize=1)
-def _asymptotic_anchor() -> tuple[float, float]:
-    """(e, tau_c) at ASYMPTOTIC_LAMBDA from the compiled integrator (about 0.02 s, once)."""
-    e, tau = _integrate_compiled(np.array([ASYMPTOTIC_LAMBDA]))
-    return float(e[0]), float(tau[0])
+    try:
+        data = json.loads(TABLE_FILE.read_text(encoding="utf-8"))
+        settings_match = {k: data.get(k) for k in _table_settings()} == _table_settings()
+        if settings_match and data["anchor"]["lambda"] == ASYMPTOTIC_LAMBDA:
+            return _cheb_table(data)
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    return _cheb_table(build_table())
 
 
 def _asymptotic(lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """e and tau_c for lambda >= ASYMPTOTIC_LAMBDA by the large-lambda law (module docstring)."""
-    e0, tau0 = _asymptotic_anchor()
+    table = _table()
     ratio = lam / ASYMPTOTIC_LAMBDA
-    return e0 * ratio**-5.0, lam * (tau0 / ASYMPTOTIC_LAMBDA + 5.0 * np.log(ratio))
+    return (table.anchor_e * ratio**-5.0,
+            lam * (table.anchor_tau / ASYMPTOTIC_LAMBDA + 5.0 * np.log(ratio)))
 
 
 def _clenshaw(coef: np.ndarray, panel: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -372,10 +249,10 @@ def _clenshaw(coef: np.ndarray, panel: np.ndarray, t: np.ndarray) -> np.ndarray:
 def restitution_and_contact_time_many(lams: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """e and tau_c for many lambdas at once (relative error about 1e-12 measured, 1e-6 promised).
 
-    Lambdas in [0, 20] are read from a Chebyshev table (see :func:`_table`), built once per
-    process in about 0.02 s once numba has compiled; larger lambdas up to ASYMPTOTIC_LAMBDA are
-    integrated one by one with the compiled DOP853 (correct, but each costs milliseconds to 0.02 s:
-    the problem turns stiff), and beyond it the large-lambda law of the module docstring applies.
+    Lambdas in [0, 20] are read from the shipped Chebyshev table (see :func:`_table`); larger
+    lambdas up to ASYMPTOTIC_LAMBDA are integrated one by one with the compiled DOP853 (correct,
+    but each costs milliseconds to 0.02 s: the problem turns stiff), and beyond it the
+    large-lambda law of the module docstring applies.
 
     Parameters
     ----------
@@ -413,30 +290,29 @@ def restitution_and_contact_time_many(lams: ArrayLike) -> tuple[np.ndarray, np.n
 def restitution_and_contact_time_one(lam: float) -> tuple[float, float]:
     """e and tau_c for one lambda: the table of :func:`restitution_and_contact_time_many`.
 
-    The same Chebyshev series summed by a compiled Clenshaw loop, which costs about a microsecond
-    where the vectorised form spends its time in numpy overhead on one-element arrays
-    (``simulate`` calls it once per run to size the run).
+    The same Chebyshev series summed by a scalar Clenshaw loop (a few microseconds, where the
+    vectorised form spends its time in numpy overhead on one-element arrays). ``predict`` and
+    ``simulate`` call it once per scene.
     """
-    lam = float(lam)
-    if not (lam >= 0.0 and lam <= TABLE_LAMBDA_MAX):
+    lam = _check_lambda(lam)
+    if lam > TABLE_LAMBDA_MAX:
         e, tau = restitution_and_contact_time_many([lam])
         return float(e[0]), float(tau[0])
     table = _table()
-    return _clenshaw_pair(table.log_e, table.log_tau, table.x_max / TABLE_PANELS, log1p(lam))
-
-
-@njit(cache=True)
-def _clenshaw_pair(
-    log_e: np.ndarray, log_tau: np.ndarray, width: float, x: float
-) -> tuple[float, float]:
-    """exp of both Chebyshev series at x = ln(1 + lambda): (e, tau_c)."""
-    panel = min(int(x / width), log_e.shape[0] - 1)
+    width = table.x_max / TABLE_PANELS
+    x = log1p(lam)
+    panel = min(int(x / width), TABLE_PANELS - 1)
     t = 2.0 * (x - panel * width) / width - 1.0
-    b1e = b2e = b1t = b2t = 0.0
-    for j in range(log_e.shape[1] - 1, 0, -1):
-        b1e, b2e = 2.0 * t * b1e - b2e + log_e[panel, j], b1e
-        b1t, b2t = 2.0 * t * b1t - b2t + log_tau[panel, j], b1t
-    return exp(t * b1e - b2e + log_e[panel, 0]), exp(t * b1t - b2t + log_tau[panel, 0])
+    return (exp(_clenshaw_scalar(table.log_e[panel].tolist(), t)),
+            exp(_clenshaw_scalar(table.log_tau[panel].tolist(), t)))
+
+
+def _clenshaw_scalar(coef: list[float], t: float) -> float:
+    """sum_k coef[k] T_k(t) for one point."""
+    b1 = b2 = 0.0
+    for c in reversed(coef[1:]):
+        b1, b2 = 2.0 * t * b1 - b2 + c, b1
+    return t * b1 - b2 + coef[0]
 
 
 # --- the paper's formulas -----------------------------------------------------------------------
@@ -578,7 +454,7 @@ def predict(scene: Scene) -> TheoryPrediction:
     d = scene.chain.diameter
     v_in = incident_velocity(scene)
     lam = inelasticity(scene)
-    e, tau_c = restitution_and_contact_time(lam)
+    e, tau_c = restitution_and_contact_time_one(lam)
     contact = tau_c * time_scale(m, a_p, v_in)
     n = travel_diameters(scene)
     travel = n * d / solitary_wave_speed(d, a_s, m, v_in) + n * d / solitary_wave_speed(

@@ -32,8 +32,11 @@ def test_bench_restitution_many():
     lams = np.linspace(0.0, 20.0, N_LAMBDAS)
     start = time.perf_counter()
     z._table.cache_clear()
-    z.restitution_and_contact_time_many(lams[:1])  # numba load/compile + table build
+    z.restitution_and_contact_time_many(lams[:1])  # read the shipped table
     warm = time.perf_counter() - start
+    start = time.perf_counter()
+    z.build_table()  # numba load (compile when not cached) + a fresh build
+    rebuild = time.perf_counter() - start
     t_fast = _best_of(lambda: z.restitution_and_contact_time_many(lams))
     e_fast, tau_fast = z.restitution_and_contact_time_many(lams)
 
@@ -51,7 +54,8 @@ def test_bench_restitution_many():
                    np.max(np.abs(tau_fast[idx] / ref[:, 1] - 1)))
 
     print(f"\nZener e, tau_c for {N_LAMBDAS} lambdas in [0, 20]")
-    print(f"  warm-up (numba cache load + Chebyshev table build): {warm * 1e3:8.1f} ms (once)")
+    print(f"  first read of the shipped Chebyshev table:       {warm * 1e3:8.1f} ms (once)")
+    print(f"  rebuilding it (numba cache load + integration):  {rebuild * 1e3:8.1f} ms")
     print(f"  fast path (table), best of 5:                      {t_fast * 1e3:8.3f} ms"
           f"   max rel. error vs reference {err_fast:.1e}")
     print(f"  compiled DOP853 (no table), {sample.size} lambdas:       {t_compiled * 1e3:8.1f} ms"

@@ -1,5 +1,6 @@
 """The console script loads only what a call needs: the listing and --version import no command
-module and none of the heavy libraries; a command imports its own module only. The listing's
+module and none of the heavy libraries; a command imports its own module only, and `theory`
+none of the heavy libraries either. The listing's
 one-line helps are the commands' own, so the fast path cannot drift from the real one."""
 
 from __future__ import annotations
@@ -35,6 +36,12 @@ def test_help_and_version_load_no_command_and_no_heavy_library():
 def test_a_command_loads_its_own_module_only():
     loaded = _loaded_after("map", "--help")
     assert loaded == {"solitonde.instrument.cli.cmd_map"}, loaded
+
+
+def test_theory_runs_without_numba_scipy_or_yaml():
+    """`theory` reads e and tau_c from the shipped Chebyshev table: no integrator is loaded."""
+    assert _loaded_after("theory") == {"solitonde.instrument.cli.cmd_theory"}
+    assert _loaded_after("theory", "--grid") == {"solitonde.instrument.cli.cmd_theory"}
 
 
 def test_the_listing_says_what_the_commands_say():

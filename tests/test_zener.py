@@ -102,6 +102,37 @@ def test_fast_path_matches_reference():
     assert table.tail < 1e-10
 
 
+def test_shipped_table_is_what_the_integrator_builds_today():
+    """zener_table.json is current: a fresh build from the compiled DOP853 gives the same e and
+    tau_c (to 1e-12 relative: the builds differ only in rounding) and the same anchor.
+
+    If this fails after a TABLE_* change, regenerate with ``zener.write_table()``."""
+    import json
+
+    shipped = json.loads(z.TABLE_FILE.read_text(encoding="utf-8"))
+    fresh = z.build_table()
+    assert {k: shipped[k] for k in ("lambda_max", "panels", "degree", "rtol")} == {
+        k: fresh[k] for k in ("lambda_max", "panels", "degree", "rtol")}
+    a, b = z._cheb_table(shipped), z._cheb_table(fresh)
+    t = np.linspace(-1.0, 1.0, 41)
+    for panel in range(z.TABLE_PANELS):
+        idx = np.full_like(t, panel, dtype=np.intp)
+        for name in ("log_e", "log_tau"):
+            np.testing.assert_allclose(z._clenshaw(getattr(a, name), idx, t),
+                                       z._clenshaw(getattr(b, name), idx, t), rtol=0, atol=1e-12)
+    assert (a.anchor_e, a.anchor_tau) == pytest.approx((b.anchor_e, b.anchor_tau), rel=1e-12)
+
+
+def test_scalar_and_vector_table_reads_agree_and_predict_uses_them():
+    """The scalar Clenshaw loop equals the vectorised one; predict's e is the table's."""
+    lams = np.array([0.0, 0.37, 3.0, 19.99])
+    e_vec, tau_vec = z.restitution_and_contact_time_many(lams)
+    for lam, e, tau in zip(lams, e_vec, tau_vec, strict=True):
+        assert z.restitution_and_contact_time_one(lam) == pytest.approx((e, tau), rel=1e-14)
+    p = z.predict(_scene())
+    assert p.e == pytest.approx(z.restitution_and_contact_time(p.lambda_)[0], rel=1e-10)
+
+
 def test_fast_path_beyond_table_and_shapes():
     """Lambdas above the table are integrated (compiled DOP853); output keeps the input shape."""
     e, tau_c = z.restitution_and_contact_time_many(np.array([[0.25, 25.0]]))
