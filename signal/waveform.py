@@ -208,6 +208,14 @@ class Waveform:
             return self
         return Waveform(self.t0, self.dt, self.force, "N", self.calibration, self.metadata)
 
+    def with_samples(self, samples: Any) -> Waveform:
+        """A copy with other samples on the same time axis (e.g. with noise added)."""
+        values = check_samples(samples)
+        if values.shape != self.samples.shape:
+            raise WaveformError("samples", f"{values.size} samples replace {self.n}",
+                                "as many samples as the waveform has")
+        return Waveform(self.t0, self.dt, values, self.units, self.calibration, self.metadata)
+
     def with_metadata(self, **items: Any) -> Waveform:
         """A copy with extra or replaced metadata entries."""
         meta = {**self.metadata, **items}

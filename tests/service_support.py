@@ -116,7 +116,7 @@ def simulated_shots(thickness: float, n_shots: int = 3, snr_db: float = 40.0,
                     distance: float = 0.35) -> list[dict[str, Any]]:
     """Shots of the model itself at ``thickness`` (infinite plate), as an acquisition records
     them (pre-trigger, noise, 12 bits), in the REST body shape."""
-    from solitonde.instrument.tables.table_build import measured_waveform
+    from solitonde.instrument.tables.measured import as_measured
     from solitonde.model.scene import scene_from_dict
     from solitonde.model.simulate import simulate
 
@@ -124,7 +124,7 @@ def simulated_shots(thickness: float, n_shots: int = 3, snr_db: float = 40.0,
                              "plate": {"thickness": thickness, "distance_to_support": distance},
                              "effects": {"plate_model": "infinite"}})
     result = simulate(scene)
-    clean = measured_waveform(result)
+    clean = as_measured(result)
     peak = float(result.truth["incident_peak_N"] - result.truth["static_sensor_N"])
     shots = []
     for k in range(n_shots):

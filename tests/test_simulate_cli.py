@@ -53,7 +53,7 @@ def test_bad_input_and_impossible_request(runner):
 
 
 def test_unmeasurable_trace_and_non_utf8_scene(runner, tmp_path):
-    """A legal scene whose record is too short to measure, and a scene file that is not UTF-8
+    """A legal scene sampled too coarsely to measure its pulse, and a scene file that is not UTF-8
     text, each get an error naming what to change (exit 2), not a traceback."""
     res = runner.invoke(build_app(), ["simulate", "--set", "output.sample_rate=2e4", "--json"])
     assert res.exit_code == 2 and isinstance(res.exception, SystemExit)

@@ -10,6 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,
     SECONDARY_FEATURES,
@@ -20,7 +21,6 @@ from solitonde.instrument.tables.table import (
 from solitonde.instrument.tables.table_build import (
     Sweep,
     build_table,
-    measured_waveform,
     partial_path,
     run_plate,
 )
@@ -135,7 +135,7 @@ def test_point_features_are_the_signal_packages(reference: Path) -> None:
     """A table point holds what extract() reads from the simulated trace with its pre-trigger."""
     t = ModelTable.load(reference)
     scene = tiny_sweep().scene_at(1, 1, 2)
-    f = extract(measured_waveform(simulate(scene)))
+    f = extract(as_measured(simulate(scene)))
     assert t.features["tof_s"][1, 1, 2] == f.tof_s
     assert t.features["arr"][1, 1, 2] == f.arr
     # and the extractor agrees with the model's own peak times within a sample

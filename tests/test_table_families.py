@@ -19,7 +19,7 @@ from solitonde.instrument.cli.main import build_app as build_cli
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
-from solitonde.instrument.tables.table_build import measured_waveform
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.synth import degrade
@@ -56,7 +56,7 @@ def _steel_shots(n: int = 3) -> list[dict]:
                                        "distance_to_support": 0.35},
                              "effects": {"plate_model": "infinite"}})
     result = simulate(scene)
-    clean = measured_waveform(result)
+    clean = as_measured(result)
     peak = float(result.truth["incident_peak_N"] - result.truth["static_sensor_N"])
     return [{"t0": clean.t0, "dt": clean.dt,
              "samples": degrade(clean.samples, 40.0, np.random.default_rng(k), peak,

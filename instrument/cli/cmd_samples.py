@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import typer
 
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import simulate
 from solitonde.signal import io as signal_io
@@ -60,6 +61,16 @@ TRUTH_FILE = "truth.tsv"
 BITS = 12
 
 
+def _common_axis(waves: list[Waveform]) -> list[Waveform]:
+    """The shots cut to the time span they all cover, for formats with one time axis per file
+    (their pre-triggers and records differ by a few samples with the drop height)."""
+    start = max(w.t0 for w in waves)
+    cuts = [round((start - w.t0) / w.dt) for w in waves]
+    n = min(w.n - cut for w, cut in zip(waves, cuts, strict=True))
+    return [Waveform(start, w.dt, w.samples[cut:cut + n], w.units, None, w.metadata)
+            for w, cut in zip(waves, cuts, strict=True)]
+
+
 def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
     """Write every sample file into ``out_dir`` and return the truth rows (also in truth.tsv)."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -77,13 +88,15 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
                                      (t["incident_time_s"], t["incident_peak_N"]),
                                      (t["reflected_time_s"], t["reflected_peak_N"]))
             reference = truth.incident_peak_N
-            samples = degrade(sim.samples, spec.snr_db, rng, reference, drift=DRIFT, bits=BITS)
             meta = {"shot": shot,
                     "plate_id": f"synthetic-t{scene.plate.thickness * 1e3:.2f}mm",
                     "position": scene.plate.distance_to_support,
                     "sphere_diameter": scene.chain.diameter, "synthetic": True,
                     "snr_db": spec.snr_db, "drop_height_m": height}
-            waves.append(Waveform(sim.t0, sim.dt, samples, "N", None, meta))
+            recorded = as_measured(sim, meta)
+            samples = degrade(recorded.samples, spec.snr_db, rng, reference, drift=DRIFT,
+                              bits=BITS)
+            waves.append(recorded.with_samples(samples))
             truth_rows.append({
                 "file": spec.name, "shot": shot, "tof_s": truth.tof_s, "arr": truth.arr,
                 "incident_time_s": t["incident_time_s"], "reflected_time_s": t["reflected_time_s"],
@@ -94,8 +107,7 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
             })
         path = out_dir / spec.name
         if path.suffix in (".npy", ".csv"):
-            n = min(w.n for w in waves)  # shots share one time axis: cut to the shortest
-            waves = [Waveform(w.t0, w.dt, w.samples[:n], w.units, None, w.metadata) for w in waves]
+            waves = _common_axis(waves)
         signal_io.write(path, waves)
     with (out_dir / TRUTH_FILE).open("w", newline="", encoding="utf-8") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(TRUTH_KEYS), delimiter="\t")
@@ -129,8 +141,6 @@ def make_scan(out_dir: Path, seed: int = 20261125) -> list[dict[str, Any]]:
     1 % drift, 12 bits). The model's chain stands on the plate's centre line, so y only places
     the position on the map; the free edges at y = 0 and y = 0.914 m are far from every y used.
     """
-    from solitonde.instrument.tables.table_build import measured_waveform
-
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     truth, manifest = [], []
@@ -140,11 +150,11 @@ def make_scan(out_dir: Path, seed: int = 20261125) -> list[dict[str, Any]]:
                                   f"plate.distance_to_support={x!r}", "output.duration=auto"])
         sim = simulate(scene)
         reference = sim.truth["incident_peak_N"]
+        recorded = as_measured(sim)
         for k in range(SCAN_SHOTS):
-            noisy = degrade(sim.samples, SCAN_SNR_DB, rng, reference, drift=DRIFT, bits=BITS)
-            wave = measured_waveform(sim, samples=noisy)
+            noisy = degrade(recorded.samples, SCAN_SNR_DB, rng, reference, drift=DRIFT, bits=BITS)
             signal_io.write(out_dir / f"scan_{name}_shot{k}.csv",
-                            Waveform(wave.t0, wave.dt, wave.samples, "N", None, {}))
+                            Waveform(recorded.t0, recorded.dt, noisy, "N", None, {}))
         manifest.append({"file": f"scan_{name}_shot*.csv", "plate_id": SCAN_PLATE,
                          "position": name, "x_m": x, "y_m": y,
                          "sphere_diameter_m": SCAN_DIAMETER})

@@ -4,10 +4,11 @@ The model (``solitonde.model``) makes the trace; the features (TOF, ARR, pulse p
 measured by ``solitonde.signal`` exactly as a recorded waveform would be, so simulated and
 measured shots share one extractor and its biases.
 
-``--out`` writes the trace with ``solitonde.signal.io`` as CSV: ``# key: <JSON>`` comment lines
-first (``scene``, ``plate_model``, ``plate_model_reason``, ``source``), then the header
-``time_s,force_N`` and one row per sample; ``solitonde.signal.io.read`` reads it back with the
-scene in ``metadata["scene"]``.
+``--out`` writes the trace as it is measured (a static pre-trigger before the impact at t = 0,
+then the shot) with ``solitonde.signal.io`` as CSV: ``# key: <JSON>`` comment lines first
+(``scene``, ``plate_model``, ``plate_model_reason``, ``source``, ``sphere_diameter``), then the
+header ``time_s,force_N`` and one row per sample; ``solitonde.signal.io.read`` reads it back
+with the scene in ``metadata["scene"]``.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from rich.console import Console
 from rich.table import Table
 
 from solitonde.instrument.tables import greens_cache
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import SimulationResult, simulate
@@ -32,16 +34,13 @@ from solitonde.signal.waveform import Waveform
 
 
 def to_waveform(result: SimulationResult) -> Waveform:
-    """The simulated sensor trace as a signal Waveform, with the scene as metadata."""
-    return Waveform(
-        result.t0, result.dt, result.samples, "N",
-        metadata={
-            "scene": result.scene.to_dict(),
-            "plate_model": result.plate_model,
-            "plate_model_reason": result.plate_model_reason,
-            "source": "solitonde simulate",
-        },
-    )
+    """The simulated trace as recorded (:func:`~solitonde.instrument.tables.measured.as_measured`,
+    the table builder's and the service's bridge too), with the scene as metadata."""
+    return as_measured(result, {
+        "scene": result.scene.to_dict(),
+        "plate_model_reason": result.plate_model_reason,
+        "source": "solitonde simulate",
+    })
 
 
 def _nan(value: float | None) -> float:
@@ -49,7 +48,8 @@ def _nan(value: float | None) -> float:
 
 
 def summary(
-    result: SimulationResult, features: Features | None, feature_error: str | None = None
+    result: SimulationResult, recorded: Waveform, features: Features | None,
+    feature_error: str | None = None,
 ) -> dict[str, Any]:
     """The JSON of ``solitonde simulate --json`` (the first twelve keys are a public contract).
 
@@ -75,7 +75,8 @@ def summary(
         "status": d["status"],
         "plate_model_reason": result.plate_model_reason,
         "sample_rate_hz": 1.0 / result.dt,
-        "n_samples": int(result.samples.size),
+        "n_samples": recorded.n,  # the record measured: pre-trigger and run
+        "t0_s": recorded.t0,
         "duration_s": d["duration_s"],
         "plate_work_J": d["plate_work_J"],
         "dissipated_J": d["dissipated_J"],
@@ -102,15 +103,17 @@ def _json_safe(data: Any) -> Any:
     return data
 
 
-def write_plot(path: Path, result: SimulationResult, data: dict[str, Any]) -> None:
-    """Sensor trace with the detected incident and reflected pulses marked (PNG)."""
+def write_plot(path: Path, result: SimulationResult, recorded: Waveform,
+               data: dict[str, Any]) -> None:
+    """The measured sensor trace with the detected incident and reflected pulses marked (PNG)."""
     from solitonde.instrument.plotting import trace_png
     from solitonde.instrument.studies.figures import write_bytes
 
     s = result.scene
     title = (f"D = {s.chain.diameter * 1e3:.2f} mm, t = {s.plate.thickness * 1e3:.2f} mm, "
              f"L = {s.plate.distance_to_support * 1e3:.0f} mm, {result.plate_model}")
-    write_bytes(path, trace_png(result.t0, result.dt, result.samples, data, title=title))
+    write_bytes(path, trace_png(recorded.t0, recorded.dt, recorded.samples, data,
+                                  title=title))
 
 
 def _table(data: dict[str, Any]) -> Table:
@@ -182,14 +185,14 @@ def simulate_command(
     except WaveformError as exc:
         feature_error = str(exc)
         typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
-    data = summary(result, features, feature_error)
+    data = summary(result, waveform, features, feature_error)
     failed = []
     def write_csv(path: Path) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         signal_io.write(path, waveform, format="csv")
 
     writers = (("--out", out, write_csv),
-               ("--plot", plot, lambda path: write_plot(path, result, data)))
+               ("--plot", plot, lambda path: write_plot(path, result, waveform, data)))
     for flag, path, write in writers:
         if path is None:
             continue

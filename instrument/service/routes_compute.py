@@ -188,7 +188,7 @@ async def simulate(request: Request) -> dict[str, Any]:
 
 
 def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str, Any]:
-    from solitonde.instrument.tables.table_build import measured_waveform
+    from solitonde.instrument.tables.measured import as_measured
     from solitonde.model.errors import SceneError, SimulationError
     from solitonde.model.scene import scene_from_dict
     from solitonde.model.simulate import simulate as run_scene
@@ -228,10 +228,7 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
     except SimulationError as exc:
         raise Problem(422, f"scene: the simulation could not be carried out ({exc})",
                       kind="simulation-failed", field="scene") from None
-    # Measured exactly as the table builder measures a simulated point: a static pre-trigger
-    # segment in front of the shot (the detector takes baseline and noise from it).
-    wf = measured_waveform(result).with_metadata(sphere_diameter=scene.chain.diameter,
-                                                 source="simulate")
+    wf = as_measured(result, {"source": "simulate"})  # as the table measures its points
     try:
         features = extract(wf).to_dict()
     except WaveformError as exc:

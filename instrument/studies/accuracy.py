@@ -30,11 +30,11 @@ import pandas as pd
 
 from solitonde.instrument.plotting import spread_labels
 from solitonde.instrument.studies.figures import new_figure, save_csv, save_json, save_png
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.model import greens, sem_tier
 from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.features import extract
-from solitonde.signal.waveform import Waveform
 
 DIAMETER_M = 9.53e-3
 THICKNESS_M = 2.29e-3
@@ -136,7 +136,7 @@ def _features(scene: Scene) -> dict[str, Any]:
     started = time.perf_counter()
     r = simulate(scene)
     wall = time.perf_counter() - started
-    f = extract(Waveform(t0=r.t0, dt=r.dt, samples=r.samples))
+    f = extract(as_measured(r))
     mesh = r.diagnostics.get("mesh") or {}
     return {
         "tof_s": math.nan if f.tof_s is None else f.tof_s,

@@ -47,6 +47,7 @@ from solitonde.instrument.studies.figures import (
     save_png,
 )
 from solitonde.instrument.tables import greens_cache
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.model import zener
 from solitonde.model.batch import default_workers
 from solitonde.model.errors import SimulationError
@@ -55,7 +56,6 @@ from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import extract
-from solitonde.signal.waveform import Waveform
 
 PLATES_M = (2.29e-3, 3.18e-3, 4.83e-3)
 """The paper's three Al 6061 plates."""
@@ -161,7 +161,7 @@ def measure(scene: Scene) -> dict[str, Any]:
         "energy_drift": result.diagnostics["energy_drift"],
     }
     try:
-        f = extract(Waveform(t0=result.t0, dt=result.dt, samples=result.samples))
+        f = extract(as_measured(result))
         row.update(
             tof_s=math.nan if f.tof_s is None else f.tof_s,
             arr=math.nan if f.arr is None else f.arr,
@@ -382,7 +382,7 @@ def fig3(out: Path) -> dict[str, Any]:
     for label, t in (("thin", PLATES_M[0]), ("thick", THICK_PLATE_M)):
         scene = scene_for(TRACE_DIAMETER_M, t)
         r = simulate(scene)
-        f = extract(Waveform(t0=r.t0, dt=r.dt, samples=r.samples))
+        f = extract(as_measured(r))
         traces[label] = (r.time, r.samples)
         info[label] = {"thickness_m": t, "plate_model": r.plate_model,
                        "incident_time_s": f.incident_time_s, "tof_s": f.tof_s, "arr": f.arr}

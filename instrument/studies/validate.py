@@ -47,8 +47,9 @@ import numpy as np
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.instrument.tables.table_build import _TASK_CACHE, measured_waveform, run_tasks
+from solitonde.instrument.tables.table_build import _TASK_CACHE, run_tasks
 from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.errors import WaveformError
@@ -98,18 +99,14 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
     try:
         for d in sorted(diameters, reverse=True):
             result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)))
-            clean = result.samples
-            reference = float(clean.max() - clean[0])
+            recorded = as_measured(result)
+            reference = float(result.samples.max() - result.samples[0])
             feats = []
             for _ in range(shots):
-                noisy = degrade(clean, snr_db, rng, reference)
-                # pre-trigger noise too: the same noise level over the padded segment
-                wf = measured_waveform(result, samples=noisy)
-                pad = wf.samples.size - clean.size
-                samples = wf.samples.copy()
-                samples[:pad] += rng.normal(0.0, reference / 10 ** (snr_db / 20), pad)
+                # white noise over the whole record, its pre-trigger included
+                noisy = degrade(recorded.samples, snr_db, rng, reference)
                 try:
-                    feats.append(extract(type(wf)(wf.t0, wf.dt, samples)))
+                    feats.append(extract(recorded.with_samples(noisy)))
                 except WaveformError:
                     continue
             agg = aggregate(feats) if feats else None

@@ -33,6 +33,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from solitonde.instrument.tables.measured import PRETRIGGER_FRACTION, as_measured
 from solitonde.instrument.tables.table import (
     AXES,
     FORMAT,
@@ -55,7 +56,6 @@ from solitonde.model.simulate import SimulationResult, simulate
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import Features, extract
 from solitonde.signal.pulses import FLAGS
-from solitonde.signal.waveform import Waveform
 
 #: Environment of Dask worker processes: one compute thread each (the cores are the workers).
 WORKER_ENV = {
@@ -64,11 +64,6 @@ WORKER_ENV = {
     "OPENBLAS_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
 }
-PRETRIGGER_FRACTION = 0.25
-"""A simulated record starts at the impact; the sensor's static reading is prepended for this
-fraction of the record (at least 64 samples), as a triggered acquisition keeps a pre-trigger
-segment: the detector estimates baseline and noise there, exactly as on measured shots."""
-
 #: The paper's sphere sizes (3/16, 3/8, 3/4 in).
 PAPER_DIAMETERS_M = (4.76e-3, 9.53e-3, 19.05e-3)
 
@@ -144,19 +139,6 @@ class Sweep:
 # One point ----------------------------------------------------------------------------------
 
 
-def measured_waveform(result: SimulationResult, pretrigger: float = PRETRIGGER_FRACTION,
-                      samples: np.ndarray | None = None) -> Waveform:
-    """The simulated sensor trace as an acquisition records it: a static pre-trigger, then the shot.
-
-    ``samples`` replaces the simulated samples (e.g. with noise added), same length.
-    """
-    x = result.samples if samples is None else samples
-    n_pre = max(64, int(pretrigger * result.samples.size))
-    padded = np.concatenate([np.full(n_pre, result.samples[0]), x])
-    return Waveform(result.t0 - n_pre * result.dt, result.dt, padded,
-                    metadata={"source": "simulation"})
-
-
 def point_record(features: Features | None, result: SimulationResult | None,
                  error: str | None, traces: bool) -> dict[str, Any]:
     """The per-point values written to the table."""
@@ -198,7 +180,7 @@ def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
     except (SimulationError, SceneError) as exc:
         return point_record(None, None, f"simulation: {exc}", traces)
     try:
-        features = extract(measured_waveform(result), **dict(detect or {}))
+        features = extract(as_measured(result), **dict(detect or {}))
     except WaveformError as exc:
         return point_record(None, result, f"features: {exc}", traces)
     return point_record(features, result, None, traces)

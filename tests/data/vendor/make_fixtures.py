@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
-from solitonde.instrument.tables.table_build import measured_waveform
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import simulate
 
@@ -28,7 +28,7 @@ def trace() -> tuple[float, float, np.ndarray]:
     scene = load_scene(None, ["chain.diameter=9.53e-3", "plate.thickness=3.18e-3",
                               "striker.drop_height=5e-3", "effects.plate_model=infinite",
                               "output.duration=auto"])
-    wave = measured_waveform(simulate(scene))
+    wave = as_measured(simulate(scene))
     volts = wave.samples / CAL
     rng = np.random.default_rng(14)
     volts = volts + 0.003 * volts.max() * rng.standard_normal(volts.size) + 0.012
