@@ -9,7 +9,6 @@ is never made up from noise.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -237,10 +236,3 @@ def aggregate(
         arr_upper_bound=max(bounds) if bounds and not with_ref else None,
         flag_counts=counts,
     )
-
-
-def finite_or_none(value: float | None) -> float | None:
-    """``None`` for missing or non-finite numbers (JSON has no inf)."""
-    if value is None or not math.isfinite(value):
-        return None
-    return float(value)

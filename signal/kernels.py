@@ -18,7 +18,6 @@ from .extrema import vargmax, vmax, vmin
 from .pulse_fit import R_MAX, R_MIN, fit_pulse, parabola_top, solve_spd, template  # noqa: F401
 from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
 from .smoothing import (  # noqa: F401
-    boxcar,
     prefix_and_triangle,
     prefix_sum,
     smoother_gain,

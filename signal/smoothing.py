@@ -55,17 +55,6 @@ def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def boxcar(x: np.ndarray, h: int) -> np.ndarray:
-    """Centred moving average over 2h+1 samples (zero phase); the window shrinks at the ends."""
-    out = np.empty(x.size)
-    if h < 1:
-        out[:] = x
-        return out
-    _box_into(x, h, np.empty(x.size + 1), out)
-    return out
-
-
-@njit(cache=True)
 def triangle(x: np.ndarray, h: int) -> np.ndarray:
     """Two boxcars in a row: a zero-phase triangular smoother of half-width about 2h."""
     out = np.empty(x.size)

@@ -114,3 +114,16 @@ def test_every_feature_from_a_simulation_is_measured_through_as_measured() -> No
 def test_no_module_builds_its_own_waveform_from_a_simulation() -> None:
     builders = {rel for rel, tree in _sources().items() if _calls(tree, "Waveform")}
     assert builders == set(OTHER_WAVEFORMS), builders
+
+
+def test_a_sample_rate_that_cannot_resolve_the_pulse_is_refused_before_the_run(
+        tmp_path: Path) -> None:
+    """20 kHz puts under 2 samples across the default scene's 89 us pulse: 422 naming
+    scene.output.sample_rate from the service, exit 2 from the command line, no simulation."""
+    scene = {"output": {"sample_rate": 2e4}}
+    with TestClient(build_app(Settings(store_path=tmp_path / "s.sqlite"))) as client:
+        r = client.post("/v1/simulate", json={"scene": scene})
+    assert r.status_code == 422 and r.json()["field"] == "scene.output.sample_rate", r.text
+    assert "44,715 Hz" in r.json()["detail"]
+    res = CliRunner().invoke(build_cli(), ["simulate", "--set", "output.sample_rate=2e4"])
+    assert res.exit_code == 2 and "output.sample_rate" in res.output

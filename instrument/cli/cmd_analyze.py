@@ -40,6 +40,7 @@ from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import FEATURES, aggregate, extract_many
+from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import UNITS
 
 OUT_SUFFIXES = (".csv", ".parquet")
@@ -86,12 +87,6 @@ def collect(paths: Iterable[Path], fmt: str | None = None
             seen.add(key)
             unique.append(f)
     return unique, missing
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def flag_message(text: str) -> str:
@@ -186,9 +181,9 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
             rows.append(row_out)
             continue
         d = feat.to_dict()
-        row_out.update({k: _clean(d[k]) for k in FEATURES})
+        row_out.update({k: json_ready(d[k]) for k in FEATURES})
         row_out["flags"] = d["flags"]
-        row_out["arr_upper_bound"] = _clean(d["arr_upper_bound"])
+        row_out["arr_upper_bound"] = json_ready(d["arr_upper_bound"])
         row_out["features"] = feat
         row_out["waveform"] = w
         rows.append(row_out)

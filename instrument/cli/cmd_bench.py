@@ -26,7 +26,7 @@ def accuracy_command(
     from tqdm import tqdm
 
     from solitonde.instrument.studies.accuracy import configs, run_bench, write_outputs
-    from solitonde.instrument.studies.figures import _clean
+    from solitonde.signal.json_ready import json_ready
 
     if out is not None and out.exists() and not out.is_dir():  # before minutes of runs
         typer.echo(f"error: --out: {str(out)!r} is a file; give a folder", err=True)
@@ -45,7 +45,7 @@ def accuracy_command(
         except OSError as exc:  # the results are still printed; the exit code says it failed
             write_error = f"error: --out: cannot write into {str(out)!r}: {exc.strerror or exc}"
     if as_json:
-        typer.echo(json.dumps(_clean(result), indent=2))
+        typer.echo(json.dumps(json_ready(result), indent=2))
     else:
         _print(result)
     if write_error:
@@ -55,7 +55,7 @@ def accuracy_command(
 
 def _print(result: dict[str, Any]) -> None:
     from solitonde.instrument.studies.accuracy import table_rows
-    from solitonde.instrument.studies.figures import _clean
+    from solitonde.signal.json_ready import json_ready
 
     quick = " (quick: tiny meshes, numbers not converged)" if result.get("quick") else ""
     table = Table(title=f"What accuracy costs (reference: {result['reference']['config']}){quick}")
@@ -67,7 +67,7 @@ def _print(result: dict[str, Any]) -> None:
     console = Console()
     console.print(table)
     console.print(("recommendation (quick: machinery only, not advice): " if quick else
-                   "recommendation: ") + json.dumps(_clean(result["recommendation"]), indent=2))
+                   "recommendation: ") + json.dumps(json_ready(result["recommendation"]), indent=2))
 
 
 def register(app: typer.Typer) -> None:

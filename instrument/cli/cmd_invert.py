@@ -8,7 +8,6 @@ combine sizes). Without ``--tof-std``/``--arr-std`` the inversion's stated defau
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -26,6 +25,7 @@ from solitonde.instrument.inference.inversion import (
 )
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.tables.table import TableError
+from solitonde.signal.json_ready import json_ready
 
 
 def table_path(option: Path | None) -> Path:
@@ -175,19 +175,9 @@ def invert_command(
         _fail(str(exc))
         return
     if as_json:
-        typer.echo(json.dumps(_clean(est.to_dict(posterior=posterior))))
+        typer.echo(json.dumps(json_ready(est.to_dict(posterior=posterior))))
     else:
         typer.echo(describe(est))
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def register(app: typer.Typer) -> None:

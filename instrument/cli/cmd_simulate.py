@@ -23,13 +23,14 @@ from rich.console import Console
 from rich.table import Table
 
 from solitonde.instrument.tables import greens_cache
-from solitonde.instrument.tables.measured import as_measured
+from solitonde.instrument.tables.measured import as_measured, check_resolved
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import SimulationResult, simulate
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import Features, extract
+from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
 
 
@@ -90,19 +91,6 @@ def summary(
     }
 
 
-def _finite(value: float) -> float | None:
-    return value if isinstance(value, float) and math.isfinite(value) else None
-
-
-def _json_safe(data: Any) -> Any:
-    """NaN and inf are not JSON: they become null."""
-    if isinstance(data, dict):
-        return {k: _json_safe(v) for k, v in data.items()}
-    if isinstance(data, float):
-        return _finite(data)
-    return data
-
-
 def write_plot(path: Path, result: SimulationResult, recorded: Waveform,
                data: dict[str, Any]) -> None:
     """The measured sensor trace with the detected incident and reflected pulses marked (PNG)."""
@@ -122,7 +110,7 @@ def _table(data: dict[str, Any]) -> Table:
     table.add_column("value", justify="right")
     rows = [
         ("plate model", data["plate_model"]),
-        ("TOF (ms)", data["tof_s"] * 1e3 if _finite(data["tof_s"]) is not None else "n/a"),
+        ("TOF (ms)", data["tof_s"] * 1e3 if math.isfinite(data["tof_s"]) else "n/a"),
         ("ARR", data["arr"]),
         ("incident peak (N)", data["incident_peak_N"]),
         ("reflected peak (N)", data["reflected_peak_N"]),
@@ -164,9 +152,10 @@ def simulate_command(
             raise typer.Exit(code=2)
     try:
         scene = load_scene(scene_file, overrides or [])
+        check_resolved(scene)
         greens_cache.install()
         result = simulate(scene)
-    except SceneError as exc:
+    except (SceneError, WaveformError) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=2) from None
     except SimulationError as exc:
@@ -201,7 +190,7 @@ def simulate_command(
         except OSError as exc:  # the result is still printed; the exit code says what failed
             failed.append(f"error: {flag}: cannot write {str(path)!r}: {exc.strerror or exc}")
     if as_json:
-        typer.echo(json.dumps(_json_safe(data), indent=2))
+        typer.echo(json.dumps(json_ready(data), indent=2))
     else:
         Console().print(_table(data))
     for line in failed:

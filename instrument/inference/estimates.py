@@ -13,6 +13,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from solitonde.signal.json_ready import json_ready
+
 log = logging.getLogger("solitonde.instrument")
 
 
@@ -94,7 +96,7 @@ class Estimator:
         """The table's axes and provenance, JSON-ready."""
         if self.table is None:
             return None
-        return _jsonable(self.table.summary())
+        return json_ready(self.table.summary())
 
     def invert(self, inputs: Sequence[Mapping[str, Any]],
                calibration: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -109,7 +111,7 @@ class Estimator:
             raise EstimateUnavailable(self.reason or "no model table loaded")
         result = self._invert(self.table, [dict(i) for i in inputs],
                               calibration=dict(calibration) if calibration else None)
-        return _jsonable(result.to_dict() if hasattr(result, "to_dict") else result)
+        return json_ready(result.to_dict() if hasattr(result, "to_dict") else result)
 
     def estimate(self, aggregates: Sequence[Mapping[str, Any]]) -> tuple[dict[str, Any] | None,
                                                                          str | None]:
@@ -151,24 +153,3 @@ def inversion_input(agg: Mapping[str, Any]) -> dict[str, Any] | str:
 def _stat(agg: Mapping[str, Any], name: str) -> Mapping[str, Any]:
     value = agg.get(name)
     return value if isinstance(value, Mapping) else {}
-
-
-def _jsonable(value: Any) -> Any:
-    """numpy scalars/arrays and tuples to plain JSON types; NaN and inf to None."""
-    import math
-
-    import numpy as np
-
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, Path):
-        return str(value)
-    return value

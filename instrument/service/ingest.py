@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from solitonde.instrument.inference.estimates import _jsonable
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import (
     IDENTIFIER_MAX,
@@ -27,6 +26,7 @@ from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.service.store import MeasurementRecord, ShotRecord, Store
 from solitonde.signal.errors import WaveformError
+from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
 
 
@@ -181,7 +181,7 @@ def check_sizes(meta: Mapping[str, Any], field_of: Any) -> None:
                 raise Problem(422, f"{field_of(key)}: {len(value):,} characters; at most "
                               f"{limit}", kind="limit", field=field_of(key))
         elif isinstance(value, Mapping | list | tuple):
-            size = len(json.dumps(_jsonable(value), default=str))
+            size = len(json.dumps(json_ready(value), default=str))
             if size > NESTED_MAX:
                 raise Problem(422, f"{field_of(key)}: {size:,} bytes of JSON; at most "
                               f"{NESTED_MAX:,}", kind="limit", field=field_of(key))
@@ -235,7 +235,7 @@ def aggregate_groups(waveforms: Sequence[Waveform], feats: Sequence[Any]) -> lis
 
 def _to_dict(obj: Any) -> dict[str, Any]:
     data = obj.to_dict() if hasattr(obj, "to_dict") else dict(obj)
-    return _jsonable(data)
+    return json_ready(data)
 
 
 def warm_up() -> float:
@@ -258,7 +258,7 @@ def warm_up() -> float:
 
 
 def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
-    return {"shot_index": index, "metadata": _jsonable(wf.metadata), "n_samples": wf.n,
+    return {"shot_index": index, "metadata": json_ready(wf.metadata), "n_samples": wf.n,
             "t0": wf.t0, "dt": wf.dt, "units": wf.units, "features": _to_dict(features)}
 
 
@@ -332,7 +332,3 @@ def measurement_dict(record: Any) -> dict[str, Any]:
         "links": {"self": f"/v1/measurements/{record.id}",
                   "plot": f"/v1/measurements/{record.id}/plot.png"},
     }
-
-
-def finite_or_none(x: float) -> float | None:
-    return x if math.isfinite(x) else None

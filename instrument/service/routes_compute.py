@@ -16,7 +16,7 @@ from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import ValidationError
 
-from solitonde.instrument.inference.estimates import EstimateUnavailable, _jsonable
+from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableChoiceError
 from solitonde.instrument.service.api_models import (
     Calibration,
@@ -30,6 +30,7 @@ from solitonde.instrument.service.heavy import run_for_client
 from solitonde.instrument.service.problems import Problem, from_pydantic
 from solitonde.instrument.service.routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
 from solitonde.instrument.service.state import service
+from solitonde.signal.json_ready import json_ready
 
 router = APIRouter(tags=["compute"], dependencies=[AUTH])
 
@@ -188,7 +189,7 @@ async def simulate(request: Request) -> dict[str, Any]:
 
 
 def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str, Any]:
-    from solitonde.instrument.tables.measured import as_measured
+    from solitonde.instrument.tables.measured import as_measured, check_resolved
     from solitonde.model.errors import SceneError, SimulationError
     from solitonde.model.scene import scene_from_dict
     from solitonde.model.simulate import simulate as run_scene
@@ -201,7 +202,12 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
             # The response carries the sensor trace only: per-particle traces (3 x samples x
             # particles floats, gigabytes within the cost budget) would be computed for nothing.
             scene = scene.with_overrides({"output.traces": False})
+        check_resolved(scene)
         cost = simulation_cost(scene, budget)
+    except WaveformError as exc:  # a sample rate that cannot resolve the pulse
+        field = f"scene.{exc.field}"
+        raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
+                      field=field) from None
     except SceneError as exc:
         field = f"scene.{exc.field}"
         raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
@@ -239,8 +245,8 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
         "n_samples": int(wf.n),
         "samples": wf.samples.tolist() if payload.include_trace else None,
         "units": "N",
-        "features": _jsonable(features),
-        "diagnostics": _jsonable({"plate_model": result.plate_model,
+        "features": json_ready(features),
+        "diagnostics": json_ready({"plate_model": result.plate_model,
                                   "plate_model_reason": result.plate_model_reason,
                                   **result.diagnostics, "truth": result.truth}),
         "cost": cost,

@@ -17,6 +17,8 @@ import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from solitonde.signal.json_ready import json_ready
+
 DPI = 90
 """Resolution of the PNGs: small files (tens of kB) that still read well in a README."""
 
@@ -63,16 +65,4 @@ def save_csv(frame: pd.DataFrame, path: Path) -> None:
 
 def save_json(data: Any, path: Path) -> None:
     """Write JSON (NaN becomes null so any JSON reader accepts the file)."""
-    write_bytes(path, (json.dumps(_clean(data), indent=2) + "\n").encode())
-
-
-def _clean(value: Any) -> Any:
-    if isinstance(value, float):
-        return value if value == value and abs(value) != float("inf") else None
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    if hasattr(value, "item"):  # numpy scalars
-        return _clean(value.item())
-    return value
+    write_bytes(path, (json.dumps(json_ready(data), indent=2) + "\n").encode())

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from solitonde.model import zener
+from solitonde.model.scene import Scene
 from solitonde.model.simulate import SimulationResult
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.waveform import Waveform
@@ -31,16 +32,31 @@ MIN_PRETRIGGER = 64
 MIN_PULSE_SAMPLES = 4.0
 """Fewest samples across the incident solitary pulse (5 D / V_s wide, Nesterenko's long-wave
 solution) for its peak to be measured; below it a shot is refused rather than measured at
-random (a 20 kHz record of the default scene has 1.9)."""
+random (a 20 kHz record of the default scene has 1.8)."""
 
 
-def pulse_samples(result: SimulationResult) -> float:
-    """Samples across the incident solitary pulse: (5 D / V_s(v_in)) / dt (paper, Eq. 12)."""
-    s = result.scene
-    v_in = zener.incident_velocity(s)
-    width = 5.0 * s.chain.diameter / zener.solitary_wave_speed(s.chain.diameter, s.a_s,
-                                                                 s.sphere_mass, v_in)
-    return width / result.dt
+def pulse_samples(scene: Scene) -> float:
+    """Samples across the incident solitary pulse at the scene's sample rate: 5 D / V_s(v_in)
+    (Nesterenko's speed, the paper's Eq. 12) times ``output.sample_rate``."""
+    v_in = zener.incident_velocity(scene)
+    d = scene.chain.diameter
+    width = 5.0 * d / zener.solitary_wave_speed(d, scene.a_s, scene.sphere_mass, v_in)
+    return width * scene.output.sample_rate
+
+
+def check_resolved(scene: Scene) -> None:
+    """Refuse (WaveformError naming ``output.sample_rate``) a sample rate too low to measure the
+    pulse (:data:`MIN_PULSE_SAMPLES`); known from the scene, so callers check before running."""
+    resolved = pulse_samples(scene)
+    if resolved < MIN_PULSE_SAMPLES:
+        rate = scene.output.sample_rate
+        raise WaveformError(
+            "output.sample_rate",
+            f"{rate:,.0f} Hz puts {resolved:.1f} samples across the solitary pulse "
+            f"({resolved / rate * 1e6:.0f} us wide): too few samples to measure its peak",
+            f"a sample rate with at least {MIN_PULSE_SAMPLES:.0f} samples across the pulse, "
+            f"above {MIN_PULSE_SAMPLES / resolved * rate:,.0f} Hz",
+        )
 
 
 def as_measured(result: SimulationResult, metadata: Mapping[str, Any] | None = None) -> Waveform:
@@ -49,18 +65,9 @@ def as_measured(result: SimulationResult, metadata: Mapping[str, Any] | None = N
     The samples are in N; ``t0`` is negative so that the impact stays at t = 0 and the model's
     peak times (``result.truth``) keep their meaning. Metadata: ``source`` ("simulation"),
     ``sphere_diameter`` and ``plate_model`` of the run, then ``metadata`` (which may replace them).
-    A record too coarse to resolve the pulse (:data:`MIN_PULSE_SAMPLES`) is a WaveformError
-    naming ``output.sample_rate``.
+    A record too coarse to resolve the pulse is refused (:func:`check_resolved`).
     """
-    resolved = pulse_samples(result)
-    if resolved < MIN_PULSE_SAMPLES:
-        raise WaveformError(
-            "output.sample_rate",
-            f"{1.0 / result.dt:,.0f} Hz puts {resolved:.1f} samples across the solitary pulse "
-            f"({resolved * result.dt * 1e6:.0f} us wide): too few samples to measure its peak",
-            f"a sample rate with at least {MIN_PULSE_SAMPLES:.0f} samples across the pulse, "
-            f"above {MIN_PULSE_SAMPLES / (resolved * result.dt):,.0f} Hz",
-        )
+    check_resolved(result.scene)
     x = np.asarray(result.samples, dtype=np.float64)
     n_pre = max(MIN_PRETRIGGER, int(PRETRIGGER_FRACTION * x.size))
     padded = np.concatenate([np.full(n_pre, x[0]), x])
