@@ -26,10 +26,10 @@ import json
 import math
 import re
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
@@ -39,9 +39,12 @@ from solitonde.instrument.cli.manifest import ManifestError, Row
 from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import FEATURES, aggregate, extract_many
+from solitonde.signal.features import FEATURES, extract_many
 from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import UNITS
+
+if TYPE_CHECKING:  # the inference (scipy) loads only when shots are summarised
+    from solitonde.instrument.inference.pipeline import SizeSummary
 
 OUT_SUFFIXES = (".csv", ".parquet")
 LOCATION_KEYS = ("plate_id", "position", "x_m", "y_m", "sphere_diameter")
@@ -190,13 +193,40 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
     return rows, used
 
 
-def aggregates(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Aggregate per (plate_id, position, x_m, y_m, sphere_diameter) over the measured shots.
+def _number(value: Any) -> float | None:
+    try:
+        return None if value is None else float(value)
+    except (TypeError, ValueError):
+        return None
 
-    Shots whose file names neither plate nor position are aggregated per file (``source`` is
+
+@dataclass(frozen=True)
+class Position:
+    """The measured shots of one sphere size at one location and their summary."""
+
+    location: dict[str, Any]  # LOCATION_KEYS and ``source`` (set for files that name nothing)
+    summary: SizeSummary
+    rows: list[dict[str, Any]]
+
+    def skip_reason(self) -> str | None:
+        """Why these shots give the inversion no input (a sphere size that is not a number, or
+        the summary's own reason), or None."""
+        stated = self.location["sphere_diameter"]
+        if stated is not None and self.summary.diameter_m is None:
+            return f"sphere_diameter {stated!r} in the metadata is not a number"
+        return self.summary.skip_reason()
+
+
+def summaries(rows: list[dict[str, Any]]) -> list[Position]:
+    """Per (plate_id, position, x_m, y_m, sphere_diameter) the summary of its measured shots
+    (instrument.inference.pipeline), in the order the groups first appear.
+
+    Shots whose file names neither plate nor position are summarised per file (``source`` is
     then set), never pooled with other files' shots: nothing says they are one position.
     """
-    groups: dict[tuple[Any, ...], list[Any]] = {}
+    from solitonde.instrument.inference.pipeline import summarise
+
+    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
     for r in rows:
         if "features" in r:
             plate, position = r.get("plate_id"), r.get("position")
@@ -205,12 +235,70 @@ def aggregates(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
             groups.setdefault(key, []).append(r)
     out = []
     for key, members in groups.items():
-        agg = aggregate([m["features"] for m in members]).to_dict()
+        location = {**dict(zip(LOCATION_KEYS, key[:-1], strict=True)), "source": key[-1]}
+        (summary,) = summarise([_number(location["sphere_diameter"])] * len(members),
+                               [m["features"] for m in members])
+        out.append(Position(location, summary, members))
+    return out
+
+
+def aggregates(groups: list[Position]) -> list[dict[str, Any]]:
+    """The summaries as JSON: location, then the aggregate; each rejected shot names its file
+    and shot number."""
+    out = []
+    for g in groups:
+        agg = g.summary.aggregate.to_dict()
         for rej in agg["rejected"]:
-            m = members[rej["index"]]
+            m = g.rows[rej["index"]]
             rej.update(source=m["source"], shot=m["shot"])
-        out.append({**dict(zip(LOCATION_KEYS, key[:-1], strict=True)), "source": key[-1],
-                    **agg})
+        out.append({**g.location, **agg})
+    return out
+
+
+def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Path] | None,
+                            calibration_file: Path | None,
+                            plate_material: str | None = None) -> list[dict[str, Any]]:
+    """Estimates per (plate_id, position) from `analyze`'s summaries, sphere sizes combined,
+    each against the table of its family (instrument.table_set's rule), through the one
+    estimate path (instrument.inference.pipeline).
+
+    Raises TableError/CalibrationError when a table or the calibration cannot be read.
+    """
+    from solitonde.instrument.cli.cmd_invert import table_set
+    from solitonde.instrument.inference.calibration import Calibration
+    from solitonde.instrument.inference.inversion import InversionError
+    from solitonde.instrument.inference.pipeline import estimate
+    from solitonde.instrument.inference.table_set import TableChoiceError
+    from solitonde.instrument.tables.table import TableError
+
+    tables = table_set(table_files)
+    cal = Calibration.load(calibration_file) if calibration_file else None
+    by_location: dict[tuple[Any, ...], list[Position]] = {}
+    for g in groups:
+        key = tuple(g.location.get(k) for k in ("plate_id", "position", "x_m", "y_m"))
+        by_location.setdefault(key, []).append(g)
+    out = []
+    for (plate, position, x_m, y_m), sizes in by_location.items():
+        row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
+        usable = [g.summary for g in sizes if g.skip_reason() is None]
+        row["skipped"] = [{"sphere_diameter": g.location["sphere_diameter"],
+                           "reason": g.skip_reason()} for g in sizes if g.skip_reason()]
+        row["diameters_m"] = [s.diameter_m for s in usable]
+        row["n_shots"] = sum(s.inputs().n_shots for s in usable)
+        row["estimate"] = None
+        if not usable:
+            out.append(row)
+            continue
+        try:
+            found = estimate(tables, usable, cal, plate_material=plate_material)
+            found.skipped = row["skipped"]
+            row["estimate"] = found.to_dict()
+        except TableChoiceError as exc:
+            flag = "--plate-material" if exc.field == "plate_material" else "--table"
+            row["error"] = f"{flag}: {exc.message}"
+        except (InversionError, TableError) as exc:
+            row["error"] = str(exc)
+        out.append(row)
     return out
 
 
@@ -383,15 +471,16 @@ def analyze(
         if "error" in r:
             errors.append({"source": r["source"], "shot": r["shot"],
                            "error": flag_message(r["error"])})
-    aggs = aggregates(rows)
+    groups = summaries(rows)
+    aggs = aggregates(groups)
     estimates = None
     if invert:
-        from solitonde.instrument.cli.cmd_invert import estimates_for_aggregates, table_path
+        from solitonde.instrument.cli.cmd_invert import table_path
         from solitonde.instrument.inference.calibration import CalibrationError
         from solitonde.instrument.tables.table import TableError
 
         try:
-            estimates = estimates_for_aggregates(aggs, table, calibration_file, plate_material)
+            estimates = estimates_for_locations(groups, table, calibration_file, plate_material)
         except CalibrationError as exc:
             errors.append({"source": str(calibration_file), "error": str(exc)})
         except (TableError, ValueError, OSError) as exc:  # table unreadable

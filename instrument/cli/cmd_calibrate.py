@@ -28,7 +28,7 @@ def _fail(message: str) -> None:
 
 def summaries_from_files(files: list[Path], diameter: float | None) -> list[FeatureSummary]:
     """Per sphere size: the aggregate of every shot in ``files``."""
-    from solitonde.instrument.cli.cmd_analyze import aggregates, analyse_file, collect
+    from solitonde.instrument.cli.cmd_analyze import analyse_file, collect, summaries
 
     paths, missing = collect(files)
     if missing:
@@ -44,15 +44,14 @@ def summaries_from_files(files: list[Path], diameter: float | None) -> list[Feat
         for r in rows:
             r["sphere_diameter"] = diameter
     out = []
-    for a in aggregates(rows):
-        d, tof, arr = a.get("sphere_diameter"), a["tof_s"], a["arr"]
-        if d is None:
+    for g in summaries(rows):
+        if g.summary.diameter_m is None:
             raise CalibrationError("sphere_diameter", "the shots carry no sphere_diameter "
                                    "metadata; give --diameter")
-        if tof["mean"] is None or arr["mean"] is None:
-            raise CalibrationError("files", f"no shot with D = {d} m has a detected reflection")
-        out.append(FeatureSummary(float(d), tof["mean"], arr["mean"], tof["std"], arr["std"],
-                                  int(tof["count"])))
+        reason = g.summary.skip_reason()
+        if reason is not None:
+            raise CalibrationError("files", reason)
+        out.append(g.summary.inputs())
     if not out:
         raise CalibrationError("files", "no shot could be analysed")
     return out

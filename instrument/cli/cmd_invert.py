@@ -17,15 +17,10 @@ import typer
 
 from solitonde.instrument.cli.cmd_table import DEFAULT_TABLE_PATH
 from solitonde.instrument.inference.calibration import Calibration, CalibrationError
-from solitonde.instrument.inference.inversion import (
-    Estimate,
-    FeatureSummary,
-    InversionError,
-    invert,
-)
+from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, InversionError
+from solitonde.instrument.inference.pipeline import estimate
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.tables.table import TableError
-from solitonde.signal.json_ready import json_ready
 
 
 def table_path(option: Path | None) -> Path:
@@ -77,61 +72,6 @@ def describe(est: Estimate) -> str:
     return "\n".join(lines)
 
 
-def estimates_for_aggregates(aggs: Sequence[Mapping[str, Any]],
-                             table_files: Sequence[Path] | None,
-                             calibration_file: Path | None,
-                             plate_material: str | None = None) -> list[dict[str, Any]]:
-    """Estimates per (plate_id, position) from `analyze` aggregates, sphere sizes combined, each
-    against the table of its family (instrument.table_set's rule).
-
-    Raises TableError/CalibrationError when a table or the calibration cannot be read.
-    """
-    tables = table_set(table_files)
-    cal = Calibration.load(calibration_file) if calibration_file else None
-    groups: dict[tuple[Any, ...], list[Mapping[str, Any]]] = {}
-    for a in aggs:
-        key = (a.get("plate_id"), a.get("position"), a.get("x_m"), a.get("y_m"))
-        groups.setdefault(key, []).append(a)
-    out = []
-    for (plate, position, x_m, y_m), members in groups.items():
-        row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
-        inputs, skipped = [], []
-        for a in members:
-            d, tof, arr = a.get("sphere_diameter"), a.get("tof_s") or {}, a.get("arr") or {}
-            if d is None or tof.get("mean") is None or arr.get("mean") is None:
-                skipped.append({"sphere_diameter": d, "reason": "no sphere_diameter in metadata"
-                                if d is None else "no shot with a detected reflection"})
-                continue
-            try:
-                diameter = float(d)
-            except (TypeError, ValueError):
-                skipped.append({"sphere_diameter": d, "reason": f"sphere_diameter {d!r} in the "
-                                "metadata is not a number"})
-                continue
-            inputs.append(FeatureSummary(diameter, float(tof["mean"]), float(arr["mean"]),
-                                         tof.get("std"), arr.get("std"),
-                                         int(tof.get("count") or 1)))
-        row["skipped"] = skipped
-        row["diameters_m"] = [i.diameter_m for i in inputs]
-        row["n_shots"] = sum(i.n_shots for i in inputs)
-        if not inputs:
-            row["estimate"] = None
-        else:
-            try:
-                chosen = tables.choose([i.diameter_m for i in inputs], None, plate_material)
-                row["estimate"] = {**invert(chosen.table, inputs, cal).to_dict(),
-                                   "table": chosen.table.table_id}
-            except TableChoiceError as exc:
-                row["estimate"] = None
-                flag = "--plate-material" if exc.field == "plate_material" else "--table"
-                row["error"] = f"{flag}: {exc.message}"
-            except (InversionError, TableError) as exc:
-                row["estimate"] = None
-                row["error"] = str(exc)
-        out.append(row)
-    return out
-
-
 def invert_command(
     tof: list[float] = typer.Option(..., "--tof", help="mean time of flight, s (repeat per "
                                     "sphere size)"),
@@ -164,9 +104,8 @@ def invert_command(
                                 tof_std[i] if tof_std else None, arr_std[i] if arr_std else None,
                                 shots[i] if shots else 1) for i in range(n)]
         tables = table_set(table)
-        chosen = tables.choose(diameter, None, plate_material)
         cal = Calibration.load(calibration) if calibration else None
-        est = invert(chosen.table, items, cal, return_posterior=posterior)
+        result = estimate(tables, items, cal, plate_material=plate_material, posterior=posterior)
     except TableChoiceError as exc:
         flag = "--plate-material" if exc.field == "plate_material" else "--table"
         _fail(f"{flag}: {exc.message}")
@@ -175,9 +114,9 @@ def invert_command(
         _fail(str(exc))
         return
     if as_json:
-        typer.echo(json.dumps(json_ready(est.to_dict(posterior=posterior))))
+        typer.echo(json.dumps(result.to_dict(posterior=posterior)))
     else:
-        typer.echo(describe(est))
+        typer.echo(describe(result.estimate))
 
 
 def register(app: typer.Typer) -> None:

@@ -13,44 +13,57 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from solitonde.instrument.inference.estimates import EstimateUnavailable
+from solitonde.instrument.inference.inversion import FeatureSummary
+from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.support import locate
+from solitonde.instrument.inference.table_set import TableSet
 
 PARAMETERS = ("thickness_m", "distance_m")
 
 
-def pool(aggregates: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Aggregates of several measurements of one position, combined per sphere diameter: the
-    count-weighted mean and the pooled sample deviation of TOF and ARR."""
+def pool(aggregates: Sequence[Mapping[str, Any]]
+         ) -> tuple[list[FeatureSummary], list[dict[str, Any]]]:
+    """Stored aggregates of several measurements of one position, combined per sphere diameter
+    (the count-weighted mean and the pooled sample deviation of TOF and ARR) as the inversion's
+    inputs, and the sizes that give none with the reason."""
     groups: dict[Any, list[Mapping[str, Any]]] = {}
     for agg in aggregates:
         groups.setdefault(agg.get("sphere_diameter"), []).append(agg)
-    out = []
+    inputs, skipped = [], []
     for diameter, members in groups.items():
-        entry: dict[str, Any] = {"sphere_diameter": diameter,
-                                 "n_shots": sum(int(m.get("n_shots") or 0) for m in members)}
-        for name in ("tof_s", "arr"):
-            stats = [m.get(name) or {} for m in members]
-            stats = [s for s in stats if s.get("mean") is not None and s.get("count")]
-            n = sum(int(s["count"]) for s in stats)
-            if not n:
-                entry[name] = {"mean": None, "std": None, "count": 0}
-                continue
-            mean = sum(s["mean"] * s["count"] for s in stats) / n
-            within = sum((s["count"] - 1) * (s.get("std") or 0.0) ** 2 for s in stats)
-            between = sum(s["count"] * (s["mean"] - mean) ** 2 for s in stats)
-            std = math.sqrt((within + between) / (n - 1)) if n > 1 else None
-            entry[name] = {"mean": mean, "std": std, "count": n}
-        out.append(entry)
-    return out
+        pooled = {name: _pooled([m.get(name) or {} for m in members]) for name in ("tof_s", "arr")}
+        if diameter is None:
+            skipped.append({"sphere_diameter": None, "reason": "metadata.sphere_diameter is "
+                            "missing: the inversion needs the sphere size"})
+        elif pooled["tof_s"] is None or pooled["arr"] is None:
+            skipped.append({"sphere_diameter": diameter, "reason": f"no shot with D = {diameter}"
+                            " m has a detected reflection (no TOF, no ARR)"})
+        else:
+            (tof, tof_std, n), (arr, arr_std, _) = pooled["tof_s"], pooled["arr"]
+            inputs.append(FeatureSummary(float(diameter), tof, arr, tof_std, arr_std, n))
+    return inputs, skipped
+
+
+def _pooled(stats: Sequence[Mapping[str, Any]]) -> tuple[float, float | None, int] | None:
+    """(mean, sample deviation, count) of the union of several (mean, std, count) groups."""
+    stats = [s for s in stats if s.get("mean") is not None and s.get("count")]
+    n = sum(int(s["count"]) for s in stats)
+    if not n:
+        return None
+    mean = sum(s["mean"] * s["count"] for s in stats) / n
+    within = sum((s["count"] - 1) * (s.get("std") or 0.0) ** 2 for s in stats)
+    between = sum(s["count"] * (s["mean"] - mean) ** 2 for s in stats)
+    return mean, (math.sqrt((within + between) / (n - 1)) if n > 1 else None), n
 
 
 def position_key(plate_position: Any, x: Any, y: Any) -> tuple[Any, Any, Any]:
     return (plate_position, None if x is None else float(x), None if y is None else float(y))
 
 
-def from_records(records: Sequence[Any], estimator: Any) -> list[dict[str, Any]]:
+def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any]]:
     """One entry per position of a plate's stored measurements (oldest first), the pooled
-    shots inverted with ``estimator`` (a :class:`~.table_set.TableSet`)."""
+    shots inverted against ``tables``."""
     groups: dict[tuple[Any, Any, Any], list[Any]] = {}
     for r in records:
         loc = r.result.get("location") or {}
@@ -58,13 +71,21 @@ def from_records(records: Sequence[Any], estimator: Any) -> list[dict[str, Any]]
                           []).append(r)
     out = []
     for (name, x, y), members in groups.items():
-        pooled = pool([a for m in members for a in m.result.get("aggregates", [])])
+        inputs, skipped = pool([a for m in members for a in m.result.get("aggregates", [])])
         table = next((m.result["table"] for m in reversed(members) if m.result.get("table")),
                      None)
+        estimate, reason = None, None
         try:
-            estimate, reason = estimator.estimate(pooled, table=table)
+            if not inputs:
+                raise EstimateUnavailable("; ".join(s["reason"] for s in skipped)
+                                          or "no shot gave a usable TOF")
+            result = estimate_from(tables, inputs, table=table)
+            result.skipped.extend(skipped)
+            estimate = result.to_dict()
+        except EstimateUnavailable as exc:
+            reason = str(exc)
         except Exception as exc:  # an inversion refusing these features: say why, go on
-            estimate, reason = None, f"inversion failed: {exc}"
+            reason = f"inversion failed: {exc}"
         out.append(position_entry(name, x, y, sum(m.n_shots for m in members), estimate, reason,
                                   [m.id for m in members],
                                   max(m.created_at for m in members)))

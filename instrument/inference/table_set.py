@@ -153,25 +153,6 @@ class TableSet:
             raise TableChoiceError(keys[0], f"table {est.table.table_id!r} was built for "
                                    f"another plate family ({detail}); it is not inverted")
 
-    def estimate(self, aggregates: Sequence[Mapping[str, Any]], table: str | None = None,
-                 plate_material: Any = None) -> tuple[dict[str, Any] | None, str | None]:
-        """The chosen table's estimate; ``(None, reason)`` when there is no table at all."""
-        if not self.loaded:
-            return None, self.reason
-        diameters = [a["sphere_diameter"] for a in aggregates
-                     if a.get("sphere_diameter") is not None]
-        est = self.choose(diameters, table, plate_material)
-        estimate, reason = est.estimate(aggregates)
-        if estimate is not None:
-            estimate = {**estimate, "table": est.table.table_id}
-        return estimate, reason
-
-    def invert(self, inputs: Sequence[Mapping[str, Any]],
-               calibration: Mapping[str, Any] | None = None, table: str | None = None,
-               plate_material: Any = None) -> dict[str, Any]:
-        est = self.choose([i["diameter_m"] for i in inputs], table, plate_material)
-        return {**est.invert(inputs, calibration), "table": est.table.table_id}
-
 
 def _covers(est: Estimator, diameters: Sequence[float]) -> bool:
     """Whether the table has every sphere size (within 1 % of its own size, the rule of

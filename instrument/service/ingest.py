@@ -15,6 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from solitonde.instrument.inference.estimates import EstimateUnavailable
+from solitonde.instrument.inference.pipeline import SizeSummary, summarise
+from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import (
     IDENTIFIER_MAX,
@@ -203,8 +206,8 @@ def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None,
     return first
 
 
-def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list[dict[str, Any]]]:
-    """Features per shot and aggregates per sphere diameter."""
+def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list[SizeSummary]]:
+    """Features per shot and a summary per sphere diameter."""
     from solitonde.signal import features as signal_features
 
     feats = []
@@ -213,29 +216,7 @@ def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list
             feats.append(signal_features.extract(wf))
         except WaveformError as exc:  # an empty prefix: a lone shot whose fields are top-level
             raise waveform_error(exc, f"{prefix}.{i}" if prefix else "") from None
-    return feats, aggregate_groups(waveforms, feats)
-
-
-def aggregate_groups(waveforms: Sequence[Waveform], feats: Sequence[Any]) -> list[dict[str, Any]]:
-    """One aggregate per sphere diameter (the inversion combines sizes, never mixes them)."""
-    from solitonde.signal import features as signal_features
-
-    groups: dict[float | None, list[Any]] = {}
-    for wf, f in zip(waveforms, feats, strict=True):
-        d = wf.metadata.get("sphere_diameter")
-        groups.setdefault(None if d is None else float(d), []).append(f)
-    out = []
-    for diameter, members in groups.items():
-        agg = signal_features.aggregate(members)
-        entry = {"sphere_diameter": diameter, "n_shots": len(members)}
-        entry.update(_to_dict(agg))
-        out.append(entry)
-    return out
-
-
-def _to_dict(obj: Any) -> dict[str, Any]:
-    data = obj.to_dict() if hasattr(obj, "to_dict") else dict(obj)
-    return json_ready(data)
+    return feats, summarise([wf.metadata.get("sphere_diameter") for wf in waveforms], feats)
 
 
 def warm_up() -> float:
@@ -259,7 +240,7 @@ def warm_up() -> float:
 
 def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
     return {"shot_index": index, "metadata": json_ready(wf.metadata), "n_samples": wf.n,
-            "t0": wf.t0, "dt": wf.dt, "units": wf.units, "features": _to_dict(features)}
+            "t0": wf.t0, "dt": wf.dt, "units": wf.units, "features": json_ready(features.to_dict())}
 
 
 def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -> Any:
@@ -285,23 +266,23 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
     chosen = choose_table(waveforms, tables, prefix)
     check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
     plate_id, position = location_of(waveforms, prefix)
-    feats, aggregates = analyse(waveforms, prefix)
-    if chosen is None:
-        estimate, reason = None, tables.reason
-    else:
+    feats, summaries = analyse(waveforms, prefix)
+    estimate, reason = None, tables.reason
+    if chosen is not None:
         try:
-            estimate, reason = chosen.estimate(aggregates)
+            estimate = estimate_from(tables, summaries, table=chosen.table.table_id).to_dict()
+            reason = None
+        except EstimateUnavailable as exc:
+            reason = str(exc)
         except Exception as exc:  # an inversion that refuses these features (e.g. out of range)
-            estimate, reason = None, f"inversion failed: {exc}"
-        if estimate is not None:
-            estimate = {**estimate, "table": chosen.table.table_id}
+            reason = f"inversion failed: {exc}"
     shots = [shot_out(i, wf, f) for i, (wf, f) in enumerate(zip(waveforms, feats, strict=True))]
     records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
                           calibration=wf.calibration, metadata=s["metadata"],
                           features=s["features"], shot_index=i)
                for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
-    result = {"aggregates": aggregates, "estimate": estimate, "estimate_reason": reason,
-              "table": chosen.table.table_id if chosen else None}
+    result = {"aggregates": [m.to_dict() for m in summaries], "estimate": estimate,
+              "estimate_reason": reason, "table": chosen.table.table_id if chosen else None}
     coordinates = {k: float(waveforms[0].metadata[k]) for k in ("x_m", "y_m")
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export

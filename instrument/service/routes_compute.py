@@ -17,7 +17,7 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import ValidationError
 
 from solitonde.instrument.inference.estimates import EstimateUnavailable
-from solitonde.instrument.inference.table_set import TableChoiceError
+from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import (
     Calibration,
     InversionInput,
@@ -81,7 +81,7 @@ async def invert(request: Request) -> dict[str, Any]:
     if not svc.estimator.loaded:
         raise Problem(503, f"table: {svc.estimator.reason}", kind="no-table", field="table")
     try:
-        estimate = await run_in_threadpool(svc.estimator.invert, inputs, calibration,
+        estimate = await run_in_threadpool(_invert, svc.estimator, inputs, calibration,
                                            payload.table, payload.plate_material)
     except EstimateUnavailable as exc:
         raise Problem(503, f"table: {exc}", kind="no-table", field="table") from None
@@ -97,6 +97,18 @@ async def invert(request: Request) -> dict[str, Any]:
         message = str(exc).partition(": ")[2] or str(exc)
         raise Problem(422, f"{field}: {message}", kind="invalid-input", field=field) from None
     return {"estimate": estimate}
+
+
+def _invert(tables: TableSet, inputs: list[dict[str, Any]], calibration: dict[str, Any] | None,
+            table: str | None, plate_material: Any) -> dict[str, Any]:
+    """The request's inputs as FeatureSummary (InversionError naming a field) through the one
+    estimate path."""
+    from solitonde.instrument.inference.inversion import FeatureSummary
+    from solitonde.instrument.inference.pipeline import estimate
+
+    items = [FeatureSummary.from_any(i) for i in inputs]
+    return estimate(tables, items, calibration, table=table,
+                    plate_material=plate_material).to_dict()
 
 
 def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:

@@ -1,0 +1,118 @@
+"""One path from measured shots to an estimate, typed from end to end.
+
+    features per shot --summarise--> [SizeSummary] --estimate(tables, ...)--> TableEstimate
+
+``analyze --invert``, ``invert``, ``calibrate``, ``POST /v1/measurements``, ``POST /v1/invert``
+and plate maps all go through :func:`estimate`; dictionaries appear only where data leaves or
+enters (JSON over HTTP and on the command line, the measurement store). A sphere size whose shots
+give no inversion input (no size in the metadata, no detected reflection) is left out with its
+reason in ``TableEstimate.skipped``; the other sizes are still inverted.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.estimates import EstimateUnavailable
+from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, invert
+from solitonde.instrument.inference.table_set import TableSet
+from solitonde.signal.features import Aggregate, Features, aggregate
+from solitonde.signal.json_ready import json_ready
+
+
+@dataclass(frozen=True)
+class SizeSummary:
+    """The shots of one sphere size at one position: their aggregate (outliers reported, shots
+    without a reflection counted) and, through :meth:`inputs`, what the inversion reads."""
+
+    diameter_m: float | None
+    aggregate: Aggregate
+
+    def skip_reason(self) -> str | None:
+        """Why these shots give no inversion input, or None when they give one."""
+        if self.diameter_m is None:
+            return "metadata.sphere_diameter is missing: the inversion needs the sphere size"
+        if self.aggregate["tof_s"].mean is None or self.aggregate["arr"].mean is None:
+            return (f"no shot with D = {self.diameter_m} m has a detected reflection (no TOF, "
+                    "no ARR); see the aggregate's arr_upper_bound")
+        return None
+
+    def inputs(self) -> FeatureSummary:
+        """Mean TOF and ARR with their shot scatter and count (EstimateUnavailable if none)."""
+        reason = self.skip_reason()
+        if reason is not None:
+            raise EstimateUnavailable(reason)
+        tof, arr = self.aggregate["tof_s"], self.aggregate["arr"]
+        return FeatureSummary(float(self.diameter_m), float(tof.mean), float(arr.mean),
+                              tof.std, arr.std, max(int(tof.count), 1))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The stored and served form: ``sphere_diameter`` then the aggregate's fields."""
+        return json_ready({"sphere_diameter": self.diameter_m, **self.aggregate.to_dict()})
+
+
+def summarise(diameters: Sequence[float | None],
+              features: Sequence[Features]) -> list[SizeSummary]:
+    """One summary per sphere diameter (the inversion combines sizes, never mixes them), in the
+    order the sizes first appear; ``diameters[i]`` is shot i's sphere size (None if unknown)."""
+    groups: dict[float | None, list[Features]] = {}
+    for d, f in zip(diameters, features, strict=True):
+        groups.setdefault(None if d is None else float(d), []).append(f)
+    return [SizeSummary(d, aggregate(members)) for d, members in groups.items()]
+
+
+@dataclass
+class TableEstimate:
+    """An inversion's estimate, the table it used and the sphere sizes left out (and why)."""
+
+    estimate: Estimate
+    table_id: str
+    skipped: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_dict(self, posterior: bool = False) -> dict[str, Any]:
+        return json_ready({**self.estimate.to_dict(posterior=posterior), "table": self.table_id,
+                           "skipped": self.skipped})
+
+
+def estimate(
+    tables: TableSet,
+    summaries: Sequence[SizeSummary | FeatureSummary],
+    calibration: Calibration | Mapping[str, Any] | None = None,
+    *,
+    table: str | None = None,
+    plate_material: Any = None,
+    posterior: bool = False,
+) -> TableEstimate:
+    """Thickness and distance to the support from per-size summaries, against the table of
+    their family (:meth:`TableSet.choose`: named by ``table`` or ``plate_material``, else the
+    one that covers the sizes).
+
+    Raises
+    ------
+    EstimateUnavailable
+        No table is loaded, or no size gives an inversion input (the reasons joined).
+    TableChoiceError
+        No table fits, or several could and none is named.
+    InversionError, TableError, CalibrationError
+        The inversion refuses the inputs or the calibration.
+    """
+    if not tables.loaded:
+        raise EstimateUnavailable(tables.reason or "no model table loaded")
+    inputs: list[FeatureSummary] = []
+    skipped: list[dict[str, Any]] = []
+    for s in summaries:
+        if isinstance(s, FeatureSummary):
+            inputs.append(s)
+        elif (reason := s.skip_reason()) is not None:
+            skipped.append({"sphere_diameter": s.diameter_m, "reason": reason})
+        else:
+            inputs.append(s.inputs())
+    if not inputs:
+        raise EstimateUnavailable("; ".join(s["reason"] for s in skipped)
+                                  or "no shot gave a usable TOF")
+    chosen = tables.choose([i.diameter_m for i in inputs], table, plate_material)
+    result = invert(chosen.table, inputs, calibration, return_posterior=posterior)
+    return TableEstimate(result, chosen.table.table_id, skipped)
