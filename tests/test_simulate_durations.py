@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from solitonde.model.scene import scene_from_dict
-from solitonde.model.simulate import auto_duration, simulate
+from solitonde.model.plan import auto_duration
+from solitonde.model.simulate import simulate
 
 
 @pytest.mark.parametrize("plate_model", ["rigid", "halfspace"])

@@ -65,7 +65,7 @@ def test_simulate_service_never_records_particle_traces(tmp_path: Path, monkeypa
 def test_plate_step_floor_is_below_the_real_step_count(sem: dict, plate: dict) -> None:
     """The floor priced before any mesh is built never exceeds the step count of the built
     mesh (else a feasible request would be refused)."""
-    from solitonde.instrument.service.routes_compute import _plate_steps_floor
+    from solitonde.model.plan import _plate_steps_floor
 
     scene = scene_from_dict({"effects": {"plate_model": "sem"}, "sem": sem,
                              "plate": {**plate, "distance_to_support": 0.05},

@@ -36,21 +36,6 @@ router = APIRouter(tags=["compute"], dependencies=[AUTH])
 
 _SIMULATIONS = anyio.CapacityLimiter(1)
 
-PLATE_DOF_WEIGHT = 4.0
-"""One spectral-element degree of freedom advanced one step costs about as much as 4 chain
-particles advanced one step, so plate work is counted in chain-equivalent units. Measured on one
-idle core: the chain (Verlet, default scene) ~3.5e8 particle-steps/s; the coupled SEM plate with
-the sum-factorised stiffness ~9e7 dof-steps/s (default mesh, 14,400 to 52,728 steps). The dense
-stiffness this weight was first set for ran ~2.6e7 dof-steps/s (weight 25)."""
-
-CONVOLUTION_WEIGHT = 0.25
-"""The ``greens`` plate convolves the whole force history at every plate step (sum over the
-steps s of s multiply-adds: plate_steps^2 / 2 in all), which dominates long runs. One
-multiply-add costs about 0.25 chain particle-steps: measured on one core, 8e9/s while the history
-fits the cache (1e5 steps) and 2e9/s beyond it (4e5 steps, 39 s), against ~3.5e8 particle-steps/s
-(0.175 at the slower rate, rounded up)."""
-
-
 async def _payload(request: Request, model: type[Any]) -> Any:
     """The request's JSON body validated as ``model``: 415 unless JSON, 422 naming the field."""
     require_json(request)
@@ -112,76 +97,12 @@ def _invert(tables: TableSet, inputs: list[dict[str, Any]], calibration: dict[st
 
 
 def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
-    """Price of simulating ``scene``: steps, degrees of freedom, their product.
+    """Price of simulating ``scene`` (:func:`solitonde.model.plan.plan`): plate model, duration,
+    samples, steps, degrees of freedom and their product, in chain particle-steps (about 3.5e8
+    per CPU second). A plate mesh is only built once a floor of its cost fits ``budget``."""
+    from solitonde.model.plan import plan
 
-    Uses the model's own rules (:func:`~solitonde.model.simulate.choose_time_step`,
-    :func:`~solitonde.model.simulate.auto_duration`, and for the spectral-element plate tiers
-    their stable step). ``cost = chain steps x (particles + 1) + w x plate steps x plate dofs``
-    with ``w`` = :data:`PLATE_DOF_WEIGHT`, in chain particle-steps (about 3.5e8 per CPU second);
-    ``greens`` adds its convolution, :data:`CONVOLUTION_WEIGHT` x plate_steps^2 / 2.
-    A plate mesh is only built once a floor of its cost fits the ``budget``, so pricing an absurd
-    mesh is itself cheap: the floor counts a plate step per sample, or more where a
-    longitudinal wave would cross an element through the thickness in less (no explicit
-    spectral-element step can be longer than that, :func:`_plate_steps_floor`).
-    """
-    from solitonde.model.boundary import StepPlan, make_boundary, resolve_plate_model
-    from solitonde.model.simulate import auto_duration, check_solver, choose_time_step
-
-    check_solver(scene)  # SceneError (422) before any mesh is built
-    plate_model, _ = resolve_plate_model(scene)
-    duration = (auto_duration(scene, plate_model) if scene.output.duration == "auto"
-                else float(scene.output.duration))
-    n_samples = math.ceil(duration * scene.output.sample_rate * (1.0 - 1e-12)) + 1
-    particles = scene.chain.n_particles + 1
-    out: dict[str, Any] = {"plate_model": plate_model, "duration_s": duration,
-                           "n_samples": int(n_samples)}
-    if plate_model in ("sem", "greens"):
-        steps = max(n_samples - 1, _plate_steps_floor(scene, duration))
-        floor = float(steps) * (particles + PLATE_DOF_WEIGHT * _sem_dofs(scene))
-        if plate_model == "greens":
-            floor += CONVOLUTION_WEIGHT * 0.5 * float(steps) ** 2
-        if floor > budget:
-            return {**out, "steps": steps, "dof": particles + _sem_dofs(scene),
-                    "cost": floor, "estimate": "floor (before the plate mesh is built)"}
-    boundary = make_boundary(scene)
-    dt, n_sub = choose_time_step(scene, boundary)
-    chain_steps, plate_steps, plate_dofs = (n_samples - 1) * n_sub, 0, 0
-    plate = getattr(boundary, "plate", None)
-    if plate is not None and hasattr(boundary, "steps"):
-        _, r, per_sample = boundary.steps(StepPlan(dt, n_sub, n_samples))
-        plate_steps = per_sample * (n_samples - 1)
-        chain_steps = plate_steps * r
-        plate_dofs = int(plate.n_dofs)
-    cost = float(chain_steps) * particles + PLATE_DOF_WEIGHT * float(plate_steps) * plate_dofs
-    if plate_model == "greens":
-        cost += CONVOLUTION_WEIGHT * 0.5 * float(plate_steps) ** 2
-    # dopri5 adapts its step (far fewer than verlet's): verlet's count bounds its cost above.
-    estimate = ("upper bound (verlet step counts)" if scene.solver.integrator == "dopri5"
-                else "exact step counts")
-    return {**out, "steps": int(max(chain_steps, plate_steps)), "dof": particles + plate_dofs,
-            "cost": cost, "estimate": estimate}
-
-
-def _plate_steps_floor(scene: Any, duration: float) -> int:
-    """Fewest explicit plate steps ``duration`` can take: the stable step of a spectral-element
-    mesh is below the time a longitudinal wave takes to cross its thinnest element (2 h / c_L is
-    the 1-D linear element's own limit; higher orders and more dimensions only shorten it), and
-    through the thickness no element is thicker than t / elements_z."""
-    sem = getattr(scene, "sem", None)
-    if sem is None:
-        return 0
-    h = scene.plate.thickness / sem.elements[2]
-    return math.ceil(duration * scene.plate_material.longitudinal_velocity / (2.0 * h))
-
-
-def _sem_dofs(scene: Any) -> int:
-    sem = getattr(scene, "sem", None)
-    if sem is None:
-        return 0
-    nodes = 1
-    for n_el, p in zip(sem.elements, sem.order, strict=True):
-        nodes *= n_el * p + 1
-    return 3 * nodes
+    return plan(scene, budget=budget).cost_dict()
 
 
 @router.post("/simulate", response_model=SimulateOut, responses={**ERRORS},

@@ -72,7 +72,7 @@ class Settings:
     max_simulation_cost:
         Budget for ``POST /v1/simulate`` in chain particle-steps (integration steps x particles;
         spectral-element plate dof-steps counted 4 times, see
-        :data:`~solitonde.instrument.service.routes_compute.PLATE_DOF_WEIGHT`); 5e8 is about 1.5 CPU
+        :data:`~solitonde.model.plan.PLATE_DOF_WEIGHT`); 5e8 is about 1.5 CPU
         seconds.
     store_synchronous:
         SQLite ``synchronous`` pragma. ``NORMAL`` (WAL) keeps every committed measurement when the
