@@ -59,10 +59,8 @@ from .chain import (
     chain_energy,
     contact_forces,
     damped_contact_forces,
-    hertz,
-    hertz_energy,
     new_peak_tracker,
-    record_sample,
+    record_into,
     sensor_reading,
     track_peaks,
     verlet_step,
@@ -70,15 +68,14 @@ from .chain import (
 from .contact import hertz_sphere_flat
 from .dopri import integrate_dopri5
 from .errors import SceneError
+from .laws import dashpot_step, hertz, hertz_energy
 from .leapfrog import integrate_elastic
+from .record import ChainRecord, chain_record
 from .scene import Scene
+from .status import RUN_NONFINITE, RUN_OK
 
 #: Plate models that ``solver.integrator = "dopri5"`` can run (the ODE tiers of this module).
 DOPRI5_PLATE_MODELS = ("rigid", "halfspace", "infinite")
-
-# Status codes returned by compiled drivers.
-RUN_OK = 0
-RUN_NONFINITE = 1
 
 
 @dataclass
@@ -197,17 +194,24 @@ class ZenerDashpot(BottomBoundary):
         return _run_dashpot(setup, plan, inv_z=1.0 / self.impedance)
 
 
+def setup_record(setup: ChainSetup, peaks: np.ndarray) -> ChainRecord:
+    """The compiled drivers' view of a setup: its arrays (shared) and constants, u0 a copy of u."""
+    return chain_record(
+        setup.u, setup.v, setup.u.copy(), setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
+        setup.tau, setup.sensor, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
+        setup.f_trace, setup.w_trace, peaks,
+    )
+
+
 def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
     if plan.integrator == "dopri5":
         return _run_dopri5(setup, plan, inv_z)
-    u0 = setup.u.copy()
     peaks = new_peak_tracker()
+    record = setup_record(setup, peaks)
     start = time.perf_counter()
-    status, done, w, plate_work, dissipated = integrate_dashpot(
-        setup.u, setup.v, setup.w, u0, setup.m, setup.g, setup.a_s, setup.a_b, inv_z,
-        setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_sub, plan.n_samples,
-        setup.samples, setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace,
-        peaks,
+    status, done, w, plate_work, dissipated = dashpot_run(
+        record, float(setup.w), float(inv_z), float(plan.dt), int(plan.n_sub),
+        int(plan.n_samples),
     )
     wall = time.perf_counter() - start
     setup.w = w
@@ -216,15 +220,11 @@ def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
 
 def _run_dopri5(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
     """The same tiers with the adaptive Dormand-Prince driver (:mod:`~solitonde.model.dopri`)."""
-    u0 = setup.u.copy()
     peaks = new_peak_tracker()
+    record = setup_record(setup, peaks)
     start = time.perf_counter()
-    out = integrate_dopri5(
-        setup.u, setup.v, setup.w, u0, setup.m, setup.g, setup.a_s, setup.a_b, inv_z,
-        setup.f_static, setup.tau, setup.sensor, plan.dt, plan.n_samples, plan.rtol,
-        plan.max_steps, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
-        setup.f_trace, setup.w_trace, peaks,
-    )
+    out = integrate_dopri5(record, float(setup.w), float(inv_z), float(plan.dt),
+                           int(plan.n_samples), float(plan.rtol), int(plan.max_steps))
     wall = time.perf_counter() - start
     status, done, w, plate_work, dissipated, accepted, rejected, nfev, deviation = out
     setup.w = w
@@ -238,147 +238,138 @@ def _run_dopri5(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
 def dashpot_advance(
     w: float, u_n: float, a_b: float, f_static: float, inv_z: float, h: float
 ) -> float:
-    """Advance the dashpot ``w' = (A_b [u_N - w]_+^1.5 - F_static) / Z`` over h with u_N frozen.
-
-    Explicit midpoint rule (second order, like the Strang splitting around it); the time step
-    keeps ``h k_b / Z <= 0.0125`` (see :func:`solitonde.model.simulate.choose_time_step`).
-    """
-    k1 = (hertz(a_b, u_n - w) - f_static) * inv_z
-    k2 = (hertz(a_b, u_n - w - 0.5 * h * k1) - f_static) * inv_z
-    return w + h * k2
+    """Advance the dashpot ``w' = (A_b [u_N - w]_+^1.5 - F_static) / Z`` over h with u_N frozen
+    (:func:`solitonde.model.laws.dashpot_step` from the current bottom force)."""
+    return dashpot_step(w, u_n, hertz(a_b, u_n - w), a_b, f_static, inv_z, h)
 
 
 @njit(cache=True, nogil=True)
-def integrate_dashpot(
-    u: np.ndarray,
-    v: np.ndarray,
-    w: float,
-    u0: np.ndarray,
-    m: float,
-    g: float,
-    a_s: float,
-    a_b: float,
-    inv_z: float,
-    f_static: float,
-    tau: float,
-    sensor: int,
-    dt: float,
-    n_sub: int,
-    n_samples: int,
-    samples: np.ndarray,
-    energy: np.ndarray,
-    u_trace: np.ndarray,
-    v_trace: np.ndarray,
-    f_trace: np.ndarray,
-    w_trace: np.ndarray,
-    pk: np.ndarray,
+def dashpot_run(
+    rec: ChainRecord, w: float, inv_z: float, dt: float, n_sub: int, n_samples: int
 ) -> tuple[int, int, float, float, float]:
     """Driver for the wall and dashpot tiers (``inv_z = 0``: the plate never moves).
 
-    Returns (status, samples recorded, final w, work done on the plate J, dissipated energy J).
-    ``energy[k]`` holds the balance chain energy + plate work + dissipated energy at sample k.
-    Without dissipation it runs the fused leapfrog form of the same scheme
-    (:func:`solitonde.model.leapfrog.integrate_elastic`); with it, :func:`integrate_dashpot_steps`.
-    It releases the GIL, so that threads run scenes in parallel (:mod:`~solitonde.model.batch`).
+    ``rec`` holds the chain's state, constants and outputs; ``w`` is the plate's initial top
+    surface, ``inv_z`` 1 / impedance, and the grid ``n_samples`` samples from t = 0, ``n_sub``
+    steps of ``dt`` apart. Returns (status, samples recorded, final w, work done on the plate J,
+    dissipated energy J). ``rec.energy[k]`` holds the balance chain energy + plate work +
+    dissipated energy at sample k. Without dissipation it runs the fused leapfrog form of the
+    same scheme (:func:`solitonde.model.leapfrog.integrate_elastic`); with it,
+    :func:`dashpot_steps_run`. It releases the GIL, so that threads run scenes in parallel
+    (:mod:`~solitonde.model.batch`).
     """
-    if tau > 0.0:
-        return integrate_dashpot_steps(
-            u, v, w, u0, m, g, a_s, a_b, inv_z, f_static, tau, sensor, dt, n_sub, n_samples,
-            samples, energy, u_trace, v_trace, f_trace, w_trace, pk,
-        )
-    status, done, w_end, plate_work = integrate_elastic(
-        u, v, w, u0, m, g, a_s, a_b, inv_z, f_static, sensor, dt, n_sub, n_samples,
-        samples, energy, u_trace, v_trace, f_trace, w_trace, pk,
-    )
+    if rec.tau > 0.0:
+        return dashpot_steps_run(rec, w, inv_z, dt, n_sub, n_samples)
+    status, done, w_end, plate_work = integrate_elastic(rec, w, inv_z, dt, n_sub, n_samples)
     return status, done, w_end, plate_work, 0.0
 
 
 @njit(cache=True)
-def integrate_dashpot_steps(
-    u: np.ndarray,
-    v: np.ndarray,
-    w: float,
-    u0: np.ndarray,
-    m: float,
-    g: float,
-    a_s: float,
-    a_b: float,
-    inv_z: float,
-    f_static: float,
-    tau: float,
-    sensor: int,
-    dt: float,
-    n_sub: int,
-    n_samples: int,
-    samples: np.ndarray,
-    energy: np.ndarray,
-    u_trace: np.ndarray,
-    v_trace: np.ndarray,
-    f_trace: np.ndarray,
-    w_trace: np.ndarray,
-    pk: np.ndarray,
+def initial_forces(
+    rec: ChainRecord, w: float, f: np.ndarray, acc: np.ndarray, vp: np.ndarray
+) -> float:
+    """Contact forces ``f`` and accelerations ``acc`` at t = 0; returns the dissipated power.
+
+    With dissipation the viscous force uses the initial velocities (``vp`` receives a copy).
+    """
+    u, n, inv_m = rec.u, rec.u.size - 1, 1.0 / rec.m
+    contact_forces(u, rec.a_s, f)
+    power = 0.0
+    if rec.tau > 0.0:
+        for i in range(n + 1):
+            vp[i] = rec.v[i]
+        power = damped_contact_forces(u, vp, rec.a_s, rec.tau, f)
+    accelerations(f, hertz(rec.a_b, u[n] - w), inv_m, rec.g, acc)
+    return power
+
+
+@njit(cache=True)
+def plate_half_step(
+    rec: ChainRecord, w: float, e_before: float, inv_z: float, h: float, f: np.ndarray,
+    acc: np.ndarray,
+) -> tuple[float, float]:
+    """Dashpot step of h with the chain frozen: returns (new w, work done on the plate J).
+
+    The work is the drop of the bottom contact's elastic energy (2/5) delta F (``e_before`` at
+    the old w), exact while u is frozen; ``acc[N]`` is refreshed for the new bottom force.
+    """
+    n = rec.u.size - 1
+    u_n = rec.u[n]
+    w = dashpot_advance(w, u_n, rec.a_b, rec.f_static, inv_z, h)
+    f_new = hertz(rec.a_b, u_n - w)
+    bottom_acceleration(acc, f, f_new, 1.0 / rec.m, rec.g)
+    return w, e_before - 0.4 * (u_n - w) * f_new
+
+
+@njit(cache=True)
+def dashpot_steps_run(
+    rec: ChainRecord, w: float, inv_z: float, dt: float, n_sub: int, n_samples: int
 ) -> tuple[int, int, float, float, float]:
     """Step-by-step driver built from the :mod:`~solitonde.model.chain` kernels (any ``tau``).
 
     The reference form of the scheme, which plate tiers imitate; arguments and return as
-    :func:`integrate_dashpot`.
+    :func:`dashpot_run`.
     """
+    u, v, a_b, sensor, pk = rec.u, rec.v, rec.a_b, rec.sensor, rec.pk
     n = u.size - 1
-    inv_m = 1.0 / m
+    inv_m = 1.0 / rec.m
     half = 0.5 * dt
     f = np.empty(n)
     acc = np.empty(n + 1)
     vp = np.empty(n + 1)
-    if tau > 0.0:
-        contact_forces(u, a_s, f)
-        f_bottom = hertz(a_b, u[n] - w)
-        accelerations(f, f_bottom, inv_m, g, acc)
-        for i in range(n + 1):
-            vp[i] = v[i]
-        power = damped_contact_forces(u, vp, a_s, tau, f)
-    else:
-        contact_forces(u, a_s, f)
-        power = 0.0
-    f_bottom = hertz(a_b, u[n] - w)
-    accelerations(f, f_bottom, inv_m, g, acc)
+    power = initial_forces(rec, w, f, acc, vp)
     plate_work = 0.0
     dissipated = 0.0
     moving = inv_z > 0.0
-    t = 0.0
     step = 0
     for k in range(n_samples):
-        record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
-        energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + plate_work + dissipated
-        if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
+        record_into(rec, k, f, w)
+        rec.energy[k] = (chain_energy(u, v, rec.u0, w, rec.m, rec.g, rec.a_s, a_b) + plate_work
+                       + dissipated)
+        if not np.isfinite(rec.samples[k]) or not np.isfinite(rec.energy[k]):
             return RUN_NONFINITE, k + 1, w, plate_work, dissipated
         if k == n_samples - 1:
             break
         # Strang splitting D(dt/2) V(dt) D(dt/2); the inner half steps of consecutive steps are
         # merged into one D(dt), so the state is synchronous only at samples (where it is read).
         if moving:
-            e_before = hertz_energy(a_b, u[n] - w)
-            w = dashpot_advance(w, u[n], a_b, f_static, inv_z, half)
-            f_new = hertz(a_b, u[n] - w)
-            plate_work += e_before - 0.4 * (u[n] - w) * f_new
-            bottom_acceleration(acc, f, f_new, inv_m, g)
+            w, work = plate_half_step(rec, w, hertz_energy(a_b, u[n] - w), inv_z, half, f, acc)
+            plate_work += work
         for sub in range(n_sub):
             power_before = power
-            f_bottom, power = verlet_step(u, v, acc, f, vp, w, a_s, a_b, inv_m, g, tau, dt)
+            f_bottom, power = verlet_step(u, v, acc, f, vp, w, rec.a_s, a_b, inv_m, rec.g, rec.tau,
+                                          dt)
             dissipated += half * (power_before + power)
             if moving:
-                # Elastic energy (2/5) delta F, exact work done on the plate while u is frozen.
+                # (2/5) delta F from the step's own bottom force, as the energy before the step
                 e_before = 0.4 * (u[n] - w) * f_bottom
                 h = half if sub == n_sub - 1 else dt
-                w = dashpot_advance(w, u[n], a_b, f_static, inv_z, h)
-                f_new = hertz(a_b, u[n] - w)
-                plate_work += e_before - 0.4 * (u[n] - w) * f_new
-                bottom_acceleration(acc, f, f_new, inv_m, g)
+                w, work = plate_half_step(rec, w, e_before, inv_z, h, f, acc)
+                plate_work += work
             step += 1
-            t = step * dt
-            track_peaks(pk, t, dt, sensor_reading(f, f_bottom, sensor), f_bottom)
+            track_peaks(pk, step * dt, dt, sensor_reading(f, f_bottom, sensor), f_bottom)
     if not pk[PK_BOT_F] >= 0.0:
         return RUN_NONFINITE, n_samples, w, plate_work, dissipated
     return RUN_OK, n_samples, w, plate_work, dissipated
+
+
+def _legacy(driver, u, v, w, u0, m, g, a_s, a_b, inv_z, f_static, tau, sensor, dt, n_sub,
+            n_samples, samples, energy, u_trace, v_trace, f_trace, w_trace, pk):
+    record = chain_record(u, v, u0, m, g, a_s, a_b, f_static, tau, sensor, samples, energy,
+                          u_trace, v_trace, f_trace, w_trace, pk)
+    return driver(record, float(w), float(inv_z), float(dt), int(n_sub), int(n_samples))
+
+
+def integrate_dashpot(*args) -> tuple[int, int, float, float, float]:
+    """:func:`dashpot_run` in the former positional form ``(u, v, w, u0, m, g, a_s, a_b, inv_z,
+    f_static, tau, sensor, dt, n_sub, n_samples, samples, energy, u_trace, v_trace, f_trace,
+    w_trace, pk)`` (kept for callers and tests written against it)."""
+    return _legacy(dashpot_run, *args)
+
+
+def integrate_dashpot_steps(*args) -> tuple[int, int, float, float, float]:
+    """:func:`dashpot_steps_run` in the former positional form of :func:`integrate_dashpot`."""
+    return _legacy(dashpot_steps_run, *args)
 
 
 # Tier registry and plate-model resolution --------------------------------------------------

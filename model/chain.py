@@ -6,6 +6,7 @@ overlap of contact j (between particles j and j + 1) is ``u[j] - u[j + 1]`` and 
 plate is ``u[N] - w`` (w: the plate's top surface under the chain). Contact forces are Hertzian,
 ``A [delta]_+^(3/2)``: an open contact carries nothing (no tension).
 
+The contact laws themselves live in :mod:`solitonde.model.laws` (written once for every driver).
 Every function here is a small ``@njit(cache=True)`` kernel that knows nothing about the plate:
 a driver loop in :mod:`solitonde.model.boundary` (or a later plate tier) owns the bottom surface
 ``w``, advances it, and calls these kernels in the order
@@ -26,10 +27,12 @@ decides what the plate takes.
 
 from __future__ import annotations
 
-from math import sqrt
-
 import numpy as np
 from numba import njit
+
+from .laws import hertz, kuwabara_kono, overlap_52
+from .laws import hertz_energy as hertz_energy  # re-exported: the laws' former home
+from .record import ChainRecord
 
 # Layout of the peak tracker array used by :func:`track_peaks`.
 PK_PREV2, PK_PREV1 = 0, 1
@@ -44,22 +47,6 @@ def new_peak_tracker() -> np.ndarray:
     pk = np.full(PK_SIZE, -np.inf)
     pk[PK_INC_T] = pk[PK_REF_T] = pk[PK_BOT_T] = np.nan
     return pk
-
-
-@njit(cache=True)
-def hertz(a: float, delta: float) -> float:
-    """Hertz force ``a delta^(3/2)`` for a closed contact, zero for an open one."""
-    if delta > 0.0:
-        return a * delta * sqrt(delta)
-    return 0.0
-
-
-@njit(cache=True)
-def hertz_energy(a: float, delta: float) -> float:
-    """Elastic energy ``(2/5) a delta^(5/2)`` stored in a closed contact."""
-    if delta > 0.0:
-        return 0.4 * a * delta * delta * sqrt(delta)
-    return 0.0
 
 
 @njit(cache=True)
@@ -81,18 +68,8 @@ def damped_contact_forces(
     """
     power = 0.0
     for j in range(f.size):
-        d = u[j] - u[j + 1]
-        if d > 0.0:
-            sd = sqrt(d)
-            el = a_s * d * sd
-            rate = v[j] - v[j + 1]
-            total = el + 1.5 * a_s * tau * sd * rate
-            if total < 0.0:
-                total = 0.0
-            f[j] = total
-            power += (total - el) * rate
-        else:
-            f[j] = 0.0
+        f[j], lost = kuwabara_kono(a_s, tau, u[j] - u[j + 1], v[j] - v[j + 1])
+        power += lost
     return power
 
 
@@ -209,13 +186,9 @@ def chain_energy(
         grav += u[i] - u0[i]
     pot = 0.0
     for j in range(u.size - 1):
-        d = u[j] - u[j + 1]
-        d = d if d > 0.0 else 0.0
-        pot += d * d * sqrt(d)
+        pot += overlap_52(u[j] - u[j + 1])
     n = u.size - 1
-    db = u[n] - w
-    db = db if db > 0.0 else 0.0
-    return 0.5 * m * kin + 0.4 * (a_s * pot + a_b * db * db * sqrt(db)) - m * g * grav
+    return 0.5 * m * kin + 0.4 * (a_s * pot + a_b * overlap_52(u[n] - w)) - m * g * grav
 
 
 @njit(cache=True)
@@ -286,3 +259,10 @@ def record_sample(
             f_trace[k, j] = f[j]
         f_trace[k, n] = f_bottom
         w_trace[k] = w
+
+
+@njit(cache=True)
+def record_into(rec: ChainRecord, k: int, f: np.ndarray, w: float) -> None:
+    """:func:`record_sample` of sample k into the run record's own arrays."""
+    record_sample(k, rec.u, rec.v, f, w, rec.a_b, rec.sensor, rec.samples, rec.u_trace,
+                  rec.v_trace, rec.f_trace, rec.w_trace)

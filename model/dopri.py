@@ -1,6 +1,6 @@
 """Adaptive Dormand-Prince 5(4) driver for the chain on a wall or a Zener dashpot (``dopri5``).
 
-The same equations as :func:`solitonde.model.boundary.integrate_dashpot` (the paper's Secs. 3.1,
+The same equations as :func:`solitonde.model.boundary.dashpot_run` (the paper's Secs. 3.1,
 3 and 5), written as one first-order system and integrated with the explicit Runge-Kutta pair of
 Dormand and Prince (J. Comp. Appl. Math. 6, 19, 1980) in the form of Hairer's DOPRI5 (Hairer,
 Norsett, Wanner, *Solving ODEs I*, 2nd ed., section II.5): FSAL, a PI step-size controller and the
@@ -41,6 +41,7 @@ the peak truth carries the interpolant's accuracy, not the sample grid's.
 from __future__ import annotations
 
 from math import exp, log, sqrt
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -53,14 +54,13 @@ from .chain import (
     PK_REF_F,
     PK_REF_T,
     chain_energy,
-    hertz,
     track_peaks,
 )
-
-RUN_OK = 0
-RUN_NONFINITE = 1
-RUN_STEP_BUDGET = 2
-RUN_STEP_TOO_SMALL = 3
+from .laws import hertz, kuwabara_kono, sphere_contact
+from .record import ChainRecord
+from .status import RUN_NONFINITE, RUN_OK
+from .status import RUN_STEP_BUDGET as RUN_STEP_BUDGET  # re-exported for simulate
+from .status import RUN_STEP_TOO_SMALL as RUN_STEP_TOO_SMALL
 
 # Dormand-Prince 5(4) tableau (Hairer's DOPRI5 constants).
 C2, C3, C4, C5 = 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0
@@ -107,26 +107,12 @@ def _rhs(
     power = 0.0
     if tau > 0.0:
         for j in range(n):
-            d = y[j] - y[j + 1]
-            if d > 0.0:
-                sd = sqrt(d)
-                el = a_s * d * sd
-                rate = y[np1 + j] - y[np1 + j + 1]
-                total = el + 1.5 * a_s * tau * sd * rate
-                if total < 0.0:
-                    total = 0.0
-                f[j] = total
-                power += (total - el) * rate
-            else:
-                f[j] = 0.0
+            f[j], lost = kuwabara_kono(a_s, tau, y[j] - y[j + 1], y[np1 + j] - y[np1 + j + 1])
+            power += lost
     else:
         for j in range(n):
-            d = y[j] - y[j + 1]
-            d = d if d > 0.0 else 0.0
-            f[j] = a_s * d * sqrt(d)
-    db = y[n] - y[2 * np1]
-    db = db if db > 0.0 else 0.0
-    f_b = a_b * db * sqrt(db)
+            f[j] = hertz(a_s, y[j] - y[j + 1])
+    f_b = hertz(a_b, y[n] - y[2 * np1])
     for i in range(np1):
         dy[i] = y[np1 + i]
     if n == 0:
@@ -149,19 +135,6 @@ def _poly(p: np.ndarray, i: int, x: float) -> float:
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
-def _contact(a_s: float, tau: float, d: float, rate: float) -> float:
-    """Sphere contact force at overlap d and closing rate d' (elastic Hertz when tau = 0)."""
-    if d <= 0.0:
-        return 0.0
-    sd = sqrt(d)
-    total = a_s * d * sd
-    if tau > 0.0:
-        total += 1.5 * a_s * tau * sd * rate
-        total = total if total > 0.0 else 0.0
-    return total
-
-
-@njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _sample_sensor(
     p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
     tau: float, sensor: int, samples: np.ndarray, f_bot: np.ndarray,
@@ -180,23 +153,21 @@ def _sample_sensor(
     damped = tau > 0.0
     for s in range(cnt):
         x = th[s]
-        db = _poly(p, n, x) - _poly(p, iw, x)
-        db = db if db > 0.0 else 0.0
-        fb = a_b * db * sqrt(db)
+        fb = hertz(a_b, _poly(p, n, x) - _poly(p, iw, x))
         u_up = _poly(p, up, x)
         u_mid = _poly(p, sensor, x)
         rate_up = 0.0
         if damped:
             v_mid = _poly(p, np1 + sensor, x)
             rate_up = _poly(p, np1 + up, x) - v_mid
-        above = _contact(a_s, tau, u_up - u_mid, rate_up)
+        above = sphere_contact(a_s, tau, u_up - u_mid, rate_up)
         if last:
             below = fb
         else:
             rate_dn = 0.0
             if damped:
                 rate_dn = v_mid - _poly(p, np1 + sensor + 1, x)
-            below = _contact(a_s, tau, u_mid - _poly(p, sensor + 1, x), rate_dn)
+            below = sphere_contact(a_s, tau, u_mid - _poly(p, sensor + 1, x), rate_dn)
         samples[k0 + s] = 0.5 * (above + below)
         f_bot[s] = fb
 
@@ -230,16 +201,13 @@ def _sample_block(
             v_cur[s] = b0 + x * (b1 + x * (b2 + x * (b3 + x * b4)))
         if i > 0:
             j = i - 1
-            for s in range(cnt):
-                d = u_prev[s] - u_cur[s]
-                d = d if d > 0.0 else 0.0
-                force[s] = a_s * d * sqrt(d)
             if tau > 0.0:
                 for s in range(cnt):
-                    d = u_prev[s] - u_cur[s]
-                    if d > 0.0:
-                        total = force[s] + 1.5 * a_s * tau * sqrt(d) * (v_prev[s] - v_cur[s])
-                        force[s] = total if total > 0.0 else 0.0
+                    force[s] = kuwabara_kono(a_s, tau, u_prev[s] - u_cur[s],
+                                             v_prev[s] - v_cur[s])[0]
+            else:
+                for s in range(cnt):
+                    force[s] = hertz(a_s, u_prev[s] - u_cur[s])
             # The sensor's contacts: j = sensor - 1 above it, j = sensor below it.
             if j == sensor - 1:
                 for s in range(cnt):
@@ -257,9 +225,7 @@ def _sample_block(
     iw = 2 * np1
     for s in range(cnt):
         w = _poly(p, iw, th[s])
-        db = u_prev[s] - w
-        db = db if db > 0.0 else 0.0
-        fb = a_b * db * sqrt(db)
+        fb = hertz(a_b, u_prev[s] - w)
         f_bot[s] = fb
         reading = f_up[s] + fb if sensor == n else f_up[s]
         samples[k0 + s] = 0.5 * reading
@@ -315,13 +281,8 @@ def _at(rc: np.ndarray, i: int, theta: float) -> float:
 def _contact_at(rc: np.ndarray, c: int, theta: float, a_s: float, tau: float) -> float:
     """Force of the sensor's contact c (0 above, 1 below) from the kept components at theta."""
     d = _at(rc, c, theta) - _at(rc, c + 1, theta)
-    if d <= 0.0:
-        return 0.0
-    sd = sqrt(d)
-    total = a_s * d * sd
-    if tau > 0.0:
-        total += 1.5 * a_s * tau * sd * (_at(rc, 5 + c, theta) - _at(rc, 6 + c, theta))
-    return total if total > 0.0 else 0.0
+    rate = _at(rc, 5 + c, theta) - _at(rc, 6 + c, theta) if tau > 0.0 else 0.0
+    return sphere_contact(a_s, tau, d, rate)
 
 
 @njit(cache=True)
@@ -360,37 +321,250 @@ def _refine_peak(
     return x2, f2
 
 
+class Ode(NamedTuple):
+    """Constants of the right-hand side :func:`_rhs` (n: the chain's last particle index)."""
+
+    n: int
+    inv_m: float
+    g: float
+    a_s: float
+    a_b: float
+    inv_z: float
+    f_static: float
+    tau: float
+
+
+# The steps of integrate_dopri5. Each is inlined into the driver (numba IR inlining), so the
+# driver compiles as one function, under its own flags, exactly as when the steps were written
+# in its body.
+_STEP = {"cache": True, "inline": "always", "fastmath": FASTMATH, "error_model": "numpy"}
+
+
+@njit(**_STEP)
+def _tolerances(u: np.ndarray, v: np.ndarray, m: float, a_s: float, rtol: float) -> np.ndarray:
+    """atol per component: rtol x (dynamic overlap, impact velocity, overlap, kinetic energy)."""
+    np1 = u.size
+    v_imp = 1e-9
+    for i in range(np1):
+        v_imp = max(v_imp, abs(v[i]))
+    e_kin = 0.5 * m * v_imp * v_imp
+    overlap = (2.5 * e_kin / a_s) ** 0.4
+    atol = np.empty(2 * np1 + 3)
+    atol[:np1] = rtol * overlap
+    atol[np1:2 * np1] = rtol * v_imp
+    atol[2 * np1] = rtol * overlap
+    atol[2 * np1 + 1:] = rtol * e_kin
+    return atol
+
+
+@njit(**_STEP)
+def _initial_step(
+    ode: Ode, f: np.ndarray, y: np.ndarray, k0: np.ndarray, y1: np.ndarray, k1: np.ndarray,
+    atol: np.ndarray, rtol: float, t_end: float,
+) -> float:
+    """Hairer's HINIT with RMS norms as scipy's select_initial_step (one RHS evaluation)."""
+    size = y.size
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(size):
+        sc = atol[i] + rtol * abs(y[i])
+        d0 += (y[i] / sc) ** 2
+        d1 += (k0[i] / sc) ** 2
+    d0 = sqrt(d0 / size)
+    d1 = sqrt(d1 / size)
+    h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h = min(h, t_end)
+    for i in range(size):
+        y1[i] = y[i] + h * k0[i]
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k1)
+    d2 = 0.0
+    for i in range(size):
+        sc = atol[i] + rtol * abs(y[i])
+        d2 += ((k1[i] - k0[i]) / sc) ** 2
+    d2 = sqrt(d2 / size) / h
+    h1 = max(1e-6, h * 1e-3) if d1 <= 1e-15 and d2 <= 1e-15 else (0.01 / max(d1, d2)) ** 0.2
+    return min(100.0 * h, h1, t_end)
+
+
+@njit(**_STEP)
+def _stages(
+    ode: Ode, f: np.ndarray, y: np.ndarray, h: float, k0: np.ndarray, k1: np.ndarray,
+    k2: np.ndarray, k3: np.ndarray, k4: np.ndarray, k5: np.ndarray, k6: np.ndarray,
+    y1: np.ndarray, size: int,
+) -> None:
+    """Stages 2..7 of one Dormand-Prince step of h from (y, k0 = y'(y)): y1 the 5th-order
+    solution, k6 = y'(y1) (FSAL); ``size`` the state's length."""
+    for i in range(size):
+        y1[i] = y[i] + h * A21 * k0[i]
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k1)
+    for i in range(size):
+        y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k2)
+    for i in range(size):
+        y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k3)
+    for i in range(size):
+        y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k4)
+    for i in range(size):
+        y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
+                            + A65 * k4[i])
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k5)
+    for i in range(size):
+        y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
+                            + A76 * k5[i])
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k6)
+
+
+@njit(**_STEP)
+def _error_norm(
+    y: np.ndarray, y1: np.ndarray, h: float, k0: np.ndarray, k2: np.ndarray, k3: np.ndarray,
+    k4: np.ndarray, k5: np.ndarray, k6: np.ndarray, atol: np.ndarray, rtol: float, size: int,
+) -> float:
+    """scipy's error norm: RMS of err_i / (atol_i + rtol max(|y_i|, |y1_i|)) over the ``size``
+    components."""
+    err = 0.0
+    for i in range(size):
+        r = h * (E1 * k0[i] + E3 * k2[i] + E4 * k3[i] + E5 * k4[i] + E6 * k5[i]
+                 + E7 * k6[i]) / (atol[i] + rtol * max(abs(y[i]), abs(y1[i])))
+        err += r * r
+    return sqrt(err / size)
+
+
+@njit(**_STEP)
+def _dense_coefficients(
+    y: np.ndarray, y1: np.ndarray, h: float, k0: np.ndarray, k2: np.ndarray, k3: np.ndarray,
+    k4: np.ndarray, k5: np.ndarray, k6: np.ndarray, rc: np.ndarray, size: int,
+) -> None:
+    """Dense output coefficients of the accepted step (Hairer's CONTD5) into ``rc`` (5 x size)."""
+    for i in range(size):
+        dy = y1[i] - y[i]
+        bspl = h * k0[i] - dy
+        rc[0, i] = y[i]
+        rc[1, i] = dy
+        rc[2, i] = bspl
+        rc[3, i] = dy - h * k6[i] - bspl
+        rc[4, i] = h * (D1 * k0[i] + D3 * k2[i] + D4 * k3[i] + D5 * k4[i]
+                        + D6 * k5[i] + D7 * k6[i])
+
+
+@njit(**_STEP)
+def _powers(rc: np.ndarray, pw: np.ndarray) -> None:
+    """The dense output as a polynomial in powers of theta (for Horner evaluation)."""
+    for i in range(rc.shape[1]):
+        pw[0, i] = rc[0, i]
+        pw[1, i] = rc[1, i] + rc[2, i]
+        pw[2, i] = rc[3, i] + rc[4, i] - rc[2, i]
+        pw[3, i] = -rc[3, i] - 2.0 * rc[4, i]
+        pw[4, i] = rc[4, i]
+
+
+@njit(**_STEP)
+def _track_indices(n: int, sensor: int) -> np.ndarray:
+    """Components kept for the peak refinement: u[s-1], u[s], u[s+1], u[N], w, v[s-1], v[s],
+    v[s+1] (indices clipped to the chain)."""
+    np1 = n + 1
+    below = min(sensor + 1, n)
+    idx = np.empty(_TRACK, dtype=np.int64)
+    idx[0] = sensor - 1
+    idx[1] = sensor
+    idx[2] = below
+    idx[3] = n
+    idx[4] = 2 * np1
+    idx[5] = np1 + sensor - 1
+    idx[6] = np1 + sensor
+    idx[7] = np1 + below
+    return idx
+
+
+@njit(**_STEP)
+def _keep(
+    hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray, n_hist: int, t: float, h: float,
+    rc: np.ndarray, track_idx: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Append step (t, h) and its tracked dense-output components; returns the (possibly grown)
+    history arrays."""
+    cap = hist_t.size
+    if n_hist == cap:
+        cap *= 2
+        grown_t = np.empty(cap)
+        grown_h = np.empty(cap)
+        grown_c = np.empty((cap, 5, _TRACK))
+        grown_t[:n_hist] = hist_t[:n_hist]
+        grown_h[:n_hist] = hist_h[:n_hist]
+        grown_c[:n_hist] = hist_c[:n_hist]
+        hist_t, hist_h, hist_c = grown_t, grown_h, grown_c
+    hist_t[n_hist] = t
+    hist_h[n_hist] = h
+    for c in range(_TRACK):
+        for p in range(5):
+            hist_c[n_hist, p, c] = rc[p, track_idx[c]]
+    return hist_t, hist_h, hist_c
+
+
+@njit(**_STEP)
+def _emit(
+    rec: ChainRecord, pw: np.ndarray, th: np.ndarray, scratch: np.ndarray, n: int,
+    first: int, stop: int, t: float, h: float, last: bool, interval: float, n_samples: int,
+    e_prev: float, e_new: float,
+) -> int:
+    """Samples first .. stop - 1 from the step [t, t + h] (dense output ``pw``), in blocks of at
+    most _BLOCK; the energy balance interpolated between the step ends. Returns the sample index
+    at which a reading was not finite (+1), or 0 when all were."""
+    traces = rec.u_trace.shape[0] > 0
+    f_bot = scratch[scratch.shape[0] - 1]
+    next_k = first
+    while next_k < stop:
+        cnt = min(stop - next_k, _BLOCK)
+        for c in range(cnt):
+            kk = next_k + c
+            th[c] = 1.0 if (last and kk == n_samples - 1) else (kk * interval - t) / h
+        if traces:
+            _sample_block(pw, th, cnt, next_k, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
+                          scratch, rec.samples, rec.u_trace, rec.v_trace, rec.f_trace,
+                          rec.w_trace)
+        else:
+            _sample_sensor(pw, th, cnt, next_k, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
+                           rec.samples, f_bot)
+        for c in range(cnt):
+            kk = next_k + c
+            rec.energy[kk] = (1.0 - th[c]) * e_prev + th[c] * e_new
+            if not np.isfinite(rec.samples[kk]):
+                return kk + 1
+            track_peaks(rec.pk, kk * interval, interval, rec.samples[kk], f_bot[c])
+        next_k += cnt
+    return 0
+
+
+@njit(**_STEP)
+def _refine_peaks(
+    rec: ChainRecord, interval: float, t_end: float, hist_t: np.ndarray, hist_h: np.ndarray,
+    hist_c: np.ndarray, n_hist: int, n: int,
+) -> None:
+    """Refine the three peaks on the dense output (each within one sample interval of the
+    parabola through its samples)."""
+    pk = rec.pk
+    for slot_f, slot_t, which in ((PK_INC_F, PK_INC_T, 0), (PK_REF_F, PK_REF_T, 0),
+                                  (PK_BOT_F, PK_BOT_T, 1)):
+        if np.isfinite(pk[slot_t]):
+            tp, fp = _refine_peak(which, pk[slot_t], interval, t_end, hist_t, hist_h, hist_c,
+                                  n_hist, n, rec.a_s, rec.a_b, rec.tau, rec.sensor)
+            pk[slot_t] = tp
+            pk[slot_f] = fp
+
+
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
 def integrate_dopri5(
-    u: np.ndarray,
-    v: np.ndarray,
-    w: float,
-    u0: np.ndarray,
-    m: float,
-    g: float,
-    a_s: float,
-    a_b: float,
-    inv_z: float,
-    f_static: float,
-    tau: float,
-    sensor: int,
-    interval: float,
-    n_samples: int,
-    rtol: float,
+    rec: ChainRecord, w: float, inv_z: float, interval: float, n_samples: int, rtol: float,
     max_steps: int,
-    samples: np.ndarray,
-    energy: np.ndarray,
-    u_trace: np.ndarray,
-    v_trace: np.ndarray,
-    f_trace: np.ndarray,
-    w_trace: np.ndarray,
-    pk: np.ndarray,
 ) -> tuple[int, int, float, float, float, int, int, int, float]:
     """Integrate chain + plate from t = 0 to (n_samples - 1) x interval with DOPRI5.
 
-    Arguments as :func:`solitonde.model.boundary.integrate_dashpot` (``interval``: the sample
-    interval), plus ``rtol`` and ``max_steps`` (attempted steps). ``u``, ``v`` are left at the
-    final state; ``pk`` gets the peaks (dense-output refined, see the module docstring).
+    ``rec`` holds the chain's state, constants and outputs (:class:`~solitonde.model.record.
+    ChainRecord`); ``w`` the plate's initial top surface, ``inv_z`` 1 / impedance (0: a wall),
+    ``interval`` the sample interval, ``rtol`` the tolerance and ``max_steps`` the budget of
+    attempted steps. ``rec.u``, ``rec.v`` are left at the final state; ``rec.pk`` gets the peaks
+    (dense-output refined, see the module docstring).
 
     ``atol = rtol x scale`` per component, with the scales of the benchmark's RK45 run
     (tests/bench_chain.py): the striker's dynamic Hertz overlap ``(5 E / (2 A_s))^(2/5)`` for
@@ -408,22 +582,13 @@ def integrate_dopri5(
     accepted steps, rejected steps, right-hand-side evaluations, largest |balance - start| over
     the step ends J).
     """
+    u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
     n = u.size - 1
     np1 = n + 1
     size = 2 * np1 + 3
-    inv_m = 1.0 / m
-    traces = u_trace.shape[0] > 0
+    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, rec.tau)
     t_end = (n_samples - 1) * interval
-    v_imp = 1e-9
-    for i in range(np1):
-        v_imp = max(v_imp, abs(v[i]))
-    e_kin = 0.5 * m * v_imp * v_imp
-    overlap = (2.5 * e_kin / a_s) ** 0.4
-    atol = np.empty(size)
-    atol[:np1] = rtol * overlap
-    atol[np1:2 * np1] = rtol * v_imp
-    atol[2 * np1] = rtol * overlap
-    atol[2 * np1 + 1:] = rtol * e_kin
+    atol = _tolerances(u, v, m, a_s, rtol)
 
     y = np.empty(size)
     y[:np1] = u
@@ -437,28 +602,17 @@ def integrate_dopri5(
     rc = np.empty((5, size))
     pw = np.empty((5, size))
     th = np.empty(_BLOCK)
-    scratch = np.empty((10 if traces else 1, _BLOCK))
+    scratch = np.empty((10 if rec.u_trace.shape[0] > 0 else 1, _BLOCK))
     f_bot = scratch[scratch.shape[0] - 1]
     f = np.empty(max(n, 1))
-    track_idx = np.empty(_TRACK, dtype=np.int64)
-    below = min(sensor + 1, n)
-    track_idx[0] = sensor - 1
-    track_idx[1] = sensor
-    track_idx[2] = below
-    track_idx[3] = n
-    track_idx[4] = 2 * np1
-    track_idx[5] = np1 + sensor - 1
-    track_idx[6] = np1 + sensor
-    track_idx[7] = np1 + below
-    cap = 256
-    hist_t = np.empty(cap)
-    hist_h = np.empty(cap)
-    hist_c = np.empty((cap, 5, _TRACK))
+    track_idx = _track_indices(n, rec.sensor)
+    hist_t = np.empty(256)
+    hist_h = np.empty(256)
+    hist_c = np.empty((256, 5, _TRACK))
     n_hist = 0
 
-    nfev = 0
-    _rhs(y, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k0)
-    nfev += 1
+    _rhs(y, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k0)
+    nfev = 1
 
     # Sample 0 is the initial state (a constant "interpolant").
     for i in range(size):
@@ -466,45 +620,24 @@ def integrate_dopri5(
         for j in range(1, 5):
             pw[j, i] = 0.0
     th[0] = 0.0
-    if traces:
-        _sample_block(pw, th, 1, 0, n, a_s, a_b, tau, sensor, scratch, samples, u_trace,
-                      v_trace, f_trace, w_trace)
+    if rec.u_trace.shape[0] > 0:
+        _sample_block(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, scratch, rec.samples,
+                      rec.u_trace, rec.v_trace, rec.f_trace, rec.w_trace)
     else:
-        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, tau, sensor, samples, f_bot)
+        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, rec.samples, f_bot)
     e_start = _balance(y, n, u0, m, g, a_s, a_b)
-    energy[0] = e_start
+    rec.energy[0] = e_start
     e_prev = e_start
     deviation = 0.0
-    if not (np.isfinite(samples[0]) and np.isfinite(e_start)):
+    if not (np.isfinite(rec.samples[0]) and np.isfinite(e_start)):
         return RUN_NONFINITE, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
     if n_samples == 1:
-        pk[PK_BOT_F] = f_bot[0]
-        pk[PK_BOT_T] = 0.0
+        rec.pk[PK_BOT_F] = f_bot[0]
+        rec.pk[PK_BOT_T] = 0.0
         return RUN_OK, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
 
-    # Initial step (Hairer's HINIT, RMS norms as scipy's select_initial_step).
-    d0 = 0.0
-    d1 = 0.0
-    for i in range(size):
-        sc = atol[i] + rtol * abs(y[i])
-        d0 += (y[i] / sc) ** 2
-        d1 += (k0[i] / sc) ** 2
-    d0 = sqrt(d0 / size)
-    d1 = sqrt(d1 / size)
-    h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-    h = min(h, t_end)
-    for i in range(size):
-        y1[i] = y[i] + h * k0[i]
-    _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k1)
+    h = _initial_step(ode, f, y, k0, y1, k1, atol, rtol, t_end)
     nfev += 1
-    d2 = 0.0
-    for i in range(size):
-        sc = atol[i] + rtol * abs(y[i])
-        d2 += ((k1[i] - k0[i]) / sc) ** 2
-    d2 = sqrt(d2 / size) / h
-    h1 = max(1e-6, h * 1e-3) if d1 <= 1e-15 and d2 <= 1e-15 else (0.01 / max(d1, d2)) ** 0.2
-    h = min(100.0 * h, h1, t_end)
-
     t = 0.0
     next_k = 1
     accepted = 0
@@ -522,34 +655,9 @@ def integrate_dopri5(
         last = t + h >= t_end * (1.0 - 1e-13)
         if last:
             h = t_end - t
-        for i in range(size):
-            y1[i] = y[i] + h * A21 * k0[i]
-        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k1)
-        for i in range(size):
-            y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
-        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k2)
-        for i in range(size):
-            y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
-        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k3)
-        for i in range(size):
-            y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
-        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k4)
-        for i in range(size):
-            y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
-                                + A65 * k4[i])
-        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k5)
-        for i in range(size):
-            y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
-                                + A76 * k5[i])
-        _rhs(y1, n, inv_m, g, a_s, a_b, inv_z, f_static, tau, f, k6)
+        _stages(ode, f, y, h, k0, k1, k2, k3, k4, k5, k6, y1, size)
         nfev += 6
-        # scipy's error norm: RMS of err_i / (atol_i + rtol max(|y_i|, |y1_i|)).
-        err = 0.0
-        for i in range(size):
-            r = h * (E1 * k0[i] + E3 * k2[i] + E4 * k3[i] + E5 * k4[i] + E6 * k5[i]
-                     + E7 * k6[i]) / (atol[i] + rtol * max(abs(y[i]), abs(y1[i])))
-            err += r * r
-        err = sqrt(err / size)
+        err = _error_norm(y, y1, h, k0, k2, k3, k4, k5, k6, atol, rtol, size)
         if not np.isfinite(err):
             return (RUN_NONFINITE, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
                     accepted, rejected, nfev, deviation)
@@ -562,30 +670,9 @@ def integrate_dopri5(
             h = h / min(1.0 / FAC_MIN, fac11 / SAFETY)
             continue
 
-        # Accepted: dense output coefficients of [t, t + h] (Hairer's CONTD5).
-        for i in range(size):
-            dy = y1[i] - y[i]
-            bspl = h * k0[i] - dy
-            rc[0, i] = y[i]
-            rc[1, i] = dy
-            rc[2, i] = bspl
-            rc[3, i] = dy - h * k6[i] - bspl
-            rc[4, i] = h * (D1 * k0[i] + D3 * k2[i] + D4 * k3[i] + D5 * k4[i]
-                            + D6 * k5[i] + D7 * k6[i])
-        if n_hist == cap:
-            cap *= 2
-            grown_t = np.empty(cap)
-            grown_h = np.empty(cap)
-            grown_c = np.empty((cap, 5, _TRACK))
-            grown_t[:n_hist] = hist_t[:n_hist]
-            grown_h[:n_hist] = hist_h[:n_hist]
-            grown_c[:n_hist] = hist_c[:n_hist]
-            hist_t, hist_h, hist_c = grown_t, grown_h, grown_c
-        hist_t[n_hist] = t
-        hist_h[n_hist] = h
-        for c in range(_TRACK):
-            for p in range(5):
-                hist_c[n_hist, p, c] = rc[p, track_idx[c]]
+        # Accepted: dense output of [t, t + h], kept for the peak refinement.
+        _dense_coefficients(y, y1, h, k0, k2, k3, k4, k5, k6, rc, size)
+        hist_t, hist_h, hist_c = _keep(hist_t, hist_h, hist_c, n_hist, t, h, rc, track_idx)
         n_hist += 1
 
         t_new = t_end if last else t + h
@@ -594,36 +681,19 @@ def integrate_dopri5(
             return (RUN_NONFINITE, next_k, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
                     accepted + 1, rejected, nfev, deviation)
         deviation = max(deviation, abs(e_new - e_start))
-        # The samples in (t, t + h], in blocks of at most _BLOCK.
+        # The samples in (t, t + h].
         stop = next_k
         while stop < n_samples and (stop * interval <= t_new or (last and stop ==
                                                                   n_samples - 1)):
             stop += 1
         if stop > next_k:
-            for i in range(size):
-                pw[0, i] = rc[0, i]
-                pw[1, i] = rc[1, i] + rc[2, i]
-                pw[2, i] = rc[3, i] + rc[4, i] - rc[2, i]
-                pw[3, i] = -rc[3, i] - 2.0 * rc[4, i]
-                pw[4, i] = rc[4, i]
-        while next_k < stop:
-            cnt = min(stop - next_k, _BLOCK)
-            for c in range(cnt):
-                kk = next_k + c
-                th[c] = 1.0 if (last and kk == n_samples - 1) else (kk * interval - t) / h
-            if traces:
-                _sample_block(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, scratch, samples,
-                              u_trace, v_trace, f_trace, w_trace)
-            else:
-                _sample_sensor(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, samples, f_bot)
-            for c in range(cnt):
-                kk = next_k + c
-                energy[kk] = (1.0 - th[c]) * e_prev + th[c] * e_new
-                if not np.isfinite(samples[kk]):
-                    return (RUN_NONFINITE, kk + 1, y1[2 * np1], y1[2 * np1 + 1],
-                            y1[2 * np1 + 2], accepted + 1, rejected, nfev, deviation)
-                track_peaks(pk, kk * interval, interval, samples[kk], f_bot[c])
-            next_k += cnt
+            _powers(rc, pw)
+            bad = _emit(rec, pw, th, scratch, n, next_k, stop, t, h, last, interval, n_samples,
+                        e_prev, e_new)
+            if bad > 0:
+                return (RUN_NONFINITE, bad, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
+                        accepted + 1, rejected, nfev, deviation)
+            next_k = stop
 
         accepted += 1
         # PI controller; no growth right after a rejection.
@@ -643,17 +713,9 @@ def integrate_dopri5(
     for i in range(np1):
         u[i] = y[i]
         v[i] = y[np1 + i]
-    if not pk[PK_BOT_F] >= 0.0:
+    if not rec.pk[PK_BOT_F] >= 0.0:
         return (RUN_NONFINITE, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted,
                 rejected, nfev, deviation)
-    # Refine the three peaks on the dense output (each within one sample interval of the
-    # parabola through its samples).
-    for slot_f, slot_t, which in ((PK_INC_F, PK_INC_T, 0), (PK_REF_F, PK_REF_T, 0),
-                                  (PK_BOT_F, PK_BOT_T, 1)):
-        if np.isfinite(pk[slot_t]):
-            tp, fp = _refine_peak(which, pk[slot_t], interval, t_end, hist_t, hist_h, hist_c,
-                                  n_hist, n, a_s, a_b, tau, sensor)
-            pk[slot_t] = tp
-            pk[slot_f] = fp
+    _refine_peaks(rec, interval, t_end, hist_t, hist_h, hist_c, n_hist, n)
     return (RUN_OK, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted, rejected,
             nfev, deviation)

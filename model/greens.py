@@ -28,9 +28,11 @@ from typing import Protocol
 import numpy as np
 from numba import njit
 
-from .chain import PK_BOT_F, chain_energy, record_sample
+from .chain import PK_BOT_F, chain_energy, record_into
+from .record import ChainRecord
 from .sem import ElasticPlate
 from .sem_kernels import chain_start, chain_substeps
+from .status import RUN_NONFINITE, RUN_OK, RUN_SHORT_RESPONSE
 
 #: Bump when the meaning of a stored response changes (invalidates every cache entry).
 #: 2: the force acts through a contact patch and g is the patch-weighted deflection; the key
@@ -158,30 +160,9 @@ def contact_response(
 
 @njit(cache=True)
 def integrate_greens(
-    u: np.ndarray,
-    v: np.ndarray,
-    u0: np.ndarray,
-    m: float,
-    g: float,
-    a_s: float,
-    a_b: float,
-    f_static: float,
-    tau: float,
-    sensor: int,
-    h: float,
-    r: int,
-    n_sub: int,
-    n_samples: int,
-    samples: np.ndarray,
-    energy: np.ndarray,
-    u_trace: np.ndarray,
-    v_trace: np.ndarray,
-    f_trace: np.ndarray,
-    w_trace: np.ndarray,
-    pk: np.ndarray,
-    response: np.ndarray,
+    rec: ChainRecord, h: float, r: int, n_sub: int, n_samples: int, response: np.ndarray
 ) -> tuple[int, int, float, float, float]:
-    """Chain on a plate given by its contact response; the contract of ``integrate_dashpot``.
+    """Chain on a plate given by its contact response; the contract of ``boundary.dashpot_run``.
 
     The same scheme as the coupled ``sem`` driver (plate step ``h``, ``r`` chain steps per plate
     step, ``n_sub`` plate steps per sample), the plate's drift to step s + 1 being the convolution
@@ -189,6 +170,8 @@ def integrate_greens(
     bottom force (beyond round-off of the static load) are zero and skipped. Returns (status,
     samples recorded, final w, work done on the plate J, dissipated energy J).
     """
+    u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
+    f_static, tau, sensor, pk = rec.f_static, rec.tau, rec.sensor, rec.pk
     n = u.size - 1
     inv_m = 1.0 / m
     dt = h / r
@@ -198,7 +181,7 @@ def integrate_greens(
     steps = n_sub * (n_samples - 1)
     length = response.size
     if length < steps + 1:
-        return 2, 0, 0.0, 0.0, 0.0
+        return RUN_SHORT_RESPONSE, 0, 0.0, 0.0, 0.0
     rev = response[::-1].copy()  # rev[length - 1 - j] = response[j]
     fdyn = np.zeros(steps + 1)
     tol = 1e-12 * f_static
@@ -214,10 +197,10 @@ def integrate_greens(
     plate_work = 0.0
     step = 0
     for k in range(n_samples):
-        record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
-        energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + plate_work + dissipated
-        if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
-            return 1, k + 1, w, plate_work, dissipated
+        record_into(rec, k, f, w)
+        rec.energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + plate_work + dissipated
+        if not np.isfinite(rec.samples[k]) or not np.isfinite(rec.energy[k]):
+            return RUN_NONFINITE, k + 1, w, plate_work, dissipated
         if k == n_samples - 1:
             break
         for _ in range(n_sub):
@@ -239,5 +222,5 @@ def integrate_greens(
             if first < 0 and abs(fdyn[step]) > tol:
                 first = step
     if not pk[PK_BOT_F] >= 0.0:
-        return 1, n_samples, w, plate_work, dissipated
-    return 0, n_samples, w, plate_work, dissipated
+        return RUN_NONFINITE, n_samples, w, plate_work, dissipated
+    return RUN_OK, n_samples, w, plate_work, dissipated

@@ -1,6 +1,6 @@
 """Fused compiled driver for the elastic chain on a wall or a Zener dashpot (the fast path).
 
-It integrates exactly the scheme of :func:`solitonde.model.boundary.integrate_dashpot` (velocity
+It integrates exactly the scheme of :func:`solitonde.model.boundary.dashpot_steps_run` (velocity
 Verlet for the chain inside a Strang splitting with the dashpot, the paper's Secs. 3.1 and
 4.1.1) for the common case without dissipation, but arranged for speed:
 
@@ -19,24 +19,20 @@ separate half kicks would give. The result agrees with the unfused driver to rou
 
 from __future__ import annotations
 
-from math import sqrt
-
 import numpy as np
 from numba import njit
 
-from .chain import PK_BOT_F, hertz, hertz_energy, record_sample, track_peaks
-
-RUN_OK = 0
-RUN_NONFINITE = 1
+from .chain import PK_BOT_F, record_into, track_peaks
+from .laws import dashpot_step, hertz, hertz_energy
+from .record import ChainRecord
+from .status import RUN_NONFINITE, RUN_OK
 
 
 @njit(cache=True)
 def _hertz_forces(u: np.ndarray, a_s: float, f: np.ndarray) -> None:
     """Branch-free Hertz forces of the N sphere-sphere contacts (vectorises)."""
     for j in range(f.size):
-        d = u[j] - u[j + 1]
-        d = d if d > 0.0 else 0.0
-        f[j] = a_s * d * sqrt(d)
+        f[j] = hertz(a_s, u[j] - u[j + 1])
 
 
 @njit(cache=True)
@@ -100,44 +96,17 @@ def _energy(
 
 
 @njit(cache=True)
-def _dashpot(
-    w: float, u_n: float, f_now: float, a_b: float, f_static: float, inv_z: float, h: float
-) -> float:
-    """Explicit midpoint step of ``w' = (A_b [u_N - w]_+^1.5 - F_static) / Z`` (u_N frozen);
-    ``f_now`` is the bottom force at (u_N, w), which the caller already has."""
-    k1 = (f_now - f_static) * inv_z
-    k2 = (hertz(a_b, u_n - w - 0.5 * h * k1) - f_static) * inv_z
-    return w + h * k2
-
-
-@njit(cache=True)
 def integrate_elastic(
-    u: np.ndarray,
-    v: np.ndarray,
-    w: float,
-    u0: np.ndarray,
-    m: float,
-    g: float,
-    a_s: float,
-    a_b: float,
-    inv_z: float,
-    f_static: float,
-    sensor: int,
-    dt: float,
-    n_sub: int,
-    n_samples: int,
-    samples: np.ndarray,
-    energy: np.ndarray,
-    u_trace: np.ndarray,
-    v_trace: np.ndarray,
-    f_trace: np.ndarray,
-    w_trace: np.ndarray,
-    pk: np.ndarray,
+    rec: ChainRecord, w: float, inv_z: float, dt: float, n_sub: int, n_samples: int
 ) -> tuple[int, int, float, float]:
-    """Elastic chain on a wall (``inv_z = 0``) or a dashpot; arguments as ``integrate_dashpot``.
+    """Elastic chain on a wall (``inv_z = 0``) or a dashpot; arguments as
+    :func:`solitonde.model.boundary.dashpot_run`.
 
     Returns (status, samples recorded, final w, work done on the plate J).
     """
+    u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
+    f_static, sensor, samples, energy, pk = (rec.f_static, rec.sensor, rec.samples, rec.energy,
+                                             rec.pk)
     n = u.size - 1
     inv_m = 1.0 / m
     half = 0.5 * dt
@@ -146,7 +115,7 @@ def integrate_elastic(
     plate_work = 0.0
     moving = inv_z > 0.0
     step = 0
-    traces = u_trace.shape[0] > 0
+    traces = rec.u_trace.shape[0] > 0
     f_bottom = hertz(a_b, u[n] - w)
     e_chain = _energy(u, v, u0, f, w, m, g, a_b)
     for k in range(n_samples):
@@ -154,7 +123,7 @@ def integrate_elastic(
         below = f[sensor] if sensor < n else f_bottom
         samples[k] = 0.5 * (f[sensor - 1] + below)
         if traces:
-            record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
+            record_into(rec, k, f, w)
         energy[k] = e_chain + plate_work
         if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
             return RUN_NONFINITE, k + 1, w, plate_work
@@ -163,7 +132,7 @@ def integrate_elastic(
         if moving:
             # Opening half step of the dashpot; its later half steps merge into full ones.
             e_before = 0.4 * (u[n] - w) * f_bottom
-            w = _dashpot(w, u[n], f_bottom, a_b, f_static, inv_z, half)
+            w = dashpot_step(w, u[n], f_bottom, a_b, f_static, inv_z, half)
             f_bottom = hertz(a_b, u[n] - w)
             plate_work += e_before - 0.4 * (u[n] - w) * f_bottom
         c = half
@@ -176,8 +145,8 @@ def integrate_elastic(
             f_after = f_bottom
             if moving:
                 e_before = 0.4 * (u[n] - w) * f_bottom
-                w = _dashpot(w, u[n], f_bottom, a_b, f_static, inv_z,
-                             half if sub == n_sub - 1 else dt)
+                w = dashpot_step(w, u[n], f_bottom, a_b, f_static, inv_z,
+                                 half if sub == n_sub - 1 else dt)
                 f_after = hertz(a_b, u[n] - w)
                 plate_work += e_before - 0.4 * (u[n] - w) * f_after
             step += 1

@@ -16,6 +16,8 @@ tuple's type:
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit, types
 from numba.extending import overload
@@ -27,11 +29,13 @@ from .chain import (
     contact_forces,
     damped_contact_forces,
     hertz,
-    record_sample,
+    record_into,
     sensor_reading,
     track_peaks,
     verlet_step,
 )
+from .record import ChainRecord
+from .status import RUN_NONFINITE, RUN_OK
 
 #: Tuple lengths that tell the two operator forms apart (see the constructors below).
 DENSE_LEN = 5
@@ -444,50 +448,41 @@ def chain_substeps(
     return f_bottom, power, dissipated
 
 
+class SemPlate(NamedTuple):
+    """The spectral-element plate as the coupled driver sees it.
+
+    inv_mass, mass: per dof; op: the stiffness operator (:func:`stiffness_product`); ldofs, lw:
+    the patch's vertical dofs and weights (summing to ``share``); up, vp: the plate's
+    displacement and velocity (in and out); share: the modelled part of the plate (1/2 for a
+    half model on a symmetry plane: it carries half the force and half the energy).
+    """
+
+    inv_mass: np.ndarray
+    mass: np.ndarray
+    op: tuple
+    ldofs: np.ndarray
+    lw: np.ndarray
+    up: np.ndarray
+    vp: np.ndarray
+    share: float
+
+
 @njit(cache=True)
 def integrate_sem(
-    u: np.ndarray,
-    v: np.ndarray,
-    u0: np.ndarray,
-    m: float,
-    g: float,
-    a_s: float,
-    a_b: float,
-    f_static: float,
-    tau: float,
-    sensor: int,
-    h: float,
-    r: int,
-    n_sub: int,
-    n_samples: int,
-    samples: np.ndarray,
-    energy: np.ndarray,
-    u_trace: np.ndarray,
-    v_trace: np.ndarray,
-    f_trace: np.ndarray,
-    w_trace: np.ndarray,
-    pk: np.ndarray,
-    inv_mass: np.ndarray,
-    mass: np.ndarray,
-    op: tuple,
-    ldofs: np.ndarray,
-    lw: np.ndarray,
-    up: np.ndarray,
-    vp: np.ndarray,
-    share: float,
+    rec: ChainRecord, h: float, r: int, n_sub: int, n_samples: int, plate: SemPlate
 ) -> tuple[int, int, float, float, float]:
-    """Chain on a spectral-element plate; the contract of ``boundary.integrate_dashpot``.
+    """Chain on a spectral-element plate; the contract of ``boundary.dashpot_run``.
 
-    ``op`` is the plate's stiffness operator (see :func:`stiffness_product`), ``h`` is the
-    plate step, ``r`` chain steps per plate step, ``n_sub`` plate steps per sample.
-    The contact force acts through the patch (vertical dofs ``ldofs``, weights ``lw`` summing to
-    ``share``) and the Hertz spring sees the work-conjugate deflection w = -(lw . up) / share
-    (z up); ``up``, ``vp`` hold the plate's displacement and velocity (in and out). ``share``
-    is the part of the plate that is modelled (1/2 for a half model on a symmetry plane: it
-    carries half the force and half the energy). Returns (status, samples recorded, final w,
-    plate energy J, dissipated energy J); ``energy[k]`` is the full balance (chain + plate +
+    ``h`` is the plate step, ``r`` chain steps per plate step, ``n_sub`` plate steps per sample.
+    The contact force acts through the patch and the Hertz spring sees the work-conjugate
+    deflection w = -(lw . up) / share (z up). Returns (status, samples recorded, final w, plate
+    energy J, dissipated energy J); ``rec.energy[k]`` is the full balance (chain + plate +
     dissipated).
     """
+    u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
+    f_static, tau, sensor, pk = rec.f_static, rec.tau, rec.sensor, rec.pk
+    inv_mass, mass, op, ldofs, lw = plate.inv_mass, plate.mass, plate.op, plate.ldofs, plate.lw
+    up, vp, share = plate.up, plate.vp, plate.share
     n = u.size - 1
     ndof = up.size
     inv_m = 1.0 / m
@@ -512,11 +507,11 @@ def integrate_sem(
     e_plate = 0.0
     step = 0
     for k in range(n_samples):
-        record_sample(k, u, v, f, w, a_b, sensor, samples, u_trace, v_trace, f_trace, w_trace)
+        record_into(rec, k, f, w)
         e_plate = plate_energy(up, vp, ap, ku, mass, w, f_static * share, h) / share
-        energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + e_plate + dissipated
-        if not np.isfinite(samples[k]) or not np.isfinite(energy[k]):
-            return 1, k + 1, w, e_plate, dissipated
+        rec.energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + e_plate + dissipated
+        if not np.isfinite(rec.samples[k]) or not np.isfinite(rec.energy[k]):
+            return RUN_NONFINITE, k + 1, w, e_plate, dissipated
         if k == n_samples - 1:
             break
         for _ in range(n_sub):
@@ -539,5 +534,5 @@ def integrate_sem(
                 vp[i] += half * ap[i]
             step += 1
     if not pk[PK_BOT_F] >= 0.0:
-        return 1, n_samples, w, e_plate, dissipated
-    return 0, n_samples, w, e_plate, dissipated
+        return RUN_NONFINITE, n_samples, w, e_plate, dissipated
+    return RUN_OK, n_samples, w, e_plate, dissipated

@@ -14,7 +14,14 @@ from functools import lru_cache
 
 import numpy as np
 
-from .boundary import BottomBoundary, ChainRun, ChainSetup, StepPlan, register_tier
+from .boundary import (
+    BottomBoundary,
+    ChainRun,
+    ChainSetup,
+    StepPlan,
+    register_tier,
+    setup_record,
+)
 from .chain import new_peak_tracker
 from .errors import SceneError
 from .greens import GreensCache, contact_response, integrate_greens
@@ -22,7 +29,7 @@ from .materials import Material
 from .mesh import plate_mesh
 from .scene import Scene
 from .sem import ElasticPlate, build_plate, single_threaded_blas
-from .sem_kernels import integrate_sem
+from .sem_kernels import SemPlate, integrate_sem
 
 
 @lru_cache(maxsize=8)
@@ -119,19 +126,15 @@ class SemBoundary(_PlateTier):
 
     def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
         plate = self.plate
-        u0 = setup.u.copy()
-        up = np.zeros(plate.n_dofs)
-        vp = np.zeros(plate.n_dofs)
         peaks = new_peak_tracker()
+        record = setup_record(setup, peaks)
+        state = SemPlate(plate.inv_mass, np.repeat(plate.node_mass, 3), plate.operator,
+                         plate.load_dofs, plate.load_weights, np.zeros(plate.n_dofs),
+                         np.zeros(plate.n_dofs), float(plate.force_share))
         h, r, per_sample = self.steps(plan)
         start = time.perf_counter()
         status, done, w, e_plate, dissipated = integrate_sem(
-            setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
-            setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
-            setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
-            plate.inv_mass, np.repeat(plate.node_mass, 3), plate.operator, plate.load_dofs,
-            plate.load_weights, up, vp, plate.force_share,
-        )
+            record, float(h), int(r), int(per_sample), int(plan.n_samples), state)
         wall = time.perf_counter() - start
         setup.w = w
         extra = self._extra(h, r, per_sample, plan)
@@ -150,16 +153,12 @@ class GreensBoundary(_PlateTier):
         h, r, per_sample = self.steps(plan)
         n_plate = per_sample * (plan.n_samples - 1)
         response, cached, spent = contact_response(self.plate, h, n_plate, self.cache)
-        u0 = setup.u.copy()
         peaks = new_peak_tracker()
+        record = setup_record(setup, peaks)
         start = time.perf_counter()
         with single_threaded_blas():
             status, done, w, plate_work, dissipated = integrate_greens(
-                setup.u, setup.v, u0, setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
-                setup.tau, setup.sensor, h, r, per_sample, plan.n_samples, setup.samples,
-                setup.energy, setup.u_trace, setup.v_trace, setup.f_trace, setup.w_trace, peaks,
-                response,
-            )
+                record, float(h), int(r), int(per_sample), int(plan.n_samples), response)
         wall = time.perf_counter() - start
         setup.w = w
         extra = self._extra(h, r, per_sample, plan)

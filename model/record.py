@@ -1,0 +1,56 @@
+"""The run record: what every compiled chain driver reads and fills, as one argument.
+
+A ``typing.NamedTuple`` of arrays and numbers, which numba passes to compiled code as a plain
+struct (and caches, unlike a jitclass). Drivers take it plus their own time grid, instead of the
+22 positional arguments each used to repeat.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class ChainRecord(NamedTuple):
+    """The chain's state, constants and output arrays for one run (arrays modified in place).
+
+    u, v: displacements (down, m) and velocities (m/s) of particles 0..N (0 = striker);
+    u0: the displacements at the start (reference of the gravity energy).
+    m: particle mass, kg. g: gravity, m/s^2. a_s, a_b: sphere-sphere and bottom Hertz constants,
+    N/m^1.5. f_static: static force on the bottom contact at the start, N. tau: Kuwabara-Kono
+    time, s (0: elastic). sensor: sensor particle, 1..N.
+    samples, energy: per-sample sensor force (N) and energy balance (J); u_trace, v_trace,
+    f_trace, w_trace: per-sample fields (zero rows: traces off); pk: the peak tracker
+    (:func:`solitonde.model.chain.new_peak_tracker`).
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    u0: np.ndarray
+    m: float
+    g: float
+    a_s: float
+    a_b: float
+    f_static: float
+    tau: float
+    sensor: int
+    samples: np.ndarray
+    energy: np.ndarray
+    u_trace: np.ndarray
+    v_trace: np.ndarray
+    f_trace: np.ndarray
+    w_trace: np.ndarray
+    pk: np.ndarray
+
+
+def chain_record(
+    u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, g: float, a_s: float, a_b: float,
+    f_static: float, tau: float, sensor: int, samples: np.ndarray, energy: np.ndarray,
+    u_trace: np.ndarray, v_trace: np.ndarray, f_trace: np.ndarray, w_trace: np.ndarray,
+    pk: np.ndarray,
+) -> ChainRecord:
+    """A record with the numbers coerced to float/int, so that one compiled version serves all."""
+    return ChainRecord(u, v, u0, float(m), float(g), float(a_s), float(a_b), float(f_static),
+                       float(tau), int(sensor), samples, energy, u_trace, v_trace, f_trace,
+                       w_trace, pk)
