@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_chain_physics import test_chatterjee_peak_velocity as _check_chatterjee
-from test_chain_physics import test_nesterenko_speed_and_width as _check_nesterenko
+from chain_checks import check_chatterjee, check_nesterenko
 
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.scene import STANDARD_GRAVITY, scene_from_dict
@@ -117,12 +116,12 @@ def long_chain_dopri():
 
 def test_chatterjee_peak_velocity(long_chain_dopri):
     """Peak particle velocity 0.682 v_imp, the same on every particle (test_chain_physics)."""
-    _check_chatterjee(long_chain_dopri)
+    check_chatterjee(long_chain_dopri)
 
 
 def test_nesterenko_speed_and_width(long_chain_dopri):
     """Nesterenko's speed within 2 %, width about five diameters (test_chain_physics)."""
-    _check_nesterenko(long_chain_dopri)
+    check_nesterenko(long_chain_dopri)
 
 
 def test_dissipation_matches_verlet():
