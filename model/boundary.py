@@ -48,6 +48,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -73,6 +74,9 @@ from .leapfrog import integrate_elastic
 from .record import ChainRecord, chain_record
 from .scene import Scene
 from .status import RUN_NONFINITE, RUN_OK
+
+if TYPE_CHECKING:
+    from .greens import GreensCache
 
 #: Plate models that ``solver.integrator = "dopri5"`` can run (the ODE tiers of this module).
 DOPRI5_PLATE_MODELS = ("rigid", "halfspace", "infinite")
@@ -374,25 +378,28 @@ def integrate_dashpot_steps(*args) -> tuple[int, int, float, float, float]:
 
 # Tier registry and plate-model resolution --------------------------------------------------
 
-TierFactory = Callable[[Scene, str], BottomBoundary]
+TierFactory = Callable[[Scene, str, "GreensCache | None"], BottomBoundary]
 TIERS: dict[str, TierFactory] = {}
 
 
 def register_tier(name: str, factory: TierFactory) -> None:
-    """Make a plate model available: ``factory(scene, reason)`` builds its boundary."""
+    """Make a plate model available: ``factory(scene, reason, greens_cache)`` builds its
+    boundary (``greens_cache``: the plate-response cache, None for the process's; see
+    :mod:`solitonde.model.greens`)."""
     TIERS[name] = factory
 
 
 register_tier(
     "rigid",
-    lambda scene, reason: Wall(
+    lambda scene, reason, cache: Wall(
         "rigid", reason,
         hertz_sphere_flat(scene.chain.diameter, scene.sphere_material, scene.sphere_material),
     ),
 )
-register_tier("halfspace", lambda scene, reason: Wall("halfspace", reason, scene.a_p))
+register_tier("halfspace", lambda scene, reason, cache: Wall("halfspace", reason, scene.a_p))
 register_tier(
-    "infinite", lambda scene, reason: ZenerDashpot(reason, scene.a_p, scene.plate_impedance)
+    "infinite",
+    lambda scene, reason, cache: ZenerDashpot(reason, scene.a_p, scene.plate_impedance),
 )
 
 
@@ -434,9 +441,10 @@ def nearest_edge_distance(scene: Scene) -> float:
     return float(min(x, lx - x, ly / 2.0))
 
 
-def make_boundary(scene: Scene, resolved: tuple[str, str] | None = None) -> BottomBoundary:
+def make_boundary(scene: Scene, resolved: tuple[str, str] | None = None,
+                  greens_cache: GreensCache | None = None) -> BottomBoundary:
     """Build the bottom boundary of a scene, resolving ``auto`` (unless ``resolved`` already
-    holds :func:`resolve_plate_model`'s answer)."""
+    holds :func:`resolve_plate_model`'s answer); ``greens_cache`` serves the ``greens`` tier."""
     name, reason = resolved if resolved is not None else resolve_plate_model(scene)
     factory = TIERS.get(name)
     if factory is None:
@@ -445,7 +453,7 @@ def make_boundary(scene: Scene, resolved: tuple[str, str] | None = None) -> Bott
             f"plate model {name!r} is not available in this build",
             allowed=", ".join([*sorted(TIERS), "auto"]),
         )
-    return factory(scene, reason)
+    return factory(scene, reason, greens_cache)
 
 
 # The spectral-element tiers (sem, greens) build on this module and register themselves.

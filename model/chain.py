@@ -15,7 +15,7 @@ a driver loop in :mod:`solitonde.model.boundary` (or a later plate tier) owns th
     and, every ``n_sub`` steps, :func:`record_sample`.
 
 Time stepping is velocity Verlet (kick-drift-kick), symplectic and second order; see
-:func:`solitonde.model.simulate.choose_time_step` for the step size and its error.
+:func:`solitonde.model.plan.choose_time_step` for the step size and its error.
 
 Dissipation (optional) is the Kuwabara-Kono viscoelastic Hertz law as written by Brilliantov,
 Spahn, Hertzsch and Pöschel (Phys. Rev. E 53, 5382, 1996; Kuwabara & Kono, Jpn. J. Appl. Phys. 26,

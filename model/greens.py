@@ -12,8 +12,9 @@ reproduces the coupled ``sem`` run to round-off; the plate run behind g is done 
 mesh, position, supports, material and step and then cached under a key of those.
 
 The model layer does no file I/O: the cache is any object with ``load(key)`` and
-``store(key, array)``; :class:`MemoryCache` (the default) keeps responses for the process, and the
-instrument layer may install a disk cache with :func:`set_default_cache`.
+``store(key, array)``, passed down from ``simulate(scene, greens_cache=...)``; without one,
+:data:`PROCESS_CACHE` (a :class:`MemoryCache`) keeps responses for the process. The instrument
+layer passes its disk cache or a per-task cache explicitly.
 """
 
 from __future__ import annotations
@@ -56,8 +57,8 @@ MEMORY_CACHE_BYTES = 512 * 1024 * 1024
 
 
 class MemoryCache:
-    """Process-wide in-memory cache (the model layer's default), least recently used first out
-    once its responses exceed ``max_bytes``; safe to share between threads."""
+    """In-memory cache (:data:`PROCESS_CACHE` is one), least recently used first out once its
+    responses exceed ``max_bytes``; safe to share between threads."""
 
     def __init__(self, max_bytes: int = MEMORY_CACHE_BYTES) -> None:
         self._items: OrderedDict[str, np.ndarray] = OrderedDict()
@@ -89,18 +90,15 @@ class MemoryCache:
             self._items.clear()
             self._bytes = 0
 
-
-_default_cache: GreensCache = MemoryCache()
-
-
-def default_cache() -> GreensCache:
-    return _default_cache
+    def __len__(self) -> int:
+        """Responses held."""
+        with self._lock:
+            return len(self._items)
 
 
-def set_default_cache(cache: GreensCache) -> None:
-    """Install the cache used when none is passed (e.g. a disk cache from the instrument layer)."""
-    global _default_cache
-    _default_cache = cache
+PROCESS_CACHE: GreensCache = MemoryCache()
+"""The cache of a run that is given none: responses kept for the process. Never replaced; a
+caller that wants another cache (a disk cache, one per table-build task) passes it."""
 
 
 def response_key(plate: ElasticPlate, dt: float) -> str:
@@ -146,7 +144,7 @@ def contact_response(
 
     Returns (g, came from cache, seconds spent computing).
     """
-    cache = _default_cache if cache is None else cache
+    cache = PROCESS_CACHE if cache is None else cache
     key = response_key(plate, dt)
     stored = cache.load(key)
     if stored is not None and stored.size >= n_steps + 1:

@@ -80,7 +80,7 @@ def dashpot_step(
 
     ``f_now`` is the bottom force at (u_N, w), which callers usually have at hand. Second order,
     like the Strang splitting around it; the time step keeps ``h k_b / Z`` small (see
-    :func:`solitonde.model.simulate.choose_time_step`).
+    :func:`solitonde.model.plan.choose_time_step`).
     """
     k1 = (f_now - f_static) * inv_z
     k2 = (hertz(a_b, u_n - w - 0.5 * h * k1) - f_static) * inv_z

@@ -166,5 +166,5 @@ class GreensBoundary(_PlateTier):
         return ChainRun(status, done, plate_work, dissipated, peaks, wall + spent, extra)
 
 
-register_tier("sem", lambda scene, reason: SemBoundary("sem", scene, reason))
-register_tier("greens", lambda scene, reason: GreensBoundary(scene, reason))
+register_tier("sem", lambda scene, reason, cache: SemBoundary("sem", scene, reason))
+register_tier("greens", GreensBoundary)

@@ -18,17 +18,17 @@ import numpy as np
 from numba import njit
 
 from .boundary import (
-    RUN_OK,
     ChainRun,
     ChainSetup,
     StepPlan,
     make_boundary,
 )
 from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T
-from .dopri import RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
 from .errors import SimulationError
+from .greens import GreensCache
 from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, check_solver, plan
 from .scene import STANDARD_GRAVITY, Scene
+from .status import RUN_OK, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
 
 
 @dataclass
@@ -112,8 +112,12 @@ def simulate(
     max_steps: int = MAX_STEPS,
     max_samples: int = MAX_SAMPLES,
     steps_per_period: int = STEPS_PER_PERIOD,
+    greens_cache: GreensCache | None = None,
 ) -> SimulationResult:
     """Simulate one shot of ``scene`` and return the sensor trace with diagnostics.
+
+    ``greens_cache`` keeps the plate responses of the ``greens`` tier (any object with
+    ``load(key)`` and ``store(key, array)``); None uses the process's memory cache.
 
     Raises
     ------
@@ -125,7 +129,7 @@ def simulate(
     started = time.perf_counter()
     solver = scene.solver
     adaptive = solver.integrator == "dopri5"
-    boundary = make_boundary(scene, check_solver(scene))
+    boundary = make_boundary(scene, check_solver(scene), greens_cache)
     planned = plan(scene, boundary, steps_per_period=steps_per_period)
     n = scene.chain.n_particles
     m = scene.sphere_mass

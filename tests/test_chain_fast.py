@@ -15,13 +15,13 @@ import pytest
 from solitonde.model.batch import scene_grid, simulate_many
 from solitonde.model.boundary import integrate_dashpot, integrate_dashpot_steps, make_boundary
 from solitonde.model.chain import new_peak_tracker
-from solitonde.model.scene import STANDARD_GRAVITY, scene_from_dict
 from solitonde.model.plan import (
     DASHPOT_STEP_FRACTION,
     DASHPOT_STEP_FRACTION_MAX,
     STEPS_PER_PERIOD,
     choose_time_step,
 )
+from solitonde.model.scene import STANDARD_GRAVITY, scene_from_dict
 from solitonde.model.simulate import initial_state, simulate
 from solitonde.model.zener import (
     restitution_and_contact_time_many,

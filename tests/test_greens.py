@@ -87,3 +87,24 @@ def test_disk_cache_round_trip_is_atomic(tmp_path) -> None:
         disk.path("../escape")
     layered = LayeredCache(DiskGreensCache(tmp_path))
     assert np.array_equal(layered.load("abc123"), data)
+
+
+def test_simulate_uses_the_cache_it_is_given_and_no_other() -> None:
+    """A greens run stores its response in the cache passed to simulate(), the next run with that
+    cache reads it back with the same trace, and the process's own cache is never touched."""
+    from solitonde.model.scene import scene_from_dict
+    from solitonde.model.simulate import simulate
+
+    scene = scene_from_dict({"effects": {"plate_model": "greens"},
+                             "sem": {"elements": [2, 2, 1], "order": [2, 2, 1],
+                                     "contact_refinement": 0},
+                             "plate": {"distance_to_support": 0.05},
+                             "output": {"duration": 2e-4}})
+    before = len(greens.PROCESS_CACHE)
+    mine = greens.MemoryCache()
+    first = simulate(scene, greens_cache=mine)
+    again = simulate(scene, greens_cache=mine)
+    assert len(mine) == 1 and len(greens.PROCESS_CACHE) == before
+    assert not first.diagnostics["greens_cached"] and again.diagnostics["greens_cached"]
+    np.testing.assert_array_equal(first.samples, again.samples)
+    assert not hasattr(greens, "set_default_cache")  # no process-wide swap to reach for

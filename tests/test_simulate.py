@@ -11,8 +11,8 @@ from solitonde.model import boundary
 from solitonde.model.batch import scene_grid, simulate_many
 from solitonde.model.contact import hertz_sphere_flat
 from solitonde.model.errors import SceneError, SimulationError
-from solitonde.model.scene import scene_from_dict
 from solitonde.model.plan import auto_duration
+from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.model.zener import predict
 

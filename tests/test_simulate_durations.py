@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from solitonde.model.scene import scene_from_dict
 from solitonde.model.plan import auto_duration
+from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
 
 

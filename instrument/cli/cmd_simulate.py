@@ -153,8 +153,7 @@ def simulate_command(
     try:
         scene = load_scene(scene_file, overrides or [])
         check_resolved(scene)
-        greens_cache.install()
-        result = simulate(scene)
+        result = simulate(scene, greens_cache=greens_cache.disk_cache())
     except (SceneError, WaveformError) as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=2) from None

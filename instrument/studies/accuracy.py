@@ -131,10 +131,10 @@ def configs(quick: bool = False) -> list[Config]:
     return out
 
 
-def _features(scene: Scene) -> dict[str, Any]:
+def _features(scene: Scene, cache: greens.GreensCache | None = None) -> dict[str, Any]:
     sem_tier._plate_cached.cache_clear()  # time the plate assembly too
     started = time.perf_counter()
-    r = simulate(scene)
+    r = simulate(scene, greens_cache=greens.MemoryCache() if cache is None else cache)
     wall = time.perf_counter() - started
     f = extract(as_measured(r))
     mesh = r.diagnostics.get("mesh") or {}
@@ -163,39 +163,34 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
     cold time is honest; the warm time is a second run with the response cached.
     """
     tick = tick or (lambda _label: None)
-    previous = greens.default_cache()
-    greens.set_default_cache(greens.MemoryCache())
-    try:
-        _warm_up()
-        ref_cfg = reference_config(quick)
-        reference = {}
+    _warm_up()
+    ref_cfg = reference_config(quick)
+    reference = {}
+    for name, distance in SCENES_M.items():
+        reference[name] = _features(ref_cfg.scene(distance))
+        tick(f"reference, {name}")
+    rows = []
+    for cfg in configs(quick):
         for name, distance in SCENES_M.items():
-            reference[name] = _features(ref_cfg.scene(distance))
-            tick(f"reference, {name}")
-        rows = []
-        for cfg in configs(quick):
-            for name, distance in SCENES_M.items():
-                greens.set_default_cache(greens.MemoryCache())
-                res = _features(cfg.scene(distance))
-                warm = math.nan
-                if cfg.tier == "greens":  # plate and response both kept, as in a table build
-                    started = time.perf_counter()
-                    simulate(cfg.scene(distance))
-                    warm = time.perf_counter() - started
-                ref = reference[name]
-                rows.append({
-                    "scene": name, "distance_m": distance, "config": cfg.label, "tier": cfg.tier,
-                    "elements": "x".join(map(str, cfg.elements)) if cfg.elements else "",
-                    "order": "x".join(map(str, cfg.order)) if cfg.order else "",
-                    "step_factor": cfg.step_factor if cfg.step_factor else math.nan,
-                    **res,
-                    "wall_warm_s": warm,
-                    "tof_error": abs(res["tof_s"] - ref["tof_s"]) / ref["tof_s"],
-                    "arr_error": abs(res["arr"] - ref["arr"]) / ref["arr"],
-                })
-                tick(f"{cfg.label}, {name}")
-    finally:
-        greens.set_default_cache(previous)
+            cache = greens.MemoryCache()  # cold: no response from an earlier config
+            res = _features(cfg.scene(distance), cache)
+            warm = math.nan
+            if cfg.tier == "greens":  # plate and response both kept, as in a table build
+                started = time.perf_counter()
+                simulate(cfg.scene(distance), greens_cache=cache)
+                warm = time.perf_counter() - started
+            ref = reference[name]
+            rows.append({
+                "scene": name, "distance_m": distance, "config": cfg.label, "tier": cfg.tier,
+                "elements": "x".join(map(str, cfg.elements)) if cfg.elements else "",
+                "order": "x".join(map(str, cfg.order)) if cfg.order else "",
+                "step_factor": cfg.step_factor if cfg.step_factor else math.nan,
+                **res,
+                "wall_warm_s": warm,
+                "tof_error": abs(res["tof_s"] - ref["tof_s"]) / ref["tof_s"],
+                "arr_error": abs(res["arr"] - ref["arr"]) / ref["arr"],
+            })
+            tick(f"{cfg.label}, {name}")
     frame = pd.DataFrame(rows)
     frame["error"] = combined_error(frame)
     frame["pareto"] = pareto(frame)

@@ -149,7 +149,7 @@ def measure(scene: Scene) -> dict[str, Any]:
     A shot without a detectable reflection has NaN TOF and ARR and carries ``arr_upper_bound``.
     """
     started = time.perf_counter()
-    result = simulate(scene)
+    result = simulate(scene, greens_cache=_CACHE)
     row: dict[str, Any] = {
         "diameter_m": scene.chain.diameter,
         "thickness_m": scene.plate.thickness,
@@ -198,8 +198,15 @@ def _sweep_position(args: SweepTask) -> list[dict[str, Any]]:
     return rows
 
 
-def _worker_init(cache_folder: str | None) -> None:
-    greens_cache.install(cache_folder)
+_CACHE: greens_cache.LayeredCache | None = None
+"""This process's plate-response cache (set by :func:`_use_cache`: the disk cache the study was
+given, so that a second run reuses every plate run)."""
+
+
+def _use_cache(cache_folder: str | None) -> None:
+    """Process-pool initializer (and the parent's own set-up): open the disk cache."""
+    global _CACHE
+    _CACHE = greens_cache.disk_cache(cache_folder)
 
 
 # --- theory curves ------------------------------------------------------------------------------
@@ -381,7 +388,7 @@ def fig3(out: Path) -> dict[str, Any]:
     info = {}
     for label, t in (("thin", PLATES_M[0]), ("thick", THICK_PLATE_M)):
         scene = scene_for(TRACE_DIAMETER_M, t)
-        r = simulate(scene)
+        r = simulate(scene, greens_cache=_CACHE)
         f = extract(as_measured(r))
         traces[label] = (r.time, r.samples)
         info[label] = {"thickness_m": t, "plate_model": r.plate_model,
@@ -586,13 +593,13 @@ def run_sweep(plan: Plan, workers: int, cache_folder: str | None,
     tasks.sort(key=lambda a: (a[0], -a[1]))
     rows: list[dict[str, Any]] = []
     if workers <= 1:
-        _worker_init(cache_folder)
+        _use_cache(cache_folder)
         for task in tasks:
             rows.extend(_sweep_position(task))
             tick("distance sweep")
     else:
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("fork"),
-                                 initializer=_worker_init, initargs=(cache_folder,)) as pool:
+                                 initializer=_use_cache, initargs=(cache_folder,)) as pool:
             futures = [pool.submit(_sweep_position, task) for task in tasks]
             for fut in as_completed(futures):
                 rows.extend(fut.result())
@@ -629,7 +636,7 @@ def reproduce(out: str | Path, quick: bool = False, *, workers: int | None = Non
     plan = make_plan(quick, preset)
     workers = default_workers() if workers is None else max(1, int(workers))
     folder = None if cache_folder is None else str(cache_folder)
-    greens_cache.install(folder)
+    _use_cache(folder)
     n_sweep = len(PLATES_M) * len(plan.distances_m)
     bar = tqdm(total=n_sweep + 6, disable=not progress, desc="reproduce", unit="step")
 

@@ -49,7 +49,7 @@ from solitonde.instrument.inference.calibration_fit import Reference, fit_calibr
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.instrument.tables.table_build import _TASK_CACHE, run_tasks
+from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.errors import WaveformError
@@ -91,35 +91,30 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
     from solitonde.model import greens
 
     rng = np.random.default_rng(seed)
-    previous = greens.default_cache()
-    greens.set_default_cache(_TASK_CACHE)
-    _TASK_CACHE.clear()
+    plate_cache = greens.MemoryCache()  # one response serves every sphere size of this plate
     summaries: dict[float, dict[str, Any] | None] = {}
     started = time.perf_counter()
-    try:
-        for d in sorted(diameters, reverse=True):
-            result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)))
-            recorded = as_measured(result)
-            reference = float(result.samples.max() - result.samples[0])
-            feats = []
-            for _ in range(shots):
-                # white noise over the whole record, its pre-trigger included
-                noisy = degrade(recorded.samples, snr_db, rng, reference)
-                try:
-                    feats.append(extract(recorded.with_samples(noisy)))
-                except WaveformError:
-                    continue
-            agg = aggregate(feats) if feats else None
-            if agg is None or agg["tof_s"].mean is None or agg["arr"].mean is None:
-                summaries[d] = None
+    for d in sorted(diameters, reverse=True):
+        result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)),
+                          greens_cache=plate_cache)
+        recorded = as_measured(result)
+        reference = float(result.samples.max() - result.samples[0])
+        feats = []
+        for _ in range(shots):
+            # white noise over the whole record, its pre-trigger included
+            noisy = degrade(recorded.samples, snr_db, rng, reference)
+            try:
+                feats.append(extract(recorded.with_samples(noisy)))
+            except WaveformError:
                 continue
-            summaries[d] = {"diameter_m": d, "tof_s": agg["tof_s"].mean,
-                            "tof_std_s": agg["tof_s"].std, "arr": agg["arr"].mean,
-                            "arr_std": agg["arr"].std, "n_shots": agg["tof_s"].count,
-                            "plate_model": result.plate_model}
-    finally:
-        _TASK_CACHE.clear()
-        greens.set_default_cache(previous)
+        agg = aggregate(feats) if feats else None
+        if agg is None or agg["tof_s"].mean is None or agg["arr"].mean is None:
+            summaries[d] = None
+            continue
+        summaries[d] = {"diameter_m": d, "tof_s": agg["tof_s"].mean,
+                        "tof_std_s": agg["tof_s"].std, "arr": agg["arr"].mean,
+                        "arr_std": agg["arr"].std, "n_shots": agg["tof_s"].count,
+                        "plate_model": result.plate_model}
     return {"thickness_m": thickness_m, "distance_m": distance_m, "summaries": summaries,
             "wall_s": time.perf_counter() - started}
 

@@ -81,8 +81,7 @@ class LayeredCache:
         self.disk.store(key, response)
 
 
-def install(folder: str | Path | None = None) -> LayeredCache:
-    """Make the disk cache the model's default for ``greens`` runs in this process."""
-    cache = LayeredCache(DiskGreensCache(folder))
-    greens.set_default_cache(cache)
-    return cache
+def disk_cache(folder: str | Path | None = None) -> LayeredCache:
+    """The disk cache (``folder``, default :func:`cache_dir`) behind a memory cache, to pass as
+    ``simulate(scene, greens_cache=...)``."""
+    return LayeredCache(DiskGreensCache(folder))

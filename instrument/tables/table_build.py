@@ -22,7 +22,6 @@ import math
 import os
 import platform
 import subprocess
-import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -51,6 +50,7 @@ from solitonde.instrument.tables.table import (
 from solitonde.model import greens
 from solitonde.model.boundary import resolve_plate_model
 from solitonde.model.errors import SceneError, SimulationError
+from solitonde.model.greens import GreensCache
 from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
 from solitonde.model.simulate import SimulationResult, simulate
 from solitonde.signal.errors import WaveformError
@@ -173,10 +173,11 @@ def point_record(features: Features | None, result: SimulationResult | None,
 
 
 def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
-                   traces: bool = False) -> dict[str, Any]:
+                   traces: bool = False, greens_cache: GreensCache | None = None
+                   ) -> dict[str, Any]:
     """Simulate one scene and extract its features as from a measurement."""
     try:
-        result = simulate(scene)
+        result = simulate(scene, greens_cache=greens_cache)
     except (SimulationError, SceneError) as exc:
         return point_record(None, None, f"simulation: {exc}", traces)
     try:
@@ -184,30 +185,6 @@ def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
     except WaveformError as exc:
         return point_record(None, result, f"features: {exc}", traces)
     return point_record(features, result, None, traces)
-
-
-class _TaskCache:
-    """Green's functions kept for the task running in this thread, dropped when it ends."""
-
-    def __init__(self) -> None:
-        self._local = threading.local()
-
-    def _items(self) -> dict[str, np.ndarray]:
-        if not hasattr(self._local, "items"):
-            self._local.items = {}
-        return self._local.items
-
-    def load(self, key: str) -> np.ndarray | None:
-        return self._items().get(key)
-
-    def store(self, key: str, response: np.ndarray) -> None:
-        self._items()[key] = np.array(response, dtype=float)
-
-    def clear(self) -> None:
-        self._items().clear()
-
-
-_TASK_CACHE = _TaskCache()
 
 
 def run_plate(sweep: Mapping[str, Any], i_t: int, i_l: int,
@@ -220,19 +197,10 @@ def run_plate(sweep: Mapping[str, Any], i_t: int, i_l: int,
     """
     spec = Sweep.from_dict(sweep)
     order = sorted(range(len(spec.diameters_m)) if diameters is None else diameters, reverse=True)
-    previous = greens.default_cache()
-    greens.set_default_cache(_TASK_CACHE)
-    _TASK_CACHE.clear()
-    points: dict[int, dict[str, Any]] = {}
-    computed = 0
-    try:
-        for i_d in order:
-            rec = simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces)
-            points[i_d] = rec
-        computed = len(_TASK_CACHE._items())
-    finally:
-        _TASK_CACHE.clear()
-        greens.set_default_cache(previous)
+    task_cache = greens.MemoryCache()  # this task's responses, dropped when it ends
+    points = {i_d: simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces,
+                                  task_cache) for i_d in order}
+    computed = len(task_cache)
     return {"i_t": i_t, "i_l": i_l, "points": points, "greens_computed": computed}
 
 
