@@ -385,6 +385,178 @@ def _widths(v: np.ndarray, peaks: np.ndarray, bounds: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """(sign, record median in the sign-corrected trace, prefix sums, lightly smoothed trace
+    (sign-corrected)): the polarity from the smoothed trace against the record's median."""
+    step = max(1, x.size // 1024)
+    ref = median(x[::step])
+    csum, s1 = prefix_and_triangle(x, 2)
+    sign = sign_in
+    if sign == 0.0:
+        sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
+    if sign < 0:
+        s1 *= -1.0
+    return sign, ref * sign, csum, s1
+
+
+@njit(cache=True)
+def _smoother(x: np.ndarray, csum: np.ndarray, s1: np.ndarray, line: np.ndarray, sign: float,
+              h_in: int) -> tuple[int, np.ndarray, np.ndarray]:
+    """(h, smoothed trace s, s - line): ``h_in``, or a sixth of the largest pulse's FWHM (a cheap
+    stand-in for a matched filter), iterated until it settles."""
+    n = x.size
+    h = h_in if h_in >= 0 else 2
+    s = s1 if h == 2 else triangle_prefix(x, csum, h, sign)
+    v = s - line
+    if h_in < 0:
+        for _ in range(3):
+            hn = max(1, _fwhm(v, vargmax(v), 0, n) // 6)
+            if 2 * hn <= 3 * h and 3 * hn >= 2 * h:
+                break
+            h = hn
+            s = triangle_prefix(x, csum, h, sign)
+            for i in range(n):
+                v[i] = s[i] - line[i]
+    return h, s, v
+
+
+@njit(cache=True)
+def _pretrigger_after_peaks(v: np.ndarray, peaks: np.ndarray, n_pre: int, h: int
+                            ) -> tuple[int, bool, bool]:
+    """(pre-trigger length, early onset, whether to re-estimate): everything before the first
+    pulse's foot, once that pulse is known."""
+    p0 = peaks[0]
+    early = False
+    new_pre = int(p0 - FOOT * _fwhm(v, p0, 0, v.size))
+    if new_pre < MIN_PRETRIGGER:
+        early = True
+        if n_pre > 0:  # keep what lies before the rise, if that is long enough
+            new_pre = min(n_pre, max(p0 - 2 * h, 0))
+        new_pre = new_pre if new_pre >= MIN_PRETRIGGER else 0
+    # Re-estimate when the first guess reached into the rise, or when twice the samples
+    # (noise matters for thresholds only: each pulse's own baseline is measured later).
+    redo = (new_pre == 0) != (n_pre == 0) or new_pre < 0.9 * n_pre or new_pre > 2 * n_pre
+    return new_pre, early, redo
+
+
+@njit(cache=True)
+def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks: np.ndarray,
+           n_pre: int, h: int, sigma_s: float, thr_sigma: float, min_ratio: float,
+           thr: float) -> tuple[np.ndarray, float]:
+    """Fit the slow trend (drift and the chain's slow level changes) into ``line`` (and ``v``):
+    a quadratic through the quiet samples, those further than 2 FWHM from every pulse; twice,
+    since the pulses depend on the line. Returns the pulses and threshold on the new line."""
+    n = y.size
+    for it in range(2):
+        if peaks.size == 0:
+            break
+        bounds = _bounds(v, peaks)
+        widths = _widths(v, peaks, bounds)
+        # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
+        # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
+        cap = 3.0 * widths[np.argmax(v[peaks])]
+        reach = np.empty(peaks.size, dtype=np.int64)
+        for j in range(peaks.size):
+            reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
+        quiet = quiet_runs(peaks, reach, n)
+        count_pre = run_count(quiet, 0, n_pre)
+        count_post = run_count(quiet, n_pre, n)
+        late = run_count(quiet, 2 * n // 3, n) > 0
+        middle = run_count(quiet, n // 3, 2 * n // 3) > 0
+        if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
+            break
+        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1)
+        c0, c1, c2 = coef[0], coef[1], coef[2]
+        inv = 1.0 / n
+        for i in range(n):
+            u = i * inv
+            line[i] = c0 + u * (c1 + u * c2)
+            v[i] = s[i] - line[i]
+        before = peaks
+        peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
+        if it == 0 and peaks.size == before.size and np.all(np.abs(peaks - before) <= h):
+            break  # the same pulses: the quiet samples, hence the line, would not change
+    return peaks, thr
+
+
+@njit(cache=True)
+def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, ip: int,
+                   lo: int, hi: int, wj: float, prev_end: int, thr: float, fit_fraction: float,
+                   shape_r: float, sk: float, nfree: int, max_iter: int, row: np.ndarray) -> int:
+    """Fill ``row[P_*]`` for the pulse at sample ``ip`` (between valleys ``lo`` and ``hi``, width
+    ``wj``): its own baseline, then the template fit to its top (a parabola when the fit fails).
+    Returns where this pulse's foot ends (the next pulse's baseline starts after it)."""
+    n = y.size
+    # Baseline: the level (about the slow trend) the sensor holds before the pulse's foot.
+    stop = int(ip - FOOT * wj)
+    start = max(prev_end, int(stop - LEVEL_SPAN * wj))
+    level = 0.0
+    if stop - start >= MIN_PRETRIGGER:
+        acc = 0.0
+        for i in range(start, stop):
+            acc += y[i] - line[i]
+        level = acc / (stop - start)
+        row[P_LEVEL] = 1.0
+    end = min(n, int(ip + FOOT * wj) + 1)
+    base_j = line[ip] + level
+    top = s[ip] - base_j
+    if top <= 0:
+        top = v[ip]
+        level = 0.0
+        base_j = line[ip]
+    fa, fb = pulse_extent(v, ip, level + fit_fraction * top, lo, hi + 1)
+    reach = int(TRUNC_SPAN * wj) + 1
+    trunc = (fa <= 0 and ip - reach < 0) or (fb >= n - 1 and ip + reach > n - 1)
+    fa = max(fa, ip - reach)
+    fb = min(fb, ip + reach)
+    if fb - fa < 8:
+        fa, fb = max(0, ip - 4), min(n - 1, ip + 4)
+    k = fb - fa + 1
+    tt = np.empty(k)
+    yy = np.empty(k)
+    for i in range(k):
+        tt[i] = fa + i - ip
+        yy[i] = (y[fa + i] - line[fa + i] - level) / top
+    tb, yb = block_average(tt, yy, MAX_FIT_POINTS)
+    ha, hb = pulse_extent(v, ip, v[ip] - 0.5 * top, lo, hi + 1)
+    p0 = np.array([1.0, 0.0, 0.5 * max(hb - ha, 2) / np.log(2.0) ** (1.0 / shape_r), shape_r])
+    p, ok = fit_pulse(tb, yb, p0, sk, nfree, max_iter)
+    method = 0.0
+    if ok and 0.2 < p[0] < 5.0 and tb[0] < p[1] < tb[-1]:
+        width = 2.0 * p[2] * np.log(2.0) ** (1.0 / p[3])
+        t_pk = p[1]
+        amp = p[0]
+    else:
+        method = 1.0
+        t_pk, amp, good = parabola_top(tb, yb)
+        if not good:
+            t_pk, amp = 0.0, 1.0
+        width = float(hb - ha + 1)
+    a, b = pulse_extent(v, ip, 0.5 * thr, lo, hi + 1)
+    row[P_TIME] = ip + t_pk
+    row[P_AMP] = amp * top
+    row[P_BASE] = base_j
+    row[P_WIDTH] = width
+    row[P_ONSET] = a
+    row[P_END] = b
+    row[P_INDEX] = ip
+    row[P_METHOD] = method
+    row[P_TRUNC] = 1.0 if trunc else 0.0
+    return end
+
+
+@njit(cache=True)
+def _saturated(y: np.ndarray, ymax: float, incident_width: float) -> bool:
+    """Clipping: the record's top value repeats over more than a twentieth of the incident's
+    width."""
+    top = ymax - 1e-9 * max(abs(ymax), 1e-300)
+    count = 0
+    for i in range(y.size):
+        count += y[i] >= top
+    return count >= max(3.0, 0.05 * incident_width)
+
+
+@njit(cache=True)
 def analyze(
     x: np.ndarray,
     sign_in: float,
@@ -429,17 +601,8 @@ def analyze(
     """
     n = x.size
     head = np.zeros(HEAD)
-    # Polarity, from the lightly smoothed trace against the record's median.
-    step = max(1, n // 1024)
-    ref = median(x[::step])
-    csum, s1 = prefix_and_triangle(x, 2)
-    sign = sign_in
-    if sign == 0.0:
-        sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
+    sign, ref, csum, s1 = _polarity(x, sign_in)
     y = x if sign > 0 else -x  # read only: a positive trace is used in place
-    if sign < 0:
-        s1 *= -1.0
-    ref *= sign
     head[H_SIGN] = sign
     ymax = vmax(y)
 
@@ -448,38 +611,16 @@ def analyze(
         head[H_EARLY] = 1.0
     span = max(0.0, ymax - ref, ref - vmin(y))  # = max |y[i] - ref| (monotonic rounding)
     floor = NOISE_FLOOR * max(span, 1e-300)
-
     base, sigma = _level_noise(y, n_pre, ref, floor)
     line = np.full(n, base)
-
-    # Smoother width: a sixth of the largest pulse's FWHM (a cheap stand-in for a matched filter).
-    h = h_in if h_in >= 0 else 2
-    s = s1 if h == 2 else triangle_prefix(x, csum, h, sign)
-    v = s - line
-    if h_in < 0:
-        for _ in range(3):
-            hn = max(1, _fwhm(v, vargmax(v), 0, n) // 6)
-            if 2 * hn <= 3 * h and 3 * hn >= 2 * h:
-                break
-            h = hn
-            s = triangle_prefix(x, csum, h, sign)
-            for i in range(n):
-                v[i] = s[i] - line[i]
+    h, s, v = _smoother(x, csum, s1, line, sign, h_in)
     sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
     peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
 
-    # Pre-trigger: everything before the first pulse's foot, once that pulse is known.
     if n_pre_in <= 0 and peaks.size > 0:
-        p0 = peaks[0]
-        new_pre = int(p0 - FOOT * _fwhm(v, p0, 0, n))
-        if new_pre < MIN_PRETRIGGER:
+        new_pre, early, redo = _pretrigger_after_peaks(v, peaks, n_pre, h)
+        if early:
             head[H_EARLY] = 1.0
-            if n_pre > 0:  # keep what lies before the rise, if that is long enough
-                new_pre = min(n_pre, max(p0 - 2 * h, 0))
-            new_pre = new_pre if new_pre >= MIN_PRETRIGGER else 0
-        # Re-estimate when the first guess reached into the rise, or when twice the samples
-        # (noise matters for thresholds only: each pulse's own baseline is measured later).
-        redo = (new_pre == 0) != (n_pre == 0) or new_pre < 0.9 * n_pre or new_pre > 2 * n_pre
         if redo:
             n_pre = new_pre
             base, sigma = _level_noise(y, n_pre, ref, floor)
@@ -487,38 +628,7 @@ def analyze(
             v = s - line
             sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
             peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
-
-    # Slow trend (drift and the chain's slow level changes): a quadratic through the quiet samples,
-    # those further than 2 FWHM from every pulse; twice, since the pulses depend on the line.
-    for it in range(2):
-        if peaks.size == 0:
-            break
-        bounds = _bounds(v, peaks)
-        widths = _widths(v, peaks, bounds)
-        # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
-        # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
-        cap = 3.0 * widths[np.argmax(v[peaks])]
-        reach = np.empty(peaks.size, dtype=np.int64)
-        for j in range(peaks.size):
-            reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
-        quiet = quiet_runs(peaks, reach, n)
-        count_pre = run_count(quiet, 0, n_pre)
-        count_post = run_count(quiet, n_pre, n)
-        late = run_count(quiet, 2 * n // 3, n) > 0
-        middle = run_count(quiet, n // 3, 2 * n // 3) > 0
-        if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
-            break
-        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1)
-        c0, c1, c2 = coef[0], coef[1], coef[2]
-        inv = 1.0 / n
-        for i in range(n):
-            u = i * inv
-            line[i] = c0 + u * (c1 + u * c2)
-            v[i] = s[i] - line[i]
-        before = peaks
-        peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
-        if it == 0 and peaks.size == before.size and np.all(np.abs(peaks - before) <= h):
-            break  # the same pulses: the quiet samples, hence the line, would not change
+    peaks, thr = _trend(y, s, v, line, peaks, n_pre, h, sigma_s, thr_sigma, min_ratio, thr)
 
     head[H_BASE] = base
     head[H_SIGMA] = sigma
@@ -536,79 +646,17 @@ def analyze(
     nfree = 4 if free_r else 3
     prev_end = 0
     for j in range(m):
-        ip = peaks[j]
-        lo, hi = bounds[j], bounds[j + 1]
-        wj = widths[j]
-        row = out[j]
-        # Baseline: the level (about the slow trend) the sensor holds before the pulse's foot.
-        stop = int(ip - FOOT * wj)
-        start = max(prev_end, int(stop - LEVEL_SPAN * wj))
-        level = 0.0
-        if stop - start >= MIN_PRETRIGGER:
-            acc = 0.0
-            for i in range(start, stop):
-                acc += y[i] - line[i]
-            level = acc / (stop - start)
-            row[P_LEVEL] = 1.0
-        prev_end = min(n, int(ip + FOOT * wj) + 1)
-        base_j = line[ip] + level
-        top = s[ip] - base_j
-        if top <= 0:
-            top = v[ip]
-            level = 0.0
-            base_j = line[ip]
-        fa, fb = pulse_extent(v, ip, level + fit_fraction * top, lo, hi + 1)
-        reach = int(TRUNC_SPAN * wj) + 1
-        trunc = (fa <= 0 and ip - reach < 0) or (fb >= n - 1 and ip + reach > n - 1)
-        fa = max(fa, ip - reach)
-        fb = min(fb, ip + reach)
-        if fb - fa < 8:
-            fa, fb = max(0, ip - 4), min(n - 1, ip + 4)
-        k = fb - fa + 1
-        tt = np.empty(k)
-        yy = np.empty(k)
-        for i in range(k):
-            tt[i] = fa + i - ip
-            yy[i] = (y[fa + i] - line[fa + i] - level) / top
-        tb, yb = block_average(tt, yy, MAX_FIT_POINTS)
-        ha, hb = pulse_extent(v, ip, v[ip] - 0.5 * top, lo, hi + 1)
-        p0 = np.array([1.0, 0.0, 0.5 * max(hb - ha, 2) / np.log(2.0) ** (1.0 / shape_r), shape_r])
-        sk = skew if j == 0 else -skew
-        p, ok = fit_pulse(tb, yb, p0, sk, nfree, max_iter)
-        method = 0.0
-        if ok and 0.2 < p[0] < 5.0 and tb[0] < p[1] < tb[-1]:
-            width = 2.0 * p[2] * np.log(2.0) ** (1.0 / p[3])
-            t_pk = p[1]
-            amp = p[0]
-        else:
-            method = 1.0
-            t_pk, amp, good = parabola_top(tb, yb)
-            if not good:
-                t_pk, amp = 0.0, 1.0
-            width = float(hb - ha + 1)
-        a, b = pulse_extent(v, ip, 0.5 * thr, lo, hi + 1)
-        row[P_TIME] = ip + t_pk
-        row[P_AMP] = amp * top
-        row[P_BASE] = base_j
-        row[P_WIDTH] = width
-        row[P_ONSET] = a
-        row[P_END] = b
-        row[P_INDEX] = ip
-        row[P_METHOD] = method
-        row[P_TRUNC] = 1.0 if trunc else 0.0
-        row[P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
+        sk = skew if j == 0 else -skew  # the later pulses travel back up the chain
+        prev_end = _measure_pulse(y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
+                                  prev_end, thr, fit_fraction, shape_r, sk, nfree, max_iter,
+                                  out[j])
+        out[j, P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
     # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
     first = min(n, int(peaks[0] + FOOT * widths[0]) + 1)
     after = max(0.0, vmax(v[first:])) if first < n else 0.0
     head[H_UPPER] = max(thr, after) / max(out[0, P_AMP], 1e-300)
-
-    # Clipping: the record's top value repeats over more than a twentieth of the incident's width.
-    top = ymax - 1e-9 * max(abs(ymax), 1e-300)
-    count = 0
-    for i in range(n):
-        count += y[i] >= top
-    head[H_SATURATED] = 1.0 if count >= max(3.0, 0.05 * out[0, P_WIDTH]) else 0.0
+    head[H_SATURATED] = 1.0 if _saturated(y, ymax, out[0, P_WIDTH]) else 0.0
     return head, out
 
 
