@@ -97,6 +97,7 @@ class ChainSetup:
     sensor: sensor particle, 1..N.
     samples, energy: outputs per sample (sensor force N, energy balance J).
     u_trace, v_trace, f_trace, w_trace: per-sample fields, zero rows when traces are off.
+    m0, a_0: the striker's mass and its contact constant with particle 1 (None: a chain sphere).
     """
 
     u: np.ndarray
@@ -115,6 +116,8 @@ class ChainSetup:
     v_trace: np.ndarray
     f_trace: np.ndarray
     w_trace: np.ndarray
+    m0: float | None = None
+    a_0: float | None = None
 
 
 @dataclass(frozen=True)
@@ -203,7 +206,7 @@ def setup_record(setup: ChainSetup, peaks: np.ndarray) -> ChainRecord:
     return chain_record(
         setup.u, setup.v, setup.u.copy(), setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
         setup.tau, setup.sensor, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
-        setup.f_trace, setup.w_trace, peaks,
+        setup.f_trace, setup.w_trace, peaks, setup.m0, setup.a_0,
     )
 
 
@@ -277,13 +280,13 @@ def initial_forces(
     With dissipation the viscous force uses the initial velocities (``vp`` receives a copy).
     """
     u, n, inv_m = rec.u, rec.u.size - 1, 1.0 / rec.m
-    contact_forces(u, rec.a_s, f)
+    contact_forces(u, rec.a_s, rec.a_0, f)
     power = 0.0
     if rec.tau > 0.0:
         for i in range(n + 1):
             vp[i] = rec.v[i]
-        power = damped_contact_forces(u, vp, rec.a_s, rec.tau, f)
-    accelerations(f, hertz(rec.a_b, u[n] - w), inv_m, rec.g, acc)
+        power = damped_contact_forces(u, vp, rec.a_s, rec.a_0, rec.tau, f)
+    accelerations(f, hertz(rec.a_b, u[n] - w), inv_m, 1.0 / rec.m0, rec.g, acc)
     return power
 
 
@@ -328,8 +331,8 @@ def dashpot_steps_run(
     step = 0
     for k in range(n_samples):
         record_into(rec, k, f, w)
-        rec.energy[k] = (chain_energy(u, v, rec.u0, w, rec.m, rec.g, rec.a_s, a_b) + plate_work
-                       + dissipated)
+        rec.energy[k] = (chain_energy(u, v, rec.u0, w, rec.m, rec.g, rec.a_s, a_b, rec.m0,
+                                      rec.a_0) + plate_work + dissipated)
         if not np.isfinite(rec.samples[k]) or not np.isfinite(rec.energy[k]):
             return RUN_NONFINITE, k + 1, w, plate_work, dissipated
         if k == n_samples - 1:
@@ -341,8 +344,8 @@ def dashpot_steps_run(
             plate_work += work
         for sub in range(n_sub):
             power_before = power
-            f_bottom, power = verlet_step(u, v, acc, f, vp, w, rec.a_s, a_b, inv_m, rec.g, rec.tau,
-                                          dt)
+            f_bottom, power = verlet_step(u, v, acc, f, vp, w, rec.a_s, rec.a_0, a_b, inv_m,
+                                          1.0 / rec.m0, rec.g, rec.tau, dt)
             dissipated += half * (power_before + power)
             if moving:
                 # (2/5) delta F from the step's own bottom force, as the energy before the step

@@ -50,15 +50,17 @@ def new_peak_tracker() -> np.ndarray:
 
 
 @njit(cache=True)
-def contact_forces(u: np.ndarray, a_s: float, f: np.ndarray) -> None:
-    """Elastic forces of the N sphere-sphere contacts into ``f`` (len N); u has len N + 1."""
-    for j in range(f.size):
+def contact_forces(u: np.ndarray, a_s: float, a_0: float, f: np.ndarray) -> None:
+    """Elastic forces of the N sphere-sphere contacts into ``f`` (len N); u has len N + 1.
+    Contact 0 (striker on particle 1) has the constant ``a_0``, the others ``a_s``."""
+    f[0] = hertz(a_0, u[0] - u[1])
+    for j in range(1, f.size):
         f[j] = hertz(a_s, u[j] - u[j + 1])
 
 
 @njit(cache=True)
 def damped_contact_forces(
-    u: np.ndarray, v: np.ndarray, a_s: float, tau: float, f: np.ndarray
+    u: np.ndarray, v: np.ndarray, a_s: float, a_0: float, tau: float, f: np.ndarray
 ) -> float:
     """Kuwabara-Kono forces of the sphere-sphere contacts into ``f``; returns the dissipated power.
 
@@ -66,8 +68,8 @@ def damped_contact_forces(
     :func:`verlet_step`). The dissipated power is the viscous force times the approach rate, over
     the closed contacts; it is >= 0 because the clamp only removes pulling force.
     """
-    power = 0.0
-    for j in range(f.size):
+    f[0], power = kuwabara_kono(a_0, tau, u[0] - u[1], v[0] - v[1])  # the striker's contact
+    for j in range(1, f.size):
         f[j], lost = kuwabara_kono(a_s, tau, u[j] - u[j + 1], v[j] - v[j + 1])
         power += lost
     return power
@@ -75,11 +77,12 @@ def damped_contact_forces(
 
 @njit(cache=True)
 def accelerations(
-    f: np.ndarray, f_bottom: float, inv_m: float, g: float, acc: np.ndarray
+    f: np.ndarray, f_bottom: float, inv_m: float, inv_m0: float, g: float, acc: np.ndarray
 ) -> None:
-    """Newton's law for every particle: gravity, the contact above pushes down, below pushes up."""
+    """Newton's law for every particle: gravity, the contact above pushes down, below pushes up
+    (``inv_m0``: 1 / the striker's mass)."""
     n = acc.size - 1
-    acc[0] = g - f[0] * inv_m
+    acc[0] = g - f[0] * inv_m0
     for i in range(1, n):
         acc[i] = g + (f[i - 1] - f[i]) * inv_m
     acc[n] = g + (f[n - 1] - f_bottom) * inv_m
@@ -117,8 +120,10 @@ def verlet_step(
     vp: np.ndarray,
     w: float,
     a_s: float,
+    a_0: float,
     a_b: float,
     inv_m: float,
+    inv_m0: float,
     g: float,
     tau: float,
     dt: float,
@@ -140,15 +145,15 @@ def verlet_step(
     if tau > 0.0:
         # Two fixed-point passes for the end-of-step velocity the viscous force depends on:
         # the first (elastic force only) is O(dt) off, the second O(dt^2), keeping order two.
-        contact_forces(u, a_s, f)
+        contact_forces(u, a_s, a_0, f)
         for _ in range(2):
-            accelerations(f, f_bottom, inv_m, g, acc)
+            accelerations(f, f_bottom, inv_m, inv_m0, g, acc)
             for i in range(v.size):
                 vp[i] = v[i] + half * acc[i]
-            power = damped_contact_forces(u, vp, a_s, tau, f)
+            power = damped_contact_forces(u, vp, a_s, a_0, tau, f)
     else:
-        contact_forces(u, a_s, f)
-    accelerations(f, f_bottom, inv_m, g, acc)
+        contact_forces(u, a_s, a_0, f)
+    accelerations(f, f_bottom, inv_m, inv_m0, g, acc)
     kick(v, acc, half)
     return f_bottom, power
 
@@ -171,13 +176,16 @@ def chain_energy(
     g: float,
     a_s: float,
     a_b: float,
+    m0: float,
+    a_0: float,
 ) -> float:
     """Kinetic + contact (including the bottom contact) + gravity energy of the chain, J.
 
     Gravity energy is ``-m g sum(u - u0)``: measured from the start so that it stays small. The
     contact energies ``(2/5) A d^(5/2)`` are summed branch-free (open contacts as d = 0) with
     reassociation allowed, so the loops vectorise: the adaptive driver evaluates this at every
-    step end.
+    step end. The striker's own mass ``m0`` and contact ``a_0`` enter as corrections to the
+    uniform sums, exactly zero when the striker is one of the chain's spheres.
     """
     kin = 0.0
     grav = 0.0
@@ -188,7 +196,20 @@ def chain_energy(
     for j in range(u.size - 1):
         pot += overlap_52(u[j] - u[j + 1])
     n = u.size - 1
-    return 0.5 * m * kin + 0.4 * (a_s * pot + a_b * overlap_52(u[n] - w)) - m * g * grav
+    return (0.5 * m * kin + 0.4 * (a_s * pot + a_b * overlap_52(u[n] - w)) - m * g * grav
+            + striker_correction(u, v, u0, m, g, a_s, m0, a_0))
+
+
+@njit(cache=True)
+def striker_correction(u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, g: float,
+                       a_s: float, m0: float, a_0: float) -> float:
+    """What the uniform chain energy misses when the striker differs: its mass in the kinetic and
+    gravity terms, its contact constant in the first contact's energy; 0.0 exactly otherwise."""
+    if m0 == m and a_0 == a_s:
+        return 0.0
+    dm = m0 - m
+    return (0.5 * dm * v[0] * v[0] - dm * g * (u[0] - u0[0])
+            + 0.4 * (a_0 - a_s) * overlap_52(u[0] - u[1]))
 
 
 @njit(cache=True)

@@ -20,6 +20,12 @@ def hertz_sphere_sphere(diameter: float, material: Material) -> float:
     return material.youngs_modulus * sqrt(diameter) / (3.0 * (1.0 - material.poisson_ratio**2))
 
 
+def hertz_two_spheres(diameter: float, a: Material, b: Material) -> float:
+    """A for two spheres of one diameter and two materials: (4/3) E* sqrt(D/4) = (2/3) E* sqrt(D),
+    N/m^(3/2) (effective radius D/4); :func:`hertz_sphere_sphere` when a and b are alike."""
+    return 2.0 / 3.0 * effective_modulus(a, b) * sqrt(diameter)
+
+
 def effective_modulus(a: Material, b: Material) -> float:
     """E* with 1/E* = (1 - nu_a^2)/E_a + (1 - nu_b^2)/E_b."""
     return 1.0 / (1.0 / a.plane_stress_modulus + 1.0 / b.plane_stress_modulus)

@@ -100,25 +100,28 @@ _TRACK = 8
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _rhs(
     y: np.ndarray, n: int, inv_m: float, g: float, a_s: float, a_b: float, inv_z: float,
-    f_static: float, tau: float, f: np.ndarray, dy: np.ndarray,
+    f_static: float, tau: float, a_0: float, inv_m0: float, f: np.ndarray, dy: np.ndarray,
 ) -> None:
-    """dy = y'(y); ``f`` (len n) receives the sphere contact forces as scratch."""
+    """dy = y'(y); ``f`` (len n) receives the sphere contact forces as scratch; ``a_0`` and
+    ``inv_m0`` are the striker's contact constant and inverse mass."""
     np1 = n + 1
     power = 0.0
     if tau > 0.0:
-        for j in range(n):
+        f[0], power = kuwabara_kono(a_0, tau, y[0] - y[1], y[np1] - y[np1 + 1])
+        for j in range(1, n):
             f[j], lost = kuwabara_kono(a_s, tau, y[j] - y[j + 1], y[np1 + j] - y[np1 + j + 1])
             power += lost
     else:
-        for j in range(n):
+        f[0] = hertz(a_0, y[0] - y[1])
+        for j in range(1, n):
             f[j] = hertz(a_s, y[j] - y[j + 1])
     f_b = hertz(a_b, y[n] - y[2 * np1])
     for i in range(np1):
         dy[i] = y[np1 + i]
     if n == 0:
-        dy[np1] = g - f_b * inv_m
+        dy[np1] = g - f_b * inv_m0
     else:
-        dy[np1] = g - f[0] * inv_m
+        dy[np1] = g - f[0] * inv_m0
         for i in range(1, n):
             dy[np1 + i] = g + (f[i - 1] - f[i]) * inv_m
         dy[np1 + n] = g + (f[n - 1] - f_b) * inv_m
@@ -137,9 +140,10 @@ def _poly(p: np.ndarray, i: int, x: float) -> float:
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _sample_sensor(
     p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
-    tau: float, sensor: int, samples: np.ndarray, f_bot: np.ndarray,
+    tau: float, sensor: int, samples: np.ndarray, f_bot: np.ndarray, a_up: float,
 ) -> None:
-    """Sensor readings of samples k0 .. k0 + cnt - 1 at step fractions ``th[:cnt]``.
+    """Sensor readings of samples k0 .. k0 + cnt - 1 at step fractions ``th[:cnt]`` (``a_up``:
+    the constant of the sensor's upper contact, the striker's when the sensor is particle 1).
 
     Evaluates only what a reading needs (traces off): the positions of particles sensor - 1,
     sensor, sensor + 1 (the bottom contact instead when the sensor is particle N), u[N] and w
@@ -160,7 +164,7 @@ def _sample_sensor(
         if damped:
             v_mid = _poly(p, np1 + sensor, x)
             rate_up = _poly(p, np1 + up, x) - v_mid
-        above = sphere_contact(a_s, tau, u_up - u_mid, rate_up)
+        above = sphere_contact(a_up, tau, u_up - u_mid, rate_up)
         if last:
             below = fb
         else:
@@ -176,7 +180,7 @@ def _sample_sensor(
 def _sample_block(
     p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
     tau: float, sensor: int, scratch: np.ndarray, samples: np.ndarray, u_trace: np.ndarray,
-    v_trace: np.ndarray, f_trace: np.ndarray, w_trace: np.ndarray,
+    v_trace: np.ndarray, f_trace: np.ndarray, w_trace: np.ndarray, a_0: float,
 ) -> None:
     """Samples k0 .. k0 + cnt - 1 with every particle field (traces on), from one step's dense
     output ``p`` (5 x M, powers of theta) at step fractions ``th[:cnt]``.
@@ -201,13 +205,14 @@ def _sample_block(
             v_cur[s] = b0 + x * (b1 + x * (b2 + x * (b3 + x * b4)))
         if i > 0:
             j = i - 1
+            a_j = a_0 if j == 0 else a_s  # contact 0 is the striker's
             if tau > 0.0:
                 for s in range(cnt):
-                    force[s] = kuwabara_kono(a_s, tau, u_prev[s] - u_cur[s],
+                    force[s] = kuwabara_kono(a_j, tau, u_prev[s] - u_cur[s],
                                              v_prev[s] - v_cur[s])[0]
             else:
                 for s in range(cnt):
-                    force[s] = hertz(a_s, u_prev[s] - u_cur[s])
+                    force[s] = hertz(a_j, u_prev[s] - u_cur[s])
             # The sensor's contacts: j = sensor - 1 above it, j = sensor below it.
             if j == sensor - 1:
                 for s in range(cnt):
@@ -235,19 +240,20 @@ def _sample_block(
 
 @njit(cache=True)
 def _balance(y: np.ndarray, n: int, u0: np.ndarray, m: float, g: float, a_s: float,
-             a_b: float) -> float:
+             a_b: float, m0: float, a_0: float) -> float:
     """Energy balance of state ``y``: chain energy (as chain_energy) + plate work + dissipated."""
     np1 = n + 1
-    return (chain_energy(y[:np1], y[np1:2 * np1], u0, y[2 * np1], m, g, a_s, a_b)
+    return (chain_energy(y[:np1], y[np1:2 * np1], u0, y[2 * np1], m, g, a_s, a_b, m0, a_0)
             + y[2 * np1 + 1] + y[2 * np1 + 2])
 
 
 @njit(cache=True)
 def _tracked_value(
     which: int, t: float, hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray,
-    n_hist: int, n: int, a_s: float, a_b: float, tau: float, sensor: int,
+    n_hist: int, n: int, a_s: float, a_b: float, tau: float, sensor: int, a_up: float,
 ) -> float:
-    """Sensor reading (``which`` 0) or bottom force (1) at time t from the kept dense output.
+    """Sensor reading (``which`` 0) or bottom force (1) at time t from the kept dense output
+    (``a_up``: the constant of the sensor's upper contact).
 
     ``hist_c[k]`` holds rcont1..5 of step k for the components u[s-1], u[s], u[s+1], u[N], w,
     v[s-1], v[s], v[s+1] (indices clipped to the chain), in that order.
@@ -265,7 +271,7 @@ def _tracked_value(
     f_b = hertz(a_b, _at(rc, 3, theta) - _at(rc, 4, theta))
     if which == 1:
         return f_b
-    above = _contact_at(rc, 0, theta, a_s, tau)
+    above = _contact_at(rc, 0, theta, a_up, tau)
     below = f_b if sensor == n else _contact_at(rc, 1, theta, a_s, tau)
     return 0.5 * (above + below)
 
@@ -289,7 +295,7 @@ def _contact_at(rc: np.ndarray, c: int, theta: float, a_s: float, tau: float) ->
 def _refine_peak(
     which: int, t_guess: float, width: float, t_max: float, hist_t: np.ndarray,
     hist_h: np.ndarray, hist_c: np.ndarray, n_hist: int, n: int, a_s: float, a_b: float,
-    tau: float, sensor: int,
+    tau: float, sensor: int, a_up: float,
 ) -> tuple[float, float]:
     """(time, value) of the maximum of the tracked quantity within ``t_guess +- width``.
 
@@ -302,20 +308,22 @@ def _refine_peak(
     r = 0.5 * (sqrt(5.0) - 1.0)
     x1 = b - r * (b - a)
     x2 = a + r * (b - a)
-    f1 = _tracked_value(which, x1, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau, sensor)
-    f2 = _tracked_value(which, x2, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau, sensor)
+    f1 = _tracked_value(which, x1, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau, sensor,
+                        a_up)
+    f2 = _tracked_value(which, x2, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau, sensor,
+                        a_up)
     tol = 1e-5 * width
     while b - a > tol:
         if f1 >= f2:
             b, x2, f2 = x2, x1, f1
             x1 = b - r * (b - a)
             f1 = _tracked_value(which, x1, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau,
-                                sensor)
+                                sensor, a_up)
         else:
             a, x1, f1 = x1, x2, f2
             x2 = a + r * (b - a)
             f2 = _tracked_value(which, x2, hist_t, hist_h, hist_c, n_hist, n, a_s, a_b, tau,
-                                sensor)
+                                sensor, a_up)
     if f1 >= f2:
         return x1, f1
     return x2, f2
@@ -332,6 +340,8 @@ class Ode(NamedTuple):
     inv_z: float
     f_static: float
     tau: float
+    a_0: float
+    inv_m0: float
 
 
 # The steps of integrate_dopri5. Each is inlined into the driver (numba IR inlining), so the
@@ -376,7 +386,8 @@ def _initial_step(
     h = min(h, t_end)
     for i in range(size):
         y1[i] = y[i] + h * k0[i]
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k1)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k1)
     d2 = 0.0
     for i in range(size):
         sc = atol[i] + rtol * abs(y[i])
@@ -396,24 +407,30 @@ def _stages(
     solution, k6 = y'(y1) (FSAL); ``size`` the state's length."""
     for i in range(size):
         y1[i] = y[i] + h * A21 * k0[i]
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k1)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k1)
     for i in range(size):
         y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k2)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k2)
     for i in range(size):
         y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k3)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k3)
     for i in range(size):
         y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k4)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k4)
     for i in range(size):
         y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
                             + A65 * k4[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k5)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k5)
     for i in range(size):
         y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
                             + A76 * k5[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k6)
+    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k6)
 
 
 @njit(**_STEP)
@@ -522,10 +539,10 @@ def _emit(
         if traces:
             _sample_block(pw, th, cnt, next_k, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
                           scratch, rec.samples, rec.u_trace, rec.v_trace, rec.f_trace,
-                          rec.w_trace)
+                          rec.w_trace, rec.a_0)
         else:
             _sample_sensor(pw, th, cnt, next_k, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
-                           rec.samples, f_bot)
+                           rec.samples, f_bot, rec.a_0 if rec.sensor == 1 else rec.a_s)
         for c in range(cnt):
             kk = next_k + c
             rec.energy[kk] = (1.0 - th[c]) * e_prev + th[c] * e_new
@@ -548,7 +565,8 @@ def _refine_peaks(
                                   (PK_BOT_F, PK_BOT_T, 1)):
         if np.isfinite(pk[slot_t]):
             tp, fp = _refine_peak(which, pk[slot_t], interval, t_end, hist_t, hist_h, hist_c,
-                                  n_hist, n, rec.a_s, rec.a_b, rec.tau, rec.sensor)
+                                  n_hist, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
+                                  rec.a_0 if rec.sensor == 1 else rec.a_s)
             pk[slot_t] = tp
             pk[slot_f] = fp
 
@@ -586,9 +604,9 @@ def integrate_dopri5(
     n = u.size - 1
     np1 = n + 1
     size = 2 * np1 + 3
-    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, rec.tau)
+    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, rec.tau, rec.a_0, 1.0 / rec.m0)
     t_end = (n_samples - 1) * interval
-    atol = _tolerances(u, v, m, a_s, rtol)
+    atol = _tolerances(u, v, rec.m0, rec.a_0, rtol)  # the striker: the largest speed
 
     y = np.empty(size)
     y[:np1] = u
@@ -611,7 +629,8 @@ def integrate_dopri5(
     hist_c = np.empty((256, 5, _TRACK))
     n_hist = 0
 
-    _rhs(y, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau, f, k0)
+    _rhs(y, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+         ode.a_0, ode.inv_m0, f, k0)
     nfev = 1
 
     # Sample 0 is the initial state (a constant "interpolant").
@@ -622,10 +641,11 @@ def integrate_dopri5(
     th[0] = 0.0
     if rec.u_trace.shape[0] > 0:
         _sample_block(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, scratch, rec.samples,
-                      rec.u_trace, rec.v_trace, rec.f_trace, rec.w_trace)
+                      rec.u_trace, rec.v_trace, rec.f_trace, rec.w_trace, rec.a_0)
     else:
-        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, rec.samples, f_bot)
-    e_start = _balance(y, n, u0, m, g, a_s, a_b)
+        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, rec.samples, f_bot,
+                       rec.a_0 if rec.sensor == 1 else a_s)
+    e_start = _balance(y, n, u0, m, g, a_s, a_b, rec.m0, rec.a_0)
     rec.energy[0] = e_start
     e_prev = e_start
     deviation = 0.0
@@ -676,7 +696,7 @@ def integrate_dopri5(
         n_hist += 1
 
         t_new = t_end if last else t + h
-        e_new = _balance(y1, n, u0, m, g, a_s, a_b)
+        e_new = _balance(y1, n, u0, m, g, a_s, a_b, rec.m0, rec.a_0)
         if not np.isfinite(e_new):
             return (RUN_NONFINITE, next_k, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
                     accepted + 1, rejected, nfev, deviation)

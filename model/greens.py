@@ -172,6 +172,8 @@ def integrate_greens(
     f_static, tau, sensor, pk = rec.f_static, rec.tau, rec.sensor, rec.pk
     n = u.size - 1
     inv_m = 1.0 / m
+    m0, a_0 = rec.m0, rec.a_0
+    inv_m0 = 1.0 / m0
     dt = h / r
     f = np.empty(n)
     acc = np.empty(n + 1)
@@ -185,7 +187,7 @@ def integrate_greens(
     tol = 1e-12 * f_static
 
     w = 0.0
-    f_bottom, power = chain_start(u, v, w, a_s, a_b, inv_m, g, tau, f, acc, vpc)
+    f_bottom, power = chain_start(u, v, w, a_s, a_0, a_b, inv_m, inv_m0, g, tau, f, acc, vpc)
     fdyn[0] = 0.5 * (f_bottom - f_static)
     first = -1
     if abs(fdyn[0]) > tol:
@@ -196,7 +198,8 @@ def integrate_greens(
     step = 0
     for k in range(n_samples):
         record_into(rec, k, f, w)
-        rec.energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + plate_work + dissipated
+        rec.energy[k] = (chain_energy(u, v, u0, w, m, g, a_s, a_b, m0, a_0) + plate_work
+                         + dissipated)
         if not np.isfinite(rec.samples[k]) or not np.isfinite(rec.energy[k]):
             return RUN_NONFINITE, k + 1, w, plate_work, dissipated
         if k == n_samples - 1:
@@ -210,8 +213,8 @@ def integrate_greens(
                 off = length - 2 - step
                 w = np.dot(rev[off + first: off + step + 1], fdyn[first: step + 1])
             f_bottom, power, lost = chain_substeps(
-                u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_b, inv_m, g, tau, sensor, power,
-                step * h, pk,
+                u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_0, a_b, inv_m, inv_m0, g, tau, sensor,
+                power, step * h, pk,
             )
             dissipated += lost
             plate_work += 0.5 * (f_old + f_bottom) * (w - w_old)

@@ -29,22 +29,24 @@ from .status import RUN_NONFINITE, RUN_OK
 
 
 @njit(cache=True)
-def _hertz_forces(u: np.ndarray, a_s: float, f: np.ndarray) -> None:
-    """Branch-free Hertz forces of the N sphere-sphere contacts (vectorises)."""
-    for j in range(f.size):
+def _hertz_forces(u: np.ndarray, a_s: float, a_0: float, f: np.ndarray) -> None:
+    """Branch-free Hertz forces of the N sphere-sphere contacts (vectorises); contact 0, the
+    striker's, has the constant ``a_0``."""
+    f[0] = hertz(a_0, u[0] - u[1])
+    for j in range(1, f.size):
         f[j] = hertz(a_s, u[j] - u[j + 1])
 
 
 @njit(cache=True)
 def _kick_drift(
     u: np.ndarray, v: np.ndarray, f: np.ndarray, f_bottom: float,
-    inv_m: float, g: float, c: float, dt: float,
+    inv_m: float, inv_m0: float, g: float, c: float, dt: float,
 ) -> None:
-    """v += c a(f, f_bottom), then u += dt v, for every particle."""
+    """v += c a(f, f_bottom), then u += dt v, for every particle (``inv_m0``: the striker's)."""
     n = u.size - 1
     if n == 0:
         return
-    v[0] += c * (g - f[0] * inv_m)
+    v[0] += c * (g - f[0] * inv_m0)
     u[0] += dt * v[0]
     for i in range(1, n):
         v[i] += c * (g + (f[i - 1] - f[i]) * inv_m)
@@ -56,13 +58,13 @@ def _kick_drift(
 @njit(cache=True)
 def _close(
     u: np.ndarray, v: np.ndarray, u0: np.ndarray, f: np.ndarray, f_bottom: float,
-    inv_m: float, g: float, c: float, m: float,
+    inv_m: float, inv_m0: float, g: float, c: float, m: float, m0: float,
 ) -> float:
     """Closing kick ``v += c a(f, f_bottom)`` and, in the same pass, the chain's kinetic +
     sphere-contact + gravity energy at the new velocities, J (the bottom contact's is not in it).
     """
     n = v.size - 1
-    v[0] += c * (g - f[0] * inv_m)
+    v[0] += c * (g - f[0] * inv_m0)
     kin = v[0] * v[0]
     grav = u[0] - u0[0]
     pot = (u[0] - u[1]) * f[0]
@@ -74,13 +76,23 @@ def _close(
     v[n] += c * (g + (f[n - 1] - f_bottom) * inv_m)
     kin += v[n] * v[n]
     grav += u[n] - u0[n]
-    return 0.5 * m * kin + 0.4 * pot - m * g * grav
+    return 0.5 * m * kin + 0.4 * pot - m * g * grav + _striker_mass_terms(u, v, u0, m, m0, g)
+
+
+@njit(cache=True)
+def _striker_mass_terms(u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, m0: float,
+                        g: float) -> float:
+    """Kinetic and gravity energy the uniform sums miss for a striker of mass ``m0`` (the
+    contact energy 0.4 d F already holds its own constant); 0.0 exactly when m0 = m."""
+    if m0 == m:
+        return 0.0
+    return 0.5 * (m0 - m) * v[0] * v[0] - (m0 - m) * g * (u[0] - u0[0])
 
 
 @njit(cache=True)
 def _energy(
     u: np.ndarray, v: np.ndarray, u0: np.ndarray, f: np.ndarray, w: float,
-    m: float, g: float, a_b: float,
+    m: float, g: float, a_b: float, m0: float,
 ) -> float:
     """Kinetic + contact + gravity energy, J, with ``f`` the forces at ``u`` (see chain_energy)."""
     kin = 0.0
@@ -92,7 +104,8 @@ def _energy(
     for j in range(f.size):
         pot += (u[j] - u[j + 1]) * f[j]
     n = u.size - 1
-    return 0.5 * m * kin + 0.4 * pot + hertz_energy(a_b, u[n] - w) - m * g * grav
+    return (0.5 * m * kin + 0.4 * pot + hertz_energy(a_b, u[n] - w) - m * g * grav
+            + _striker_mass_terms(u, v, u0, m, m0, g))
 
 
 @njit(cache=True)
@@ -109,15 +122,17 @@ def integrate_elastic(
                                              rec.pk)
     n = u.size - 1
     inv_m = 1.0 / m
+    m0, a_0 = rec.m0, rec.a_0
+    inv_m0 = 1.0 / m0
     half = 0.5 * dt
     f = np.empty(n)
-    _hertz_forces(u, a_s, f)
+    _hertz_forces(u, a_s, a_0, f)
     plate_work = 0.0
     moving = inv_z > 0.0
     step = 0
     traces = rec.u_trace.shape[0] > 0
     f_bottom = hertz(a_b, u[n] - w)
-    e_chain = _energy(u, v, u0, f, w, m, g, a_b)
+    e_chain = _energy(u, v, u0, f, w, m, g, a_b, m0)
     for k in range(n_samples):
         # Here u, v, w are synchronous; f and f_bottom are the forces at (u, w).
         below = f[sensor] if sensor < n else f_bottom
@@ -139,8 +154,8 @@ def integrate_elastic(
         f_kick = f_bottom
         f_after = f_bottom
         for sub in range(n_sub):
-            _kick_drift(u, v, f, f_kick, inv_m, g, c, dt)
-            _hertz_forces(u, a_s, f)
+            _kick_drift(u, v, f, f_kick, inv_m, inv_m0, g, c, dt)
+            _hertz_forces(u, a_s, a_0, f)
             f_bottom = hertz(a_b, u[n] - w)
             f_after = f_bottom
             if moving:
@@ -156,7 +171,8 @@ def integrate_elastic(
             f_kick = 0.5 * (f_bottom + f_after)
         # Closing half kick (with the bottom force before the plate's last half step), fused with
         # the energy sum; then the state is synchronous again.
-        e_chain = _close(u, v, u0, f, f_bottom, inv_m, g, half, m) + 0.4 * (u[n] - w) * f_after
+        e_chain = (_close(u, v, u0, f, f_bottom, inv_m, inv_m0, g, half, m, m0)
+                   + 0.4 * (u[n] - w) * f_after)
         f_bottom = f_after
     if not pk[PK_BOT_F] >= 0.0:
         return RUN_NONFINITE, n_samples, w, plate_work

@@ -72,12 +72,16 @@ def choose_time_step(
     m = scene.sphere_mass
     g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
     n = scene.chain.n_particles
-    e_kin = 0.5 * m * scene.impact_velocity**2
+    e_kin = 0.5 * scene.striker_mass * scene.impact_velocity**2
     f_s = _peak_force_bound(scene.a_s, e_kin, max(n - 1, 0) * m * g)
     f_b = _peak_force_bound(boundary.a_bottom, e_kin, n * m * g)
     k_s = 1.5 * scene.a_s ** (2.0 / 3.0) * f_s ** (1.0 / 3.0)
     k_b = 1.5 * boundary.a_bottom ** (2.0 / 3.0) * f_b ** (1.0 / 3.0)
     omega = 2.0 * math.sqrt(max(k_s, k_b) / m)
+    if scene.striker_differs:  # its own contact and mass may be the stiffest pair
+        f_0 = _peak_force_bound(scene.a_0, e_kin, 0.0)
+        k_0 = 1.5 * scene.a_0 ** (2.0 / 3.0) * f_0 ** (1.0 / 3.0)
+        omega = 2.0 * math.sqrt(max(k_s, k_b, k_0) / min(m, scene.striker_mass))
     dt_max = 2.0 * math.pi / (omega * steps_per_period)
     rate = boundary.max_rate(k_b)
     if rate > 0.0:
@@ -119,7 +123,7 @@ def _auto_duration(scene: Scene, m: float, a_s: float, a_p: float, z: float) -> 
     from . import zener
 
     d = scene.chain.diameter
-    v_in = zener.CHATTERJEE_RATIO * scene.impact_velocity
+    v_in = zener.incident_velocity(scene)
     e, tau_c = zener.restitution_and_contact_time_one(zener.inelasticity_from(m, a_p, v_in, z))
     # e -> 0 sends Eq. 15's reflected trip to infinity; below e = 0.01 the reflection carries
     # ARR < 0.4 % and the record ends when a wave at 1 % of v_in would be back.

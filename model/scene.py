@@ -24,7 +24,13 @@ from pydantic import (
     model_validator,
 )
 
-from .contact import hertz_sphere_flat, hertz_sphere_sphere, plate_impedance, sphere_mass
+from .contact import (
+    hertz_sphere_flat,
+    hertz_sphere_sphere,
+    hertz_two_spheres,
+    plate_impedance,
+    sphere_mass,
+)
 from .errors import SceneError
 from .materials import Material, material_of, properties_from
 
@@ -159,9 +165,13 @@ class ChainSpec(_Section):
 
 
 class StrikerSpec(_Section):
-    """The striker, identical to the chain spheres: a drop height or an impact velocity."""
+    """The striker: a sphere of the chain's diameter, of the chain's material unless ``material``
+    says otherwise, dropped from a height or given an impact velocity."""
 
     drop_height: Number = Field(5e-3, ge=1e-6, le=100.0, description="free-fall height, m")
+    material: MaterialName | None = Field(
+        None, description="striker material when it differs from the chain's: a library name or "
+        "{name, youngs_modulus, poisson_ratio, density} (SI); omitted: the chain's")
     velocity: Annotated[Number, Field(ge=1e-4, le=100.0)] | None = Field(
         None, description="impact velocity, m/s")
 
@@ -334,6 +344,35 @@ class Scene(_Section):
     def a_s(self) -> float:
         """Hertz constant between two chain spheres, N/m^1.5."""
         return hertz_sphere_sphere(self.chain.diameter, self.sphere_material)
+
+    @property
+    def striker_material(self) -> Material:
+        """The striker's material: ``striker.material``, else the chain's."""
+        if self.striker.material is None:
+            return self.sphere_material
+        return material_of(self.striker.material, "striker.material")
+
+    @property
+    def striker_differs(self) -> bool:
+        """Whether the striker is not simply one more of the chain's spheres."""
+        a, b = self.striker_material, self.sphere_material
+        return ((a.youngs_modulus, a.poisson_ratio, a.density)
+                != (b.youngs_modulus, b.poisson_ratio, b.density))
+
+    @property
+    def striker_mass(self) -> float:
+        """m_0, kg: a sphere of the chain's diameter in the striker's material."""
+        if not self.striker_differs:
+            return self.sphere_mass
+        return sphere_mass(self.chain.diameter, self.striker_material)
+
+    @property
+    def a_0(self) -> float:
+        """Hertz constant between the striker and the first chain sphere, N/m^1.5."""
+        if not self.striker_differs:
+            return self.a_s
+        return hertz_two_spheres(self.chain.diameter, self.striker_material,
+                                 self.sphere_material)
 
     @property
     def a_p(self) -> float:

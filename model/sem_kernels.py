@@ -410,28 +410,30 @@ def plate_energy(
 
 @njit(cache=True)
 def chain_start(
-    u: np.ndarray, v: np.ndarray, w: float, a_s: float, a_b: float, inv_m: float, g: float,
-    tau: float, f: np.ndarray, acc: np.ndarray, vpc: np.ndarray,
+    u: np.ndarray, v: np.ndarray, w: float, a_s: float, a_0: float, a_b: float, inv_m: float,
+    inv_m0: float, g: float, tau: float, f: np.ndarray, acc: np.ndarray, vpc: np.ndarray,
 ) -> tuple[float, float]:
-    """Forces and accelerations of the chain at t = 0; returns (bottom force, dissipated power)."""
+    """Forces and accelerations of the chain at t = 0; returns (bottom force, dissipated power).
+    ``a_0``, ``inv_m0``: the striker's contact constant and inverse mass."""
     n = u.size - 1
-    contact_forces(u, a_s, f)
+    contact_forces(u, a_s, a_0, f)
     f_bottom = hertz(a_b, u[n] - w)
-    accelerations(f, f_bottom, inv_m, g, acc)
+    accelerations(f, f_bottom, inv_m, inv_m0, g, acc)
     power = 0.0
     if tau > 0.0:
         for i in range(n + 1):
             vpc[i] = v[i]
-        power = damped_contact_forces(u, vpc, a_s, tau, f)
-        accelerations(f, f_bottom, inv_m, g, acc)
+        power = damped_contact_forces(u, vpc, a_s, a_0, tau, f)
+        accelerations(f, f_bottom, inv_m, inv_m0, g, acc)
     return f_bottom, power
 
 
 @njit(cache=True)
 def chain_substeps(
     u: np.ndarray, v: np.ndarray, acc: np.ndarray, f: np.ndarray, vpc: np.ndarray,
-    w_old: float, w_new: float, r: int, dt: float, a_s: float, a_b: float, inv_m: float,
-    g: float, tau: float, sensor: int, power: float, t_start: float, pk: np.ndarray,
+    w_old: float, w_new: float, r: int, dt: float, a_s: float, a_0: float, a_b: float,
+    inv_m: float, inv_m0: float, g: float, tau: float, sensor: int, power: float,
+    t_start: float, pk: np.ndarray,
 ) -> tuple[float, float, float]:
     """r chain steps of dt with the plate surface moving linearly from w_old to w_new.
 
@@ -442,7 +444,8 @@ def chain_substeps(
     for s in range(1, r + 1):
         w = w_old + (w_new - w_old) * (s / r)
         power_before = power
-        f_bottom, power = verlet_step(u, v, acc, f, vpc, w, a_s, a_b, inv_m, g, tau, dt)
+        f_bottom, power = verlet_step(u, v, acc, f, vpc, w, a_s, a_0, a_b, inv_m, inv_m0, g,
+                                      tau, dt)
         dissipated += 0.5 * dt * (power_before + power)
         track_peaks(pk, t_start + s * dt, dt, sensor_reading(f, f_bottom, sensor), f_bottom)
     return f_bottom, power, dissipated
@@ -486,6 +489,8 @@ def integrate_sem(
     n = u.size - 1
     ndof = up.size
     inv_m = 1.0 / m
+    m0, a_0 = rec.m0, rec.a_0
+    inv_m0 = 1.0 / m0
     dt = h / r
     half = 0.5 * h
     f = np.empty(n)
@@ -496,7 +501,7 @@ def integrate_sem(
 
     nl = ldofs.size
     w = patch_deflection(up, ldofs, lw, share)
-    f_bottom, power = chain_start(u, v, w, a_s, a_b, inv_m, g, tau, f, acc, vpc)
+    f_bottom, power = chain_start(u, v, w, a_s, a_0, a_b, inv_m, inv_m0, g, tau, f, acc, vpc)
     stiffness_product(op, up, ku)
     for i in range(ndof):
         ap[i] = -inv_mass[i] * ku[i]
@@ -509,7 +514,8 @@ def integrate_sem(
     for k in range(n_samples):
         record_into(rec, k, f, w)
         e_plate = plate_energy(up, vp, ap, ku, mass, w, f_static * share, h) / share
-        rec.energy[k] = chain_energy(u, v, u0, w, m, g, a_s, a_b) + e_plate + dissipated
+        rec.energy[k] = (chain_energy(u, v, u0, w, m, g, a_s, a_b, m0, a_0) + e_plate
+                         + dissipated)
         if not np.isfinite(rec.samples[k]) or not np.isfinite(rec.energy[k]):
             return RUN_NONFINITE, k + 1, w, e_plate, dissipated
         if k == n_samples - 1:
@@ -521,8 +527,8 @@ def integrate_sem(
             w_old = w
             w = patch_deflection(up, ldofs, lw, share)
             f_bottom, power, lost = chain_substeps(
-                u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_b, inv_m, g, tau, sensor, power,
-                step * h, pk,
+                u, v, acc, f, vpc, w_old, w, r, dt, a_s, a_0, a_b, inv_m, inv_m0, g, tau, sensor,
+                power, step * h, pk,
             )
             dissipated += lost
             stiffness_product(op, up, ku)

@@ -162,6 +162,7 @@ def simulate(
         samples=np.empty(n_samples), energy=np.empty(n_samples),
         u_trace=np.empty((rows, n + 1)), v_trace=np.empty((rows, n + 1)),
         f_trace=np.empty((rows, n + 1)), w_trace=np.empty(rows),
+        m0=scene.striker_mass, a_0=scene.a_0,
     )
     step_plan = StepPlan(dt, n_sub, n_samples, integrator=solver.integrator, rtol=solver.rtol,
                          max_steps=max_steps)
@@ -174,7 +175,7 @@ def simulate(
 
     # Relative to the energy in play: the striker's, or what left the chain if that is more
     # (with gravity a chain that keeps sinking into an infinite plate feeds it without end).
-    e_scale = max(0.5 * m * v_imp**2, abs(run.plate_work) + run.dissipated)
+    e_scale = max(0.5 * scene.striker_mass * v_imp**2, abs(run.plate_work) + run.dissipated)
     balance = setup.energy
     if adaptive:
         # dopri5's samples interpolate the balance between step ends: drift is measured there.

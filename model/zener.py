@@ -337,8 +337,18 @@ def time_scale(mass: float, a_p: float, v_in: float) -> float:
 
 
 def incident_velocity(scene: Scene) -> float:
-    """v_in = 0.682 v_imp: the particle velocity the solitary wave brings to the plate, m/s."""
-    return CHATTERJEE_RATIO * scene.impact_velocity
+    """v_in = 0.682 v_imp: the particle velocity the solitary wave brings to the plate, m/s
+    (an estimate for a striker unlike the chain's spheres, see below)."""
+    v_in = CHATTERJEE_RATIO * scene.impact_velocity
+    if scene.striker_differs:
+        # No closed form: Chatterjee's 0.682 is for a striker identical to the chain's spheres.
+        # Scaled by the velocity 2 m0 / (m0 + m) v_imp that a free elastic collision gives the
+        # first sphere, never above the identical striker's: an estimate that errs towards a
+        # slower, weaker wave, i.e. a longer record (auto duration) and a longer critical distance
+        # (the auto tier), both on the safe side.
+        m0, m = scene.striker_mass, scene.sphere_mass
+        v_in *= min(1.0, 2.0 * m0 / (m0 + m))
+    return v_in
 
 
 def inelasticity(scene: Scene) -> float:
@@ -450,6 +460,14 @@ def predict(scene: Scene) -> TheoryPrediction:
     solitary wave's trip over N diameters down at V_s(v_in) and up at V_s(e v_in) (Eq. 14), which
     is Eq. 15 term by term.
     """
+    if scene.striker_differs:
+        raise SceneError(
+            "striker.material",
+            "the closed-form theory needs a striker identical to the chain's spheres "
+            "(Chatterjee's v_m = 0.682 v_imp, Eqs. 12-15); this striker is "
+            f"{scene.striker_material.name}, the chain {scene.sphere_material.name}",
+            allowed="omit striker.material (the chain's), or `solitonde simulate` the scene",
+        )
     m, a_s, a_p = scene.sphere_mass, scene.a_s, scene.a_p
     d = scene.chain.diameter
     v_in = incident_velocity(scene)

@@ -71,8 +71,31 @@ def test_parquet_output(tmp_path):
     assert len(pd.read_parquet(out)) == 3
 
 
+def _tof_bound_samples(row: dict) -> float:
+    """The Cramer-Rao bound on a shot's TOF, in samples: the model's clean trace for the row's
+    scene and the row's SNR (signal.accuracy.cramer_rao)."""
+    from solitonde.model.scene import load_scene
+    from solitonde.model.simulate import simulate
+    from solitonde.signal.accuracy import Truth, cramer_rao
+
+    scene = load_scene(None, [f"chain.diameter={row['sphere_diameter_m']}",
+                              f"plate.thickness={row['plate_thickness_m']}",
+                              f"striker.drop_height={row['drop_height_m']}",
+                              "effects.plate_model=infinite", "output.duration=auto"])
+    sim = simulate(scene)
+    t = sim.truth
+    truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
+                             (t["incident_time_s"], t["incident_peak_N"]),
+                             (t["reflected_time_s"], t["reflected_peak_N"]))
+    sigma = truth.incident_peak_N / 10 ** (float(row["snr_db"]) / 20)
+    return cramer_rao(sim.samples, sim.dt, truth, 1.0 / sim.dt, sigma, sim.t0)["tof_samples"]
+
+
 def test_data_samples_match_their_truth():
-    """The shipped synthetic samples analyse to their truth (TOF within 2 samples)."""
+    """The shipped synthetic samples analyse to their truth: TOF within 2 samples, or within 4
+    standard deviations of the Cramer-Rao bound where the data cannot do better (D = 19.05 mm
+    at 30 dB: the reflection, ARR 0.12, is 11 dB above the noise and the bound 2.5 samples);
+    ARR within 0.02."""
     truth = {(r["file"], int(r["shot"])): r
              for r in csv.DictReader((DATA / "truth.tsv").open(), delimiter="\t")}
     result = CliRunner().invoke(build_app(), ["analyze", str(DATA), "--json"])
@@ -82,7 +105,8 @@ def test_data_samples_match_their_truth():
     for s in shots:
         t = truth[(Path(s["source"]).name, s["shot"])]
         dt = 1.0 / float(t["sample_rate_hz"])
-        assert abs(s["tof_s"] - float(t["tof_s"])) < 2 * dt
+        error = abs(s["tof_s"] - float(t["tof_s"])) / dt
+        assert error < 2 or error < 4 * _tof_bound_samples(t), (s["source"], s["shot"], error)
         assert abs(s["arr"] - float(t["arr"])) < 0.02
 
 

@@ -15,7 +15,7 @@ from typing import Any
 from solitonde.model.materials import properties_from
 
 FAMILY_KEYS = ("sphere_material", "plate_material", "plate_size_m", "supports", "gravity",
-               "n_particles", "sensor_index", "impact_velocity_m_s")
+               "n_particles", "sensor_index", "impact_velocity_m_s", "striker_material")
 """The keys of a family, in the order they are reported."""
 
 
@@ -30,6 +30,9 @@ def family_of_scene(scene: Any) -> dict[str, Any]:
         "n_particles": int(scene.chain.n_particles),
         "sensor_index": int(scene.chain.sensor_index),
         "impact_velocity_m_s": float(scene.impact_velocity),
+        "striker_material": properties_from(scene.striker.material
+                                            if scene.striker.material is not None
+                                            else scene.chain.material),
     }
 
 
