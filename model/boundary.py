@@ -215,11 +215,16 @@ def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
         return _run_dopri5(setup, plan, inv_z)
     peaks = new_peak_tracker()
     record = setup_record(setup, peaks)
+    args = (record, float(setup.w), float(inv_z), float(plan.dt), int(plan.n_sub),
+            int(plan.n_samples))
     start = time.perf_counter()
-    status, done, w, plate_work, dissipated = dashpot_run(
-        record, float(setup.w), float(inv_z), float(plan.dt), int(plan.n_sub),
-        int(plan.n_samples),
-    )
+    # The driver is chosen here, not in dashpot_run: compiled together, the damped driver's code
+    # slows the elastic loop by about 10 % (3.3 against 3.8 ms on the default scene).
+    if setup.tau > 0.0:
+        status, done, w, plate_work, dissipated = dashpot_steps_run(*args)
+    else:
+        status, done, w, plate_work = integrate_elastic(*args)
+        dissipated = 0.0
     wall = time.perf_counter() - start
     setup.w = w
     return ChainRun(status, done, plate_work, dissipated, peaks, wall)
@@ -308,7 +313,7 @@ def plate_half_step(
     return w, e_before - 0.4 * (u_n - w) * f_new
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def dashpot_steps_run(
     rec: ChainRecord, w: float, inv_z: float, dt: float, n_sub: int, n_samples: int
 ) -> tuple[int, int, float, float, float]:

@@ -53,9 +53,10 @@ def new_peak_tracker() -> np.ndarray:
 def contact_forces(u: np.ndarray, a_s: float, a_0: float, f: np.ndarray) -> None:
     """Elastic forces of the N sphere-sphere contacts into ``f`` (len N); u has len N + 1.
     Contact 0 (striker on particle 1) has the constant ``a_0``, the others ``a_s``."""
-    f[0] = hertz(a_0, u[0] - u[1])
-    for j in range(1, f.size):
+    for j in range(f.size):
         f[j] = hertz(a_s, u[j] - u[j + 1])
+    if a_0 != a_s:  # after the loop, which stays one vectorised pass
+        f[0] = hertz(a_0, u[0] - u[1])
 
 
 @njit(cache=True)
@@ -68,10 +69,14 @@ def damped_contact_forces(
     :func:`verlet_step`). The dissipated power is the viscous force times the approach rate, over
     the closed contacts; it is >= 0 because the clamp only removes pulling force.
     """
-    f[0], power = kuwabara_kono(a_0, tau, u[0] - u[1], v[0] - v[1])  # the striker's contact
-    for j in range(1, f.size):
+    power = 0.0
+    for j in range(f.size):
         f[j], lost = kuwabara_kono(a_s, tau, u[j] - u[j + 1], v[j] - v[j + 1])
         power += lost
+    if a_0 != a_s:  # the striker's contact, redone with its own constant
+        _, lost = kuwabara_kono(a_s, tau, u[0] - u[1], v[0] - v[1])
+        f[0], lost_0 = kuwabara_kono(a_0, tau, u[0] - u[1], v[0] - v[1])
+        power += lost_0 - lost
     return power
 
 
@@ -200,7 +205,7 @@ def chain_energy(
             + striker_correction(u, v, u0, m, g, a_s, m0, a_0))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def striker_correction(u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, g: float,
                        a_s: float, m0: float, a_0: float) -> float:
     """What the uniform chain energy misses when the striker differs: its mass in the kinetic and

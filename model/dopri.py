@@ -100,21 +100,24 @@ _TRACK = 8
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _rhs(
     y: np.ndarray, n: int, inv_m: float, g: float, a_s: float, a_b: float, inv_z: float,
-    f_static: float, tau: float, a_0: float, inv_m0: float, f: np.ndarray, dy: np.ndarray,
+    f_static: float, tau: float, a0_scale: float, inv_m0: float, f: np.ndarray, dy: np.ndarray,
 ) -> None:
-    """dy = y'(y); ``f`` (len n) receives the sphere contact forces as scratch; ``a_0`` and
-    ``inv_m0`` are the striker's contact constant and inverse mass."""
+    """dy = y'(y); ``f`` (len n) receives the sphere contact forces as scratch. The striker:
+    ``a0_scale`` its contact constant over the chain's (1.0 for one of the chain's spheres),
+    ``inv_m0`` 1 / its mass."""
     np1 = n + 1
     power = 0.0
     if tau > 0.0:
-        f[0], power = kuwabara_kono(a_0, tau, y[0] - y[1], y[np1] - y[np1 + 1])
-        for j in range(1, n):
+        for j in range(n):
             f[j], lost = kuwabara_kono(a_s, tau, y[j] - y[j + 1], y[np1 + j] - y[np1 + j + 1])
             power += lost
+        if a0_scale != 1.0:  # the striker's contact dissipates at its own constant
+            rate = y[np1] - y[np1 + 1]
+            power += (a0_scale - 1.0) * kuwabara_kono(a_s, tau, y[0] - y[1], rate)[1]
     else:
-        f[0] = hertz(a_0, y[0] - y[1])
-        for j in range(1, n):
+        for j in range(n):
             f[j] = hertz(a_s, y[j] - y[j + 1])
+    f[0] *= a0_scale  # both force laws are linear in the contact constant
     f_b = hertz(a_b, y[n] - y[2 * np1])
     for i in range(np1):
         dy[i] = y[np1 + i]
@@ -340,7 +343,7 @@ class Ode(NamedTuple):
     inv_z: float
     f_static: float
     tau: float
-    a_0: float
+    a0_scale: float  # the striker's contact constant over the chain's
     inv_m0: float
 
 
@@ -387,7 +390,7 @@ def _initial_step(
     for i in range(size):
         y1[i] = y[i] + h * k0[i]
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k1)
+         ode.a0_scale, ode.inv_m0, f, k1)
     d2 = 0.0
     for i in range(size):
         sc = atol[i] + rtol * abs(y[i])
@@ -408,29 +411,29 @@ def _stages(
     for i in range(size):
         y1[i] = y[i] + h * A21 * k0[i]
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k1)
+         ode.a0_scale, ode.inv_m0, f, k1)
     for i in range(size):
         y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k2)
+         ode.a0_scale, ode.inv_m0, f, k2)
     for i in range(size):
         y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k3)
+         ode.a0_scale, ode.inv_m0, f, k3)
     for i in range(size):
         y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k4)
+         ode.a0_scale, ode.inv_m0, f, k4)
     for i in range(size):
         y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
                             + A65 * k4[i])
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k5)
+         ode.a0_scale, ode.inv_m0, f, k5)
     for i in range(size):
         y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
                             + A76 * k5[i])
     _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k6)
+         ode.a0_scale, ode.inv_m0, f, k6)
 
 
 @njit(**_STEP)
@@ -604,7 +607,8 @@ def integrate_dopri5(
     n = u.size - 1
     np1 = n + 1
     size = 2 * np1 + 3
-    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, rec.tau, rec.a_0, 1.0 / rec.m0)
+    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, rec.tau, rec.a_0 / a_s,
+              1.0 / rec.m0)
     t_end = (n_samples - 1) * interval
     atol = _tolerances(u, v, rec.m0, rec.a_0, rtol)  # the striker: the largest speed
 
@@ -630,7 +634,7 @@ def integrate_dopri5(
     n_hist = 0
 
     _rhs(y, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a_0, ode.inv_m0, f, k0)
+         ode.a0_scale, ode.inv_m0, f, k0)
     nfev = 1
 
     # Sample 0 is the initial state (a constant "interpolant").

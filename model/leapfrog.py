@@ -29,11 +29,10 @@ from .status import RUN_NONFINITE, RUN_OK
 
 
 @njit(cache=True)
-def _hertz_forces(u: np.ndarray, a_s: float, a_0: float, f: np.ndarray) -> None:
-    """Branch-free Hertz forces of the N sphere-sphere contacts (vectorises); contact 0, the
-    striker's, has the constant ``a_0``."""
-    f[0] = hertz(a_0, u[0] - u[1])
-    for j in range(1, f.size):
+def _hertz_forces(u: np.ndarray, a_s: float, f: np.ndarray) -> None:
+    """Branch-free Hertz forces of the N sphere-sphere contacts (vectorises); a striker unlike
+    the chain's spheres has its contact 0 redone by the caller."""
+    for j in range(f.size):
         f[j] = hertz(a_s, u[j] - u[j + 1])
 
 
@@ -108,7 +107,7 @@ def _energy(
             + _striker_mass_terms(u, v, u0, m, m0, g))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_elastic(
     rec: ChainRecord, w: float, inv_z: float, dt: float, n_sub: int, n_samples: int
 ) -> tuple[int, int, float, float]:
@@ -126,7 +125,10 @@ def integrate_elastic(
     inv_m0 = 1.0 / m0
     half = 0.5 * dt
     f = np.empty(n)
-    _hertz_forces(u, a_s, a_0, f)
+    striker = a_0 != a_s  # a striker of another material: its contact 0 has its own constant
+    _hertz_forces(u, a_s, f)
+    if striker:
+        f[0] = hertz(a_0, u[0] - u[1])
     plate_work = 0.0
     moving = inv_z > 0.0
     step = 0
@@ -155,7 +157,9 @@ def integrate_elastic(
         f_after = f_bottom
         for sub in range(n_sub):
             _kick_drift(u, v, f, f_kick, inv_m, inv_m0, g, c, dt)
-            _hertz_forces(u, a_s, a_0, f)
+            _hertz_forces(u, a_s, f)
+            if striker:
+                f[0] = hertz(a_0, u[0] - u[1])
             f_bottom = hertz(a_b, u[n] - w)
             f_after = f_bottom
             if moving:

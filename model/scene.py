@@ -355,6 +355,8 @@ class Scene(_Section):
     @property
     def striker_differs(self) -> bool:
         """Whether the striker is not simply one more of the chain's spheres."""
+        if self.striker.material is None:
+            return False
         a, b = self.striker_material, self.sphere_material
         return ((a.youngs_modulus, a.poisson_ratio, a.density)
                 != (b.youngs_modulus, b.poisson_ratio, b.density))
