@@ -401,42 +401,6 @@ def _initial_step(
 
 
 @njit(**_STEP)
-def _stages(
-    ode: Ode, f: np.ndarray, y: np.ndarray, h: float, k0: np.ndarray, k1: np.ndarray,
-    k2: np.ndarray, k3: np.ndarray, k4: np.ndarray, k5: np.ndarray, k6: np.ndarray,
-    y1: np.ndarray, size: int,
-) -> None:
-    """Stages 2..7 of one Dormand-Prince step of h from (y, k0 = y'(y)): y1 the 5th-order
-    solution, k6 = y'(y1) (FSAL); ``size`` the state's length."""
-    for i in range(size):
-        y1[i] = y[i] + h * A21 * k0[i]
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k1)
-    for i in range(size):
-        y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k2)
-    for i in range(size):
-        y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k3)
-    for i in range(size):
-        y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k4)
-    for i in range(size):
-        y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
-                            + A65 * k4[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k5)
-    for i in range(size):
-        y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
-                            + A76 * k5[i])
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k6)
-
-
-@njit(**_STEP)
 def _error_norm(
     y: np.ndarray, y1: np.ndarray, h: float, k0: np.ndarray, k2: np.ndarray, k3: np.ndarray,
     k4: np.ndarray, k5: np.ndarray, k6: np.ndarray, atol: np.ndarray, rtol: float, size: int,
@@ -679,7 +643,35 @@ def integrate_dopri5(
         last = t + h >= t_end * (1.0 - 1e-13)
         if last:
             h = t_end - t
-        _stages(ode, f, y, h, k0, k1, k2, k3, k4, k5, k6, y1, size)
+        # Stages 2..7 from (y, k0 = y'(y)): y1 the 5th-order solution, k6 = y'(y1) (FSAL).
+        # Written here, not in a helper: numba's inlined helper ran the driver 8 % slower
+        # (127 against 117 us on the default scene at rtol 3.2e-5).
+        for i in range(size):
+            y1[i] = y[i] + h * A21 * k0[i]
+        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+             ode.a0_scale, ode.inv_m0, f, k1)
+        for i in range(size):
+            y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
+        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+             ode.a0_scale, ode.inv_m0, f, k2)
+        for i in range(size):
+            y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
+        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+             ode.a0_scale, ode.inv_m0, f, k3)
+        for i in range(size):
+            y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
+        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+             ode.a0_scale, ode.inv_m0, f, k4)
+        for i in range(size):
+            y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
+                                + A65 * k4[i])
+        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+             ode.a0_scale, ode.inv_m0, f, k5)
+        for i in range(size):
+            y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
+                                + A76 * k5[i])
+        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
+             ode.a0_scale, ode.inv_m0, f, k6)
         nfev += 6
         err = _error_norm(y, y1, h, k0, k2, k3, k4, k5, k6, atol, rtol, size)
         if not np.isfinite(err):
