@@ -24,7 +24,7 @@ Subclass :class:`BottomBoundary`, give it ``name``, ``reason`` and ``a_bottom``,
 scale of its own), and add a factory with :func:`register_tier`. ``integrate`` receives a
 :class:`ChainSetup` (initial state, constants, preallocated output arrays) and a :class:`StepPlan`
 (dt, steps per sample, samples) and returns a :class:`ChainRun`. Its compiled driver loop calls
-the kernels of :mod:`solitonde.model.chain` per step, as :func:`integrate_dashpot_steps` does:
+the kernels of :mod:`solitonde.model.chain` per step, as :func:`dashpot_steps_run` does:
 
     1. advance the plate by dt/2 with the chain frozen, book the work ``int F dw`` done on it,
        refresh the bottom force and ``acc[N]`` (:func:`~solitonde.model.chain.bottom_acceleration`);

@@ -31,7 +31,6 @@ import numpy as np
 from numba import njit
 
 from .laws import hertz, kuwabara_kono, overlap_52
-from .laws import hertz_energy as hertz_energy  # re-exported: the laws' former home
 from .record import ChainRecord
 
 # Layout of the peak tracker array used by :func:`track_peaks`.
@@ -206,14 +205,23 @@ def chain_energy(
 
 
 @njit(cache=True, inline="always")
+def striker_mass_terms(u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, m0: float,
+                       g: float) -> float:
+    """Kinetic and gravity energy that sums over uniform masses miss for a striker of mass
+    ``m0``; 0.0 exactly when m0 = m."""
+    if m0 == m:
+        return 0.0
+    return 0.5 * (m0 - m) * v[0] * v[0] - (m0 - m) * g * (u[0] - u0[0])
+
+
+@njit(cache=True, inline="always")
 def striker_correction(u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, g: float,
                        a_s: float, m0: float, a_0: float) -> float:
     """What the uniform chain energy misses when the striker differs: its mass in the kinetic and
     gravity terms, its contact constant in the first contact's energy; 0.0 exactly otherwise."""
-    if m0 == m and a_0 == a_s:
-        return 0.0
-    dm = m0 - m
-    return (0.5 * dm * v[0] * v[0] - dm * g * (u[0] - u0[0])
+    if a_0 == a_s:
+        return striker_mass_terms(u, v, u0, m, m0, g)
+    return (striker_mass_terms(u, v, u0, m, m0, g)
             + 0.4 * (a_0 - a_s) * overlap_52(u[0] - u[1]))
 
 

@@ -15,7 +15,8 @@ State vector ``y`` (length 2 (N + 1) + 3)::
     y[2N+3]           W, work done on the plate, J:  W' = F_b w'
     y[2N+4]           D, energy dissipated in the contacts, J:  D' = dissipated power
 
-with ``u_i' = v_i``, ``v_i' = g + (F_{i-1} - F_i) / m`` (F_{-1} = 0, F_N = F_b),
+with ``u_i' = v_i``, ``v_i' = g + (F_{i-1} - F_i) / m_i`` (F_{-1} = 0, F_N = F_b; m_0 the
+striker's mass, m_i = m otherwise; contact 0 has the striker's constant A_0),
 ``F_b = A_b [u_N - w]_+^(3/2)``, ``w' = (F_b - F_static) / Z`` (``inv_z = 1 / Z``, 0 for a wall)
 and the sphere contacts elastic Hertz or, with ``tau > 0``, Kuwabara-Kono
 ``F = [A d^(3/2) + (3/2) A tau d^(1/2) d']_+`` as in :mod:`solitonde.model.chain`. Carrying W and D
@@ -552,7 +553,7 @@ def integrate_dopri5(
     (dense-output refined, see the module docstring).
 
     ``atol = rtol x scale`` per component, with the scales of the benchmark's RK45 run
-    (tests/bench_chain.py): the striker's dynamic Hertz overlap ``(5 E / (2 A_s))^(2/5)`` for
+    (tests/bench_chain.py): the striker's dynamic Hertz overlap ``(5 E / (2 A_0))^(2/5)`` for
     positions and the plate deflection, the impact velocity (the largest initial speed) for
     velocities, and the striker's kinetic energy E for the plate work and dissipated energy.
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .chain import PK_BOT_F, record_into, track_peaks
+from .chain import PK_BOT_F, record_into, striker_mass_terms, track_peaks
 from .laws import dashpot_step, hertz, hertz_energy
 from .record import ChainRecord
 from .status import RUN_NONFINITE, RUN_OK
@@ -75,17 +75,7 @@ def _close(
     v[n] += c * (g + (f[n - 1] - f_bottom) * inv_m)
     kin += v[n] * v[n]
     grav += u[n] - u0[n]
-    return 0.5 * m * kin + 0.4 * pot - m * g * grav + _striker_mass_terms(u, v, u0, m, m0, g)
-
-
-@njit(cache=True)
-def _striker_mass_terms(u: np.ndarray, v: np.ndarray, u0: np.ndarray, m: float, m0: float,
-                        g: float) -> float:
-    """Kinetic and gravity energy the uniform sums miss for a striker of mass ``m0`` (the
-    contact energy 0.4 d F already holds its own constant); 0.0 exactly when m0 = m."""
-    if m0 == m:
-        return 0.0
-    return 0.5 * (m0 - m) * v[0] * v[0] - (m0 - m) * g * (u[0] - u0[0])
+    return 0.5 * m * kin + 0.4 * pot - m * g * grav + striker_mass_terms(u, v, u0, m, m0, g)
 
 
 @njit(cache=True)
@@ -104,7 +94,7 @@ def _energy(
         pot += (u[j] - u[j + 1]) * f[j]
     n = u.size - 1
     return (0.5 * m * kin + 0.4 * pot + hertz_energy(a_b, u[n] - w) - m * g * grav
-            + _striker_mass_terms(u, v, u0, m, m0, g))
+            + striker_mass_terms(u, v, u0, m, m0, g))
 
 
 @njit(cache=True, nogil=True)

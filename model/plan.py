@@ -34,10 +34,11 @@ DASHPOT_STEP_FRACTION = 0.0125
 DASHPOT_STEP_FRACTION_MAX = 0.5
 #: Plate models whose plate never moves: their auto duration uses lambda = 0.
 STATIC_PLATE_MODELS = ("rigid", "halfspace")
+#: Sample counts beyond this are refused outright (steps and costs stay exact floats below it).
+MAX_COUNTABLE = 2.0**53
 #: Default limits on one run.
 MAX_STEPS = 20_000_000
 MAX_SAMPLES = 20_000_000
-
 
 
 def _peak_force_bound(a: float, e_kin: float, f_static: float) -> float:
@@ -154,7 +155,6 @@ def check_solver(scene: Scene) -> tuple[str, str] | None:
     return name, reason
 
 
-
 PLATE_DOF_WEIGHT = 4.0
 """One spectral-element degree of freedom advanced one step costs about as much as 4 chain
 particles advanced one step, so plate work is counted in chain-equivalent units. Measured on one
@@ -221,9 +221,10 @@ def plan(
     ``cost = chain steps x (particles + 1) + PLATE_DOF_WEIGHT x plate steps x plate dofs``, plus
     ``CONVOLUTION_WEIGHT x plate_steps^2 / 2`` for ``greens``; about 3.5e8 per CPU second.
     """
-    resolved = check_solver(scene)
-    name, reason = (boundary.name, boundary.reason) if boundary is not None else \
-        (resolved or resolve_plate_model(scene))
+    if boundary is not None:  # built by the caller, after its own check_solver
+        name, reason = boundary.name, boundary.reason
+    else:
+        name, reason = check_solver(scene) or resolve_plate_model(scene)
     if scene.output.duration != "auto":
         duration = float(scene.output.duration)
     elif boundary is not None:
@@ -273,9 +274,10 @@ def plan(
 def _sample_count(duration: float, interval: float) -> int:
     """Samples from t = 0 through the end of the interval that holds ``duration``."""
     intervals = duration / interval * (1.0 - 1e-12)
-    if not math.isfinite(intervals):  # a huge finite duration overflows: refuse, never ceil(inf)
+    if not intervals <= MAX_COUNTABLE:  # a huge duration: refuse before counts overflow floats
         raise SimulationError(f"step_budget_exceeded: output.duration of {duration:.4g} s needs "
-                              f"more than 1e308 samples of {interval:.3g} s; shorten it")
+                              f"{intervals:.3g} samples of {interval:.3g} s (at most "
+                              f"{MAX_COUNTABLE:.3g} can even be counted); shorten it")
     return math.ceil(intervals) + 1
 
 

@@ -28,7 +28,7 @@ from .errors import SimulationError
 from .greens import GreensCache
 from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, check_solver, plan
 from .scene import STANDARD_GRAVITY, Scene
-from .status import RUN_OK, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
+from .status import RUN_OK, RUN_SHORT_RESPONSE, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
 
 
 @dataclass
@@ -102,6 +102,9 @@ def _failure(run: ChainRun, plan: StepPlan, plate_model: str) -> str:
             return (f"step_too_small: {setting}: the step size fell below 1e-14 of the duration "
                     f"({where}); raise solver.rtol")
         return f"nonfinite: the run produced non-finite values {where} ({setting})"
+    if run.status == RUN_SHORT_RESPONSE:  # an internal inconsistency, never the user's input
+        return (f"internal: the plate response of plate model {plate_model} is shorter than "
+                "the run; please report this scene")
     return (f"nonfinite: the run produced non-finite values after {run.samples_done} samples "
             f"(dt = {plan.dt:.3g} s, plate model {plate_model})")
 

@@ -1,7 +1,8 @@
 """Values made ready for JSON: one rule for the service, the command line and the files.
 
 JSON has no NaN or infinity and knows neither numpy types nor paths, so every writer of JSON in
-solitonde passes its data through :func:`json_ready`.
+the service and the command line passes its data through :func:`json_ready`. (Metadata written
+into waveform files keeps its own rule, ``waveform._jsonable``: NaN survives a file round trip.)
 """
 
 from __future__ import annotations

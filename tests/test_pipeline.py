@@ -90,3 +90,26 @@ def test_no_module_but_the_pipeline_calls_the_inversion() -> None:
                     and node.func.id == "invert":
                 callers.add(str(path.relative_to(root)))
     assert callers == {"inference/pipeline.py", *STUDIES}, callers
+
+
+def test_the_service_leaves_a_silent_size_out_and_exports_the_sizes_it_used(tmp_path) -> None:
+    """One measurement, two sphere sizes, the larger without a reflection: the estimate comes
+    from the other, lists the silent one in ``skipped``, and the estimates export names only the
+    size that was inverted."""
+    import csv as csv_module
+    import io
+
+    shots = [w.to_dict() for w in signal_io.read(CSV)]
+    dt = 5e-7
+    lone = Waveform(0.0, dt, pulse_train(4000, dt, [(300e-6, 50.0, 40e-6)]),
+                    metadata={**signal_io.read(CSV)[0].metadata, "sphere_diameter": 0.01905})
+    settings = Settings(store_path=tmp_path / "s.sqlite", table_path=TABLE)
+    with TestClient(build_app(settings)) as client:
+        r = client.post("/v1/measurements", json={"shots": [*shots, lone.to_dict()]})
+        assert r.status_code == 201, r.text
+        est = r.json()["estimate"]
+        assert est["thickness_m"]["status"] == "constrained"
+        assert [s["sphere_diameter"] for s in est["skipped"]] == [0.01905]
+        rows = list(csv_module.DictReader(io.StringIO(client.get(
+            "/v1/measurements/export", params={"kind": "estimates"}).text)))
+    assert [row["sphere_diameters_m"] for row in rows] == ["0.00953"]

@@ -49,10 +49,17 @@ def test_the_price_of_an_absurd_mesh_is_a_floor_without_building_it() -> None:
     assert p.estimate.startswith("floor") and p.cost > 1e9 and math.isnan(p.dt_s)
 
 
-def test_a_duration_too_long_to_count_is_refused() -> None:
-    s = scene_from_dict({"output": {"duration": 1e300, "sample_rate": 1e9}})
+@pytest.mark.parametrize("duration, rate", [(1e300, 1e9), (1e302, 1e6), (1e12, 1e6)])
+def test_a_duration_too_long_to_count_is_refused(duration: float, rate: float) -> None:
+    """Sample counts that overflow (1e309), that a float cannot hold as a step count times the
+    sub-steps (1e308), or that are merely absurd (1e18) are a SimulationError, never an
+    OverflowError: the service answers 422, the command line an error line."""
+    s = scene_from_dict({"effects": {"plate_model": "infinite"},
+                         "output": {"duration": duration, "sample_rate": rate}})
     with pytest.raises(SimulationError, match="step_budget_exceeded"):
-        plan(s)
+        plan(s, budget=5e8)
+    with pytest.raises(SimulationError, match="step_budget_exceeded"):
+        simulate(s)
 
 
 def test_nothing_above_model_plans_a_run_itself() -> None:

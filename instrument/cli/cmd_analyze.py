@@ -290,8 +290,8 @@ def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Pa
             out.append(row)
             continue
         try:
-            found = estimate(tables, usable, cal, plate_material=plate_material)
-            found.skipped = row["skipped"]
+            found = estimate(tables, usable, cal, plate_material=plate_material,
+                             skipped=row["skipped"])
             row["estimate"] = found.to_dict()
         except TableChoiceError as exc:
             flag = "--plate-material" if exc.field == "plate_material" else "--table"

@@ -22,6 +22,14 @@ from solitonde.instrument.inference.table_set import TableSet
 from solitonde.signal.features import Aggregate, Features, aggregate
 from solitonde.signal.json_ready import json_ready
 
+MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sphere size"
+
+
+def no_reflection(diameter_m: float) -> str:
+    """Why a sphere size whose shots show no reflection is left out."""
+    return (f"no shot with D = {diameter_m} m has a detected reflection (no TOF, no ARR); see "
+            "the aggregate's arr_upper_bound")
+
 
 @dataclass(frozen=True)
 class SizeSummary:
@@ -34,10 +42,9 @@ class SizeSummary:
     def skip_reason(self) -> str | None:
         """Why these shots give no inversion input, or None when they give one."""
         if self.diameter_m is None:
-            return "metadata.sphere_diameter is missing: the inversion needs the sphere size"
+            return MISSING_SIZE
         if self.aggregate["tof_s"].mean is None or self.aggregate["arr"].mean is None:
-            return (f"no shot with D = {self.diameter_m} m has a detected reflection (no TOF, "
-                    "no ARR); see the aggregate's arr_upper_bound")
+            return no_reflection(self.diameter_m)
         return None
 
     def inputs(self) -> FeatureSummary:
@@ -85,10 +92,13 @@ def estimate(
     table: str | None = None,
     plate_material: Any = None,
     posterior: bool = False,
+    skipped: Sequence[Mapping[str, Any]] = (),
 ) -> TableEstimate:
     """Thickness and distance to the support from per-size summaries, against the table of
     their family (:meth:`TableSet.choose`: named by ``table`` or ``plate_material``, else the
     one that covers the sizes).
+
+    ``skipped`` lists sizes the caller already left out (``{"sphere_diameter", "reason"}``).
 
     Raises
     ------
@@ -102,17 +112,17 @@ def estimate(
     if not tables.loaded:
         raise EstimateUnavailable(tables.reason or "no model table loaded")
     inputs: list[FeatureSummary] = []
-    skipped: list[dict[str, Any]] = []
+    left_out = [dict(s) for s in skipped]
     for s in summaries:
         if isinstance(s, FeatureSummary):
             inputs.append(s)
         elif (reason := s.skip_reason()) is not None:
-            skipped.append({"sphere_diameter": s.diameter_m, "reason": reason})
+            left_out.append({"sphere_diameter": s.diameter_m, "reason": reason})
         else:
             inputs.append(s.inputs())
     if not inputs:
-        raise EstimateUnavailable("; ".join(s["reason"] for s in skipped)
+        raise EstimateUnavailable("; ".join(s["reason"] for s in left_out)
                                   or "no shot gave a usable TOF")
     chosen = tables.choose([i.diameter_m for i in inputs], table, plate_material)
     result = invert(chosen.table, inputs, calibration, return_posterior=posterior)
-    return TableEstimate(result, chosen.table.table_id, skipped)
+    return TableEstimate(result, chosen.table.table_id, left_out)

@@ -15,6 +15,7 @@ from typing import Any
 
 from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.inversion import FeatureSummary
+from solitonde.instrument.inference.pipeline import MISSING_SIZE, no_reflection
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.support import locate
 from solitonde.instrument.inference.table_set import TableSet
@@ -34,11 +35,9 @@ def pool(aggregates: Sequence[Mapping[str, Any]]
     for diameter, members in groups.items():
         pooled = {name: _pooled([m.get(name) or {} for m in members]) for name in ("tof_s", "arr")}
         if diameter is None:
-            skipped.append({"sphere_diameter": None, "reason": "metadata.sphere_diameter is "
-                            "missing: the inversion needs the sphere size"})
+            skipped.append({"sphere_diameter": None, "reason": MISSING_SIZE})
         elif pooled["tof_s"] is None or pooled["arr"] is None:
-            skipped.append({"sphere_diameter": diameter, "reason": f"no shot with D = {diameter}"
-                            " m has a detected reflection (no TOF, no ARR)"})
+            skipped.append({"sphere_diameter": diameter, "reason": no_reflection(diameter)})
         else:
             (tof, tof_std, n), (arr, arr_std, _) = pooled["tof_s"], pooled["arr"]
             inputs.append(FeatureSummary(float(diameter), tof, arr, tof_std, arr_std, n))
@@ -76,12 +75,7 @@ def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any
                      None)
         estimate, reason = None, None
         try:
-            if not inputs:
-                raise EstimateUnavailable("; ".join(s["reason"] for s in skipped)
-                                          or "no shot gave a usable TOF")
-            result = estimate_from(tables, inputs, table=table)
-            result.skipped.extend(skipped)
-            estimate = result.to_dict()
+            estimate = estimate_from(tables, inputs, table=table, skipped=skipped).to_dict()
         except EstimateUnavailable as exc:
             reason = str(exc)
         except Exception as exc:  # an inversion refusing these features: say why, go on

@@ -639,8 +639,7 @@ def _export_estimates(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, 
     while True:
         page = svc.store.list(plate_id, after, 1000)
         for r in page:
-            diameters = [a["sphere_diameter"] for a in r.result.get("aggregates", [])
-                         if a.get("sphere_diameter") is not None]
+            diameters = _estimated_sizes(r.result)
             location = {"plate_id": r.plate_id, "position": r.position,
                         **(r.result.get("location") or {})}
             rows.append({"measurement_id": r.id, "created_at": iso_utc(r.created_at),
@@ -655,6 +654,17 @@ def _export_estimates(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, 
         after = page[-1].id
     columns = ("measurement_id", "created_at", *ESTIMATE_COLUMNS)
     return to_bytes(rows, fmt, columns), _MEDIA[fmt]
+
+
+def _estimated_sizes(result: dict[str, Any]) -> list[float]:
+    """The sphere sizes an estimate was made from (the inversion's inputs, less any it left
+    out); without an estimate, every size measured."""
+    estimate = result.get("estimate")
+    if estimate and estimate.get("inputs"):
+        excluded = set(estimate.get("excluded_diameters_m") or [])
+        return [i["diameter_m"] for i in estimate["inputs"] if i["diameter_m"] not in excluded]
+    return [a["sphere_diameter"] for a in result.get("aggregates", [])
+            if a.get("sphere_diameter") is not None]
 
 
 def _missing(measurement_id: int) -> Problem:

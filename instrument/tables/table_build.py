@@ -22,6 +22,7 @@ import math
 import os
 import platform
 import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
@@ -197,7 +198,8 @@ def run_plate(sweep: Mapping[str, Any], i_t: int, i_l: int,
     """
     spec = Sweep.from_dict(sweep)
     order = sorted(range(len(spec.diameters_m)) if diameters is None else diameters, reverse=True)
-    task_cache = greens.MemoryCache()  # this task's responses, dropped when it ends
+    # This task's responses, dropped when it ends; unbounded, so that its size counts them.
+    task_cache = greens.MemoryCache(max_bytes=sys.maxsize)
     points = {i_d: simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces,
                                   task_cache) for i_d in order}
     computed = len(task_cache)
