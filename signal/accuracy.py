@@ -15,7 +15,7 @@ static reading (the model's ``arr``): by 6 % of the ARR for D = 9.53 mm on a 2.2
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,6 +54,14 @@ class Truth:
         x = np.asarray(samples, dtype=np.float64)
         levels = pulse_levels(x, dt, t0, [incident[0], reflected[0]], [incident[1], reflected[1]])
         return cls(incident[0], reflected[0], incident[1] - levels[0], reflected[1] - levels[1])
+
+    @classmethod
+    def from_peaks(cls, samples: np.ndarray, dt: float, t0: float,
+                   peaks: Mapping[str, float]) -> Truth:
+        """:meth:`from_trace` with the peaks as a simulation reports them (``incident_time_s``,
+        ``incident_peak_N``, ``reflected_time_s``, ``reflected_peak_N``)."""
+        return cls.from_trace(samples, dt, t0, (peaks["incident_time_s"], peaks["incident_peak_N"]),
+                              (peaks["reflected_time_s"], peaks["reflected_peak_N"]))
 
 
 def _fwhm_samples(x: np.ndarray, i: int, level: float) -> int:

@@ -28,9 +28,7 @@ def model_trace(thickness: float = 4.83e-3) -> tuple[np.ndarray, float, Truth]:
                               f"output.sample_rate={FINE_RATE}", "output.duration=0.95e-3"])
     sim = simulate(scene)
     t = sim.truth
-    truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
-                             (t["incident_time_s"], t["incident_peak_N"]),
-                             (t["reflected_time_s"], t["reflected_peak_N"]))
+    truth = Truth.from_peaks(sim.samples, sim.dt, sim.t0, t)
     return sim.samples, sim.dt, truth
 
 

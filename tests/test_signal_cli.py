@@ -84,9 +84,7 @@ def _tof_bound_samples(row: dict) -> float:
                               "effects.plate_model=infinite", "output.duration=auto"])
     sim = simulate(scene)
     t = sim.truth
-    truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
-                             (t["incident_time_s"], t["incident_peak_N"]),
-                             (t["reflected_time_s"], t["reflected_peak_N"]))
+    truth = Truth.from_peaks(sim.samples, sim.dt, sim.t0, t)
     sigma = truth.incident_peak_N / 10 ** (float(row["snr_db"]) / 20)
     return cramer_rao(sim.samples, sim.dt, truth, 1.0 / sim.dt, sigma, sim.t0)["tof_samples"]
 

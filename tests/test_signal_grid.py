@@ -31,9 +31,7 @@ def _simulate(diameter: float, thickness: float):
                               "effects.plate_model=infinite"])
     sim = simulate(scene)
     t = sim.truth
-    truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
-                             (t["incident_time_s"], t["incident_peak_N"]),
-                             (t["reflected_time_s"], t["reflected_peak_N"]))
+    truth = Truth.from_peaks(sim.samples, sim.dt, sim.t0, t)
     return sim, truth
 
 

@@ -264,7 +264,7 @@ def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Pa
 
     Raises TableError/CalibrationError when a table or the calibration cannot be read.
     """
-    from solitonde.instrument.cli.cmd_invert import table_set
+    from solitonde.instrument.cli.cmd_invert import choice_error, table_set
     from solitonde.instrument.inference.calibration import Calibration
     from solitonde.instrument.inference.inversion import InversionError
     from solitonde.instrument.inference.pipeline import estimate
@@ -294,8 +294,7 @@ def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Pa
                              skipped=row["skipped"])
             row["estimate"] = found.to_dict()
         except TableChoiceError as exc:
-            flag = "--plate-material" if exc.field == "plate_material" else "--table"
-            row["error"] = f"{flag}: {exc.message}"
+            row["error"] = choice_error(exc)
         except (InversionError, TableError) as exc:
             row["error"] = str(exc)
         out.append(row)

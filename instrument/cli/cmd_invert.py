@@ -42,6 +42,12 @@ def table_set(options: Sequence[Path] | None) -> TableSet:
     return tables
 
 
+def choice_error(exc: TableChoiceError) -> str:
+    """A table-choice error in the command line's words (the flag that picks the table)."""
+    flag = "--plate-material" if exc.field == "plate_material" else "--table"
+    return f"{flag}: {exc.message}"
+
+
 def _fail(message: str) -> None:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(2)
@@ -107,8 +113,7 @@ def invert_command(
         cal = Calibration.load(calibration) if calibration else None
         result = estimate(tables, items, cal, plate_material=plate_material, posterior=posterior)
     except TableChoiceError as exc:
-        flag = "--plate-material" if exc.field == "plate_material" else "--table"
-        _fail(f"{flag}: {exc.message}")
+        _fail(choice_error(exc))
         return
     except (InversionError, TableError, CalibrationError) as exc:
         _fail(str(exc))

@@ -84,9 +84,7 @@ def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
                                       "effects.plate_model=infinite", "output.duration=auto"])
             sim = simulate(scene)
             t = sim.truth
-            truth = Truth.from_trace(sim.samples, sim.dt, sim.t0,
-                                     (t["incident_time_s"], t["incident_peak_N"]),
-                                     (t["reflected_time_s"], t["reflected_peak_N"]))
+            truth = Truth.from_peaks(sim.samples, sim.dt, sim.t0, t)
             reference = truth.incident_peak_N
             meta = {"shot": shot,
                     "plate_id": f"synthetic-t{scene.plate.thickness * 1e3:.2f}mm",
