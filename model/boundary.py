@@ -80,6 +80,11 @@ if TYPE_CHECKING:
 
 #: Plate models that ``solver.integrator = "dopri5"`` can run (the ODE tiers of this module).
 DOPRI5_PLATE_MODELS = ("rigid", "halfspace", "infinite")
+#: Plate models on a mesh (:mod:`solitonde.model.sem_tier`): 3-D spectral elements or Mindlin,
+#: stepped with the chain or convolved as a cached Green's function.
+MESHED_PLATE_MODELS = ("sem", "greens", "mindlin", "mindlin_greens")
+#: The meshed models that convolve a cached contact response.
+CONVOLVED_PLATE_MODELS = ("greens", "mindlin_greens")
 
 
 @dataclass

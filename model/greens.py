@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from .chain import PK_BOT_F, chain_energy, record_into
+from .mindlin import MindlinPlate
 from .record import ChainRecord
 from .sem import ElasticPlate
 from .sem_kernels import chain_start, chain_substeps
@@ -38,7 +39,8 @@ from .status import RUN_NONFINITE, RUN_OK, RUN_SHORT_RESPONSE
 #: Bump when the meaning of a stored response changes (invalidates every cache entry).
 #: 2: the force acts through a contact patch and g is the patch-weighted deflection; the key
 #: holds the patch radius and the element edges (local refinement).
-GREENS_VERSION = 2
+#: 3: the key names the plate theory (3-D elasticity or Mindlin) on the same mesh.
+GREENS_VERSION = 3
 
 
 class GreensCache(Protocol):
@@ -101,8 +103,8 @@ PROCESS_CACHE: GreensCache = MemoryCache()
 caller that wants another cache (a disk cache, one per table-build task) passes it."""
 
 
-def response_key(plate: ElasticPlate, dt: float) -> str:
-    """Hash of everything the response depends on: plate, mesh, position, patch, supports,
+def response_key(plate: ElasticPlate | MindlinPlate, dt: float) -> str:
+    """Hash of everything the response depends on: plate theory, mesh, position, patch, supports,
     material, dt."""
     mesh, mat = plate.mesh, plate.material
     edges = hashlib.sha256(
@@ -112,6 +114,7 @@ def response_key(plate: ElasticPlate, dt: float) -> str:
         "contact_radius_m": float(mesh.contact_radius),
         "edges": edges,
         "version": GREENS_VERSION,
+        "plate_theory": "mindlin" if isinstance(plate, MindlinPlate) else "3d",
         "thickness_m": float(mesh.z_edges[-1]),
         "size_m": [float(mesh.x_edges[-1]), float(mesh.full_width)],
         "distance_to_support_m": float(mesh.contact_xy[0]),
@@ -126,7 +129,7 @@ def response_key(plate: ElasticPlate, dt: float) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
-def compute_response(plate: ElasticPlate, dt: float, n_steps: int) -> np.ndarray:
+def compute_response(plate: ElasticPlate | MindlinPlate, dt: float, n_steps: int) -> np.ndarray:
     """g[0..n_steps]: deflection under the chain (down, m) after a unit downward force for one step.
 
     Equivalently the patch-weighted vertical displacement (z up, :meth:`ElasticPlate.
@@ -138,7 +141,8 @@ def compute_response(plate: ElasticPlate, dt: float, n_steps: int) -> np.ndarray
 
 
 def contact_response(
-    plate: ElasticPlate, dt: float, n_steps: int, cache: GreensCache | None = None
+    plate: ElasticPlate | MindlinPlate, dt: float, n_steps: int,
+    cache: GreensCache | None = None
 ) -> tuple[np.ndarray, bool, float]:
     """The response g of at least ``n_steps + 1`` samples, from the cache when it holds one.
 

@@ -350,7 +350,7 @@ def plate_mesh(
     contact_x: float | None = None,
     symmetry: bool = False,
     contact_radius: float = 0.0,
-    contact_refinement: int = 0,
+    contact_refinement: float = 0,
 ) -> PlateMesh:
     """Mesh a plate of in-plane ``size`` (Lx, Ly) and ``thickness`` with the chain at x = contact_x.
 

@@ -15,13 +15,16 @@ from dataclasses import dataclass
 from typing import Any
 
 from .boundary import (
+    CONVOLVED_PLATE_MODELS,
     DOPRI5_PLATE_MODELS,
+    MESHED_PLATE_MODELS,
     BottomBoundary,
     StepPlan,
     make_boundary,
     resolve_plate_model,
 )
 from .errors import SceneError, SimulationError
+from .mindlin import SHEAR_FACTOR
 from .scene import STANDARD_GRAVITY, Scene
 
 #: Verlet steps per period of the stiffest chain oscillation (see :func:`choose_time_step`).
@@ -99,7 +102,7 @@ def auto_duration(scene: Scene, plate_model: str | None = None) -> float:
 
     From the theory of :mod:`solitonde.model.zener` for the plate model the scene runs with
     (``plate_model``, resolved from the scene when None): Zener's infinite plate for the plates
-    that move (``infinite``, and ``sem``/``greens``, whose supports only shorten the TOF), and
+    that move (``infinite``, and the meshed plates, whose supports only shorten the TOF), and
     lambda = 0 with the wall's own Hertz constant for the static tiers (``rigid``,
     ``halfspace``): their reflection does not depend on the plate's thickness, and the infinite
     plate's TOF, which grows without bound as the plate thins, would stretch or refuse their runs.
@@ -237,15 +240,15 @@ def plan(
     n_samples = _sample_count(duration, interval)
     particles = scene.chain.n_particles + 1
     integrator = scene.solver.integrator
-    if boundary is None and name in ("sem", "greens"):
-        steps = max(n_samples - 1, _plate_steps_floor(scene, duration))
-        floor = float(steps) * (particles + PLATE_DOF_WEIGHT * _sem_dofs(scene))
-        if name == "greens":
+    if boundary is None and name in MESHED_PLATE_MODELS:
+        steps = max(n_samples - 1, _plate_steps_floor(scene, duration, name))
+        dofs = _plate_dofs(scene, name)
+        floor = float(steps) * (particles + PLATE_DOF_WEIGHT * dofs)
+        if name in CONVOLVED_PLATE_MODELS:
             floor += CONVOLUTION_WEIGHT * 0.5 * float(steps) ** 2
         if floor > budget:
             return RunPlan(name, reason, integrator, duration, n_samples, math.nan, 0, steps,
-                           0, particles, _sem_dofs(scene), floor,
-                           "floor (before the plate mesh is built)")
+                           0, particles, dofs, floor, "floor (before the plate mesh is built)")
     if boundary is None:
         boundary = make_boundary(scene, (name, reason))
     dt, n_sub = choose_time_step(scene, boundary, steps_per_period)
@@ -263,7 +266,7 @@ def plan(
         chain_steps = plate_steps * r
         plate_dofs = int(plate.n_dofs)
     cost = float(chain_steps) * particles + PLATE_DOF_WEIGHT * float(plate_steps) * plate_dofs
-    if name == "greens":
+    if name in CONVOLVED_PLATE_MODELS:
         cost += CONVOLUTION_WEIGHT * 0.5 * float(plate_steps) ** 2
     estimate = ("upper bound (verlet step counts)" if integrator == "dopri5"
                 else "exact step counts")
@@ -281,23 +284,37 @@ def _sample_count(duration: float, interval: float) -> int:
     return math.ceil(intervals) + 1
 
 
-def _plate_steps_floor(scene: Scene, duration: float) -> int:
-    """Fewest explicit plate steps ``duration`` can take: the stable step of a spectral-element
-    mesh is below the time a longitudinal wave takes to cross its thinnest element (2 h / c_L is
-    the 1-D linear element's own limit; higher orders and more dimensions only shorten it), and
-    through the thickness no element is thicker than t / elements_z."""
+def _plate_steps_floor(scene: Scene, duration: float, name: str) -> int:
+    """Fewest explicit plate steps ``duration`` can take.
+
+    3-D plate: the stable step of a spectral-element mesh is below the time a longitudinal wave
+    takes to cross its thinnest element (2 h / c_L is the 1-D linear element's own limit; higher
+    orders and more dimensions only shorten it), and through the thickness no element is thicker
+    than t / elements_z. Mindlin plate: a uniform rotation of the free nodes has the Rayleigh
+    quotient of the thickness-shear mode, omega^2 = 12 kappa G / (rho t^2), so the step is below
+    2 / omega whatever the mesh.
+    """
     sem = getattr(scene, "sem", None)
     if sem is None:
         return 0
-    h = scene.plate.thickness / sem.elements[2]
-    return math.ceil(duration * scene.plate_material.longitudinal_velocity / (2.0 * h))
+    t = scene.plate.thickness
+    mat = scene.plate_material
+    if name.startswith("mindlin"):
+        omega = math.sqrt(12.0 * SHEAR_FACTOR * mat.shear_modulus / mat.density) / t
+        return math.ceil(duration * omega / 2.0)
+    h = t / sem.elements[2]
+    return math.ceil(duration * mat.longitudinal_velocity / (2.0 * h))
 
 
-def _sem_dofs(scene: Scene) -> int:
+def _plate_dofs(scene: Scene, name: str) -> int:
+    """Dofs of the nominal mesh (before local refinement): three per node, one layer of nodes
+    for the Mindlin plate."""
     sem = getattr(scene, "sem", None)
     if sem is None:
         return 0
     nodes = 1
-    for n_el, p in zip(sem.elements, sem.order, strict=True):
-        nodes *= n_el * p + 1
+    counts = zip(sem.elements, sem.order, strict=True)
+    for axis, (n_el, p) in enumerate(counts):
+        if axis < 2 or not name.startswith("mindlin"):
+            nodes *= n_el * p + 1
     return 3 * nodes

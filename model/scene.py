@@ -36,7 +36,8 @@ from .materials import Material, material_of, properties_from
 
 STANDARD_GRAVITY = 9.80665  # m/s^2
 
-PLATE_MODELS = ("rigid", "halfspace", "infinite", "sem", "greens", "auto")
+PLATE_MODELS = ("rigid", "halfspace", "infinite", "sem", "greens", "mindlin", "mindlin_greens",
+                "auto")
 SUPPORTS = ("opposite_edges", "all_edges", "none")
 MAX_PLATE_SIZE = 100.0  # m, per in-plane side; beyond it no mesh or Green's function is sane
 
@@ -225,7 +226,8 @@ class EffectsSpec(_Section):
 
     gravity: StrictBool = Field(True, description="static preload m g per particle (paper Eq. 1)")
     dissipation: StrictBool = Field(False, description="contact damping (off in the paper's model)")
-    plate_model: Literal["rigid", "halfspace", "infinite", "sem", "greens", "auto"] = Field(
+    plate_model: Literal["rigid", "halfspace", "infinite", "sem", "greens", "mindlin",
+                         "mindlin_greens", "auto"] = Field(
         "auto", description="bottom boundary; auto picks the cheapest model that is right"
     )
     damping: Number = Field(
@@ -283,6 +285,12 @@ class SemSpec(_Section):
     contact_refinement: Integer = Field(
         1, ge=0, le=8, description="elements of size 2 r_c / n around the chain (0: none, the "
         "paper's uniform layout)",
+    )
+    mindlin_element_size: Number = Field(
+        6.0, ge=0.5, le=50.0, description="plate models 'mindlin' and 'mindlin_greens': size of "
+        "the elements around the chain in contact radii r_c (the patch itself is integrated "
+        "exactly on any element; a 2-D plate has no field to resolve across the thickness, so "
+        "it needs no element as fine as the 3-D plate's 2 r_c / contact_refinement)",
     )
 
     @model_validator(mode="after")

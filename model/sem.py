@@ -18,12 +18,12 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.linalg import LinearOperator, eigsh
 from threadpoolctl import threadpool_limits
 
 from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
 from .mesh import PlateMesh
+from .plate_base import ExplicitPlate
 from .sem_kernels import dense_operator, run_plate_load, stiffness_product, sumfact_operator
 
 SUPPORTS = ("opposite_edges", "all_edges", "none")
@@ -84,7 +84,7 @@ def element_mass(
 
 
 @dataclass(frozen=True)
-class ElasticPlate:
+class ElasticPlate(ExplicitPlate):
     """An assembled-in-spirit (never as a matrix) spectral-element plate ready to time-step.
 
     Attributes
@@ -115,33 +115,13 @@ class ElasticPlate:
     load_weights: np.ndarray
 
     @property
-    def n_dofs(self) -> int:
-        return self.inv_mass.size
-
-    @property
     def contact_dof(self) -> int:
         """Vertical (z) dof of the node under the chain (when the mesh has one there)."""
         return 3 * self.mesh.contact_node + 2
 
-    @property
-    def force_share(self) -> float:
-        """Part of the contact force (and plate energy) the mesh carries: 1/2 for a half model."""
-        return self.mesh.share
-
-    @property
-    def fixed(self) -> np.ndarray:
-        return self.inv_mass == 0.0
-
     def dense_operator(self) -> tuple:
         """The dense-element-matrix operator (the reference), with work arrays of its own."""
         return dense_operator(self.edofs, self.offsets, self.kes)
-
-    def apply_stiffness(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """K u, matrix-free (sum factorisation)."""
-        if out is None:
-            out = np.empty(self.n_dofs)
-        stiffness_product(self.operator, np.ascontiguousarray(u, dtype=float), out)
-        return out
 
     def apply_stiffness_dense(self, u: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """K u, matrix-free with the dense element matrices (the reference for the above)."""
@@ -166,29 +146,14 @@ class ElasticPlate:
         k.sum_duplicates()
         return k
 
-    # Stability --------------------------------------------------------------------------------
-    @cached_property
-    def max_eigenvalue(self) -> float:
-        """Largest eigenvalue of M^-1 K on the free dofs (rad^2/s^2), by Lanczos.
+    def describe(self) -> dict[str, object]:
+        """JSON-ready summary of the mesh."""
+        return {"plate_theory": "3d", **self.mesh.describe()}
 
-        Works on the symmetric form M^-1/2 K M^-1/2 (a few hundred matrix-free products). The
-        time step itself uses :attr:`element_bound`, which is cheaper and never below this.
-        """
-        free = ~self.fixed
-        s = np.sqrt(self.inv_mass)
-        out = np.empty(self.n_dofs)
-
-        def matvec(x: np.ndarray) -> np.ndarray:
-            y = s * np.ravel(x)
-            stiffness_product(self.operator, y, out)
-            return s * out
-
-        op = LinearOperator((self.n_dofs, self.n_dofs), matvec=matvec, dtype=float)
-        rng = np.random.default_rng(0)
-        v0 = rng.standard_normal(self.n_dofs) * free
-        vals = eigsh(op, k=1, which="LA", tol=1e-6, v0=v0, return_eigenvectors=False,
-                     ncv=min(self.n_dofs, 40), maxiter=5000)
-        return float(vals[0])
+    @property
+    def dof_mass(self) -> np.ndarray:
+        """Mass per dof (three per node), kg."""
+        return np.repeat(self.node_mass, 3)
 
     @cached_property
     def element_bound(self) -> float:
@@ -200,22 +165,6 @@ class ElasticPlate:
             d = 1.0 / np.sqrt(me)
             best = max(best, float(np.linalg.eigvalsh(self.kes[s] * d[:, None] * d[None, :])[-1]))
         return best
-
-    @property
-    def critical_step(self) -> float:
-        """dt_crit = 2 / omega_max for central differences, s."""
-        return 2.0 / np.sqrt(self.max_eigenvalue)
-
-    # Energy -----------------------------------------------------------------------------------
-    def kinetic_energy(self, v: np.ndarray) -> float:
-        """0.5 v^T M v, J."""
-        m = np.repeat(self.node_mass, 3)
-        return 0.5 * float(np.dot(m * v, v))
-
-    def strain_energy(self, u: np.ndarray, u_next: np.ndarray | None = None) -> float:
-        """0.5 u^T K u, or the time-centred 0.5 u_n^T K u_{n+1} (exactly conserved by leapfrog)."""
-        ku = self.apply_stiffness(u)
-        return 0.5 * float(np.dot(ku, u if u_next is None else u_next))
 
     def run_point_force(self, force: np.ndarray, dt: float, record_dofs: np.ndarray | None = None,
                         dof: int | None = None) -> np.ndarray:
@@ -229,20 +178,6 @@ class ElasticPlate:
                                 np.asarray([dof], dtype=np.int64), np.ones(1), float(dt),
                                 self.inv_mass, self.operator, rec)
         return out
-
-
-    def run_contact_load(self, force: np.ndarray, dt: float,
-                         record_dofs: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Central differences from rest under a contact force history ``force[n]`` (+z, N).
-
-        The force acts through the contact patch (nodal forces force[n] b). Returns (w, rec):
-        w[n] = b . u_n / share, the patch-weighted vertical displacement under the chain (+z),
-        and rec[n, r] = u_n[record_dofs[r]] (empty without ``record_dofs``), n = 0..len(force).
-        """
-        rec = np.asarray([] if record_dofs is None else record_dofs, dtype=np.int64)
-        w, out = run_plate_load(np.ascontiguousarray(force, dtype=float), self.load_dofs,
-                                self.load_weights, float(dt), self.inv_mass, self.operator, rec)
-        return w / self.force_share, out
 
 
 def _sumfact(mesh: PlateMesh, sizes: np.ndarray, material: Material) -> tuple:

@@ -34,6 +34,7 @@ from .chain import (
     track_peaks,
     verlet_step,
 )
+from .mindlin_kernels import MINDLIN_LEN, apply_stiffness_mindlin
 from .record import ChainRecord
 from .status import RUN_NONFINITE, RUN_OK
 
@@ -301,7 +302,8 @@ def apply_stiffness_sumfact(
 
 # Either form --------------------------------------------------------------------------------
 def stiffness_product(op: tuple, u: np.ndarray, out: np.ndarray) -> None:
-    """out = K u for an operator from :func:`sumfact_operator` or :func:`dense_operator`.
+    """out = K u for an operator from :func:`sumfact_operator`, :func:`dense_operator` or
+    :func:`~solitonde.model.mindlin_kernels.mindlin_operator`.
 
     Callable from Python and from compiled code (where the form is resolved at compile time).
     """
@@ -309,6 +311,8 @@ def stiffness_product(op: tuple, u: np.ndarray, out: np.ndarray) -> None:
         apply_stiffness(u, op[0], op[1], op[2], op[3], op[4], out)
     elif len(op) == SUMFACT_LEN:
         apply_stiffness_sumfact(u, *op, out)
+    elif len(op) == MINDLIN_LEN:
+        apply_stiffness_mindlin(u, *op, out)
     else:
         raise TypeError(f"not a stiffness operator: a tuple of {len(op)} items")
 
@@ -326,6 +330,10 @@ def _stiffness_product_impl(op, u, out):
         def sumfact(op, u, out):
             apply_stiffness_sumfact(u, op[0], op[1], op[2], op[3], op[4], op[5], op[6], out)
         return sumfact
+    if len(op) == MINDLIN_LEN:
+        def mindlin(op, u, out):
+            apply_stiffness_mindlin(u, op[0], op[1], op[2], op[3], op[4], op[5], out)
+        return mindlin
     return None
 
 

@@ -1,10 +1,13 @@
-"""The ``sem`` and ``greens`` plate models as bottom boundaries of the chain.
+"""The meshed plate models as bottom boundaries of the chain: ``sem``, ``greens``, ``mindlin``,
+``mindlin_greens``.
 
-``sem`` advances the chain and a spectral-element plate together, one velocity-Verlet step for
+``sem`` advances the chain and a 3-D spectral-element plate together, one velocity-Verlet step for
 both (central differences for the plate); ``greens`` replaces the plate by the convolution with
-its cached contact response (:mod:`solitonde.model.greens`). Both build the same plate from the
-scene's ``plate`` and ``sem`` sections, and both share the step: the chain's own step or the
-plate's stable step times ``sem.step_factor``, whichever is smaller, on the sample grid.
+its cached contact response (:mod:`solitonde.model.greens`). ``mindlin`` and ``mindlin_greens``
+do the same with the Mindlin-Reissner plate (:mod:`solitonde.model.mindlin`) on the same in-plane
+mesh machinery. All build their plate from the scene's ``plate`` and ``sem`` sections, and all
+share the step: the chain's own step or the plate's stable step times ``sem.step_factor``,
+whichever is smaller, on the sample grid.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from .errors import SceneError
 from .greens import GreensCache, contact_response, integrate_greens
 from .materials import Material
 from .mesh import plate_mesh
+from .mindlin import MindlinPlate, build_mindlin_plate
 from .scene import Scene
 from .sem import ElasticPlate, build_plate, single_threaded_blas
 from .sem_kernels import SemPlate, integrate_sem
@@ -37,9 +41,12 @@ def _plate_cached(
     size: tuple[float, float], thickness: float, elements: tuple[int, int, int],
     order: tuple[int, int, int], contact_x: float, symmetry: bool, material: Material,
     supports: str, contact_radius: float = 0.0, contact_refinement: int = 0,
-) -> ElasticPlate:
+    theory: str = "3d",
+) -> ElasticPlate | MindlinPlate:
     mesh = plate_mesh(size, thickness, elements, order, contact_x, symmetry, contact_radius,
                       contact_refinement)
+    if theory == "mindlin":
+        return build_mindlin_plate(mesh, material, supports)
     return build_plate(mesh, material, supports)
 
 
@@ -66,15 +73,17 @@ def contact_radius(scene: Scene) -> float:
     return radius
 
 
-def plate_for(scene: Scene) -> ElasticPlate:
-    """The spectral-element plate of a scene (kept for reuse within the process)."""
+def plate_for(scene: Scene, theory: str = "3d") -> ElasticPlate | MindlinPlate:
+    """The meshed plate of a scene, 3-D or Mindlin (kept for reuse within the process)."""
     p, s = scene.plate, scene.sem
+    refinement = 0 if s.preset == "paper" else s.contact_refinement
+    if theory == "mindlin" and s.preset != "paper":
+        refinement = 2.0 / float(s.mindlin_element_size)
     try:
         return _plate_cached(
             (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
             tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
-            p.supports, contact_radius(scene),
-            0 if s.preset == "paper" else int(s.contact_refinement),
+            p.supports, contact_radius(scene), float(refinement), theory,
         )
     except ValueError as exc:  # the mesh cannot put a node under the chain (too coarse)
         raise SceneError("sem.elements", f"{exc} (plate.distance_to_support "
@@ -90,7 +99,7 @@ class _PlateTier(BottomBoundary):
         self.name = name
         self.reason = reason
         self.a_bottom = scene.a_p
-        self.plate = plate_for(scene)
+        self.plate = plate_for(scene, "mindlin" if name.startswith("mindlin") else "3d")
         self.step_factor = float(scene.sem.step_factor)
         # 2 / sqrt(max element eigenvalue) <= the true limit 2 / omega_max (element bound)
         self.dt_critical = 2.0 / np.sqrt(self.plate.element_bound)
@@ -110,7 +119,7 @@ class _PlateTier(BottomBoundary):
 
     def _extra(self, h: float, r: int, per_sample: int, plan: StepPlan) -> dict[str, object]:
         return {
-            "mesh": self.plate.mesh.describe(),
+            "mesh": self.plate.describe(),
             "dt_s": h,
             "dt_stability_ratio": h / self.dt_critical,
             "dt_critical_s": self.dt_critical,
@@ -128,7 +137,7 @@ class SemBoundary(_PlateTier):
         plate = self.plate
         peaks = new_peak_tracker()
         record = setup_record(setup, peaks)
-        state = SemPlate(plate.inv_mass, np.repeat(plate.node_mass, 3), plate.operator,
+        state = SemPlate(plate.inv_mass, plate.dof_mass, plate.operator,
                          plate.load_dofs, plate.load_weights, np.zeros(plate.n_dofs),
                          np.zeros(plate.n_dofs), float(plate.force_share))
         h, r, per_sample = self.steps(plan)
@@ -145,8 +154,9 @@ class SemBoundary(_PlateTier):
 class GreensBoundary(_PlateTier):
     """Chain on the plate's cached contact response (convolution)."""
 
-    def __init__(self, scene: Scene, reason: str, cache: GreensCache | None = None) -> None:
-        super().__init__("greens", scene, reason)
+    def __init__(self, name: str, scene: Scene, reason: str,
+                 cache: GreensCache | None = None) -> None:
+        super().__init__(name, scene, reason)
         self.cache = cache
 
     def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
@@ -167,4 +177,7 @@ class GreensBoundary(_PlateTier):
 
 
 register_tier("sem", lambda scene, reason, cache: SemBoundary("sem", scene, reason))
-register_tier("greens", GreensBoundary)
+register_tier("greens", lambda scene, reason, cache: GreensBoundary("greens", scene, reason, cache))
+register_tier("mindlin", lambda scene, reason, cache: SemBoundary("mindlin", scene, reason))
+register_tier("mindlin_greens",
+              lambda scene, reason, cache: GreensBoundary("mindlin_greens", scene, reason, cache))

@@ -63,7 +63,8 @@ def test_reported_mesh_and_step(near_support) -> None:
     """The diagnostics name the mesh and a step within the stability limit; the default mesh is
     refined around the chain to elements of 2 r_c = 2 t, the paper preset is not."""
     d = near_support["sem"].diagnostics
-    assert d["mesh"] == {"elements": [8, 4, 1], "order": [4, 4, 2], "nodes": 33 * 17 * 3,
+    assert d["mesh"] == {"plate_theory": "3d", "elements": [8, 4, 1], "order": [4, 4, 2],
+                         "nodes": 33 * 17 * 3,
                          "dofs": 3 * 33 * 17 * 3, "symmetry": True, "element_shapes": 2,
                          "min_element_m": d["mesh"]["min_element_m"],
                          "contact_radius_m": pytest.approx(3.18e-3), "contact_nodes": 25}

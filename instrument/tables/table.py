@@ -52,7 +52,8 @@ STATUS_NAMES = {
     STATUS_NO_REFLECTION: "no_reflection",
     STATUS_FAILED: "failed",
 }
-PLATE_MODEL_NAMES = ("rigid", "halfspace", "infinite", "sem", "greens", "unknown")
+PLATE_MODEL_NAMES = ("rigid", "halfspace", "infinite", "sem", "greens", "mindlin",
+                     "mindlin_greens", "unknown")
 
 
 class TableError(ValueError):

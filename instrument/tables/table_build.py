@@ -49,7 +49,7 @@ from solitonde.instrument.tables.table import (
     TableError,
 )
 from solitonde.model import greens
-from solitonde.model.boundary import resolve_plate_model
+from solitonde.model.boundary import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.greens import GreensCache
 from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
@@ -131,7 +131,7 @@ class Sweep:
         def cost(key: tuple[int, int]) -> tuple[int, float]:
             i_t, i_l = key
             finite = resolve_plate_model(self.scene_at(len(self.diameters_m) - 1, i_t, i_l))[0]
-            return (0 if finite in ("greens", "sem") else 1, self.thicknesses_m[i_t])
+            return (0 if finite in MESHED_PLATE_MODELS else 1, self.thicknesses_m[i_t])
         keys = [(i, j) for i in range(len(self.thicknesses_m))
                 for j in range(len(self.distances_m))]
         return sorted(keys, key=cost)
