@@ -1,0 +1,138 @@
+"""Where a 2-D plate suffices: the Mindlin plate against the 3-D spectral elements, scene by scene.
+
+For each sphere size, plate thickness and chain position, the same scene runs on the 3-D plate and
+on the Mindlin plate (the same in-plane mesh machinery, :mod:`solitonde.model.mindlin`), each with
+a fresh plate and a fresh response cache, so each wall time is a first shot at a new plate: what a
+table build pays per plate. TOF and ARR come from the sensor trace through the extractor, as for
+measurements; the errors are relative to the 3-D plate. A scene is within the table budget when
+both errors are (:data:`solitonde.instrument.studies.accuracy.BUDGETS`).
+
+The pair of models is either the Green's functions (``greens`` / ``mindlin_greens``: what tables
+use) or the coupled runs (``sem`` / ``mindlin``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from itertools import product
+from typing import Any
+
+from solitonde.instrument.studies.accuracy import BUDGETS
+from solitonde.instrument.tables.measured import as_measured
+from solitonde.model import greens, sem_tier
+from solitonde.model.scene import Scene, scene_from_dict
+from solitonde.model.simulate import simulate
+from solitonde.signal.features import extract
+
+PAIRS = {"greens": ("greens", "mindlin_greens"), "coupled": ("sem", "mindlin")}
+"""The 3-D model and its Mindlin counterpart, per kind of run."""
+
+DIAMETERS_M = (4.76e-3, 9.53e-3, 19.05e-3)
+THICKNESSES_M = (1.5e-3, 2.29e-3, 3.18e-3, 4.83e-3, 6.0e-3)
+"""The paper's three plates and the default table's thinnest and thickest."""
+DISTANCES_M = (0.02, 0.457)
+"""Near the clamped support and at the centre."""
+
+
+@dataclass(frozen=True)
+class Point:
+    """One scene of the map."""
+
+    diameter_m: float
+    thickness_m: float
+    distance_m: float
+
+    def scene(self, plate_model: str) -> Scene:
+        return scene_from_dict({
+            "chain": {"diameter": self.diameter_m},
+            "plate": {"thickness": self.thickness_m, "distance_to_support": self.distance_m},
+            "effects": {"plate_model": plate_model},
+        })
+
+
+def default_points(quick: bool = False) -> list[Point]:
+    """The map: every sphere size x thickness x position (``quick``: two cheap scenes)."""
+    if quick:
+        return [Point(9.53e-3, 4.83e-3, 0.02), Point(4.76e-3, 6.0e-3, 0.457)]
+    return [Point(d, t, l) for d, t, l in product(DIAMETERS_M, THICKNESSES_M, DISTANCES_M)]
+
+
+def _run(scene: Scene) -> dict[str, Any]:
+    """Features and cost of one first shot (plate assembled, response computed, no reuse)."""
+    sem_tier._plate_cached.cache_clear()
+    started = time.perf_counter()
+    result = simulate(scene, greens_cache=greens.MemoryCache())
+    wall = time.perf_counter() - started
+    features = extract(as_measured(result))
+    mesh = result.diagnostics.get("mesh") or {}
+    return {
+        "tof_s": math.nan if features.tof_s is None else features.tof_s,
+        "arr": math.nan if features.arr is None else features.arr,
+        "wall_s": wall,
+        "dofs": mesh.get("dofs", 0),
+        "plate_dt_s": result.diagnostics.get("dt_s"),
+        "energy_drift": result.diagnostics["energy_drift"],
+    }
+
+
+def _warm_up(pair: tuple[str, str]) -> None:
+    """Compile every kernel of both models once on a small scene, so no timing includes numba."""
+    for tier in pair:
+        scene = scene_from_dict({"plate": {"distance_to_support": 0.3},
+                                 "effects": {"plate_model": tier},
+                                 "sem": {"elements": [2, 2, 1], "order": [2, 2, 1]}})
+        simulate(scene, greens_cache=greens.MemoryCache())
+
+
+def compare(points: Sequence[Point], kind: str = "greens",
+            tick: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Run every point on both models of ``PAIRS[kind]``; rows, the budget, a summary."""
+    if kind not in PAIRS:
+        raise ValueError(f"kind must be one of {', '.join(PAIRS)}, got {kind!r}")
+    tick = tick or (lambda _label: None)
+    reference, mindlin = PAIRS[kind]
+    _warm_up(PAIRS[kind])
+    budget = BUDGETS["table_build"]
+    rows = []
+    for p in points:
+        ref = _run(p.scene(reference))
+        new = _run(p.scene(mindlin))
+        tof_error = abs(new["tof_s"] - ref["tof_s"]) / ref["tof_s"]
+        arr_error = abs(new["arr"] - ref["arr"]) / ref["arr"]
+        rows.append({
+            "diameter_m": p.diameter_m, "thickness_m": p.thickness_m, "distance_m": p.distance_m,
+            "d_over_t": p.diameter_m / p.thickness_m,
+            "tof_3d_s": ref["tof_s"], "arr_3d": ref["arr"],
+            "tof_mindlin_s": new["tof_s"], "arr_mindlin": new["arr"],
+            "tof_error": tof_error, "arr_error": arr_error,
+            "within_budget": bool(tof_error <= budget["tof"] and arr_error <= budget["arr"]),
+            "wall_3d_s": ref["wall_s"], "wall_mindlin_s": new["wall_s"],
+            "speedup": ref["wall_s"] / new["wall_s"],
+            "dofs_3d": ref["dofs"], "dofs_mindlin": new["dofs"],
+            "dt_3d_s": ref["plate_dt_s"], "dt_mindlin_s": new["plate_dt_s"],
+            "energy_drift_3d": ref["energy_drift"], "energy_drift_mindlin": new["energy_drift"],
+        })
+        tick(f"D {p.diameter_m * 1e3:.2f} t {p.thickness_m * 1e3:.2f} L {p.distance_m * 1e3:.0f}")
+    return {"kind": kind, "models": {"3d": reference, "mindlin": mindlin}, "budget": budget,
+            "rows": rows, "summary": summary(rows)}
+
+
+def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Worst errors, the speed-up range and the scenes outside the budget."""
+    if not rows:
+        return {}
+    return {
+        "points": len(rows),
+        "within_budget": sum(r["within_budget"] for r in rows),
+        "max_tof_error": max(r["tof_error"] for r in rows),
+        "max_arr_error": max(r["arr_error"] for r in rows),
+        "speedup_min": min(r["speedup"] for r in rows),
+        "speedup_median": sorted(r["speedup"] for r in rows)[len(rows) // 2],
+        "outside_budget": [
+            {k: r[k] for k in ("diameter_m", "thickness_m", "distance_m", "d_over_t",
+                               "tof_error", "arr_error")}
+            for r in rows if not r["within_budget"]],
+    }
