@@ -8,7 +8,9 @@ matters most): one near the clamped support (L = 20 mm) and one at the centre. E
   element counts, polynomial orders, through-thickness resolution and step factors;
 - ``greens``: the same plate as a cached contact response, timed cold (the response computed,
   what the first shot at a new plate/position pays) and warm (reused: every further sphere size or
-  drop height at that position, i.e. a table build).
+  drop height at that position, i.e. a table build);
+- ``mindlin`` and ``mindlin_greens``: the Mindlin-Reissner plate on the same in-plane mesh,
+  coupled and as a cached response (``solitonde bench plates`` maps it over sizes and plates).
 
 Errors are relative, against a converged ``sem`` run (:func:`reference_config`); TOF and ARR are
 extracted from the sensor trace with :func:`solitonde.signal.features.extract`, as for
@@ -32,6 +34,7 @@ from solitonde.instrument.plotting import spread_labels
 from solitonde.instrument.studies.figures import new_figure, save_csv, save_json, save_png
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.model import greens, sem_tier
+from solitonde.model.boundary import CONVOLVED_PLATE_MODELS
 from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.features import extract
@@ -66,12 +69,19 @@ class Config:
     step_factor: float | None = None
     preset: str = "resolved"
     refinement: int = 1
+    mindlin_size: float = 6.0
 
     @property
     def label(self) -> str:
         if self.elements is None or self.order is None:
             return self.tier
         e, o = self.elements, self.order
+        if self.tier.startswith("mindlin"):
+            text = f"{self.tier} {self.preset} {e[0]}x{e[1]} p{o[0]}{o[1]}"
+            if self.preset == "resolved" and self.mindlin_size != 6.0:
+                text += f" e{self.mindlin_size:g}"
+            return text + (f" sf{self.step_factor:g}" if self.step_factor not in (None, 0.9)
+                           else "")
         text = f"{self.tier} {self.preset} {e[0]}x{e[1]}x{e[2]} p{o[0]}{o[1]}{o[2]}"
         if self.preset == "resolved" and self.refinement != 1:
             text += f" r{self.refinement}"
@@ -89,6 +99,7 @@ class Config:
                                    "step_factor": self.step_factor or 0.9}
             if self.preset == "resolved":
                 sem["contact_refinement"] = self.refinement
+                sem["mindlin_element_size"] = self.mindlin_size
             data["sem"] = sem
         return scene_from_dict(data)
 
@@ -128,6 +139,11 @@ def configs(quick: bool = False) -> list[Config]:
     for n in (16, 32):
         out.append(Config("sem", (n, n, 1), (4, 4, 2), 0.9, "paper"))
     out.append(Config("greens", (16, 16, 1), (4, 4, 2), 0.9, "paper"))
+    for n in (16, 24):
+        out.append(Config("mindlin", (n, n, 1), (4, 4, 2), 0.9))
+    out += [Config("mindlin", (16, 16, 1), (4, 4, 2), 0.9, mindlin_size=2.0),
+            Config("mindlin", (16, 16, 1), (4, 4, 2), 0.9, mindlin_size=12.0),
+            Config("mindlin_greens", (16, 16, 1), (4, 4, 2), 0.9)]
     return out
 
 
@@ -152,7 +168,7 @@ def _features(scene: Scene, cache: greens.GreensCache | None = None) -> dict[str
 
 def _warm_up() -> None:
     """Compile every kernel once on a tiny mesh so no timing includes numba compilation."""
-    for tier in ("infinite", "sem", "greens"):
+    for tier in ("infinite", "sem", "greens", "mindlin", "mindlin_greens"):
         simulate(Config(tier, (2, 2, 1), (2, 2, 1), 0.9).scene(0.3))
 
 
@@ -175,7 +191,7 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
             cache = greens.MemoryCache()  # cold: no response from an earlier config
             res = _features(cfg.scene(distance), cache)
             warm = math.nan
-            if cfg.tier == "greens":  # plate and response both kept, as in a table build
+            if cfg.tier in CONVOLVED_PLATE_MODELS:  # plate and response kept, as in a table
                 started = time.perf_counter()
                 simulate(cfg.scene(distance), greens_cache=cache)
                 warm = time.perf_counter() - started
@@ -284,23 +300,25 @@ def write_outputs(result: dict[str, Any], out: Path) -> None:
     save_csv(frame, out / "accuracy.csv")
     save_json(result, out / "accuracy.json")
     fig, axes = new_figure(2)
-    colours = {"infinite": "tab:blue", "sem": "tab:red", "greens": "tab:green"}
+    colours = {"infinite": "tab:blue", "sem": "tab:red", "greens": "tab:green",
+               "mindlin": "tab:purple", "mindlin_greens": "tab:orange"}
     labelled: list[tuple[Any, list[Any]]] = []
     for ax, scene in zip(axes, SCENES_M, strict=True):
         g = frame[frame["scene"] == scene]
         for tier, h in g.groupby("tier"):
             ax.plot(h["wall_s"], h["error"].clip(lower=1e-5), "o", color=colours.get(tier),
-                    label=f"{tier}" + (" (cold)" if tier == "greens" else ""))
-            if tier == "greens":
+                    label=f"{tier}" + (" (cold)" if tier in CONVOLVED_PLATE_MODELS else ""))
+            if tier in CONVOLVED_PLATE_MODELS:
                 ax.plot(h["wall_warm_s"], h["error"].clip(lower=1e-5), "D", mfc="none",
-                        color=colours[tier], label="greens (cached response)")
+                        color=colours[tier], label=f"{tier} (cached response)")
         front = g[g["pareto"]].assign(cost=lambda d: d["wall_warm_s"].fillna(d["wall_s"]))
         front = front.sort_values("cost")
         ax.plot(front["cost"], front["error"].clip(lower=1e-5), "k:", lw=1, label="Pareto front")
         ax.set_xscale("log")
         ax.set_yscale("log")
         labels = [ax.annotate(row.config.replace("sem ", "").replace("greens ", "")
-                              .replace("resolved ", ""), (row.wall_s, max(row.error, 1e-5)),
+                              .replace("resolved ", "").replace("mindlin_", "M")
+                              .replace("mindlin ", "M "), (row.wall_s, max(row.error, 1e-5)),
                               textcoords="offset points", xytext=(4, 2), fontsize=6, alpha=0.8)
                   for row in g.sort_values("error").itertuples()]
         labelled.append((ax, labels))
