@@ -97,6 +97,8 @@ def plates_command(
                                                 "4.83, 6 mm)."),
     distances: str | None = typer.Option(None, "--distances",
                                          help="Distances to the support, m (default 0.02,0.457)."),
+    overrides: list[str] | None = typer.Option(
+        None, "--set", help="Your set-up, as for simulate, e.g. --set plate.material=ti_6al_4v."),
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON."),
     quick: bool = typer.Option(False, "--quick", help="Two cheap scenes (checks the machinery)."),
 ) -> None:
@@ -106,6 +108,7 @@ def plates_command(
     from tqdm import tqdm
 
     from solitonde.instrument.studies import plate_theory
+    from solitonde.model.errors import SceneError
     from solitonde.signal.json_ready import json_ready
 
     if kind not in plate_theory.PAIRS:
@@ -126,7 +129,11 @@ def plates_command(
             bar.set_postfix_str(label)
             bar.update(1)
 
-        result = plate_theory.compare(points, kind, tick)
+        try:
+            result = plate_theory.compare(points, kind, tick, overrides or [])
+        except SceneError as exc:
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(2) from None
     if as_json:
         typer.echo(json.dumps(json_ready(result), indent=2))
         return

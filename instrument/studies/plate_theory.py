@@ -23,7 +23,7 @@ from typing import Any
 from solitonde.instrument.studies.accuracy import BUDGETS
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.model import greens, sem_tier
-from solitonde.model.scene import Scene, scene_from_dict
+from solitonde.model.scene import Scene, load_scene, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.features import extract
 
@@ -45,12 +45,13 @@ class Point:
     thickness_m: float
     distance_m: float
 
-    def scene(self, plate_model: str) -> Scene:
-        return scene_from_dict({
-            "chain": {"diameter": self.diameter_m},
-            "plate": {"thickness": self.thickness_m, "distance_to_support": self.distance_m},
-            "effects": {"plate_model": plate_model},
-        })
+    def scene(self, plate_model: str, overrides: Sequence[str] = ()) -> Scene:
+        """The scene on ``plate_model``; ``overrides`` (``key=value``, as ``--set``) go first,
+        so the point's own size, thickness and position win."""
+        return load_scene(None, [*overrides, f"chain.diameter={self.diameter_m!r}",
+                                 f"plate.thickness={self.thickness_m!r}",
+                                 f"plate.distance_to_support={self.distance_m!r}",
+                                 f"effects.plate_model={plate_model}"])
 
 
 def default_points(quick: bool = False) -> list[Point]:
@@ -88,18 +89,24 @@ def _warm_up(pair: tuple[str, str]) -> None:
 
 
 def compare(points: Sequence[Point], kind: str = "greens",
-            tick: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Run every point on both models of ``PAIRS[kind]``; rows, the budget, a summary."""
+            tick: Callable[[str], None] | None = None,
+            overrides: Sequence[str] = ()) -> dict[str, Any]:
+    """Run every point on both models of ``PAIRS[kind]``; rows, the budget, a summary.
+
+    ``overrides`` (``key=value``) describe the user's set-up (plate material, sphere material,
+    plate size); they are checked before any run (SceneError names the key)."""
     if kind not in PAIRS:
         raise ValueError(f"kind must be one of {', '.join(PAIRS)}, got {kind!r}")
     tick = tick or (lambda _label: None)
     reference, mindlin = PAIRS[kind]
+    for p in points:
+        p.scene(mindlin, overrides)
     _warm_up(PAIRS[kind])
     budget = BUDGETS["table_build"]
     rows = []
     for p in points:
-        ref = _run(p.scene(reference))
-        new = _run(p.scene(mindlin))
+        ref = _run(p.scene(reference, overrides))
+        new = _run(p.scene(mindlin, overrides))
         tof_error = abs(new["tof_s"] - ref["tof_s"]) / ref["tof_s"]
         arr_error = abs(new["arr"] - ref["arr"]) / ref["arr"]
         rows.append({
@@ -117,7 +124,7 @@ def compare(points: Sequence[Point], kind: str = "greens",
         })
         tick(f"D {p.diameter_m * 1e3:.2f} t {p.thickness_m * 1e3:.2f} L {p.distance_m * 1e3:.0f}")
     return {"kind": kind, "models": {"3d": reference, "mindlin": mindlin}, "budget": budget,
-            "rows": rows, "summary": summary(rows)}
+            "overrides": list(overrides), "rows": rows, "summary": summary(rows)}
 
 
 def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
