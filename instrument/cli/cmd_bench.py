@@ -71,16 +71,18 @@ def _print(result: dict[str, Any]) -> None:
                    "recommendation: ") + json.dumps(json_ready(result["recommendation"]), indent=2))
 
 
-def _floats(text: str | None, option: str) -> list[float] | None:
+def _floats(text: str | None, option: str, zero: bool = False) -> list[float] | None:
+    """A comma-separated list of lengths in metres (positive; also 0 where ``zero``)."""
     if text is None:
         return None
     try:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         values = []
-    if not values or not all(0.0 < v < 10.0 for v in values):
+    if not values or not all((v >= 0.0 if zero else v > 0.0) and v < 10.0 for v in values):
         typer.echo(f"error: {option}: {text!r} is not a comma-separated list of lengths in "
-                   "metres (allowed: 0 < value < 10, e.g. 2.29e-3,4.83e-3)", err=True)
+                   f"metres (allowed: {'0 <=' if zero else '0 <'} value < 10, e.g. "
+                   "2.29e-3,4.83e-3)", err=True)
         raise typer.Exit(2)
     return values
 
@@ -116,7 +118,7 @@ def plates_command(
                    err=True)
         raise typer.Exit(2)
     given = [_floats(diameters, "--diameters"), _floats(thicknesses, "--thicknesses"),
-             _floats(distances, "--distances")]
+             _floats(distances, "--distances", zero=True)]
     if quick or all(g is None for g in given):
         points = plate_theory.default_points(quick)
     else:
