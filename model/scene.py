@@ -286,6 +286,17 @@ class SemSpec(_Section):
         1, ge=0, le=8, description="elements of size 2 r_c / n around the chain (0: none, the "
         "paper's uniform layout)",
     )
+    plate_theory: Literal["auto", "3d", "mindlin"] = Field(
+        "auto", description="the meshed plate effects.plate_model 'auto' uses near a support: "
+        "'3d' (greens), 'mindlin' (mindlin_greens), or 'auto': Mindlin wherever it was measured "
+        "within the table budget of the 3-D plate (README, 'Where a 2-D plate suffices')",
+    )
+    elements_per_wavelength: Number = Field(
+        1.0, ge=0.0, le=8.0, description="plate models 'mindlin' and 'mindlin_greens': at least "
+        "this many in-plane elements per flexural (Kirchhoff A0) wavelength at the top of the "
+        "incident pulse's band, f = V_s / (2.5 D); thin plates get more elements than "
+        "sem.elements, never fewer (0: sem.elements as given)",
+    )
     mindlin_element_size: Number = Field(
         6.0, ge=0.5, le=50.0, description="plate models 'mindlin' and 'mindlin_greens': size of "
         "the elements around the chain in contact radii r_c (the patch itself is integrated "

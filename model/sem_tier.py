@@ -12,6 +12,7 @@ whichever is smaller, on the sample grid.
 
 from __future__ import annotations
 
+import math
 import time
 from functools import lru_cache
 
@@ -73,15 +74,53 @@ def contact_radius(scene: Scene) -> float:
     return radius
 
 
+def flexural_wavelength(scene: Scene) -> float:
+    """The Kirchhoff A0 wavelength at the top of the incident pulse's band, m.
+
+    The solitary wave is about 5 D long and passes at V_s (Eq. 12), so its force lasts about
+    5 D / V_s; f = V_s / (2.5 D), twice the inverse of that, bounds the band the plate is driven
+    in. Kirchhoff's wavelength is the longer one at a given frequency (Mindlin's A0 is slower),
+    so it is the conservative choice only together with a margin; ``sem.elements_per_wavelength``
+    is that margin.
+    """
+    from .lamb import kirchhoff_phase_velocity
+    from .zener import incident_velocity, solitary_wave_speed
+
+    d = scene.chain.diameter
+    v_s = solitary_wave_speed(d, scene.a_s, scene.sphere_mass, incident_velocity(scene))
+    f = v_s / (2.5 * d)
+    return float(kirchhoff_phase_velocity(f, scene.plate.thickness, scene.plate_material)) / f
+
+
+def mindlin_elements(scene: Scene) -> tuple[int, int, int]:
+    """The Mindlin plate's nominal element counts: ``sem.elements``, raised where the plate is
+    thin enough that the flexural wavelength needs more (``sem.elements_per_wavelength``).
+
+    A thin plate's reflections from the support travel as short flexural waves; on the 3-D
+    plate's default 16 x 16 mesh (57 mm elements on the paper's plate) they are under-resolved
+    below about 2 mm, in either plate theory. The 2-D plate can afford the elements.
+    """
+    s = scene.sem
+    per = float(s.elements_per_wavelength)
+    if per <= 0.0 or s.preset == "paper":
+        return tuple(s.elements)
+    size = per / flexural_wavelength(scene)
+    return (max(int(s.elements[0]), math.ceil(scene.plate.size[0] * size)),
+            max(int(s.elements[1]), math.ceil(scene.plate.size[1] * size)), int(s.elements[2]))
+
+
 def plate_for(scene: Scene, theory: str = "3d") -> ElasticPlate | MindlinPlate:
     """The meshed plate of a scene, 3-D or Mindlin (kept for reuse within the process)."""
     p, s = scene.plate, scene.sem
     refinement = 0 if s.preset == "paper" else s.contact_refinement
-    if theory == "mindlin" and s.preset != "paper":
-        refinement = 2.0 / float(s.mindlin_element_size)
+    elements = tuple(s.elements)
+    if theory == "mindlin":
+        elements = mindlin_elements(scene)
+        if s.preset != "paper":
+            refinement = 2.0 / float(s.mindlin_element_size)
     try:
         return _plate_cached(
-            (float(p.size[0]), float(p.size[1])), float(p.thickness), tuple(s.elements),
+            (float(p.size[0]), float(p.size[1])), float(p.thickness), elements,
             tuple(s.order), float(p.distance_to_support), bool(s.symmetry), scene.plate_material,
             p.supports, contact_radius(scene), float(refinement), theory,
         )

@@ -7,6 +7,11 @@ table build pays per plate. TOF and ARR come from the sensor trace through the e
 measurements; the errors are relative to the 3-D plate. A scene is within the table budget when
 both errors are (:data:`solitonde.instrument.studies.accuracy.BUDGETS`).
 
+The Mindlin plate takes more in-plane elements than ``sem.elements`` on thin plates (one per
+flexural wavelength, :func:`solitonde.model.sem_tier.mindlin_elements`). The 3-D reference runs
+either on that same in-plane mesh (``same-mesh``: the two plate theories compared, nothing else)
+or on its own default mesh (``default-mesh``: what the 3-D tier gives out of the box).
+
 The pair of models is either the Green's functions (``greens`` / ``mindlin_greens``: what tables
 use) or the coupled runs (``sem`` / ``mindlin``).
 """
@@ -24,11 +29,14 @@ from solitonde.instrument.studies.accuracy import BUDGETS
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.model import greens, sem_tier
 from solitonde.model.scene import Scene, load_scene, scene_from_dict
+from solitonde.model.sem_tier import mindlin_elements
 from solitonde.model.simulate import simulate
 from solitonde.signal.features import extract
 
 PAIRS = {"greens": ("greens", "mindlin_greens"), "coupled": ("sem", "mindlin")}
 """The 3-D model and its Mindlin counterpart, per kind of run."""
+REFERENCES = ("same-mesh", "default-mesh")
+"""The 3-D reference's in-plane mesh: the Mindlin plate's, or the 3-D tier's own default."""
 
 DIAMETERS_M = (4.76e-3, 9.53e-3, 19.05e-3)
 THICKNESSES_M = (1.5e-3, 2.29e-3, 3.18e-3, 4.83e-3, 6.0e-3)
@@ -90,13 +98,17 @@ def _warm_up(pair: tuple[str, str]) -> None:
 
 def compare(points: Sequence[Point], kind: str = "greens",
             tick: Callable[[str], None] | None = None,
-            overrides: Sequence[str] = ()) -> dict[str, Any]:
+            overrides: Sequence[str] = (), reference_mesh: str = "same-mesh") -> dict[str, Any]:
     """Run every point on both models of ``PAIRS[kind]``; rows, the budget, a summary.
 
     ``overrides`` (``key=value``) describe the user's set-up (plate material, sphere material,
-    plate size); they are checked before any run (SceneError names the key)."""
+    plate size); they are checked before any run (SceneError names the key). ``reference_mesh``
+    is one of :data:`REFERENCES`."""
     if kind not in PAIRS:
         raise ValueError(f"kind must be one of {', '.join(PAIRS)}, got {kind!r}")
+    if reference_mesh not in REFERENCES:
+        raise ValueError(f"reference_mesh must be one of {', '.join(REFERENCES)}, "
+                         f"got {reference_mesh!r}")
     tick = tick or (lambda _label: None)
     reference, mindlin = PAIRS[kind]
     for p in points:
@@ -105,13 +117,17 @@ def compare(points: Sequence[Point], kind: str = "greens",
     budget = BUDGETS["table_build"]
     rows = []
     for p in points:
-        ref = _run(p.scene(reference, overrides))
+        elements = mindlin_elements(p.scene(mindlin, overrides))
+        mesh = ([f"sem.elements=[{elements[0]},{elements[1]},{elements[2]}]"]
+                if reference_mesh == "same-mesh" else [])
+        ref = _run(p.scene(reference, [*overrides, *mesh]))
         new = _run(p.scene(mindlin, overrides))
         tof_error = abs(new["tof_s"] - ref["tof_s"]) / ref["tof_s"]
         arr_error = abs(new["arr"] - ref["arr"]) / ref["arr"]
         rows.append({
             "diameter_m": p.diameter_m, "thickness_m": p.thickness_m, "distance_m": p.distance_m,
             "d_over_t": p.diameter_m / p.thickness_m,
+            "elements_mindlin": list(elements[:2]),
             "tof_3d_s": ref["tof_s"], "arr_3d": ref["arr"],
             "tof_mindlin_s": new["tof_s"], "arr_mindlin": new["arr"],
             "tof_error": tof_error, "arr_error": arr_error,
@@ -123,7 +139,8 @@ def compare(points: Sequence[Point], kind: str = "greens",
             "energy_drift_3d": ref["energy_drift"], "energy_drift_mindlin": new["energy_drift"],
         })
         tick(f"D {p.diameter_m * 1e3:.2f} t {p.thickness_m * 1e3:.2f} L {p.distance_m * 1e3:.0f}")
-    return {"kind": kind, "models": {"3d": reference, "mindlin": mindlin}, "budget": budget,
+    return {"kind": kind, "models": {"3d": reference, "mindlin": mindlin},
+            "reference_mesh": reference_mesh, "budget": budget,
             "overrides": list(overrides), "rows": rows, "summary": summary(rows)}
 
 
