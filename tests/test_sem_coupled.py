@@ -92,22 +92,31 @@ def test_small_spheres_at_the_centre_see_an_infinite_plate() -> None:
     assert sem.truth["tof_s"] == pytest.approx(inf.truth["tof_s"], rel=0.01)
 
 
-def test_auto_picks_greens_near_the_support_and_infinite_far_from_it() -> None:
-    """auto: infinite beyond auto_margin x L_c (k = 0.57) from every edge, else greens; the
-    reason names the distance and L_c."""
+def test_auto_picks_a_finite_plate_near_the_support_and_infinite_far_from_it() -> None:
+    """auto: infinite beyond auto_margin x L_c (k = 0.57) from every edge, else a Green's
+    function: the Mindlin plate's inside the measured D/t range, the 3-D plate's outside it or
+    when sem.plate_theory says so; the reason names the distance, L_c and D/t."""
     scene = load_scene(None, [])
     l_c = critical_distance(scene, k=0.57)
     margin = scene.sem.auto_margin
     near = load_scene(None, [f"plate.distance_to_support={0.9 * margin * l_c}"])
     far = load_scene(None, [f"plate.distance_to_support={1.1 * margin * l_c}"])
     name, reason = resolve_plate_model(near)
-    assert name == "greens"
-    assert f"{margin * l_c * 1e3:.1f} mm" in reason
+    assert name == "mindlin_greens"
+    assert f"{margin * l_c * 1e3:.1f} mm" in reason and "D/t = 3.00" in reason
     assert resolve_plate_model(far)[0] == "infinite"
     # the far clamped edge counts too
-    assert resolve_plate_model(load_scene(None, ["plate.distance_to_support=0.9"]))[0] == "greens"
+    assert resolve_plate_model(
+        load_scene(None, ["plate.distance_to_support=0.9"]))[0] == "mindlin_greens"
     explicit = load_scene(None, ["effects.plate_model=sem"])
     assert resolve_plate_model(explicit)[0] == "sem"
+    d = f"plate.distance_to_support={0.9 * margin * l_c}"
+    three_d = load_scene(None, [d, "sem.plate_theory=3d"])
+    assert resolve_plate_model(three_d)[0] == "greens"
+    # a sphere much smaller than the thickness: outside the measured range, the 3-D plate
+    thick = load_scene(None, ["plate.distance_to_support=0.01", "plate.thickness=0.03"])
+    name, reason = resolve_plate_model(thick)
+    assert name == "greens" and "outside" in reason
 
 
 def test_near_the_support_arr_rises_and_tof_falls() -> None:
