@@ -153,3 +153,14 @@ def test_validate_function_refuses_a_negative_seed() -> None:
     with pytest.raises(ValidationInputError) as info:
         validate(ModelTable.load(DEFAULT_TABLE), 1, seed=-1)
     assert info.value.field == "seed"
+
+
+def test_validate_refuses_an_unknown_truth_plate_theory(tmp_path: Path) -> None:
+    """The plate theory behind the truths is named and checked before any simulation."""
+    from solitonde.instrument.studies.validate import ValidationInputError
+
+    with pytest.raises(ValidationInputError) as info:
+        validate(ModelTable.load(DEFAULT_TABLE), 1, truth_plate_theory="kirchhoff")
+    assert info.value.field == "truth_plate_theory"
+    output = _bad_validate(tmp_path, "--truth-plate-theory", "kirchhoff")
+    assert output.startswith("error: --truth-plate-theory:") and "3d" in output

@@ -53,6 +53,10 @@ def validate_command(
                                                "(default: all of the table's)"),
     measurements: Path | None = typer.Option(None, "--measurements", help="JSON file keeping the "
                                              "simulated shots; reused when it matches the draw"),
+    truth_plate_theory: str = typer.Option(
+        "auto", "--truth-plate-theory", help="plate theory of the simulated truths near a support "
+        "(sem.plate_theory: auto, 3d, mindlin): 3d checks a table built on the Mindlin plate "
+        "against 3-D plates"),
     out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
@@ -75,9 +79,9 @@ def validate_command(
         report = validate(model, n, seed,
                           workers=default_workers() if workers is None else workers,
                           scheduler=scheduler, progress=progress, diameters=sizes,
-                          measurements=measurements)
+                          measurements=measurements, truth_plate_theory=truth_plate_theory)
     except ValidationInputError as exc:
-        _fail(f"--{exc.field}: {str(exc).partition(': ')[2]}")
+        _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
     m = report.metrics
     if out is not None:
         try:

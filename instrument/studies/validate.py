@@ -187,12 +187,16 @@ class ValidationReport:
 def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
              scheduler: str | None = None, progress: bool = False,
              diameters: Sequence[float] | None = None,
-             measurements: str | Path | None = None) -> ValidationReport:
+             measurements: str | Path | None = None,
+             truth_plate_theory: str = "auto") -> ValidationReport:
     """Run the synthetic validation on ``table`` (see the module doc).
 
     ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
     names a JSON file that keeps the simulated, measured plates: when it holds the same draw
     (n, seed, sizes, table grid range and scene) they are reused and only the inversion runs.
+    ``truth_plate_theory`` (``sem.plate_theory`` of the simulated plates: auto, 3d, mindlin)
+    lets the truths come from another plate model than the table's, e.g. the 3-D plate behind a
+    table built on the Mindlin plate, so the model's own error shows in the scores.
 
     Raises
     ------
@@ -213,7 +217,12 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         if len(set(diameters)) < len(diameters):
             raise ValidationInputError("diameters", "a sphere size is listed twice (each table "
                                        "size at most once)")
+    if truth_plate_theory not in ("auto", "3d", "mindlin"):
+        raise ValidationInputError("truth_plate_theory", f"must be auto, 3d or mindlin, got "
+                                   f"{truth_plate_theory!r}")
     base = table.sweep.get("scene", {})
+    if truth_plate_theory != "auto":
+        base = apply_overrides(dict(base), {"sem.plate_theory": truth_plate_theory})
     lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
     draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_axis[-1])))
              for _ in range(n)]
@@ -326,6 +335,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "reference": {"thickness_m": [t_ref, t_ref2], "distance_m": l_ref},
         "calibration": calibration.to_dict()["per_diameter"],
         "diameters_m": diameters,
+        "truth_plate_theory": truth_plate_theory,
         "simulation_wall_s": wall,
         "table": str(table.path) if table.path else None,
     }
