@@ -62,16 +62,18 @@ def test_simulate_service_never_records_particle_traces(tmp_path: Path, monkeypa
     {"elements": [2, 2, 2], "order": [5, 5, 3], "contact_refinement": 0},
 ])
 @pytest.mark.parametrize("plate", [{"thickness": 3.18e-3}, {"thickness": 6e-3}])
-def test_plate_step_floor_is_below_the_real_step_count(sem: dict, plate: dict) -> None:
+@pytest.mark.parametrize("model", ["sem", "mindlin"])
+def test_plate_step_floor_is_below_the_real_step_count(sem: dict, plate: dict,
+                                                      model: str) -> None:
     """The floor priced before any mesh is built never exceeds the step count of the built
-    mesh (else a feasible request would be refused)."""
+    mesh (else a feasible request would be refused), for either plate theory."""
     from solitonde.model.plan import _plate_steps_floor
 
-    scene = scene_from_dict({"effects": {"plate_model": "sem"}, "sem": sem,
+    scene = scene_from_dict({"effects": {"plate_model": model}, "sem": sem,
                              "plate": {**plate, "distance_to_support": 0.05},
                              "output": {"sample_rate": 1e3, "duration": 2e-4}})
     real = simulation_cost(scene)["steps"]
-    assert 1 <= _plate_steps_floor(scene, 2e-4) <= real
+    assert 1 <= _plate_steps_floor(scene, 2e-4, model) <= real
 
 
 def test_a_huge_mesh_at_a_low_sample_rate_is_refused_before_it_is_built(monkeypatch) -> None:

@@ -85,7 +85,7 @@ def summary(
         "flags": list(features.flags),
         "feature_error": feature_error,
         "model_truth": result.truth,
-        # spectral-element plate models (sem, greens) only
+        # meshed plate models (sem, greens, mindlin, mindlin_greens) only
         **{k: d[k] for k in ("mesh", "dt_stability_ratio", "chain_dt_s", "greens_cached")
            if k in d},
     }
