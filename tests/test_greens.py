@@ -9,6 +9,7 @@ from solitonde.instrument.tables.greens_cache import DiskGreensCache, LayeredCac
 from solitonde.model import greens
 from solitonde.model.materials import MATERIALS
 from solitonde.model.mesh import plate_mesh
+from solitonde.model.mindlin import build_mindlin_plate
 from solitonde.model.sem import build_plate
 
 AL = MATERIALS["al_6061"]
@@ -54,8 +55,9 @@ def test_key_depends_on_everything_the_response_depends_on() -> None:
         greens.response_key(_plate(radius=2e-3), 1e-7),
         greens.response_key(_plate(refinement=2), 1e-7),
         greens.response_key(_plate(radius=0.0, refinement=0), 1e-7),
+        greens.response_key(build_mindlin_plate(base.mesh, AL), 1e-7),  # the plate theory
     ]
-    assert len({key, *others}) == 10
+    assert len({key, *others}) == 11
 
 
 def test_cache_reuses_and_extends() -> None:
@@ -108,3 +110,22 @@ def test_simulate_uses_the_cache_it_is_given_and_no_other() -> None:
     assert not first.diagnostics["greens_cached"] and again.diagnostics["greens_cached"]
     np.testing.assert_array_equal(first.samples, again.samples)
     assert not hasattr(greens, "set_default_cache")  # no process-wide swap to reach for
+
+
+def test_a_3d_plates_key_is_unchanged_by_the_mindlin_tier() -> None:
+    """Disk caches written before the Mindlin plate existed stay valid: a 3-D plate's key is
+    the same hash of the same description (no plate-theory field for it)."""
+    import hashlib
+    import json
+
+    plate = _plate()
+    mesh = plate.mesh
+    edges = hashlib.sha256(np.concatenate((mesh.x_edges, mesh.y_edges, mesh.z_edges))
+                           .astype("<f8").tobytes()).hexdigest()[:16]
+    desc = {"contact_radius_m": float(mesh.contact_radius), "edges": edges, "version": 2,
+            "thickness_m": float(mesh.z_edges[-1]), "size_m": [0.3, 0.3],
+            "distance_to_support_m": 0.05, "elements": list(mesh.elements),
+            "order": list(mesh.order), "symmetry": True, "supports": "opposite_edges",
+            "material": [AL.youngs_modulus, AL.poisson_ratio, AL.density], "dt_s": 1e-7}
+    text = json.dumps(desc, sort_keys=True, separators=(",", ":"), default=repr)
+    assert greens.response_key(plate, 1e-7) == hashlib.sha256(text.encode()).hexdigest()[:32]
