@@ -41,7 +41,7 @@ from .sem_kernels import SemPlate, integrate_sem
 def _plate_cached(
     size: tuple[float, float], thickness: float, elements: tuple[int, int, int],
     order: tuple[int, int, int], contact_x: float, symmetry: bool, material: Material,
-    supports: str, contact_radius: float = 0.0, contact_refinement: int = 0,
+    supports: str, contact_radius: float = 0.0, contact_refinement: float = 0.0,
     theory: str = "3d",
 ) -> ElasticPlate | MindlinPlate:
     mesh = plate_mesh(size, thickness, elements, order, contact_x, symmetry, contact_radius,
@@ -79,9 +79,9 @@ def flexural_wavelength(scene: Scene) -> float:
 
     The solitary wave is about 5 D long and passes at V_s (Eq. 12), so its force lasts about
     5 D / V_s; f = V_s / (2.5 D), twice the inverse of that, bounds the band the plate is driven
-    in. Kirchhoff's wavelength is the longer one at a given frequency (Mindlin's A0 is slower),
-    so it is the conservative choice only together with a margin; ``sem.elements_per_wavelength``
-    is that margin.
+    in. Kirchhoff's A0 is a little faster than Mindlin's at these frequencies, so this wavelength
+    is a little longer than the plate's own; ``sem.elements_per_wavelength`` (1 by default; its
+    convergence is in the README, "Where a 2-D plate suffices") allows for it.
     """
     from .lamb import kirchhoff_phase_velocity
     from .zener import incident_velocity, solitary_wave_speed
@@ -132,7 +132,7 @@ def plate_for(scene: Scene, theory: str = "3d") -> ElasticPlate | MindlinPlate:
 
 
 class _PlateTier(BottomBoundary):
-    """Shared parts of the two tiers: the plate, its stable step, the reported diagnostics."""
+    """Shared parts of the meshed tiers: the plate, its stable step, the reported diagnostics."""
 
     def __init__(self, name: str, scene: Scene, reason: str) -> None:
         self.name = name
