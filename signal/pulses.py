@@ -56,6 +56,8 @@ FLAGS = (
 )
 """Every quality flag detection can raise, in the order they are reported."""
 
+METHODS = ("template", "parabola", "refined")
+"""Where a pulse's peak comes from, by the kernel's ``P_METHOD`` code."""
 MIN_PRETRIGGER = K.MIN_PRETRIGGER
 SHAPE_EXPONENT = 2.38
 """Exponent r of the fitted shape: least squares of the skewed template against the chain
@@ -161,9 +163,14 @@ class DetectOptions:
 class Pulse:
     """One detected pulse, refined on the raw samples.
 
-    ``time_s`` is the sub-sample peak time, ``peak_N`` the peak above the local baseline,
-    ``width_s`` the full width at half maximum of the fitted shape, ``method`` ``"template"`` or
-    ``"parabola"`` (the fall-back).
+    ``time_s`` is the sub-sample peak time and ``peak_N`` the peak above the pre-impact baseline
+    ``baseline_N`` (the sensor's reading before the impact, at the peak's time): the paper's
+    definitions. ``rise_N`` is the fitted template's height above ``level_N``, the level the
+    sensor holds just before the pulse (immune to baseline drift, but not the paper's amplitude:
+    after the incident the chain decompresses and the sensor sits below its static reading).
+    ``width_s`` is the full width at half maximum of the fitted shape; ``method`` says where the
+    peak comes from: ``"template"``, ``"refined"`` (the data's top, where the template's shape
+    misses the pulse's) or ``"parabola"`` (the template fit failed).
     """
 
     time_s: float
@@ -175,6 +182,8 @@ class Pulse:
     snr_db: float
     index: int
     method: str
+    rise_N: float = math.nan
+    level_N: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -291,7 +300,8 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
             time_s=t0 + row[K.P_TIME] * dt, peak_N=amp, baseline_N=sign * row[K.P_BASE],
             width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
             end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
-            method="parabola" if row[K.P_METHOD] else "template",
+            method=METHODS[int(row[K.P_METHOD])], rise_N=row[K.P_RISE],
+            level_N=sign * row[K.P_LEVEL_N],
         ))
     if cut_secondary:
         notes.append("a secondary pulse runs past the end of the record (TOF and ARR are whole)")
