@@ -43,6 +43,10 @@ LEVEL_SPAN = 12.0
 """The baseline window before a pulse's foot is at most this many FWHM long (the noise of the
 level falls as the root of its length; the slow trend carries it to the peak)."""
 
+BASELINE_SPAN = 3.0
+"""The pre-impact baseline is measured on the pre-trigger samples at least this many FWHM before
+the incident's peak."""
+
 TRUNC_SPAN = 2.5
 """A pulse counts as truncated when the record ends (or starts) within this many FWHM of its peak
 while the pulse is still above ``fit_fraction`` of its height."""
@@ -655,10 +659,7 @@ def analyze(
             peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
     peaks, thr = _trend(y, s, v, line, peaks, n_pre, h, sigma_s, thr_sigma, min_ratio, thr)
 
-    pre = pre_impact_baseline(y, n_pre)
     head[H_BASE] = base
-    head[H_PRE0] = pre[0] if pre[2] > 0 else line[0]
-    head[H_PRE1] = pre[1] if pre[2] > 0 else 0.0
     head[H_SIGMA] = sigma
     head[H_THR] = thr
     head[H_NPRE] = n_pre
@@ -671,13 +672,26 @@ def analyze(
 
     bounds = _bounds(v, peaks)
     widths = _widths(v, peaks, bounds)
+    # The pre-impact baseline from the pre-trigger up to BASELINE_SPAN FWHM before the incident's
+    # peak: the solitary wave's leading tail, still 0.5 % of its peak at the foot, would tilt it.
+    pre = pre_impact_baseline(y, min(n_pre, int(peaks[0] - BASELINE_SPAN * widths[0])))
+    head[H_PRE0] = pre[0] if pre[2] > 0 else line[0]
+    head[H_PRE1] = pre[1] if pre[2] > 0 else 0.0
     nfree = 4 if free_r else 3
+    # The refinement's errors take the noise where the baseline is measured (coloured noise
+    # included): the detection's segment reaches into the incident's leading tail, which on a
+    # clean trace is all its "noise". Without such a segment, the smoothed noise's excess over
+    # white noise's tells the colour.
+    if pre[2] > 0:
+        sigma_top = max(pre[3], floor)
+    else:
+        sigma_top = sigma * max(1.0, sigma_s / max(smoother_gain(h) * sigma, 1e-300))
     prev_end = 0
     for j in range(m):
         sk = skew if j == 0 else -skew  # the later pulses travel back up the chain
         prev_end = _measure_pulse(y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
                                   prev_end, thr, fit_fraction, shape_r, sk, nfree, max_iter,
-                                  sigma, pre, out[j])
+                                  sigma_top, pre, out[j])
         out[j, P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
     if m >= 2:  # the incident and the reflection on one rung: their ratio is the ARR

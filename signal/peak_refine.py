@@ -5,7 +5,7 @@ The paper's TOF is the time between the incident and the reflected peaks, its AR
 their heights above the sensor's reading before the impact. A fitted template of fixed shape
 reads both with little noise, but wherever a pulse's shape differs from it (a reflection that
 rises slower than it falls, a flat top, gravity on or off) its peak is not the pulse's: up to
-several microseconds and percent. :func:`refine_peak` therefore fits cubics to the data's top
+several microseconds and percent. :func:`refine_peak` therefore fits quartics to the data's top
 over a ladder of windows, from a few samples (no shape bias, most noise) to a quarter of the
 pulse's height, and keeps the widest estimate, the template's included, that agrees with every
 narrower one within :data:`AGREE_SIGMAS` of that one's standard error (Lepski's rule). Clean
@@ -33,6 +33,8 @@ SLOPE_SIGMAS = 4.0
 """The pre-trigger's slope is extrapolated as baseline drift only beyond this many standard
 errors; otherwise the baseline is the pre-trigger's mean (all a noise-free trace has)."""
 MIN_PRE = 16
+NOISE_BLOCK = 16
+"""Samples per block in the pre-trigger's coloured-noise check."""
 RESOLVED = 0.1
 """A window's peak is used only when its time's standard error is at most this fraction of the
 window's half-width."""
@@ -40,13 +42,17 @@ window's half-width."""
 
 @njit(cache=True)
 def pre_impact_baseline(y: np.ndarray, n_pre: int) -> np.ndarray:
-    """``(c0, c1, ok)``: the sensor's reading before the impact, ``c0 + c1 * i`` at sample ``i``.
+    """``(c0, c1, ok, noise)``: the sensor's reading before the impact, ``c0 + c1 * i`` at sample
+    ``i``, and the noise a fit of many samples sees.
 
     The least-squares line through the pre-trigger segment ``y[:n_pre]``, its slope kept only
     when it is :data:`SLOPE_SIGMAS` standard errors from zero (a drift the segment shows);
-    otherwise the segment's mean. ``ok`` is 0 when there is no pre-trigger segment to measure.
+    otherwise the segment's mean. ``noise`` is the residuals' standard deviation, scaled up for
+    coloured noise (a low-pass, an anti-alias filter) by the spread of their means over
+    :data:`NOISE_BLOCK` samples against white noise's. ``ok`` is 0 when there is no pre-trigger
+    segment to measure.
     """
-    out = np.zeros(3)
+    out = np.zeros(4)
     if n_pre < MIN_PRE:
         return out
     m = float(n_pre)
@@ -68,6 +74,19 @@ def pre_impact_baseline(y: np.ndarray, n_pre: int) -> np.ndarray:
         rss += e * e
     se = np.sqrt(rss / (m - 2.0) / sxx)
     out[2] = 1.0
+    white = rss / (m - 2.0)
+    blocks = n_pre // NOISE_BLOCK
+    coloured = white
+    if blocks >= 4:
+        acc = 0.0
+        for k in range(blocks):
+            bm = 0.0
+            for i in range(k * NOISE_BLOCK, (k + 1) * NOISE_BLOCK):
+                bm += y[i] - mean_y - slope * (i - mean_i)
+            bm /= NOISE_BLOCK
+            acc += bm * bm
+        coloured = max(white, NOISE_BLOCK * acc / blocks)
+    out[3] = np.sqrt(coloured)
     if abs(slope) > SLOPE_SIGMAS * se:
         out[0] = mean_y - slope * mean_i
         out[1] = slope
@@ -77,83 +96,83 @@ def pre_impact_baseline(y: np.ndarray, n_pre: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def cubic_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
-               curvature: float) -> np.ndarray:
-    """Least-squares cubic through ``y[c - h .. c + h]`` (within [lo, hi]) and its largest local
-    maximum inside the window: ``(time in samples, value, se of time, se of value, ok,
-    curvature at the maximum per sample squared)``.
+def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
+              curvature: float) -> np.ndarray:
+    """Least-squares quartic through ``y[c - h .. c + h]`` (within [lo, hi]) and its maximum
+    inside the window: ``(time in samples, value, se of time, se of value, ok, curvature at the
+    maximum per sample squared)``.
 
-    The standard errors are the delta method's for white noise ``sigma``: at the maximum
-    ``p'(u) = 0``, so the time moves by ``-dp'/p''`` and the value by ``dp`` alone. ``p''`` is
-    ``curvature`` when it is negative (the pulse's, from a wider window): a narrow window's own
-    curvature is mostly noise, and a noisy sharp maximum would claim a small error it does not
-    have.
+    A quartic, not a parabola or a cubic: a top is flat to fourth order wherever a pulse is
+    symmetric, and a cubic through an off-centre window reads that term as a shift. The maximum
+    is Newton's root of ``p'`` from the parabola's. The standard errors are the delta method's for
+    white noise ``sigma``: at the maximum ``p'(u) = 0``, so the time moves by ``-dp'/p''`` and the
+    value by ``dp`` alone; ``p''`` is ``curvature`` when that is negative (the pulse's, from the
+    template): a narrow window's own curvature is mostly noise, and a noisy sharp maximum would
+    claim a precision it does not have.
     """
     out = np.zeros(6)
     a = max(c - h, lo)
     b = min(c + h, hi)
-    if b - a < 4 or a >= c or b <= c:
+    if b - a < 6 or a >= c or b <= c:
         return out
-    m = np.zeros((4, 4))
-    rhs = np.zeros(4)
+    m = np.zeros((5, 5))
+    rhs = np.zeros(5)
+    pw = np.empty(5)
     inv_h = 1.0 / h
     for i in range(a, b + 1):
         u = (i - c) * inv_h
-        pw0, pw1, pw2, pw3 = 1.0, u, u * u, u * u * u
-        pw = (pw0, pw1, pw2, pw3)
-        for k in range(4):
+        pw[0] = 1.0
+        for k in range(1, 5):
+            pw[k] = pw[k - 1] * u
+        for k in range(5):
             rhs[k] += pw[k] * y[i]
-            for q in range(4):
+            for q in range(5):
                 m[k, q] += pw[k] * pw[q]
     work = m.copy()
-    coef = np.zeros(4)
+    coef = np.zeros(5)
     if not solve_spd(work, rhs, coef):
         return out
-    c1, c2, c3 = coef[1], coef[2], coef[3]
-    ua, ub = (a - c) * inv_h, (b - c) * inv_h
-    best_u = np.nan
-    best_p = -np.inf
-    roots = np.empty(2)
-    nroot = 0
-    if abs(c3) < 1e-12 * (abs(c2) + abs(c1) + 1e-300):
-        if c2 < 0:
-            roots[0] = -c1 / (2.0 * c2)
-            nroot = 1
-    else:
-        disc = 4.0 * c2 * c2 - 12.0 * c3 * c1
-        if disc >= 0:
-            sq = np.sqrt(disc)
-            roots[0] = (-2.0 * c2 + sq) / (6.0 * c3)
-            roots[1] = (-2.0 * c2 - sq) / (6.0 * c3)
-            nroot = 2
-    for k in range(nroot):
-        u = roots[k]
-        if ua <= u <= ub and 2.0 * c2 + 6.0 * c3 * u < 0:
-            p = coef[0] + u * (c1 + u * (c2 + u * c3))
-            if p > best_p:
-                best_p = p
-                best_u = u
-    if not np.isfinite(best_p):
+    c1, c2, c3, c4 = coef[1], coef[2], coef[3], coef[4]
+    if not c2 < 0:
         return out
-    u = best_u
-    curv = 2.0 * c2 + 6.0 * c3 * u
+    ua, ub = (a - c) * inv_h, (b - c) * inv_h
+    u = min(max(-c1 / (2.0 * c2), ua), ub)
+    for _ in range(20):
+        d1 = c1 + u * (2.0 * c2 + u * (3.0 * c3 + 4.0 * c4 * u))
+        d2 = 2.0 * c2 + u * (6.0 * c3 + 12.0 * c4 * u)
+        if not d2 < 0:
+            return out
+        step = d1 / d2
+        u = min(max(u - step, ua), ub)
+        if abs(step) < 1e-12:
+            break
+    if u <= ua or u >= ub:
+        return out  # the maximum lies outside the window
+    curv = 2.0 * c2 + u * (6.0 * c3 + 12.0 * c4 * u)
+    if not curv < 0:
+        return out
     out[5] = curv * inv_h * inv_h
     if curvature < 0:
         curv = curvature * h * h
-    gt = np.array([0.0, 1.0, 2.0 * u, 3.0 * u * u]) * (-1.0 / curv)
-    ga = np.array([1.0, u, u * u, u * u * u])
+    gt = np.zeros(5)
+    ga = np.zeros(5)
+    ga[0] = 1.0
+    for k in range(1, 5):
+        ga[k] = ga[k - 1] * u
+        gt[k] = -k * ga[k - 1] / curv
     var = np.zeros(2)
-    sol = np.zeros(4)
-    for k, g in enumerate((gt, ga)):
+    sol = np.zeros(5)
+    for k in range(2):
+        g = gt if k == 0 else ga
         work[:, :] = m
         if not solve_spd(work, g, sol):
             return out
         acc = 0.0
-        for q in range(4):
+        for q in range(5):
             acc += g[q] * sol[q]
         var[k] = acc
     out[0] = c + u * h
-    out[1] = best_p
+    out[1] = coef[0] + u * (c1 + u * (c2 + u * (c3 + u * c4)))
     out[2] = sigma * np.sqrt(var[0]) * h
     out[3] = sigma * np.sqrt(var[1])
     out[4] = 1.0
@@ -168,7 +187,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     ``top_fit`` (``height`` above its own base, scale ``w`` samples, exponent ``r``), the pulse
     lying within samples [lo, hi].
 
-    Cubics over the :data:`LADDER` windows are fitted from the widest in, each centred on the
+    Quartics over the :data:`LADDER` windows are fitted from the widest in, each centred on the
     peak the next wider one found; then, from the narrowest out, the widest estimate (the
     template last) that lies within :data:`AGREE_SIGMAS` standard errors of every narrower one is
     kept, for the time and the value apart. Returns them, whether either is a refinement (not
@@ -188,7 +207,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     frac = t_fit - np.floor(t_fit)
     for i in range(shape.size):
         shape[i] = height * np.exp(-(abs(i - hw - frac) / w) ** r)
-    curvature = cubic_peak(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0)[5]
+    curvature = poly_peak(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0)[5]
     values[:] = np.nan
     values[nl] = top_fit
     if not curvature < 0:
@@ -200,7 +219,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
         c = int(round(centre))
         if c <= lo or c >= hi:
             continue
-        est[k] = cubic_peak(y, c, halves[k], lo, hi, sigma, curvature)
+        est[k] = poly_peak(y, c, halves[k], lo, hi, sigma, curvature)
         # Usable only where the noise leaves the peak well inside the window: beyond that the
         # cubic's maximum is a root of a noisy derivative, far from Gaussian, and would overrule
         # the wider windows by chance.
