@@ -228,6 +228,23 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
             centre = est[k, 0]
         else:
             est[k, 4] = 0.0
+    # A reflection split in two humps: the ladder follows the template into one of them, the
+    # other may be higher. A narrowest window on the pulse's highest sample that reads a clearly
+    # higher top replaces the narrow rungs.
+    top_i = lo
+    for i in range(lo, hi + 1):
+        if y[i] > y[top_i]:
+            top_i = i
+    first = 0
+    while first < nl and est[first, 4] == 0:
+        first += 1
+    if first == nl or abs(top_i - est[first, 0]) > halves[first]:
+        alt = poly_peak(y, top_i, halves[0], lo, hi, sigma, curvature)
+        if alt[4] > 0 and alt[2] <= RESOLVED * halves[0] and (
+                first == nl or alt[1] > est[first, 1] + AGREE_SIGMAS * max(alt[3],
+                                                                           est[first, 3])):
+            est[:, 4] = 0.0
+            est[0] = alt
     t_pk, k_t = _lepski(est, 0, 2, t_fit)
     v_pk, k_v = _lepski(est, 1, 3, top_fit)
     for k in range(nl):
