@@ -46,8 +46,9 @@ class Features:
 
     ``None`` marks a quantity the shot does not support (no reflection: no TOF, ARR, reflected
     time or peak). Peaks are above ``baseline_N``, the pre-impact reading at the incident's peak;
-    ``*_rise_N`` and ``arr_local`` are the rises above the level just before each pulse. ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the
-    reflection (peak over the incident peak).
+    ``*_rise_N`` and ``arr_local`` are the rises above the level just before each pulse.
+    ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the reflection (peak
+    over the incident peak).
     """
 
     tof_s: float | None

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from .extrema import vargmax, vmax, vmin
-from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak  # noqa: F401
+from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
 from .pulse_fit import R_MAX, R_MIN, fit_pulse, parabola_top, solve_spd, template  # noqa: F401
 from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
 from .smoothing import (  # noqa: F401
@@ -558,7 +558,7 @@ def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray
     row[P_RUNG] = rung
     if refined:
         method = 2.0
-    i_ref = min(max(int(round(t_ref)), 0), n - 1)
+    i_ref = min(max(round(t_ref), 0), n - 1)
     base_pre = pre[0] + pre[1] * t_ref if pre[2] > 0 else line[i_ref]
     row[P_TIME] = t_ref
     row[P_AMP] = top_ref - base_pre

@@ -199,7 +199,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     est = np.zeros((nl, 6))
     halves = np.zeros(nl, dtype=np.int64)
     for k in range(nl):
-        halves[k] = max(MIN_HALF, int(round(w * (-np.log(1.0 - LADDER[k])) ** (1.0 / r))))
+        halves[k] = max(MIN_HALF, round(w * (-np.log(1.0 - LADDER[k])) ** (1.0 / r)))
     # The errors use the template's curvature over the widest window, not each fit's own: noise
     # that sharpens a fitted top would otherwise claim a precision the window does not have.
     hw = halves[nl - 1]
@@ -216,7 +216,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     for k in range(nl - 1, -1, -1):
         if k < nl - 1 and halves[k] >= halves[k + 1]:
             continue  # the same window as the wider one: nothing new
-        c = int(round(centre))
+        c = round(centre)
         if c <= lo or c >= hi:
             continue
         est[k] = poly_peak(y, c, halves[k], lo, hi, sigma, curvature)
