@@ -109,24 +109,26 @@ def test_noise_free_bias_is_small():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("rate", [1e6, 2e6, 2.5e6, 3e6, 5e6])
-def test_accuracy_table(rate):
-    """The accuracy table (run with -m slow -s): 400 shots per SNR."""
+@pytest.mark.parametrize("drift", [0.0, 0.02])
+def test_accuracy_table(rate, drift):
+    """The accuracy table (run with -m slow -s): 400 shots per SNR, without and with drift."""
     fine, dt, truth = model_trace()
-    rows = study(fine, dt, truth, rate, [None, 40.0, 20.0, 10.0], trials=400, seed=3)
+    rows = study(fine, dt, truth, rate, [None, 40.0, 30.0, 20.0, 10.0], trials=400, seed=3,
+                 drift=drift)
     print("\n" + format_table(rows, f"D 9.53 mm, t 4.83 mm, ARR {truth.arr:.3f}, "
-                                    f"{rate / 1e6:g} MHz, drift 2 %, 12 bits"))
+                                    f"{rate / 1e6:g} MHz, drift {100 * drift:g} %, 12 bits"))
     by = {r["snr_db"]: r for r in rows}
     assert by[40.0]["tof_err_p95_samples"] < by[10.0]["tof_err_p95_samples"]
 
 
 @pytest.mark.slow
 def test_arr_error_across_plates():
-    """20 dB at 2 MHz on a thinner, the reference and a thicker plate (-m slow -s): the ARR
+    """20 dB at 2 MHz, no drift, on a thinner, the reference and a thicker plate (-m slow -s): ARR
     error in ARR units stays put while the relative error grows as the reflection weakens."""
     rows = []
     for thickness in (3.18e-3, 4.83e-3, 9.53e-3):
         fine, dt, truth = model_trace(thickness)
-        (row,) = study(fine, dt, truth, RATE, [20.0], trials=400, seed=4)
+        (row,) = study(fine, dt, truth, RATE, [20.0], trials=400, seed=4, drift=0.0)
         print("\n" + format_table([row], f"D 9.53 mm, t {thickness * 1e3:.2f} mm, "
                                           f"ARR {truth.arr:.3f}, 2 MHz, 20 dB"))
         rows.append((truth.arr, row))
