@@ -6,11 +6,12 @@ and measured; the errors against the known truth are summarised per SNR, beside 
 bound (:func:`cramer_rao`) for the same pulses, sampling and noise.
 
 Truth (:meth:`Truth.from_trace`): the peak times and values are the model's own (integration-step
-resolution); each amplitude is taken above the level the noise-free trace holds before the
-pulse's foot, exactly as :func:`solitonde.signal.kernels.analyze` defines a pulse's baseline.
-After the incident the chain decompresses and the sensor sits below its static reading (0.2 N for
-D = 9.53 mm, 1 N for 19.05 mm), so the reflection's amplitude differs from its rise above the
-static reading (the model's ``arr``): by 6 % of the ARR for D = 9.53 mm on a 2.29 mm plate.
+resolution); each amplitude is taken above the sensor's reading before the impact, the paper's
+definition and the extractor's (the model's ``arr`` is the same ratio). The level the sensor holds
+just before a pulse is not that baseline: after the incident the chain decompresses and the
+sensor sits below its static reading (0.2 N for D = 9.53 mm, 1 N for 19.05 mm), so a rise above
+that level (the extractor's ``rise_N``) reads the reflection larger, by 6 % of the ARR for
+D = 9.53 mm on a 2.29 mm plate.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from .waveform import Waveform
 
 @dataclass(frozen=True)
 class Truth:
-    """True pulse times and peaks (above the pre-trigger level) of the noise-free trace."""
+    """True pulse times and peaks (above the pre-impact reading) of the noise-free trace."""
 
     incident_time_s: float
     reflected_time_s: float
@@ -49,11 +50,11 @@ class Truth:
         cls, samples: np.ndarray, dt: float, t0: float, incident: tuple[float, float],
         reflected: tuple[float, float],
     ) -> Truth:
-        """Truth from a finely sampled noise-free trace and the true (time, peak value) of the
-        incident and reflected pulses: amplitudes above the level before each pulse's foot."""
-        x = np.asarray(samples, dtype=np.float64)
-        levels = pulse_levels(x, dt, t0, [incident[0], reflected[0]], [incident[1], reflected[1]])
-        return cls(incident[0], reflected[0], incident[1] - levels[0], reflected[1] - levels[1])
+        """Truth from a finely sampled noise-free trace that starts before (or at) the impact and
+        the true (time, peak value) of the incident and reflected pulses: amplitudes above the
+        trace's first sample, the sensor's reading before the impact."""
+        base = float(np.asarray(samples, dtype=np.float64)[0])
+        return cls(incident[0], reflected[0], incident[1] - base, reflected[1] - base)
 
     @classmethod
     def from_peaks(cls, samples: np.ndarray, dt: float, t0: float,

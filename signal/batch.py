@@ -53,6 +53,9 @@ class FeatureTable:
     baseline_N: np.ndarray
     noise_N: np.ndarray
     n_pulses: np.ndarray
+    arr_local: np.ndarray
+    incident_rise_N: np.ndarray
+    reflected_rise_N: np.ndarray
 
     def __len__(self) -> int:
         return int(self.detected.size)
@@ -86,6 +89,9 @@ class FeatureTable:
             secondary_ratios=[float(r) for r in self.secondary_ratios[i, :count]],
             baseline_N=float(self.baseline_N[i]),
             noise_N=float(self.noise_N[i]),
+            arr_local=opt(self.arr_local[i]),
+            incident_rise_N=float(self.incident_rise_N[i]),
+            reflected_rise_N=opt(self.reflected_rise_N[i]),
         )
 
     def to_features(self) -> list[Features | None]:
@@ -183,6 +189,7 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
     has_ref = counts > 1
     times = t0 + rows[:, :, K.P_TIME] * dt
     amps = rows[:, :, K.P_AMP]
+    rise = rows[:, :, K.P_RISE]
     inc_t, inc_a = times[:, 0], amps[:, 0]
     ref_t = np.where(has_ref, times[:, 1], nan)
     ref_a = np.where(has_ref, amps[:, 1], nan)
@@ -226,4 +233,7 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
         baseline_N=np.where(detected, sign * rows[:, 0, K.P_BASE], nan),
         noise_N=noise,
         n_pulses=counts,
+        arr_local=np.where(has_ref, rise[:, 1] / np.where(detected, rise[:, 0], 1.0), nan),
+        incident_rise_N=np.where(detected, rise[:, 0], nan),
+        reflected_rise_N=np.where(has_ref, rise[:, 1], nan),
     )

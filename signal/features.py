@@ -1,7 +1,12 @@
 """Features of a shot (TOF, ARR, SNR, flags) and their aggregate over repeated shots.
 
-TOF = t_reflected - t_incident and ARR = F_reflected / F_incident (the paper's Secs.
-4.1.2-4.1.3), both from :func:`solitonde.signal.pulses.detect`. A shot without a detectable
+TOF = t_reflected - t_incident, the time between the two pulses' peaks, and ARR =
+F_reflected / F_incident, the ratio of their peaks above the sensor's reading before the impact
+(the paper's definitions, Secs. 4.1.2-4.1.3), both from :func:`solitonde.signal.pulses.detect`.
+``arr_local`` is the ratio of the pulses' rises above the level the sensor holds just before
+each (the extractor's ARR before it measured the paper's): immune to a baseline drift that the
+pre-trigger cannot show, but larger than the ARR wherever the chain decompresses between the
+pulses (gravity on: by 0.8 % of the ARR at D/t 2, 7 % at D/t 4). A shot without a detectable
 reflection has no TOF and no ARR; it carries ``arr_upper_bound`` instead (the largest
 excursion after the incident, or the detection threshold, over the incident peak), so a number
 is never made up from noise.
@@ -40,8 +45,10 @@ class Features:
     """What one shot says: times and peaks of the incident and reflected pulses, TOF, ARR, flags.
 
     ``None`` marks a quantity the shot does not support (no reflection: no TOF, ARR, reflected
-    time or peak). ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the
-    reflection (peak over the incident peak).
+    time or peak). Peaks are above ``baseline_N``, the pre-impact reading at the incident's peak;
+    ``*_rise_N`` and ``arr_local`` are the rises above the level just before each pulse.
+    ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the reflection (peak
+    over the incident peak).
     """
 
     tof_s: float | None
@@ -57,6 +64,9 @@ class Features:
     secondary_ratios: list[float] = field(default_factory=list)
     baseline_N: float = 0.0
     noise_N: float = 0.0
+    arr_local: float | None = None
+    incident_rise_N: float | None = None
+    reflected_rise_N: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict with unit-carrying keys; flags as a list of names."""
@@ -74,6 +84,9 @@ class Features:
             "secondary_ratios": list(self.secondary_ratios),
             "baseline_N": self.baseline_N,
             "noise_N": self.noise_N,
+            "arr_local": self.arr_local,
+            "incident_rise_N": self.incident_rise_N,
+            "reflected_rise_N": self.reflected_rise_N,
         }
 
 
@@ -102,6 +115,9 @@ def from_detection(det: Detection) -> Features:
         secondary_ratios=[p.peak_N / inc.peak_N for p in det.secondary],
         baseline_N=det.baseline_N,
         noise_N=det.noise_N,
+        arr_local=None if ref is None else ref.rise_N / inc.rise_N,
+        incident_rise_N=inc.rise_N,
+        reflected_rise_N=None if ref is None else ref.rise_N,
     )
 
 

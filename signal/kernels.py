@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from .extrema import vargmax, vmax, vmin
+from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
 from .pulse_fit import R_MAX, R_MIN, fit_pulse, parabola_top, solve_spd, template  # noqa: F401
 from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
 from .smoothing import (  # noqa: F401
@@ -42,18 +43,28 @@ LEVEL_SPAN = 12.0
 """The baseline window before a pulse's foot is at most this many FWHM long (the noise of the
 level falls as the root of its length; the slow trend carries it to the peak)."""
 
+BASELINE_SPAN = 3.0
+"""The pre-impact baseline is measured on the pre-trigger samples at least this many FWHM before
+the incident's peak."""
+
 TRUNC_SPAN = 2.5
 """A pulse counts as truncated when the record ends (or starts) within this many FWHM of its peak
 while the pulse is still above ``fit_fraction`` of its height."""
 
-# Columns of the head array returned by analyze.
+# Columns of the head array returned by analyze (H_PRE0, H_PRE1: the pre-impact baseline
+# H_PRE0 + H_PRE1 * i at sample i, in the sign-corrected trace).
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
- H_UPPER) = range(10)
-HEAD = 10
-# Columns of the per-pulse array returned by analyze (times and widths in samples).
+ H_UPPER, H_PRE0, H_PRE1) = range(12)
+HEAD = 12
+# Columns of the per-pulse array returned by analyze (times and widths in samples). P_AMP is the
+# peak above the pre-impact baseline P_BASE (at the peak), P_RISE the template's height above
+# the level the sensor holds just before the pulse (P_LEVEL_N; drift-immune), P_METHOD 0
+# template, 1 parabola (template fit failed), 2 refined on the data's top (see local_refine).
+# P_RUNG is the refinement rung the peak value comes from (peak_refine.LADDER; its length: the
+# template), P_VALUES.. the value on every rung (NaN where unusable), in the trace's units.
 (P_TIME, P_AMP, P_BASE, P_WIDTH, P_ONSET, P_END, P_INDEX, P_METHOD, P_TRUNC, P_MERGED,
- P_LEVEL) = range(11)
-PULSE = 11
+ P_LEVEL, P_RISE, P_LEVEL_N, P_RUNG, P_VALUES) = range(15)
+PULSE = P_VALUES + len(LADDER) + 1
 
 
 MAX_ABS_SAMPLE = 1e12
@@ -482,9 +493,12 @@ def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks:
 @njit(cache=True)
 def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, ip: int,
                    lo: int, hi: int, wj: float, prev_end: int, thr: float, fit_fraction: float,
-                   shape_r: float, sk: float, nfree: int, max_iter: int, row: np.ndarray) -> int:
+                   shape_r: float, sk: float, nfree: int, max_iter: int, sigma: float,
+                   pre: np.ndarray, row: np.ndarray) -> int:
     """Fill ``row[P_*]`` for the pulse at sample ``ip`` (between valleys ``lo`` and ``hi``, width
-    ``wj``): its own baseline, then the template fit to its top (a parabola when the fit fails).
+    ``wj``): the level before it, the template fit to its top (a parabola when the fit fails),
+    then the peak refined on the data (:func:`refine_peak`) and measured above the pre-impact
+    baseline ``pre[0] + pre[1] * i`` (``pre[2]`` 0: no pre-trigger, the slow trend stands in).
     Returns where this pulse's foot ends (the next pulse's baseline starts after it)."""
     n = y.size
     # Baseline: the level (about the slow trend) the sensor holds before the pulse's foot.
@@ -533,9 +547,24 @@ def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray
             t_pk, amp = 0.0, 1.0
         width = float(hb - ha + 1)
     a, b = pulse_extent(v, ip, 0.5 * thr, lo, hi + 1)
-    row[P_TIME] = ip + t_pk
-    row[P_AMP] = amp * top
-    row[P_BASE] = base_j
+    # The template's peak in the trace's units, then the peak refined on the data's top: the
+    # template's shape is fixed, a pulse's is not (skewed or flat-topped reflections).
+    t_fit = ip + t_pk
+    top_fit = base_j + amp * top
+    half = 0.5 * width * 1.0 / np.log(2.0) ** (1.0 / shape_r)
+    values = row[P_VALUES:P_VALUES + len(LADDER) + 1]
+    t_ref, top_ref, refined, rung = refine_peak(y, t_fit, top_fit, amp * top, half, shape_r, a,
+                                                b, sigma, values)
+    row[P_RUNG] = rung
+    if refined:
+        method = 2.0
+    i_ref = min(max(round(t_ref), 0), n - 1)
+    base_pre = pre[0] + pre[1] * t_ref if pre[2] > 0 else line[i_ref]
+    row[P_TIME] = t_ref
+    row[P_AMP] = top_ref - base_pre
+    row[P_BASE] = base_pre
+    row[P_RISE] = amp * top
+    row[P_LEVEL_N] = base_j
     row[P_WIDTH] = width
     row[P_ONSET] = a
     row[P_END] = b
@@ -643,15 +672,32 @@ def analyze(
 
     bounds = _bounds(v, peaks)
     widths = _widths(v, peaks, bounds)
+    # The pre-impact baseline from the pre-trigger up to BASELINE_SPAN FWHM before the incident's
+    # peak: the solitary wave's leading tail, still 0.5 % of its peak at the foot, would tilt it.
+    pre = pre_impact_baseline(y, min(n_pre, int(peaks[0] - BASELINE_SPAN * widths[0])))
+    head[H_PRE0] = pre[0] if pre[2] > 0 else line[0]
+    head[H_PRE1] = pre[1] if pre[2] > 0 else 0.0
     nfree = 4 if free_r else 3
+    # The refinement's errors take the noise where the baseline is measured (coloured noise
+    # included): the detection's segment reaches into the incident's leading tail, which on a
+    # clean trace is all its "noise". Without such a segment, the smoothed noise's excess over
+    # white noise's tells the colour.
+    if pre[2] > 0:
+        sigma_top = max(pre[3], floor)
+    else:
+        sigma_top = sigma * max(1.0, sigma_s / max(smoother_gain(h) * sigma, 1e-300))
     prev_end = 0
     for j in range(m):
         sk = skew if j == 0 else -skew  # the later pulses travel back up the chain
         prev_end = _measure_pulse(y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
                                   prev_end, thr, fit_fraction, shape_r, sk, nfree, max_iter,
-                                  out[j])
+                                  sigma_top, pre, out[j])
         out[j, P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
+    if m >= 2:  # the incident and the reflection on one rung: their ratio is the ARR
+        k = common_rung(out[:2, P_VALUES:], out[:2, P_RUNG])
+        for j in range(2):
+            out[j, P_AMP] = out[j, P_VALUES + k] - out[j, P_BASE]
     # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
     first = min(n, int(peaks[0] + FOOT * widths[0]) + 1)
     after = max(0.0, vmax(v[first:])) if first < n else 0.0

@@ -18,20 +18,26 @@ number is never picked out of noise:
    (follows acquisition drift and the chain's slow level changes); detection is redone against it.
 5. Incident = first pulse; reflected = the next one (flagged ``overlapping`` if the incident has
    not decayed in between); the rest are secondary pulses.
-6. Each pulse is measured on the raw samples. Its baseline is the level the sensor holds just
-   before it: the mean of the samples (about the slow trend) between the previous pulse's foot
-   and this pulse's foot (at most 6 FWHM), carried along the trend to the peak. After the
-   incident the chain decompresses and the sensor sits below its static reading; a reflection is
-   measured from where it starts, as an experimenter reading the trace would, and the synthetic
-   truth in :mod:`solitonde.signal.accuracy` uses the same definition. Then the skewed
-   super-Gaussian ``A exp(-|u|^r)``, ``u = (t - tc) / (w (1 +- skew))`` is fitted by least
-   squares (amplitude, time, width; ``r`` too if asked) to the part of the pulse above
-   ``fit_fraction`` of its height. ``tc`` is the sub-sample peak time and ``A`` the peak above
-   the baseline. The chain's solitary wave at the sensor rises slightly faster than it falls
-   (half-widths differ by about 1 %); a reflection travels the other way up the chain, so its
-   time profile is mirrored: the incident gets ``+skew``, later pulses ``-skew``. A symmetric
-   template would read the incident about +0.1 us late and the reflection -0.1 us early. If the
-   fit fails, a least-squares parabola through the top is used instead.
+6. Each pulse is measured on the raw samples, as the paper defines TOF and ARR: its peak time,
+   and its peak's height above the sensor's reading before the impact (the pre-trigger up to 3
+   FWHM before the incident's peak: its mean, or its least-squares line where its slope is four
+   standard errors from zero). First the skewed super-Gaussian ``A exp(-|u|^r)``,
+   ``u = (t - tc) / (w (1 +- skew))``, is fitted by least squares (amplitude, time, width; ``r``
+   too if asked) to the part of the pulse above ``fit_fraction`` of its height, on the level the
+   sensor holds just before the pulse (the mean of the samples about the slow trend between the
+   previous pulse's foot and this one's, at most 12 FWHM). The chain's incident pulse rises
+   slightly faster than it falls; a reflection travels the other way up the chain, so the
+   incident gets ``+skew``, later pulses ``-skew``. If the fit fails, a least-squares parabola
+   through the top is used instead. That template reads a pulse of its own shape with the least
+   noise, but reflections differ (from a soft plate without preload they rise slower than they
+   fall, flat-topped near D/t 4, split in two humps above), and the fitted peak then misses the
+   pulse's by up to several microseconds and percent. So the peak is refined on the data's top
+   (:mod:`.peak_refine`): quartics over windows from a few samples to a quarter of the pulse's
+   height, the widest estimate (the template's last) that agrees with every narrower one within
+   its noise is kept, time and height apart. A clean trace gets the trace's own peak; a noisy one
+   keeps the template's wherever the data cannot tell it wrong. The incident and the reflection
+   are read on the same window for the ARR. The template's height above the level before the
+   pulse stays as ``rise_N`` (drift-immune; see :mod:`solitonde.signal.features`).
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ FLAGS = (
 )
 """Every quality flag detection can raise, in the order they are reported."""
 
+METHODS = ("template", "parabola", "refined")
+"""Where a pulse's peak comes from, by the kernel's ``P_METHOD`` code."""
 MIN_PRETRIGGER = K.MIN_PRETRIGGER
 SHAPE_EXPONENT = 2.38
 """Exponent r of the fitted shape: least squares of the skewed template against the chain
@@ -161,9 +169,14 @@ class DetectOptions:
 class Pulse:
     """One detected pulse, refined on the raw samples.
 
-    ``time_s`` is the sub-sample peak time, ``peak_N`` the peak above the local baseline,
-    ``width_s`` the full width at half maximum of the fitted shape, ``method`` ``"template"`` or
-    ``"parabola"`` (the fall-back).
+    ``time_s`` is the sub-sample peak time and ``peak_N`` the peak above the pre-impact baseline
+    ``baseline_N`` (the sensor's reading before the impact, at the peak's time): the paper's
+    definitions. ``rise_N`` is the fitted template's height above ``level_N``, the level the
+    sensor holds just before the pulse (immune to baseline drift, but not the paper's amplitude:
+    after the incident the chain decompresses and the sensor sits below its static reading).
+    ``width_s`` is the full width at half maximum of the fitted shape; ``method`` says where the
+    peak comes from: ``"template"``, ``"refined"`` (the data's top, where the template's shape
+    misses the pulse's) or ``"parabola"`` (the template fit failed).
     """
 
     time_s: float
@@ -175,6 +188,8 @@ class Pulse:
     snr_db: float
     index: int
     method: str
+    rise_N: float = math.nan
+    level_N: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -291,7 +306,8 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
             time_s=t0 + row[K.P_TIME] * dt, peak_N=amp, baseline_N=sign * row[K.P_BASE],
             width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
             end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
-            method="parabola" if row[K.P_METHOD] else "template",
+            method=METHODS[int(row[K.P_METHOD])], rise_N=row[K.P_RISE],
+            level_N=sign * row[K.P_LEVEL_N],
         ))
     if cut_secondary:
         notes.append("a secondary pulse runs past the end of the record (TOF and ARR are whole)")

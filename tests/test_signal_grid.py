@@ -1,8 +1,9 @@
 """Noise-free model traces of the paper's 3 x 3 grid through the extractor (regression for the
 pre-trigger that once reached into the incident pulse of D = 19.05 mm, t = 3.18 mm).
 
-Truth: the model's own peaks (integration-step resolution), amplitudes above the level before each
-pulse's foot (Truth.from_trace, the extractor's baseline definition). Where D/t > 5 the reflection
+Truth: the model's own peaks (integration-step resolution), amplitudes above the reading before the
+impact (Truth.from_trace, the paper's definition and the extractor's). The record starts at the
+impact, so the pre-trigger is short (tests/test_feature_bias.py measures through as_measured). Where D/t > 5 the reflection
 splits into a train of small pulses (paper: ARR near 0); there only the incident is compared.
 """
 

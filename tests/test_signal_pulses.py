@@ -51,14 +51,23 @@ def test_noise_free_train(t_inc, tof, support, amp, arr, baseline):
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**31), arr=st.floats(0.3, 1.0), n_sec=st.integers(0, 3))
 def test_noisy_train_with_secondaries(seed, arr, n_sec):
-    """At 40 dB with drift and 12 bits: TOF within a sample, ARR within 3 %, secondaries found."""
+    """At 40 dB with drift and 12 bits: TOF within a sample, secondaries found; the rises above
+    the level before each pulse (``arr_local``, immune to drift) within 3 %, and so the ARR on
+    the same shot without the drift.
+
+    The ARR (heights above the pre-impact baseline, the paper's) carries a drift that the short
+    pre-trigger cannot show: 2 % of the incident over the record is up to 4 % of an ARR of 0.5 at
+    the reflection, and no estimator can tell it from the sensor's own level.
+    """
     pulses = [(150e-6, 30.0, 80e-6), (550e-6, 30.0 * arr, 85e-6)]
     pulses += [(700e-6 + 130e-6 * k, 30.0 * arr * 0.5, 85e-6) for k in range(n_sec)]
     w = shot(pulses, noise=40.0, seed=seed, drift=0.02, bits=12)
     f = extract(w)
     assert "no_reflection" not in f.flags
     assert abs(f.tof_s - 400e-6) < DT
-    assert f.arr == pytest.approx(arr, rel=0.03)
+    assert f.arr_local == pytest.approx(arr, rel=0.03)
+    still = extract(shot(pulses, noise=40.0, seed=seed, bits=12))
+    assert still.arr == pytest.approx(arr, rel=0.03)
     assert len(f.secondary_times_s) == n_sec
     for k, t in enumerate(f.secondary_times_s):
         assert abs(t - (700e-6 + 130e-6 * k)) < 2 * DT
