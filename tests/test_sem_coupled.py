@@ -94,7 +94,7 @@ def test_small_spheres_at_the_centre_see_an_infinite_plate() -> None:
 
 def test_auto_picks_a_finite_plate_near_the_support_and_infinite_far_from_it() -> None:
     """auto: infinite beyond auto_margin x L_c (k = 0.57) from every edge, else a Green's
-    function: the Mindlin plate's inside the measured D/t range, the 3-D plate's outside it or
+    function: the Mindlin plate's from the smallest measured D/t up, the 3-D plate's below it or
     when sem.plate_theory says so; the reason names the distance, L_c and D/t."""
     scene = load_scene(None, [])
     l_c = critical_distance(scene, k=0.57)
@@ -116,7 +116,7 @@ def test_auto_picks_a_finite_plate_near_the_support_and_infinite_far_from_it() -
     # a sphere much smaller than the thickness: outside the measured range, the 3-D plate
     thick = load_scene(None, ["plate.distance_to_support=0.01", "plate.thickness=0.03"])
     name, reason = resolve_plate_model(thick)
-    assert name == "greens" and "outside" in reason
+    assert name == "greens" and "below 0.5" in reason
 
 
 def test_near_the_support_arr_rises_and_tof_falls() -> None:

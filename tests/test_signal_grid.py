@@ -3,8 +3,9 @@ pre-trigger that once reached into the incident pulse of D = 19.05 mm, t = 3.18 
 
 Truth: the model's own peaks (integration-step resolution), amplitudes above the reading before the
 impact (Truth.from_trace, the paper's definition and the extractor's). The record starts at the
-impact, so the pre-trigger is short (tests/test_feature_bias.py measures through as_measured). Where D/t > 5 the reflection
-splits into a train of small pulses (paper: ARR near 0); there only the incident is compared.
+impact, so the pre-trigger is short (tests/test_feature_bias.py measures through as_measured).
+Where D/t > 5 the reflection splits into a train of small pulses (paper: ARR near 0); there
+only the incident is compared.
 """
 
 from __future__ import annotations
