@@ -318,10 +318,16 @@ def test_floor_level_reflection_next_to_no_reflection_nodes_does_not_pin_the_dis
     lo, hi = est.thickness_m.ci95
     assert lo < t < hi
     # a reflection well above the floor is no match for the no-reflection nodes: only a support
-    # near by returns that much (the answer moves there)
+    # near by returns that much, so either the answer moves there or, where no cell near the
+    # support fits it together with the other two sizes (the table rebuilt with the Mindlin plate
+    # and the pre-impact ARR: best chi^2 59.6 against 38.3), the size is left out as disagreeing.
+    # Never a far-field answer that counts it as explained.
     inputs[-1] = {"diameter_m": 9.53e-3, "tof_s": 794e-6, "arr": 0.4, "n_shots": 5}
-    near = invert(table, inputs).distance_m
-    assert near.status == "constrained" and near.ci95[1] < 0.1
+    loud = invert(table, inputs)
+    if 9.53e-3 in loud.extra.get("excluded_diameters_m", []):
+        assert "D = 9.53 mm left out" in loud.reason
+    else:
+        assert loud.distance_m.status == "constrained" and loud.distance_m.ci95[1] < 0.1
 
 
 def test_at_the_support_a_thin_plate_is_not_ruled_out_by_prior_volume() -> None:
