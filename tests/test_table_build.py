@@ -61,11 +61,12 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_reference_table_is_complete_and_sane(reference: Path) -> None:
-    """All points computed; near the support the finite plate was used; provenance recorded."""
+    """All points computed; near the support the finite plate (auto: the Mindlin plate's Green's
+    function) was used; provenance recorded."""
     t = ModelTable.load(reference)
     assert t.complete and (t.status == STATUS_OK).all()
     names = {t.plate_model_names[int(m)] for m in np.unique(t.plate_model)}
-    assert names == {"greens", "infinite"}
+    assert names == {"mindlin_greens", "infinite"}
     s = t.summary()
     assert s["shape"] == [2, 2, 3]
     prov = s["provenance"]
@@ -124,11 +125,26 @@ def test_partial_of_another_sweep_is_refused(tmp_path: Path) -> None:
 
 
 def test_one_greens_function_serves_every_sphere_size() -> None:
-    """Near the support all sizes use the finite plate, and the task computes one response."""
-    result = run_plate(tiny_sweep().to_dict(), 0, 1)
+    """Near the support all sizes use the finite plate; on the 3-D plate (one mesh for every
+    size) the task computes one response."""
+    sweep = Sweep([4.76e-3, 9.53e-3], [3e-3, 5e-3], [0.0, 0.02, 0.3],
+                  scene={**FAST, "sem": {**FAST["sem"], "plate_theory": "3d"}})
+    result = run_plate(sweep.to_dict(), 0, 1)
     assert {p["plate_model"] for p in result["points"].values()} == {"greens"}
     assert result["greens_computed"] == 1
     assert len(result["points"]) == 2
+
+
+def test_the_mindlin_plate_computes_one_response_per_mesh() -> None:
+    """The Mindlin plate's mesh follows each size's flexural wavelength: a response per distinct
+    mesh, none computed twice."""
+    from solitonde.model.sem_tier import mindlin_elements
+
+    sweep = tiny_sweep()
+    result = run_plate(sweep.to_dict(), 0, 1)
+    assert {p["plate_model"] for p in result["points"].values()} == {"mindlin_greens"}
+    meshes = {mindlin_elements(sweep.scene_at(i, 0, 1)) for i in range(2)}
+    assert result["greens_computed"] == len(meshes)
 
 
 def test_point_features_are_the_signal_packages(reference: Path) -> None:
