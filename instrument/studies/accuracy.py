@@ -147,7 +147,10 @@ def configs(quick: bool = False) -> list[Config]:
     return out
 
 
-def _features(scene: Scene, cache: greens.GreensCache | None = None) -> dict[str, Any]:
+def first_shot(scene: Scene, cache: greens.GreensCache | None = None) -> dict[str, Any]:
+    """TOF and ARR as the extractor reads them, the model's own peaks, and the cost of a shot at
+    a new plate: the plate assembled (its process cache cleared) and, without ``cache``, its
+    response computed."""
     sem_tier._plate_cached.cache_clear()  # time the plate assembly too
     started = time.perf_counter()
     r = simulate(scene, greens_cache=greens.MemoryCache() if cache is None else cache)
@@ -183,13 +186,13 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
     ref_cfg = reference_config(quick)
     reference = {}
     for name, distance in SCENES_M.items():
-        reference[name] = _features(ref_cfg.scene(distance))
+        reference[name] = first_shot(ref_cfg.scene(distance))
         tick(f"reference, {name}")
     rows = []
     for cfg in configs(quick):
         for name, distance in SCENES_M.items():
             cache = greens.MemoryCache()  # cold: no response from an earlier config
-            res = _features(cfg.scene(distance), cache)
+            res = first_shot(cfg.scene(distance), cache)
             warm = math.nan
             if cfg.tier in CONVOLVED_PLATE_MODELS:  # plate and response kept, as in a table
                 started = time.perf_counter()

@@ -18,20 +18,16 @@ use) or the coupled runs (``sem`` / ``mindlin``).
 
 from __future__ import annotations
 
-import math
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import product
 from typing import Any
 
-from solitonde.instrument.studies.accuracy import BUDGETS
-from solitonde.instrument.tables.measured import as_measured
-from solitonde.model import greens, sem_tier
+from solitonde.instrument.studies.accuracy import BUDGETS, first_shot
+from solitonde.model import greens
 from solitonde.model.scene import Scene, load_scene, scene_from_dict
 from solitonde.model.sem_tier import mindlin_elements
 from solitonde.model.simulate import simulate
-from solitonde.signal.features import extract
 
 PAIRS = {"greens": ("greens", "mindlin_greens"), "coupled": ("sem", "mindlin")}
 """The 3-D model and its Mindlin counterpart, per kind of run."""
@@ -69,24 +65,6 @@ def default_points(quick: bool = False) -> list[Point]:
     return [Point(d, t, l) for d, t, l in product(DIAMETERS_M, THICKNESSES_M, DISTANCES_M)]
 
 
-def _run(scene: Scene) -> dict[str, Any]:
-    """Features and cost of one first shot (plate assembled, response computed, no reuse)."""
-    sem_tier._plate_cached.cache_clear()
-    started = time.perf_counter()
-    result = simulate(scene, greens_cache=greens.MemoryCache())
-    wall = time.perf_counter() - started
-    features = extract(as_measured(result))
-    mesh = result.diagnostics.get("mesh") or {}
-    return {
-        "tof_s": math.nan if features.tof_s is None else features.tof_s,
-        "arr": math.nan if features.arr is None else features.arr,
-        "wall_s": wall,
-        "dofs": mesh.get("dofs", 0),
-        "plate_dt_s": result.diagnostics.get("dt_s"),
-        "energy_drift": result.diagnostics["energy_drift"],
-    }
-
-
 def _warm_up(pair: tuple[str, str]) -> None:
     """Compile every kernel of both models once on a small scene, so no timing includes numba."""
     for tier in pair:
@@ -120,8 +98,8 @@ def compare(points: Sequence[Point], kind: str = "greens",
         elements = mindlin_elements(p.scene(mindlin, overrides))
         mesh = ([f"sem.elements=[{elements[0]},{elements[1]},{elements[2]}]"]
                 if reference_mesh == "same-mesh" else [])
-        ref = _run(p.scene(reference, [*overrides, *mesh]))
-        new = _run(p.scene(mindlin, overrides))
+        ref = first_shot(p.scene(reference, [*overrides, *mesh]))
+        new = first_shot(p.scene(mindlin, overrides))
         tof_error = abs(new["tof_s"] - ref["tof_s"]) / ref["tof_s"]
         arr_error = abs(new["arr"] - ref["arr"]) / ref["arr"]
         rows.append({
