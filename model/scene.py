@@ -257,7 +257,8 @@ class OutputSpec(_Section):
 
 
 class SemSpec(_Section):
-    """Spectral-element plate discretisation (plate models ``sem``, ``greens``, ``auto``)."""
+    """Meshed plate discretisation (plate models ``sem``, ``greens``, ``mindlin``,
+    ``mindlin_greens``, ``auto``)."""
 
     preset: Literal["resolved", "paper"] = Field(
         "resolved", description="'resolved': the contact patch below, resolved by local "
@@ -288,8 +289,9 @@ class SemSpec(_Section):
     )
     plate_theory: Literal["auto", "3d", "mindlin"] = Field(
         "auto", description="the meshed plate effects.plate_model 'auto' uses near a support: "
-        "'3d' (greens), 'mindlin' (mindlin_greens), or 'auto': Mindlin wherever it was measured "
-        "within the table budget of the 3-D plate (README, 'Where a 2-D plate suffices')",
+        "'3d' (greens), 'mindlin' (mindlin_greens), or 'auto': Mindlin from D/t = 0.5 up, where "
+        "it was measured within the table budget of the 3-D plate, 3-D below (README, 'Where a "
+        "2-D plate suffices')",
     )
     elements_per_wavelength: Number = Field(
         1.0, ge=0.0, le=8.0, description="plate models 'mindlin' and 'mindlin_greens': at least "
