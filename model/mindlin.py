@@ -35,7 +35,7 @@ from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
 from .mesh import PlateMesh
 from .mindlin_kernels import mindlin_operator
-from .plate_base import ExplicitPlate
+from .plate_base import ExplicitPlate, element_bound, support_masks
 
 SHEAR_FACTOR = np.pi**2 / 12.0
 """Mindlin's shear correction kappa (matches the 3-D thickness-shear cut-off frequency)."""
@@ -134,12 +134,9 @@ class MindlinPlate(ExplicitPlate):
     @cached_property
     def element_bound(self) -> float:
         """max over elements of lambda_max(K_e, M_e): an upper bound of ``max_eigenvalue``."""
-        best = 0.0
-        for s, size in enumerate(self.sizes):
-            d = 1.0 / np.sqrt(element_mass(tuple(size), self.mesh.order[:2], self.material,
-                                           self.thickness))
-            best = max(best, float(np.linalg.eigvalsh(self.kes[s] * d[:, None] * d[None, :])[-1]))
-        return best
+        return element_bound(self.kes, [
+            element_mass(tuple(size), self.mesh.order[:2], self.material, self.thickness)
+            for size in self.sizes])
 
     def describe(self) -> dict[str, object]:
         """JSON-ready summary of the mesh as this plate uses it."""
@@ -182,13 +179,10 @@ def build_mindlin_plate(mesh: PlateMesh, material: Material,
                         supports: str = "opposite_edges") -> MindlinPlate:
     """Element matrices, diagonal mass and constraints of the Mindlin plate on ``mesh``'s
     in-plane grid, of thickness ``mesh``'s z extent."""
-    from .sem import SUPPORTS
-
-    if supports not in SUPPORTS:
-        raise ValueError(f"supports must be one of {', '.join(SUPPORTS)}, got {supports!r}")
     thickness = float(mesh.z_edges[-1])
     px, py, _ = mesh.order
     conn, el_sizes, xy = _in_plane(mesh)
+    clamped, mirror = support_masks(xy[:, 0], xy[:, 1], mesh, supports)
     scale = float(el_sizes.max())
     uniq, shape_id = np.unique(np.round(el_sizes / scale, 11), axis=0, return_inverse=True)
     shape_id = shape_id.ravel().astype(np.int64)
@@ -204,17 +198,8 @@ def build_mindlin_plate(mesh: PlateMesh, material: Material,
         np.add.at(dof_mass, els.ravel(), np.tile(me, els.shape[0]))
 
     fixed = np.zeros((n_nodes, 3), dtype=bool)
-    x, y = xy[:, 0], xy[:, 1]
-    lx, ly = float(mesh.x_edges[-1]), float(mesh.y_edges[-1])
-    tol = 1e-9 * max(lx, mesh.full_width)
-    if supports in ("opposite_edges", "all_edges"):
-        fixed[(np.abs(x) < tol) | (np.abs(x - lx) < tol)] = True
-    if supports == "all_edges":
-        fixed[np.abs(y) < tol] = True
-        if not mesh.symmetry:
-            fixed[np.abs(y - ly) < tol] = True
-    if mesh.symmetry:
-        fixed[np.abs(y - ly) < tol, 2] = True
+    fixed[clamped] = True
+    fixed[mirror, 2] = True  # theta_y, the rotation that moves a point across the mirror plane
     inv_mass = 1.0 / dof_mass
     inv_mass[fixed.ravel()] = 0.0
 

@@ -13,7 +13,42 @@ from functools import cached_property
 import numpy as np
 from scipy.sparse.linalg import LinearOperator, eigsh
 
+from .mesh import PlateMesh
 from .sem_kernels import run_plate_load, stiffness_product
+
+SUPPORTS = ("opposite_edges", "all_edges", "none")
+
+
+def support_masks(x: np.ndarray, y: np.ndarray, mesh: PlateMesh,
+                  supports: str) -> tuple[np.ndarray, np.ndarray]:
+    """(clamped, mirror): the nodes at in-plane positions ``x``, ``y`` on a clamped edge (every
+    dof fixed) and on the symmetry plane y = Ly/2 of a half model (the dof that moves across it
+    fixed). ``supports`` is one of :data:`SUPPORTS`; clamped edges are x = 0 and x = Lx, and with
+    ``all_edges`` also y = 0 and, on a full model, y = Ly."""
+    if supports not in SUPPORTS:
+        raise ValueError(f"supports must be one of {', '.join(SUPPORTS)}, got {supports!r}")
+    lx, ly = float(mesh.x_edges[-1]), float(mesh.y_edges[-1])
+    tol = 1e-9 * max(lx, mesh.full_width)
+    on_top = np.abs(y - ly) < tol
+    clamped = np.zeros(x.shape, dtype=bool)
+    if supports in ("opposite_edges", "all_edges"):
+        clamped |= (np.abs(x) < tol) | (np.abs(x - lx) < tol)
+    if supports == "all_edges":
+        clamped |= np.abs(y) < tol
+        if not mesh.symmetry:
+            clamped |= on_top
+    mirror = on_top if mesh.symmetry else np.zeros(x.shape, dtype=bool)
+    return clamped, mirror
+
+
+def element_bound(kes: np.ndarray, masses: list[np.ndarray]) -> float:
+    """max over element shapes of lambda_max(K_e, M_e) with a diagonal M_e (per dof): an upper
+    bound of the largest eigenvalue of the assembled M^-1 K, so 2 / sqrt of it is a safe step."""
+    best = 0.0
+    for k, m in zip(kes, masses, strict=True):
+        d = 1.0 / np.sqrt(m)
+        best = max(best, float(np.linalg.eigvalsh(k * d[:, None] * d[None, :])[-1]))
+    return best
 
 
 class ExplicitPlate:

@@ -23,10 +23,8 @@ from threadpoolctl import threadpool_limits
 from .gll import gll_derivative_matrix, gll_weights
 from .materials import Material
 from .mesh import PlateMesh
-from .plate_base import ExplicitPlate
+from .plate_base import ExplicitPlate, element_bound, support_masks
 from .sem_kernels import dense_operator, run_plate_load, stiffness_product, sumfact_operator
-
-SUPPORTS = ("opposite_edges", "all_edges", "none")
 
 
 @contextmanager
@@ -159,12 +157,9 @@ class ElasticPlate(ExplicitPlate):
     def element_bound(self) -> float:
         """max over elements of lambda_max(K_e, M_e): an upper bound of ``max_eigenvalue``."""
         sizes, _ = self.mesh.shapes
-        best = 0.0
-        for s, size in enumerate(sizes):
-            me = np.repeat(element_mass(tuple(size), self.mesh.order, self.material.density), 3)
-            d = 1.0 / np.sqrt(me)
-            best = max(best, float(np.linalg.eigvalsh(self.kes[s] * d[:, None] * d[None, :])[-1]))
-        return best
+        return element_bound(self.kes, [
+            np.repeat(element_mass(tuple(size), self.mesh.order, self.material.density), 3)
+            for size in sizes])
 
     def run_point_force(self, force: np.ndarray, dt: float, record_dofs: np.ndarray | None = None,
                         dof: int | None = None) -> np.ndarray:
@@ -199,8 +194,7 @@ def build_plate(
     mesh: PlateMesh, material: Material, supports: str = "opposite_edges"
 ) -> ElasticPlate:
     """Element matrices, diagonal mass and constraints of a meshed plate."""
-    if supports not in SUPPORTS:
-        raise ValueError(f"supports must be one of {', '.join(SUPPORTS)}, got {supports!r}")
+    clamped, mirror = support_masks(mesh.nodes[:, 0], mesh.nodes[:, 1], mesh, supports)
     sizes, shape_id = mesh.shapes
     kes = np.stack([element_stiffness(tuple(s), mesh.order, material) for s in sizes])
     order = np.argsort(shape_id, kind="stable")
@@ -215,17 +209,8 @@ def build_plate(
         np.add.at(node_mass, els.ravel(), np.tile(me, els.shape[0]))
 
     fixed = np.zeros((mesh.n_nodes, 3), dtype=bool)
-    x, y = mesh.nodes[:, 0], mesh.nodes[:, 1]
-    ax, ay, _ = mesh.axes
-    tol = 1e-9 * max(ax[-1], mesh.full_width)
-    if supports in ("opposite_edges", "all_edges"):
-        fixed[(np.abs(x) < tol) | (np.abs(x - ax[-1]) < tol)] = True
-    if supports == "all_edges":
-        fixed[np.abs(y) < tol] = True
-        if not mesh.symmetry:
-            fixed[np.abs(y - ay[-1]) < tol] = True
-    if mesh.symmetry:
-        fixed[np.abs(y - ay[-1]) < tol, 1] = True
+    fixed[clamped] = True
+    fixed[mirror, 1] = True  # u_y across the mirror plane
     inv_mass = np.repeat(1.0 / node_mass, 3)
     inv_mass[fixed.ravel()] = 0.0
     nodes, weights = mesh.contact_load

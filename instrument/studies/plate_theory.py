@@ -95,11 +95,12 @@ def compare(points: Sequence[Point], kind: str = "greens",
     budget = BUDGETS["table_build"]
     rows = []
     for p in points:
-        elements = mindlin_elements(p.scene(mindlin, overrides))
+        scene = p.scene(mindlin, overrides)
+        elements = mindlin_elements(scene)
         mesh = ([f"sem.elements=[{elements[0]},{elements[1]},{elements[2]}]"]
                 if reference_mesh == "same-mesh" else [])
         ref = first_shot(p.scene(reference, [*overrides, *mesh]))
-        new = first_shot(p.scene(mindlin, overrides))
+        new = first_shot(scene)
         tof_error = abs(new["tof_s"] - ref["tof_s"]) / ref["tof_s"]
         arr_error = abs(new["arr"] - ref["arr"]) / ref["arr"]
         rows.append({
