@@ -56,6 +56,8 @@ class FeatureTable:
     arr_local: np.ndarray
     incident_rise_N: np.ndarray
     reflected_rise_N: np.ndarray
+    tof_peak_s: np.ndarray
+    arr_peak: np.ndarray
 
     def __len__(self) -> int:
         return int(self.detected.size)
@@ -92,6 +94,8 @@ class FeatureTable:
             arr_local=opt(self.arr_local[i]),
             incident_rise_N=float(self.incident_rise_N[i]),
             reflected_rise_N=opt(self.reflected_rise_N[i]),
+            tof_peak_s=opt(self.tof_peak_s[i]),
+            arr_peak=opt(self.arr_peak[i]),
         )
 
     def to_features(self) -> list[Features | None]:
@@ -236,4 +240,8 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
         arr_local=np.where(has_ref, rise[:, 1] / np.where(detected, rise[:, 0], 1.0), nan),
         incident_rise_N=np.where(detected, rise[:, 0], nan),
         reflected_rise_N=np.where(has_ref, rise[:, 1], nan),
+        tof_peak_s=np.where(has_ref, (t0 + rows[:, 1, K.P_PEAK_TIME] * dt)
+                            - (t0 + rows[:, 0, K.P_PEAK_TIME] * dt), nan),
+        arr_peak=np.where(has_ref, rows[:, 1, K.P_PEAK_AMP]
+                          / np.where(detected, rows[:, 0, K.P_PEAK_AMP], 1.0), nan),
     )

@@ -3,6 +3,12 @@
 TOF = t_reflected - t_incident, the time between the two pulses' peaks, and ARR =
 F_reflected / F_incident, the ratio of their peaks above the sensor's reading before the impact
 (the paper's definitions, Secs. 4.1.2-4.1.3), both from :func:`solitonde.signal.pulses.detect`.
+``tof_s`` and ``arr`` read each peak on the fitted solitary-wave template: their mean under
+white noise is what they read on the noise-free trace, at the Cramer-Rao bound's scatter, and
+the model tables hold the same reading of the model's traces, so the shape's offset from the
+trace's own peak (up to a few microseconds and percent on flat or skewed reflections) cancels
+in an estimate. ``tof_peak_s`` and ``arr_peak`` are the trace's own peaks, refined on the
+data's top: exact on a clean trace, but noise moves their mean towards the template's.
 ``arr_local`` is the ratio of the pulses' rises above the level the sensor holds just before
 each (the extractor's ARR before it measured the paper's): immune to a baseline drift that the
 pre-trigger cannot show, but larger than the ARR wherever the chain decompresses between the
@@ -67,6 +73,8 @@ class Features:
     arr_local: float | None = None
     incident_rise_N: float | None = None
     reflected_rise_N: float | None = None
+    tof_peak_s: float | None = None
+    arr_peak: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict with unit-carrying keys; flags as a list of names."""
@@ -87,6 +95,8 @@ class Features:
             "arr_local": self.arr_local,
             "incident_rise_N": self.incident_rise_N,
             "reflected_rise_N": self.reflected_rise_N,
+            "tof_peak_s": self.tof_peak_s,
+            "arr_peak": self.arr_peak,
         }
 
 
@@ -118,6 +128,8 @@ def from_detection(det: Detection) -> Features:
         arr_local=None if ref is None else ref.rise_N / inc.rise_N,
         incident_rise_N=inc.rise_N,
         reflected_rise_N=None if ref is None else ref.rise_N,
+        tof_peak_s=None if ref is None else ref.peak_time_s - inc.peak_time_s,
+        arr_peak=None if ref is None else ref.peak_height_N / inc.peak_height_N,
     )
 
 

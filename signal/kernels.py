@@ -56,14 +56,17 @@ while the pulse is still above ``fit_fraction`` of its height."""
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
  H_UPPER, H_PRE0, H_PRE1) = range(12)
 HEAD = 12
-# Columns of the per-pulse array returned by analyze (times and widths in samples). P_AMP is the
-# peak above the pre-impact baseline P_BASE (at the peak), P_RISE the template's height above
-# the level the sensor holds just before the pulse (P_LEVEL_N; drift-immune), P_METHOD 0
-# template, 1 parabola (template fit failed), 2 refined on the data's top (see local_refine).
-# P_RUNG is the refinement rung the peak value comes from (peak_refine.LADDER; its length: the
-# template), P_VALUES.. the value on every rung (NaN where unusable), in the trace's units.
+# Columns of the per-pulse array returned by analyze (times and widths in samples). P_TIME and
+# P_AMP are the fitted template's peak time and its height above the pre-impact baseline P_BASE
+# (at that time): a fixed estimator, whose mean under noise is its noise-free value. P_PEAK_TIME
+# and P_PEAK_AMP are the peak refined on the data's top (the trace's own peak when clean; see
+# peak_refine), P_RISE the template's height above the level the sensor holds just before the
+# pulse (P_LEVEL_N; drift-immune), P_METHOD 0 template, 1 parabola (template fit failed), 2 the
+# peak refined on the data's top. P_RUNG is the refinement rung the refined value comes from
+# (peak_refine.LADDER; its length: the template), P_VALUES.. the value on every rung (NaN where
+# unusable), in the trace's units.
 (P_TIME, P_AMP, P_BASE, P_WIDTH, P_ONSET, P_END, P_INDEX, P_METHOD, P_TRUNC, P_MERGED,
- P_LEVEL, P_RISE, P_LEVEL_N, P_RUNG, P_VALUES) = range(15)
+ P_LEVEL, P_RISE, P_LEVEL_N, P_RUNG, P_PEAK_TIME, P_PEAK_AMP, P_VALUES) = range(17)
 PULSE = P_VALUES + len(LADDER) + 1
 
 
@@ -558,11 +561,14 @@ def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray
     row[P_RUNG] = rung
     if refined:
         method = 2.0
-    i_ref = min(max(round(t_ref), 0), n - 1)
-    base_pre = pre[0] + pre[1] * t_ref if pre[2] > 0 else line[i_ref]
-    row[P_TIME] = t_ref
-    row[P_AMP] = top_ref - base_pre
+    i_fit = min(max(round(t_fit), 0), n - 1)
+    base_pre = pre[0] + pre[1] * t_fit if pre[2] > 0 else line[i_fit]
+    row[P_TIME] = t_fit
+    row[P_AMP] = top_fit - base_pre
     row[P_BASE] = base_pre
+    i_ref = min(max(round(t_ref), 0), n - 1)
+    row[P_PEAK_TIME] = t_ref
+    row[P_PEAK_AMP] = top_ref - (pre[0] + pre[1] * t_ref if pre[2] > 0 else line[i_ref])
     row[P_RISE] = amp * top
     row[P_LEVEL_N] = base_j
     row[P_WIDTH] = width
@@ -694,10 +700,13 @@ def analyze(
                                   sigma_top, pre, out[j])
         out[j, P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
-    if m >= 2:  # the incident and the reflection on one rung: their ratio is the ARR
+    if m >= 2:  # the refined peaks of the incident and the reflection on one rung
         k = common_rung(out[:2, P_VALUES:], out[:2, P_RUNG])
         for j in range(2):
-            out[j, P_AMP] = out[j, P_VALUES + k] - out[j, P_BASE]
+            t_j = out[j, P_PEAK_TIME]
+            i_j = min(max(round(t_j), 0), n - 1)
+            base_j = pre[0] + pre[1] * t_j if pre[2] > 0 else line[i_j]
+            out[j, P_PEAK_AMP] = out[j, P_VALUES + k] - base_j
     # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
     first = min(n, int(peaks[0] + FOOT * widths[0]) + 1)
     after = max(0.0, vmax(v[first:])) if first < n else 0.0

@@ -169,9 +169,12 @@ class DetectOptions:
 class Pulse:
     """One detected pulse, refined on the raw samples.
 
-    ``time_s`` is the sub-sample peak time and ``peak_N`` the peak above the pre-impact baseline
-    ``baseline_N`` (the sensor's reading before the impact, at the peak's time): the paper's
-    definitions. ``rise_N`` is the fitted template's height above ``level_N``, the level the
+    ``time_s`` is the fitted template's sub-sample peak time and ``peak_N`` its peak above the
+    pre-impact baseline ``baseline_N`` (the sensor's reading before the impact, at that time): a
+    fixed estimator, near the Cramer-Rao bound, whose mean under noise is what it reads on the
+    noise-free trace (the model tables hold that reading). ``peak_time_s`` and ``peak_height_N``
+    are the peak refined on the data's top: the trace's own peak on a clean trace (the paper's
+    definitions exactly), but its mean moves with the noise (see :mod:`.peak_refine`). ``rise_N`` is the fitted template's height above ``level_N``, the level the
     sensor holds just before the pulse (immune to baseline drift, but not the paper's amplitude:
     after the incident the chain decompresses and the sensor sits below its static reading).
     ``width_s`` is the full width at half maximum of the fitted shape; ``method`` says where the
@@ -190,6 +193,8 @@ class Pulse:
     method: str
     rise_N: float = math.nan
     level_N: float = math.nan
+    peak_time_s: float = math.nan
+    peak_height_N: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -307,7 +312,8 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
             width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
             end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
             method=METHODS[int(row[K.P_METHOD])], rise_N=row[K.P_RISE],
-            level_N=sign * row[K.P_LEVEL_N],
+            level_N=sign * row[K.P_LEVEL_N], peak_time_s=t0 + row[K.P_PEAK_TIME] * dt,
+            peak_height_N=row[K.P_PEAK_AMP],
         ))
     if cut_secondary:
         notes.append("a secondary pulse runs past the end of the record (TOF and ARR are whole)")

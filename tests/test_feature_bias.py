@@ -8,7 +8,9 @@ D/t 0.5, 1.5, 3, 4 x gravity on and off on Zener's infinite plate, sampled at 1,
 in rotation, and the greens tier near a clamped support (the reflection rides on the support's
 echoes). The pulse shapes differ widely: a reflection from a soft plate without preload rises
 slower than it falls, flat-topped at D/t 4; the extractor used to read them up to 3 us and 1.8 %
-off. Run with ``-s`` for the table.
+off. ``tof_peak_s`` and ``arr_peak`` are those peaks; ``tof_s`` and ``arr`` read the fitted
+template's (steady under noise, issue 27: ``tests/test_feature_noise.py``), and the table
+prints their offset from the peaks, which the model tables carry too. Run with ``-s``.
 """
 
 from __future__ import annotations
@@ -59,27 +61,32 @@ def shots() -> list[SimulationResult]:
     return [r for r in simulate_many(_scenes(), workers=2) if isinstance(r, SimulationResult)]
 
 
-def _bias(result: SimulationResult) -> tuple[float, float]:
-    """(TOF error in s, relative ARR error) of the extracted features against the model's peaks."""
+def _bias(result: SimulationResult) -> tuple[float, float, float, float]:
+    """(TOF error in s, relative ARR error) of the refined peaks against the model's peaks,
+    then the same of the template's reading (``tof_s``, ``arr``)."""
     truth = result.truth
     f = extract(as_measured(result))
+    assert f.tof_peak_s is not None and f.arr_peak is not None, f.flags
     assert f.tof_s is not None and f.arr is not None, f.flags
-    return f.tof_s - truth["tof_s"], f.arr / truth["arr"] - 1.0
+    return (f.tof_peak_s - truth["tof_s"], f.arr_peak / truth["arr"] - 1.0,
+            f.tof_s - truth["tof_s"], f.arr / truth["arr"] - 1.0)
 
 
-def test_clean_tof_and_arr_match_the_model_peaks(shots: list[SimulationResult]) -> None:
-    """|TOF bias| <= 0.1 us and |ARR bias| <= 0.5 % on every shot of the grid and near a support."""
+def test_clean_peak_tof_and_arr_match_the_model_peaks(shots: list[SimulationResult]) -> None:
+    """``tof_peak_s``, ``arr_peak``: |TOF bias| <= 0.1 us and |ARR bias| <= 0.5 % on every shot
+    of the grid and near a support."""
     assert len(shots) == len(DIAMETERS) * len(D_OVER_T) * 2 + len(GREENS)
     rows = []
     for r in shots:
-        tof, arr = _bias(r)
+        tof, arr, tof_fit, arr_fit = _bias(r)
         s = r.scene
         rows.append((s.effects.plate_model, s.effects.gravity, s.chain.diameter,
-                     s.plate.thickness, s.output.sample_rate, r.truth["arr"], tof, arr))
-    print("\nplate     g  D mm  t mm  MHz    ARR   TOF bias us  ARR bias %")
-    for model, g, d, t, rate, arr_true, tof, arr in rows:
+                     s.plate.thickness, s.output.sample_rate, r.truth["arr"], tof, arr, tof_fit,
+                     arr_fit))
+    print("\nplate     g  D mm  t mm  MHz    ARR   TOF bias us  ARR bias %   template: TOF us  ARR %")
+    for model, g, d, t, rate, arr_true, tof, arr, tof_fit, arr_fit in rows:
         print(f"{model:8s} {g:d} {d * 1e3:5.2f} {t * 1e3:5.2f} {rate / 1e6:4.0f} {arr_true:6.4f} "
-              f"{tof * 1e6:+11.4f} {100 * arr:+10.3f}")
+              f"{tof * 1e6:+11.4f} {100 * arr:+10.3f}   {tof_fit * 1e6:+14.3f} {100 * arr_fit:+6.2f}")
     worst_tof = max(abs(row[6]) for row in rows)
     worst_arr = max(abs(row[7]) for row in rows)
     print(f"max |TOF bias| {worst_tof * 1e6:.4f} us, max |ARR bias| {100 * worst_arr:.3f} %")
@@ -92,14 +99,20 @@ def test_peaks_are_heights_above_the_pre_impact_reading(shots: list[SimulationRe
     preload with gravity on), not above the level the sensor holds just before it: with gravity
     on the chain decompresses after the incident, the rise above that lower level (``arr_local``)
     reads the reflection larger than the paper's ARR."""
+    from solitonde.signal.pulses import detect
+
     for r in shots:
-        f = extract(as_measured(r))
+        w = as_measured(r)
+        f = extract(w)
         static = r.truth["static_sensor_N"]
         assert f.baseline_N == pytest.approx(static, abs=1e-9 * f.incident_peak_N)
-        assert f.incident_peak_N == pytest.approx(r.truth["incident_peak_N"] - static, rel=1e-3)
+        incident = detect(w).incident
+        assert incident is not None
+        assert incident.peak_height_N == pytest.approx(r.truth["incident_peak_N"] - static,
+                                                       rel=1e-3)
         if r.scene.effects.gravity and r.scene.effects.plate_model == "infinite" \
                 and r.scene.d_over_t >= 3:
-            assert f.arr_local > f.arr * 1.005  # the old definition's bias, named
+            assert f.arr_local > f.arr_peak * 1.005  # the old definition's bias, named
         assert math.isfinite(f.arr_local)
 
 
