@@ -398,6 +398,31 @@ def solitary_wave_speed_from_force(diameter: float, a_s: float, mass: float, f_m
     return sqrt(0.8) * diameter * a_s ** (1.0 / 3.0) * mass**-0.5 * f_m ** (1.0 / 6.0)
 
 
+def travel_time_at_unit_force(scene: Scene) -> float:
+    """The sensor-to-plate-and-back trip of a solitary wave of 1 N peak force, s:
+    ``2 N D / V_s(1 N)`` with N of Eq. 15. A wave of peak F takes this times ``F^(-1/6)``
+    (Nesterenko's speed, Eq. 11), whatever launched it: where the chain puts a reflection."""
+    d = scene.chain.diameter
+    return 2.0 * travel_diameters(scene) * d / solitary_wave_speed_from_force(
+        d, scene.a_s, scene.sphere_mass, 1.0)
+
+
+SOLITARY_FWHM_DIAMETERS = 1.92
+"""Full width at half maximum of the sensor's reading of a solitary wave, in diameters travelled
+at its speed: FWHM = 1.92 D / V_s(F). Measured on this model's incident pulses (the fitted
+template's width; D 4.76-19.05 mm, gravity on and off, identical, tungsten-carbide and glass
+strikers, 1-10 MHz): 1.911-1.963, gravity's preload widening it by up to 2.6 %."""
+
+
+def pulse_width_at_unit_force(scene: Scene) -> float:
+    """The sensor's FWHM of a solitary wave of 1 N peak force in this chain, s; a wave of peak F
+    is ``F^(-1/6)`` times as wide (Nesterenko: its length is fixed in diameters, its speed grows
+    as F^(1/6))."""
+    d = scene.chain.diameter
+    return SOLITARY_FWHM_DIAMETERS * d / solitary_wave_speed_from_force(
+        d, scene.a_s, scene.sphere_mass, 1.0)
+
+
 def critical_distance(scene: Scene, k: float) -> float:
     """L_c = c T_c0 / 2 (Eq. 18), m, with c = k sqrt(E_p / rho_p) and T_c0 the half-space time.
 

@@ -22,7 +22,7 @@ import numpy as np
 from . import kernels as K
 from .errors import WaveformError
 from .features import Features
-from .pulses import FLAGS, DetectOptions, kernel_args, lowpass
+from .pulses import FLAGS, WIDTH_TOLERANCE, DetectOptions, kernel_args, lowpass, width_ratio
 from .waveform import MIN_SAMPLES, UNITS, invalid_sample
 
 FLAG_BITS = {name: 1 << k for k, name in enumerate(FLAGS)}
@@ -58,6 +58,7 @@ class FeatureTable:
     reflected_rise_N: np.ndarray
     tof_peak_s: np.ndarray
     arr_peak: np.ndarray
+    incident_width_s: np.ndarray
 
     def __len__(self) -> int:
         return int(self.detected.size)
@@ -96,6 +97,7 @@ class FeatureTable:
             reflected_rise_N=opt(self.reflected_rise_N[i]),
             tof_peak_s=opt(self.tof_peak_s[i]),
             arr_peak=opt(self.arr_peak[i]),
+            incident_width_s=float(self.incident_width_s[i]),
         )
 
     def to_features(self) -> list[Features | None]:
@@ -190,25 +192,32 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
     sign = heads[:, K.H_SIGN]
     noise = heads[:, K.H_SIGMA]
     detected = counts > 0
-    has_ref = counts > 1
+    has_ref = (counts > 1) & (heads[:, K.H_NOREF] == 0)
     times = t0 + rows[:, :, K.P_TIME] * dt
     amps = rows[:, :, K.P_AMP]
     rise = rows[:, :, K.P_RISE]
     inc_t, inc_a = times[:, 0], amps[:, 0]
+    inc_w = rows[:, 0, K.P_WIDTH] * dt
     ref_t = np.where(has_ref, times[:, 1], nan)
     ref_a = np.where(has_ref, amps[:, 1], nan)
     snr = np.array([20.0 * math.log10(max(a, 1e-300) / s) for a, s in zip(amps[:, 0], noise,
                                                                          strict=True)])
     ref_snr = np.array([20.0 * math.log10(max(a, 1e-300) / s) for a, s in zip(amps[:, 1], noise,
                                                                              strict=True)])
-    n_sec = np.clip(counts - 2, 0, opts.max_secondary)
+    # The secondary pulses follow the reflection's row, or the incident's where the travel gate
+    # held no reflection.
+    start = np.where(has_ref, 2, 1)
+    n_sec = np.clip(counts - start, 0, opts.max_secondary)
     sec = np.arange(opts.max_secondary)[None, :] < n_sec[:, None]
-    sec_t = np.where(sec, times[:, 2:], nan)
-    sec_r = np.where(sec, amps[:, 2:] / np.where(detected, inc_a, 1.0)[:, None], nan)
+    cols = np.minimum(start[:, None] + np.arange(opts.max_secondary)[None, :], times.shape[1] - 1)
+    sec_t = np.where(sec, np.take_along_axis(times, cols, axis=1), nan)
+    sec_r = np.where(sec, np.take_along_axis(amps, cols, axis=1)
+                     / np.where(detected, inc_a, 1.0)[:, None], nan)
 
     merged = rows[:, :, K.P_MERGED] != 0
     cut = rows[:, :, K.P_TRUNC] != 0  # only the incident and the reflection count
-    overlapping = has_ref & (merged[:, 0] | ((counts > 2) & merged[:, 1]))
+    train = heads[:, K.H_TRAIN] != 0
+    overlapping = has_ref & ((merged[:, 0] & ~train) | ((counts > 2) & merged[:, 1]))
     low_snr = np.where(has_ref, ref_snr, snr) < opts.low_snr_db
     raised = {
         "no_reflection": detected & ~has_ref,
@@ -217,6 +226,9 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
         "overlapping": overlapping,
         "truncated": (heads[:, K.H_EARLY] != 0) | (detected & cut[:, 0]) | (has_ref & cut[:, 1]),
         "inverted_polarity": sign < 0,
+        "implausible_units": detected & ~np.array([
+            1.0 / WIDTH_TOLERANCE <= width_ratio(w, a, opts.pulse_width_1n_s) <= WIDTH_TOLERANCE
+            for w, a in zip(inc_w, inc_a, strict=True)], dtype=bool),
     }
     flags = np.zeros(sign.size, dtype=np.uint8)
     for name, where in raised.items():
@@ -244,4 +256,5 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
                             - (t0 + rows[:, 0, K.P_PEAK_TIME] * dt), nan),
         arr_peak=np.where(has_ref, rows[:, 1, K.P_PEAK_AMP]
                           / np.where(detected, rows[:, 0, K.P_PEAK_AMP], 1.0), nan),
+        incident_width_s=np.where(detected, inc_w, nan),
     )

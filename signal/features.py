@@ -54,7 +54,8 @@ class Features:
     time or peak). Peaks are above ``baseline_N``, the pre-impact reading at the incident's peak;
     ``*_rise_N`` and ``arr_local`` are the rises above the level just before each pulse.
     ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the reflection (peak
-    over the incident peak).
+    over the incident peak); ``incident_width_s`` is the incident's full width at half maximum
+    (the fitted template's), which a solitary wave ties to its force and the sphere size.
     """
 
     tof_s: float | None
@@ -75,6 +76,7 @@ class Features:
     reflected_rise_N: float | None = None
     tof_peak_s: float | None = None
     arr_peak: float | None = None
+    incident_width_s: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict with unit-carrying keys; flags as a list of names."""
@@ -97,6 +99,7 @@ class Features:
             "reflected_rise_N": self.reflected_rise_N,
             "tof_peak_s": self.tof_peak_s,
             "arr_peak": self.arr_peak,
+            "incident_width_s": self.incident_width_s,
         }
 
 
@@ -130,6 +133,7 @@ def from_detection(det: Detection) -> Features:
         reflected_rise_N=None if ref is None else ref.rise_N,
         tof_peak_s=None if ref is None else ref.peak_time_s - inc.peak_time_s,
         arr_peak=None if ref is None else ref.peak_height_N / inc.peak_height_N,
+        incident_width_s=inc.width_s,
     )
 
 
@@ -215,17 +219,28 @@ def aggregate(
 ) -> Aggregate:
     """Mean, standard deviation and count per feature over repeated shots, with outliers reported.
 
-    A shot is rejected when its TOF or ARR has a modified z-score above ``outlier_z`` among the
-    shots with a reflection (only with at least ``min_for_rejection`` of them; ``None`` turns
-    rejection off). Rejected shots are listed, never dropped silently.
+    A shot flagged ``implausible_units`` is rejected first (its numbers are in units nobody
+    stated). A shot is rejected when its TOF or ARR has a modified z-score above ``outlier_z``
+    among the shots with a reflection (only with at least ``min_for_rejection`` of them; ``None``
+    turns rejection off). Rejected shots are listed, never dropped silently.
     """
     if not features:
         raise WaveformError("features", "nothing to aggregate", "at least one shot's features")
     n = len(features)
-    with_ref = [i for i, f in enumerate(features) if f.tof_s is not None and f.arr is not None]
-    no_ref = [i for i in range(n) if i not in set(with_ref)]
     rejected: list[dict[str, Any]] = []
     dropped: set[int] = set()
+    for i, f in enumerate(features):
+        if "implausible_units" in f.flags:
+            dropped.add(i)
+            rejected.append({
+                "index": i, "feature": "incident_width_s", "value": f.incident_width_s,
+                "modified_z": None,
+                "reason": "implausible_units: the incident's width and amplitude disagree with "
+                          "the chain's solitary wave (the units or the calibration)",
+            })
+    with_ref = [i for i, f in enumerate(features)
+                if f.tof_s is not None and f.arr is not None and i not in dropped]
+    no_ref = [i for i in range(n) if i not in set(with_ref) and i not in dropped]
     if outlier_z is not None and len(with_ref) >= min_for_rejection:
         for name in ("tof_s", "arr"):
             values = np.array([getattr(features[i], name) for i in with_ref])

@@ -53,9 +53,18 @@ while the pulse is still above ``fit_fraction`` of its height."""
 
 # Columns of the head array returned by analyze (H_PRE0, H_PRE1: the pre-impact baseline
 # H_PRE0 + H_PRE1 * i at sample i, in the sign-corrected trace).
+# H_TRAIN: pulses between the incident and a gated reflection (the incident's train); H_NOREF: 1
+# when the travel gate holds no pulse (the later pulses are then all secondary).
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
- H_UPPER, H_PRE0, H_PRE1) = range(12)
-HEAD = 12
+ H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF) = range(14)
+HEAD = 14
+
+GATE_LO, GATE_HI = 0.75, 3.2
+"""With a travel gate, a reflection arrives between these multiples of the round trip at the
+incident's solitary-wave speed after the incident: never faster than the incident itself came
+down (less a margin for the wave's width and the sensor's place in it); at most that slow when the
+reflection is a fiftieth of the incident (its speed then 0.52 of the incident's, F^(1/6)) and the
+plate held the last sphere for another round trip."""
 # Columns of the per-pulse array returned by analyze (times and widths in samples). P_TIME and
 # P_AMP are the fitted template's peak time and its height above the pre-impact baseline P_BASE
 # (at that time): a fixed estimator, whose mean under noise is its noise-free value. P_PEAK_TIME
@@ -581,6 +590,41 @@ def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray
 
 
 @njit(cache=True)
+def _gate_reflection(out: np.ndarray, gate_1n: float, head: np.ndarray) -> np.ndarray:
+    """The rows reordered so that the reflection, the first pulse inside the travel gate
+    (:data:`GATE_LO`, :data:`GATE_HI` times ``gate_1n F_inc^(-1/6)`` samples after the incident),
+    comes second; the pulses before it (the incident's train) follow it, then the later ones, in
+    time order. No pulse inside the gate sets ``head[H_NOREF]``."""
+    m = out.shape[0]
+    trip = gate_1n * max(out[0, P_AMP], 1e-300) ** (-1.0 / 6.0)
+    pick = -1
+    for j in range(1, m):
+        delay = out[j, P_TIME] - out[0, P_TIME]
+        if GATE_LO * trip <= delay <= GATE_HI * trip:
+            pick = j
+            break
+    if pick < 0:
+        head[H_NOREF] = 1.0
+        head[H_TRAIN] = 0.0
+        for j in range(1, m):
+            if out[j, P_TIME] - out[0, P_TIME] < GATE_LO * trip:
+                head[H_TRAIN] += 1.0
+        return out
+    head[H_TRAIN] = pick - 1
+    if pick == 1:
+        return out
+    order = np.empty(m, dtype=np.int64)
+    order[0] = 0
+    order[1] = pick
+    k = 2
+    for j in range(1, m):
+        if j != pick:
+            order[k] = j
+            k += 1
+    return out[order].copy()
+
+
+@njit(cache=True)
 def _saturated(y: np.ndarray, ymax: float, incident_width: float) -> bool:
     """Clipping: the record's top value repeats over more than a twentieth of the incident's
     width."""
@@ -604,6 +648,7 @@ def analyze(
     skew: float,
     free_r: bool,
     max_iter: int,
+    gate_1n: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Detect and measure every pulse of one shot.
 
@@ -627,6 +672,10 @@ def analyze(
         the later ones (travelling back up the chain) ``-skew``.
     max_iter:
         Levenberg-Marquardt iterations per pulse.
+    gate_1n:
+        Sensor-to-plate-and-back travel time, in samples, of a solitary wave of unit peak (the
+        trace's units); the reflection is then gated (:func:`_gate_reflection`). 0: no gate,
+        the pulse after the incident is the reflection.
 
     Returns
     -------
@@ -700,7 +749,9 @@ def analyze(
                                   sigma_top, pre, out[j])
         out[j, P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
-    if m >= 2:  # the refined peaks of the incident and the reflection on one rung
+    if gate_1n > 0 and m >= 2:
+        out = _gate_reflection(out, gate_1n, head)
+    if m >= 2 and head[H_NOREF] == 0:  # the refined peaks of the incident and the reflection
         k = common_rung(out[:2, P_VALUES:], out[:2, P_RUNG])
         for j in range(2):
             t_j = out[j, P_PEAK_TIME]
@@ -709,7 +760,12 @@ def analyze(
             out[j, P_PEAK_AMP] = out[j, P_VALUES + k] - base_j
     # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
     first = min(n, int(peaks[0] + FOOT * widths[0]) + 1)
-    after = max(0.0, vmax(v[first:])) if first < n else 0.0
+    last = n
+    if gate_1n > 0:
+        trip = gate_1n * max(out[0, P_AMP], 1e-300) ** (-1.0 / 6.0)
+        first = max(first, min(n, int(out[0, P_TIME] + GATE_LO * trip)))
+        last = max(first, min(n, int(out[0, P_TIME] + GATE_HI * trip) + 1))
+    after = max(0.0, vmax(v[first:last])) if first < last else 0.0
     head[H_UPPER] = max(thr, after) / max(out[0, P_AMP], 1e-300)
     head[H_SATURATED] = 1.0 if _saturated(y, ymax, out[0, P_WIDTH]) else 0.0
     return head, out
@@ -728,6 +784,7 @@ def analyze_batch(
     skew: float,
     free_r: bool,
     max_iter: int,
+    gate_1n: float,
     keep: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`analyze` of every row of ``x`` (one shot per row), without the GIL (callers split
@@ -742,7 +799,7 @@ def analyze_batch(
     counts = np.zeros(m, dtype=np.int64)
     for i in range(m):
         head, rows = analyze(x[i], sign_in, n_pre_in, h_in, thr_sigma, min_ratio, fit_fraction,
-                             shape_r, skew, free_r, max_iter)
+                             shape_r, skew, free_r, max_iter, gate_1n)
         heads[i] = head
         counts[i] = rows.shape[0]
         for j in range(min(rows.shape[0], keep)):

@@ -59,6 +59,7 @@ FLAGS = (
     "overlapping",
     "truncated",
     "inverted_polarity",
+    "implausible_units",
 )
 """Every quality flag detection can raise, in the order they are reported."""
 
@@ -69,6 +70,11 @@ SHAPE_EXPONENT = 2.38
 """Exponent r of the fitted shape: least squares of the skewed template against the chain
 model's incident pulse at the sensor (D = 4.76 to 19.05 mm) gives r = 2.35 to 2.41, residual
 0.25 % of the peak (Nesterenko's cos^6 is close to r = 2)."""
+WIDTH_TOLERANCE = 1.25
+"""``implausible_units`` is raised when the incident's width differs from a solitary wave's of its
+amplitude by more than this factor either way (a factor 10 in force moves the width by 1.47,
+Nesterenko's F^(-1/6); a volt read as a millivolt by 3.2, a millisecond read as a microsecond by
+1000; the chain's own spread, gravity and striker included, is within 3 %)."""
 SHAPE_SKEW = 0.0045
 """Skew of the fitted shape, same fit: the model's incident pulse rises faster than it falls
 (skew 0.0041 to 0.0045); its reflections fit -0.003 to -0.006 (-0.018 for D = 19.05 mm)."""
@@ -110,6 +116,20 @@ class DetectOptions:
         gets ``+shape_skew``, later pulses ``-shape_skew``. ``0`` for symmetric pulses.
     max_secondary:
         At most this many secondary pulses are reported.
+    travel_time_1n_s:
+        The chain's geometry, where known: the time a solitary wave of 1 N peak force takes from
+        the sensor down to the plate and back up, s (``2 N D / V_s(1 N)``; a wave of peak F
+        travels at ``V_s(1 N) F^(1/6)``, Nesterenko). The reflection is then the first pulse
+        that arrives between 0.75 and 3.2 times that trip at the measured incident's speed
+        after it; pulses before that belong to the incident's train (a striker heavier than the
+        spheres launches several waves) and are listed as secondary. ``None``: the pulse after
+        the incident is the reflection. Needs the trace in newtons.
+    pulse_width_1n_s:
+        The chain's solitary wave, where known: the full width at half maximum of a wave of 1 N
+        peak force at the sensor, s (``1.92 D / V_s(1 N)``; a wave of peak F is ``F^(-1/6)``
+        times that). An incident more than :data:`WIDTH_TOLERANCE` off that law for its
+        measured amplitude raises ``implausible_units``: the force or the time axis is not in
+        the units the file states. Needs the trace in newtons.
     """
 
     pretrigger_s: float | None = None
@@ -123,6 +143,8 @@ class DetectOptions:
     shape_exponent: float | None = SHAPE_EXPONENT
     shape_skew: float = SHAPE_SKEW
     max_secondary: int = 8
+    travel_time_1n_s: float | None = None
+    pulse_width_1n_s: float | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> WaveformError:
@@ -154,6 +176,14 @@ class DetectOptions:
             raise bad("shape_skew", "-0.3 <= shape_skew <= 0.3")
         if not isinstance(self.max_secondary, int) or self.max_secondary < 0:
             raise bad("max_secondary", "a non-negative integer")
+        if self.travel_time_1n_s is not None and not (
+            math.isfinite(self.travel_time_1n_s) and self.travel_time_1n_s > 0
+        ):
+            raise bad("travel_time_1n_s", "a positive duration in s, or None")
+        if self.pulse_width_1n_s is not None and not (
+            math.isfinite(self.pulse_width_1n_s) and self.pulse_width_1n_s > 0
+        ):
+            raise bad("pulse_width_1n_s", "a positive duration in s, or None")
 
     @classmethod
     def from_kwargs(cls, options: dict[str, Any]) -> DetectOptions:
@@ -174,12 +204,13 @@ class Pulse:
     fixed estimator, near the Cramer-Rao bound, whose mean under noise is what it reads on the
     noise-free trace (the model tables hold that reading). ``peak_time_s`` and ``peak_height_N``
     are the peak refined on the data's top: the trace's own peak on a clean trace (the paper's
-    definitions exactly), but its mean moves with the noise (see :mod:`.peak_refine`). ``rise_N`` is the fitted template's height above ``level_N``, the level the
-    sensor holds just before the pulse (immune to baseline drift, but not the paper's amplitude:
-    after the incident the chain decompresses and the sensor sits below its static reading).
-    ``width_s`` is the full width at half maximum of the fitted shape; ``method`` says where the
-    peak comes from: ``"template"``, ``"refined"`` (the data's top, where the template's shape
-    misses the pulse's) or ``"parabola"`` (the template fit failed).
+    definitions exactly), but its mean moves with the noise (see :mod:`.peak_refine`).
+    ``rise_N`` is the fitted template's height above ``level_N``, the level the sensor holds just
+    before the pulse (immune to baseline drift, but not the paper's amplitude: after the incident
+    the chain decompresses and the sensor sits below its static reading). ``width_s`` is the full
+    width at half maximum of the fitted shape; ``method`` says where ``time_s`` and ``peak_N``
+    come from: ``"template"``, or ``"parabola"`` where the template fit failed (``"refined"``:
+    the template's, with a refined peak that differs from it).
     """
 
     time_s: float
@@ -252,6 +283,7 @@ def kernel_args(opts: DetectOptions, n: int, dt: float) -> tuple[Any, ...]:
         sign, n_pre, -1 if opts.smooth_samples is None else opts.smooth_samples,
         opts.threshold_sigma, opts.min_ratio, opts.fit_fraction,
         SHAPE_EXPONENT if free_r else opts.shape_exponent, opts.shape_skew, free_r, MAX_ITER,
+        0.0 if opts.travel_time_1n_s is None else opts.travel_time_1n_s / dt,
     )
 
 
@@ -318,15 +350,25 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     if cut_secondary:
         notes.append("a secondary pulse runs past the end of the record (TOF and ARR are whole)")
     incident = pulses[0]
-    reflected = pulses[1] if len(pulses) > 1 else None
-    secondary = tuple(pulses[2 : 2 + opts.max_secondary])
-    if len(pulses) > 2 + opts.max_secondary:
-        notes.append(f"{len(pulses) - 2 - opts.max_secondary} further secondary pulses not listed")
+    gated_out = bool(head[K.H_NOREF])
+    reflected = pulses[1] if len(pulses) > 1 and not gated_out else None
+    first_secondary = 1 if reflected is None else 2
+    secondary = tuple(pulses[first_secondary : first_secondary + opts.max_secondary])
+    if len(pulses) > first_secondary + opts.max_secondary:
+        notes.append(f"{len(pulses) - first_secondary - opts.max_secondary} further secondary "
+                     "pulses not listed")
+    train = int(head[K.H_TRAIN])
+    if train:
+        notes.append(f"{train} pulse(s) follow the incident sooner than a reflection can arrive "
+                     "(the incident's train: a striker heavier than the spheres); listed as "
+                     "secondary")
     upper = None
     if reflected is None:
         flags.add("no_reflection")
         upper = head[K.H_UPPER]
-    elif rows[0][K.P_MERGED]:
+        if gated_out and len(pulses) > 1:
+            notes.append("no pulse arrives when the chain's geometry puts the reflection")
+    elif rows[0][K.P_MERGED] and not train:
         flags.add("overlapping")
     if reflected is not None and len(pulses) > 2 and rows[1][K.P_MERGED]:
         flags.add("overlapping")
@@ -337,11 +379,26 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         flags.add("low_snr")
     if head[K.H_SATURATED]:
         flags.add("saturated")
+    ratio = width_ratio(incident.width_s, incident.peak_N, opts.pulse_width_1n_s)
+    if not 1.0 / WIDTH_TOLERANCE <= ratio <= WIDTH_TOLERANCE:
+        flags.add("implausible_units")
+        notes.append(f"the incident pulse is {incident.width_s:.3g} s wide at {incident.peak_N:.3g}"
+                     f" N, {ratio:.3g} times a solitary wave of that force in this chain")
     return Detection(
         baseline_N=incident.baseline_N, pulses=tuple(pulses), incident=incident,
         reflected=reflected, secondary=secondary, flags=_ordered(flags), arr_upper_bound=upper,
         notes=tuple(notes), **common,
     )
+
+
+def width_ratio(width_s: float, peak_N: float, width_1n_s: float | None) -> float:
+    """A pulse's width over a solitary wave's of the same peak force (``width_1n_s``
+    ``F^(-1/6)``); 1.0 when the chain's wave is not known, NaN for a non-positive peak."""
+    if width_1n_s is None:
+        return 1.0
+    if not peak_N > 0:
+        return math.nan
+    return width_s / (width_1n_s * peak_N ** (-1.0 / 6.0))
 
 
 def _ordered(flags: set[str]) -> tuple[str, ...]:

@@ -107,7 +107,7 @@ def solve(scene: Scene, t_end: float, rate: float = 20e6, pre_s: float = 1e-4,
     t_after = np.arange(0.0, t_end, dt)
     x_after = reading(t_after)
     static = float(x_after[0])
-    n_pre = int(round(pre_s / dt))
+    n_pre = round(pre_s / dt)
     samples = np.concatenate([np.full(n_pre, static), x_after])
     inc_t, inc_f = _refined_max(reading, t_after, x_after, 0, t_after.size)
     # The reflection: the largest maximum once the sensor has fallen back below a tenth of the

@@ -89,8 +89,10 @@ def _with_diameter(tmp_path: Path, value: str) -> Path:
 
 
 def test_invert_that_fails_for_a_position_is_an_error_and_exit_1(tmp_path: Path) -> None:
-    """A sphere size the table lacks: the estimate fails, so the run did not all succeed."""
-    res = _run("analyze", str(_with_diameter(tmp_path, "0.006")), "--invert", "--json")
+    """A sphere size the table lacks: the estimate fails, so the run did not all succeed. (10.5
+    mm: the file's 9.53 mm pulses are still plausibly that chain's; 6 mm would be flagged
+    ``implausible_units``, its solitary wave 1.9 times narrower.)"""
+    res = _run("analyze", str(_with_diameter(tmp_path, "0.0105")), "--invert", "--json")
     assert res.exit_code == 1, res.output
     body = json.loads(res.stdout)
     (err,) = body["errors"]

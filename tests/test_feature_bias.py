@@ -83,10 +83,12 @@ def test_clean_peak_tof_and_arr_match_the_model_peaks(shots: list[SimulationResu
         rows.append((s.effects.plate_model, s.effects.gravity, s.chain.diameter,
                      s.plate.thickness, s.output.sample_rate, r.truth["arr"], tof, arr, tof_fit,
                      arr_fit))
-    print("\nplate     g  D mm  t mm  MHz    ARR   TOF bias us  ARR bias %   template: TOF us  ARR %")
+    print("\nplate     g  D mm  t mm  MHz    ARR   TOF bias us  ARR bias %   "
+          "template: TOF us  ARR %")
     for model, g, d, t, rate, arr_true, tof, arr, tof_fit, arr_fit in rows:
         print(f"{model:8s} {g:d} {d * 1e3:5.2f} {t * 1e3:5.2f} {rate / 1e6:4.0f} {arr_true:6.4f} "
-              f"{tof * 1e6:+11.4f} {100 * arr:+10.3f}   {tof_fit * 1e6:+14.3f} {100 * arr_fit:+6.2f}")
+              f"{tof * 1e6:+11.4f} {100 * arr:+10.3f}   {tof_fit * 1e6:+14.3f} "
+              f"{100 * arr_fit:+6.2f}")
     worst_tof = max(abs(row[6]) for row in rows)
     worst_arr = max(abs(row[7]) for row in rows)
     print(f"max |TOF bias| {worst_tof * 1e6:.4f} us, max |ARR bias| {100 * worst_arr:.3f} %")

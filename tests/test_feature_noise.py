@@ -25,12 +25,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
-from scipy_chain import ChainTrace, solve  # noqa: E402
+from scipy_chain import ChainTrace, solve
 
-from solitonde.model.scene import scene_from_dict  # noqa: E402
-from solitonde.signal.accuracy import Truth, cramer_rao  # noqa: E402
-from solitonde.signal.features import extract  # noqa: E402
-from solitonde.signal.waveform import Waveform  # noqa: E402
+from solitonde.model.scene import scene_from_dict
+from solitonde.signal.accuracy import Truth, cramer_rao
+from solitonde.signal.features import extract
+from solitonde.signal.waveform import Waveform
 
 FINE_RATE = 20e6
 SNRS = (20.0, 30.0, 40.0, 60.0)

@@ -21,6 +21,7 @@ files in volts that carry no calibration (a run in which no file used it reports
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -36,6 +37,7 @@ from rich.console import Console
 
 from solitonde.instrument.cli.console_tables import Column, fitted_table
 from solitonde.instrument.cli.manifest import ManifestError, Row
+from solitonde.instrument.inference import chain_geometry
 from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
@@ -177,16 +179,24 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
                                    "channel": signal_channels.channel_name(w)
                                    if meta.get("channel") is not None else None,
                                    **{k: meta.get(k) for k in LOCATION_KEYS}}
+        diameter = _number(meta.get("sphere_diameter"))
         try:
-            (feat,) = extract_many([w])
+            (feat,) = extract_many([w], **chain_geometry.shot_options(diameter))
         except WaveformError as exc:
             row_out["error"] = str(exc)
             rows.append(row_out)
             continue
+        if diameter is None and not chain_geometry.fits_some_chain(
+                feat, chain_geometry.STANDARD_DIAMETERS):
+            feat = dataclasses.replace(feat, flags=[*feat.flags, "implausible_units"])
         d = feat.to_dict()
         row_out.update({k: json_ready(d[k]) for k in FEATURES})
         row_out["flags"] = d["flags"]
         row_out["arr_upper_bound"] = json_ready(d["arr_upper_bound"])
+        if "implausible_units" in feat.flags:  # listed with its numbers, never summarised
+            row_out["error"] = chain_geometry.units_message(feat, diameter)
+            rows.append(row_out)
+            continue
         row_out["features"] = feat
         row_out["waveform"] = w
         rows.append(row_out)

@@ -23,7 +23,7 @@ from rich.console import Console
 from rich.table import Table
 
 from solitonde.instrument.tables import greens_cache
-from solitonde.instrument.tables.measured import as_measured, check_resolved
+from solitonde.instrument.tables.measured import as_measured, check_resolved, detect_options
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.scene import load_scene
 from solitonde.model.simulate import SimulationResult, simulate
@@ -169,7 +169,7 @@ def simulate_command(
     features: Features | None = None
     feature_error = None
     try:
-        features = extract(waveform)
+        features = extract(waveform, **detect_options(result.scene))
     except WaveformError as exc:
         feature_error = str(exc)
         typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)

@@ -208,12 +208,14 @@ def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None,
 
 def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list[SizeSummary]]:
     """Features per shot and a summary per sphere diameter."""
+    from solitonde.instrument.inference import chain_geometry
     from solitonde.signal import features as signal_features
 
     feats = []
     for i, wf in enumerate(waveforms):
         try:
-            feats.append(signal_features.extract(wf))
+            feats.append(signal_features.extract(
+                wf, **chain_geometry.shot_options(wf.metadata.get("sphere_diameter"))))
         except WaveformError as exc:  # an empty prefix: a lone shot whose fields are top-level
             raise waveform_error(exc, f"{prefix}.{i}" if prefix else "") from None
     return feats, summarise([wf.metadata.get("sphere_diameter") for wf in waveforms], feats)

@@ -122,7 +122,7 @@ async def simulate(request: Request) -> dict[str, Any]:
 
 
 def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str, Any]:
-    from solitonde.instrument.tables.measured import as_measured, check_resolved
+    from solitonde.instrument.tables.measured import as_measured, check_resolved, detect_options
     from solitonde.model.errors import SceneError, SimulationError
     from solitonde.model.scene import scene_from_dict
     from solitonde.model.simulate import simulate as run_scene
@@ -169,7 +169,7 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
                       kind="simulation-failed", field="scene") from None
     wf = as_measured(result, {"source": "simulate"})  # as the table measures its points
     try:
-        features = extract(wf).to_dict()
+        features = extract(wf, **detect_options(result.scene)).to_dict()
     except WaveformError as exc:
         features = {"error": str(exc)}
     return {

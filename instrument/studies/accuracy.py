@@ -32,7 +32,7 @@ import pandas as pd
 
 from solitonde.instrument.plotting import spread_labels
 from solitonde.instrument.studies.figures import new_figure, save_csv, save_json, save_png
-from solitonde.instrument.tables.measured import as_measured
+from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.model import greens, sem_tier
 from solitonde.model.boundary import CONVOLVED_PLATE_MODELS
 from solitonde.model.scene import Scene, scene_from_dict
@@ -155,7 +155,7 @@ def first_shot(scene: Scene, cache: greens.GreensCache | None = None) -> dict[st
     started = time.perf_counter()
     r = simulate(scene, greens_cache=greens.MemoryCache() if cache is None else cache)
     wall = time.perf_counter() - started
-    f = extract(as_measured(r))
+    f = extract(as_measured(r), **detect_options(r.scene))
     mesh = r.diagnostics.get("mesh") or {}
     return {
         "tof_s": math.nan if f.tof_s is None else f.tof_s,

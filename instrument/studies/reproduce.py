@@ -47,7 +47,7 @@ from solitonde.instrument.studies.figures import (
     save_png,
 )
 from solitonde.instrument.tables import greens_cache
-from solitonde.instrument.tables.measured import as_measured
+from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.model import zener
 from solitonde.model.batch import default_workers
 from solitonde.model.errors import SimulationError
@@ -161,7 +161,7 @@ def measure(scene: Scene) -> dict[str, Any]:
         "energy_drift": result.diagnostics["energy_drift"],
     }
     try:
-        f = extract(as_measured(result))
+        f = extract(as_measured(result), **detect_options(result.scene))
         row.update(
             tof_s=math.nan if f.tof_s is None else f.tof_s,
             arr=math.nan if f.arr is None else f.arr,
@@ -389,7 +389,7 @@ def fig3(out: Path) -> dict[str, Any]:
     for label, t in (("thin", PLATES_M[0]), ("thick", THICK_PLATE_M)):
         scene = scene_for(TRACE_DIAMETER_M, t)
         r = simulate(scene, greens_cache=_CACHE)
-        f = extract(as_measured(r))
+        f = extract(as_measured(r), **detect_options(r.scene))
         traces[label] = (r.time, r.samples)
         info[label] = {"thickness_m": t, "plate_model": r.plate_model,
                        "incident_time_s": f.incident_time_s, "tof_s": f.tof_s, "arr": f.arr}

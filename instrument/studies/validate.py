@@ -47,7 +47,7 @@ import numpy as np
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
-from solitonde.instrument.tables.measured import as_measured
+from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides, scene_from_dict
@@ -98,13 +98,14 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
         result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)),
                           greens_cache=plate_cache)
         recorded = as_measured(result)
+        options = detect_options(result.scene)
         reference = float(result.samples.max() - result.samples[0])
         feats = []
         for _ in range(shots):
             # white noise over the whole record, its pre-trigger included
             noisy = degrade(recorded.samples, snr_db, rng, reference)
             try:
-                feats.append(extract(recorded.with_samples(noisy)))
+                feats.append(extract(recorded.with_samples(noisy), **options))
             except WaveformError:
                 continue
         agg = aggregate(feats) if feats else None

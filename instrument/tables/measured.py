@@ -35,6 +35,16 @@ solution) for its peak to be measured; below it a shot is refused rather than me
 random (a 20 kHz record of the default scene has 1.8)."""
 
 
+def detect_options(scene: Scene) -> dict[str, float]:
+    """The extractor's options for a shot of this scene's chain: where its geometry puts the
+    reflection (``travel_time_1n_s``, a striker's train never taken for it) and how wide a
+    solitary wave of the measured force is (``pulse_width_1n_s``, ``implausible_units``). The
+    model tables measure their points with them, and measured shots of a stated sphere size too
+    (:mod:`solitonde.instrument.inference.chain_geometry`)."""
+    return {"travel_time_1n_s": zener.travel_time_at_unit_force(scene),
+            "pulse_width_1n_s": zener.pulse_width_at_unit_force(scene)}
+
+
 def pulse_samples(scene: Scene) -> float:
     """Samples across the incident solitary pulse at the scene's sample rate: 5 D / V_s(v_in)
     (Nesterenko's speed, the paper's Eq. 12) times ``output.sample_rate``."""

@@ -33,7 +33,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from solitonde.instrument.tables.measured import PRETRIGGER_FRACTION, as_measured
+from solitonde.instrument.tables.measured import PRETRIGGER_FRACTION, as_measured, detect_options
 from solitonde.instrument.tables.table import (
     AXES,
     FORMAT,
@@ -182,7 +182,7 @@ def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
     except (SimulationError, SceneError) as exc:
         return point_record(None, None, f"simulation: {exc}", traces)
     try:
-        features = extract(as_measured(result), **dict(detect or {}))
+        features = extract(as_measured(result), **{**detect_options(scene), **dict(detect or {})})
     except WaveformError as exc:
         return point_record(None, result, f"features: {exc}", traces)
     return point_record(features, result, None, traces)
