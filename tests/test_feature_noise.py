@@ -122,3 +122,27 @@ def test_tof_and_arr_means_do_not_move_with_noise(traces: dict[str, ChainTrace],
         assert r["tof_sd"] <= SD_OVER_BOUND * r["tof_crb"], r
         assert r["arr_sd"] <= SD_OVER_BOUND * r["arr_crb"], r
         assert math.isfinite(r["tof_offset"])
+
+
+@pytest.mark.slow
+def test_the_docs_table_of_errors_against_snr_rate_and_gravity() -> None:
+    """docs/waveforms.md's table: D 9.53 mm on a 4.83 mm plate, gravity off and on, sampled at 1,
+    2 and 10 MHz, 200 draws at 20-60 dB each; the same criteria as the grid above. Run with
+    ``-m slow -s``."""
+    print("\n| gravity | MHz | SNR dB | TOF mean error us | TOF sd us (bound) | ARR mean error % "
+          "| ARR sd % (bound) |")
+    print("|---|---|---|---|---|---|---|")
+    for gravity in (False, True):
+        scene = scene_from_dict({"plate": {"thickness": 4.83e-3},
+                                 "effects": {"plate_model": "infinite", "gravity": gravity}})
+        trace = solve(scene, 0.9e-3, rate=FINE_RATE)
+        for rate in (1e6, 2e6, 10e6):
+            for r in _cell(trace, rate):
+                print(f"| {'on' if gravity else 'off'} | {rate / 1e6:g} | {r['snr']:.0f} | "
+                      f"{r['tof_mean'] * 1e6:+.3f} | {r['tof_sd'] * 1e6:.3f} "
+                      f"({r['tof_crb'] * 1e6:.3f}) | {100 * r['arr_mean']:+.3f} | "
+                      f"{100 * r['arr_sd']:.3f} ({100 * r['arr_crb']:.3f}) |")
+                assert abs(r["tof_mean"]) <= max(TOF_LIMIT_S, 0.25 * r["tof_sd"]), r
+                assert abs(r["arr_mean"]) <= max(ARR_LIMIT, 0.25 * r["arr_sd"]), r
+                assert r["tof_sd"] <= SD_OVER_BOUND * r["tof_crb"], r
+                assert r["arr_sd"] <= SD_OVER_BOUND * r["arr_crb"], r

@@ -218,6 +218,11 @@ def _create(fh: h5py.File, sweep: Sweep) -> None:
     fh.attrs["format"] = FORMAT
     fh.attrs["format_version"] = FORMAT_VERSION
     fh.attrs["sweep"] = json.dumps(sweep.to_dict(), sort_keys=True)
+    # The chain's options every point was measured with (the reflection's travel gate, the
+    # solitary wave's width law), per sphere size: what a measured shot of that size gets too.
+    fh.attrs["chain_options"] = json.dumps(
+        {f"{d:.6g}": detect_options(sweep.scene_at(i, 0, 0))
+         for i, d in enumerate(sweep.diameters_m)}, sort_keys=True)
     fh.attrs["complete"] = False
     fh.attrs["flag_names"] = json.dumps(list(FLAGS))
     fh.attrs["plate_model_names"] = json.dumps(list(PLATE_MODEL_NAMES))
