@@ -335,7 +335,7 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         amp = row[K.P_AMP]
         if row[K.P_TRUNC]:
             # The shot is truncated when a measured pulse is; a cut secondary is only noted.
-            if k < 2:
+            if k == 0 or (k == 1 and not head[K.H_NOREF]):
                 flags.add("truncated")
             else:
                 cut_secondary = True
