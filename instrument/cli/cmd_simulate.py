@@ -82,6 +82,8 @@ def summary(
         "plate_work_J": d["plate_work_J"],
         "dissipated_J": d["dissipated_J"],
         "snr_db": features.snr_db,
+        "tof_peak_s": _nan(features.tof_peak_s),  # the trace's own peaks (tof_s: the template's)
+        "arr_peak": _nan(features.arr_peak),
         "flags": list(features.flags),
         "feature_error": feature_error,
         "model_truth": result.truth,
