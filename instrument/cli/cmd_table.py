@@ -93,6 +93,9 @@ def plan_text(plan: BuildPlan) -> str:
     kinds = {"meshed": "near a support (meshed plate)", "dashpot": "far (Zener's dashpot)"}
     for kind, n in plan.points_by_kind.items():
         lines.append(f"  {n} points {kinds[kind]}: pilot {plan.pilots[kind]:.2f} s a point")
+    if plan.compile_s > 10:
+        lines.append(f"  (the pilot first compiled the model's kernels: {duration(plan.compile_s)}"
+                     ", once per installation)")
     lines.append(f"  estimated time: {duration(plan.eta_s)} on {plan.workers} worker"
                  f"{'s' * (plan.workers != 1)} (+ their start), after a "
                  f"{duration(plan.pilot_wall_s)} pilot")
