@@ -58,11 +58,19 @@ class Queue:
 
     @staticmethod
     def _take_lock(path: Path) -> Any:
-        import fcntl
-
+        """An exclusive lock on ``path`` held while the file stays open (flock on POSIX, a
+        byte-range lock on Windows, where acquisition PCs often run)."""
         fh = path.open("a+")
         try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            try:
+                import fcntl
+            except ImportError:  # Windows
+                import msvcrt
+
+                fh.seek(0)
+                msvcrt.locking(fh.fileno(), msvcrt.LK_NBLCK, 1)  # type: ignore[attr-defined]
+            else:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             fh.close()
             raise QueueLocked(f"--state: {path.parent} is in use by another watch") from None
