@@ -128,16 +128,14 @@ def noisy_shots(result: SimulationResult, recorded: Waveform, n: int, snr_db: fl
             .with_metadata(**meta, shot=k) for k in range(n)]
 
 
-def shot_features(waves: list[Waveform]) -> list[dict[str, Any]]:
-    """TOF, ARR, SNR and flags of each noisy shot, as the signal package measures them (a shot
-    whose pulses cannot be found says why)."""
+def shot_features(measured: list[Features | str]) -> list[dict[str, Any]]:
+    """TOF, ARR, SNR and flags of each noisy shot as the signal package measured them, or why
+    a shot's pulses could not be found."""
     out: list[dict[str, Any]] = []
-    for k, w in enumerate(waves):
-        try:
-            f = extract(w)
-        except WaveformError as exc:
+    for k, f in enumerate(measured):
+        if isinstance(f, str):
             out.append({"shot": k, "tof_s": math.nan, "arr": math.nan, "snr_db": math.nan,
-                        "flags": [], "error": str(exc)})
+                        "flags": [], "error": f})
             continue
         out.append({"shot": k, "tof_s": _nan(f.tof_s), "arr": _nan(f.arr),
                     "snr_db": f.snr_db, "flags": list(f.flags)})
@@ -249,7 +247,13 @@ def simulate_command(
     written: Waveform | list[Waveform] = waveform
     if shots is not None and snr_db is not None:
         written = noisy_shots(result, waveform, shots, snr_db, drift, seed)
-        data["shots"] = shot_features(written)
+        measured: list[Features | str] = []
+        for shot in written:
+            try:  # the recorded trace with this shot's noise, measured as any recording
+                measured.append(extract(waveform.with_samples(shot.samples)))
+            except WaveformError as exc:
+                measured.append(str(exc))
+        data["shots"] = shot_features(measured)
         data["acquisition"] = written[0].metadata["acquisition"]
     failed = []
 
