@@ -128,6 +128,7 @@ def test_upload_see_the_estimate_open_the_second_shot_and_see_live_updates(serve
                                              "y_m": 0.2, "sphere_diameter": 9.53e-3}})
             assert r.status_code == 201, r.text
             page.locator("#positions tbody tr", has_text="A2").wait_for(timeout=20_000)
+            page.locator("#measurements tbody tr", has_text="A2").wait_for(timeout=20_000)
             assert page.locator("#measurements tbody tr").count() == 2
             figures = os.environ.get("SOLITONDE_FIGURES")
             shot = Path(figures) if figures else tmp_path
