@@ -99,20 +99,21 @@ def test_post_other_metadata_is_another_measurement_and_a_refusal_exits_1(server
 
 
 def test_post_usage_errors_exit_2_naming_the_flag(tmp_path):
+    from typer.testing import CliRunner
+
+    from solitonde.instrument.cli.main import build_app
+
+    def post(*args: str):
+        return CliRunner().invoke(build_app(), ["post", *args])
+
     for args, expected in ((["--units", "mV"], "--units: 'mV' is not N or V"),
                            (["--calibration", "-1"], "--calibration: -1 must be > 0")):
-        run = subprocess.run(_cli("post", str(CSV), "--server", "http://127.0.0.1:9", *args),
-                             capture_output=True, text=True, env=_env(), timeout=60)
-        assert run.returncode == 2 and expected in run.stderr, run.stderr
-    run = subprocess.run(_cli("post", str(tmp_path / "nope.csv"), "--server", "http://x"),
-                         capture_output=True, text=True, env=_env(), timeout=60)
-    assert run.returncode == 2 and "no such file or folder" in run.stderr
-
-
-def test_post_with_no_server_says_so_and_exits_1():
-    run = subprocess.run(_cli("post", str(CSV), "--server", f"http://127.0.0.1:{free_port()}"),
-                         capture_output=True, text=True, env=_env(), timeout=60)
-    assert run.returncode == 1 and run.stderr.startswith(f"not sent: {CSV}: "), run.stderr
+        run = post(str(CSV), "--server", "http://127.0.0.1:9", *args)
+        assert run.exit_code == 2 and expected in run.output, run.output
+    run = post(str(tmp_path / "nope.csv"), "--server", "http://x")
+    assert run.exit_code == 2 and "no such file or folder" in run.output
+    run = post(str(CSV), "--server", f"http://127.0.0.1:{free_port()}")
+    assert run.exit_code == 1 and f"not sent: {CSV}: " in run.output, run.output
 
 
 def _write_slowly(target: Path, data: bytes, parts: int, pause_s: float) -> None:
