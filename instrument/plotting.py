@@ -290,12 +290,28 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
         title += (f"; support at {support['normal_angle_deg']:.1f} deg, offset "
                   f"{support['offset_m'] * 1e3:.1f} mm (95 % {_mm(lo)}..{_mm(hi)} mm)")
     elif plate_map.get("support_reason"):
-        title += f"; support not located: {plate_map['support_reason'][:70]}"
-    fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=0.88, wspace=0.25)
+        title += f"; support not located: {plate_map['support_reason']}"
+    lines = _fitted_title(fig, title, width_px)
+    top = 0.88 - (len(lines) - 1) * 15.0 / height_px
+    fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=top, wspace=0.25)
     for ax, labels in labels_of:  # after the layout, which moves the axes
         spread_labels(ax, labels)
     return fig
+
+
+def _fitted_title(fig: Any, title: str, width_px: int) -> list[str]:
+    """Set ``title`` as the figure's title wrapped to its width, never cut (a reason cut short
+    says nothing); returns the lines. The width is measured as drawn, narrowing until it fits."""
+    import textwrap
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    width = max(20, int(width_px / 7))
+    while True:
+        lines = textwrap.wrap(title, width=width) or [""]
+        text = fig.suptitle("\n".join(lines), fontsize=10)
+        if text.get_window_extent(renderer).width <= 0.96 * width_px or width <= 20:
+            return lines
+        width = int(width * 0.9)
 
 
 def map_png(plate_map: Mapping[str, Any], *, width_px: int = 1200, height_px: int = 560) -> bytes:

@@ -70,3 +70,39 @@ def test_an_existing_table_is_not_replaced_without_overwrite(tmp_path: Path, mon
     Path(str(out) + ".partial").write_bytes(b"")  # an interrupted rebuild resumes
     CliRunner().invoke(build_app(), ["table", "build", *GRID, "--out", str(out)])
     assert calls == [out, out]
+
+
+def test_a_scene_builds_its_own_sphere_size_and_the_plan_comes_first(tmp_path: Path) -> None:
+    """`table build --scene` without --diameters: the scene's sphere only; the plan (points,
+    sizes, thicknesses, distances, pilot, estimate) is printed before the result, and the pilot's
+    plate is kept in the table."""
+    from solitonde.instrument.tables.table import ModelTable
+
+    scene = tmp_path / "my_plate.yaml"
+    scene.write_text("chain: {diameter: 4.76e-3}\nplate: {material: steel_structural}\n"
+                     "effects: {plate_model: infinite}\n")
+    out = tmp_path / "my.h5"
+    res = CliRunner().invoke(build_app(), ["table", "build", "--scene", str(scene), "--out",
+                                           str(out), "--thicknesses", "3e-3,4e-3",
+                                           "--distances", "0.3,0.4", "--workers", "1",
+                                           "--no-progress"])
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert lines[0] == "plan: 4 points = 1 sphere size x 2 thicknesses x 2 distances"
+    assert lines[1].split(":")[1].strip() == "4.76"
+    assert lines[2].split(":")[1].strip() == "3, 4"
+    assert lines[3].split(":")[1].strip() == "300, 400"
+    assert lines[4].startswith("  4 points far (Zener's dashpot): pilot ")
+    assert lines[5].startswith("  estimated time: ") and "on 1 worker " in lines[5]
+    assert lines[6].startswith(f"wrote {out}: 4 scenes on 4 plates")  # the pilot's counted
+    table = ModelTable.load(out)
+    assert table.summary()["complete"]
+    assert table.summary()["axes"]["diameter_m"]["values"] == [4.76e-3]
+
+    both = tmp_path / "both.h5"
+    res = CliRunner().invoke(build_app(), ["table", "build", "--scene", str(scene), "--out",
+                                           str(both), "--diameters", "4.76e-3,9.53e-3",
+                                           "--thicknesses", "3e-3", "--distances", "0.3",
+                                           "--workers", "1", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert res.output.startswith("plan: 2 points = 2 sphere sizes x 1 thicknesses")

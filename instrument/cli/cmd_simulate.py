@@ -9,6 +9,13 @@ then the shot) with ``solitonde.signal.io`` as CSV: ``# key: <JSON>`` comment li
 (``scene``, ``plate_model``, ``plate_model_reason``, ``source``, ``sphere_diameter``), then the
 header ``time_s,force_N`` and one row per sample; ``solitonde.signal.io.read`` reads it back
 with the scene in ``metadata["scene"]``.
+
+``--shots N --snr-db S [--drift F] [--seed K]`` makes N noisy repeated shots of the one simulated
+trace with the acquisition model ``validate`` uses (signal.synth.degrade: white noise over the
+whole record, pre-trigger included, at S dB below the incident peak above the baseline; with
+``--drift`` a baseline drift of F times that peak), to plan an experiment or test a set-up;
+``--out`` then holds one column per shot, and the report adds every shot's TOF and ARR with
+their mean and spread. The noise is seeded: the same K gives the same shots.
 """
 
 from __future__ import annotations
@@ -106,6 +113,53 @@ def write_plot(path: Path, result: SimulationResult, recorded: Waveform,
                                   title=title))
 
 
+def noisy_shots(result: SimulationResult, recorded: Waveform, n: int, snr_db: float,
+                drift: float = 0.0, seed: int = 0) -> list[Waveform]:
+    """``n`` shots of ``recorded`` as an acquisition makes them, with validate's noise model:
+    signal.synth.degrade with the incident peak above the baseline (the model's own trace) as
+    the reference of the SNR and the drift, seeded by ``seed``."""
+    import numpy as np
+
+    from solitonde.signal.synth import degrade
+
+    rng = np.random.default_rng(seed)
+    reference = float(result.samples.max() - result.samples[0])
+    meta = {"acquisition": {"shots": n, "snr_db": snr_db, "drift": drift, "seed": seed,
+                            "reference_N": reference}}
+    return [recorded.with_samples(degrade(recorded.samples, snr_db, rng, reference, drift))
+            .with_metadata(**meta, shot=k) for k in range(n)]
+
+
+def shot_features(measured: list[Features | str]) -> list[dict[str, Any]]:
+    """TOF, ARR, SNR and flags of each noisy shot as the signal package measured them, or why
+    a shot's pulses could not be found."""
+    out: list[dict[str, Any]] = []
+    for k, f in enumerate(measured):
+        if isinstance(f, str):
+            out.append({"shot": k, "tof_s": math.nan, "arr": math.nan, "snr_db": math.nan,
+                        "flags": [], "error": f})
+            continue
+        out.append({"shot": k, "tof_s": _nan(f.tof_s), "arr": _nan(f.arr),
+                    "snr_db": f.snr_db, "flags": list(f.flags)})
+    return out
+
+
+def _shots_line(rows: list[dict[str, Any]], acquisition: dict[str, Any]) -> str:
+    import numpy as np
+
+    tof = np.array([r["tof_s"] for r in rows], dtype=float)
+    arr = np.array([r["arr"] for r in rows], dtype=float)
+    ok = np.isfinite(tof) & np.isfinite(arr)
+    head = (f"{len(rows)} noisy shots (SNR {acquisition['snr_db']:g} dB, drift "
+            f"{acquisition['drift']:g}, seed {acquisition['seed']}): ")
+    if not ok.any():
+        return head + "no shot with both pulses found"
+    ddof = 1 if ok.sum() > 1 else 0
+    return (head + f"{int(ok.sum())} measured; TOF {tof[ok].mean() * 1e6:.2f} +- "
+            f"{tof[ok].std(ddof=ddof) * 1e6:.2f} us, ARR {arr[ok].mean():.4f} +- "
+            f"{arr[ok].std(ddof=ddof):.4f}")
+
+
 def _table(data: dict[str, Any]) -> Table:
     table = Table(title="Chain simulation", show_header=True)
     table.add_column("quantity")
@@ -141,6 +195,16 @@ def simulate_command(
     out: Path | None = typer.Option(None, "--out", help="Write the sensor trace as CSV."),
     plot: Path | None = typer.Option(None, "--plot", help="Draw the trace (PNG) with pulses."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    shots: int | None = typer.Option(None, "--shots", min=1, max=10_000, help="Make this many "
+                                     "noisy shots of the trace (needs --snr-db); --out gets one "
+                                     "column each."),
+    snr_db: float | None = typer.Option(None, "--snr-db", min=-20.0, max=200.0, help="dB, "
+                                        "noise of the shots: 20 log10(incident peak / noise "
+                                        "sigma)."),
+    drift: float = typer.Option(0.0, "--drift", min=0.0, max=10.0, help="Baseline drift of "
+                                "each shot, as a fraction of the incident peak."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the noise (same seed, same "
+                             "shots)."),
 ) -> None:
     """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
     if scene_arg is not None and scene_file is not None and scene_arg != scene_file:
@@ -148,6 +212,12 @@ def simulate_command(
                    "give one", err=True)
         raise typer.Exit(code=2)
     scene_file = scene_file or scene_arg
+    if shots is None and (snr_db is not None or drift):
+        shots = 1
+    if shots is not None and snr_db is None:
+        typer.echo("error: --snr-db: needed with --shots (the noise of the shots, in dB)",
+                   err=True)
+        raise typer.Exit(code=2)
     for flag, path in (("--out", out), ("--plot", plot)):
         if path is not None and path.is_dir():  # before the run, which may take minutes
             typer.echo(f"error: {flag}: {str(path)!r} is a folder; give a file name", err=True)
@@ -176,10 +246,22 @@ def simulate_command(
         feature_error = str(exc)
         typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
     data = summary(result, waveform, features, feature_error)
+    written: Waveform | list[Waveform] = waveform
+    if shots is not None and snr_db is not None:
+        written = noisy_shots(result, waveform, shots, snr_db, drift, seed)
+        measured: list[Features | str] = []
+        for shot in written:
+            try:  # the recorded trace with this shot's noise, measured as any recording
+                measured.append(extract(waveform.with_samples(shot.samples)))
+            except WaveformError as exc:
+                measured.append(str(exc))
+        data["shots"] = shot_features(measured)
+        data["acquisition"] = written[0].metadata["acquisition"]
     failed = []
+
     def write_csv(path: Path) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        signal_io.write(path, waveform, format="csv")
+        signal_io.write(path, written, format=None if path.suffix else "csv")
 
     writers = (("--out", out, write_csv),
                ("--plot", plot, lambda path: write_plot(path, result, waveform, data)))
@@ -194,6 +276,8 @@ def simulate_command(
         typer.echo(json.dumps(json_ready(data), indent=2))
     else:
         Console().print(_table(data))
+        if "shots" in data:
+            Console().print(_shots_line(data["shots"], data["acquisition"]), highlight=False)
     for line in failed:
         typer.echo(line, err=True)
     if failed:

@@ -2,7 +2,12 @@
 
 Axes are given as comma lists (``4.76e-3,9.53e-3``) or as ``geom:START:STOP:N`` /
 ``lin:START:STOP:N``; without them the default table's grid is used (the paper's three spheres,
-t = 1.5..6 mm, L = 0..457 mm dense within 200 mm).
+t = 1.5..6 mm, L = 0..457 mm dense within 200 mm). With ``--scene`` (or ``--set
+chain.diameter=...``) and no ``--diameters`` the table is built for the scene's sphere size only.
+
+Before the sweep starts, ``build`` prints its plan: the points, the sphere sizes, thicknesses
+and distances, how many points need a meshed plate, and a time estimate from a pilot (one plate
+of each kind run first and kept); then a progress bar whose ETA tqdm refines as plates return.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from solitonde.instrument.service.settings import DEFAULT_TABLE
 from solitonde.instrument.tables.table import ModelTable, TableError
 from solitonde.instrument.tables.table_build import (
     PAPER_DIAMETERS_M,
+    BuildPlan,
     Sweep,
     build_table,
     default_distances_m,
@@ -29,7 +35,7 @@ from solitonde.instrument.tables.table_build import (
     partial_path,
 )
 from solitonde.model.errors import SceneError
-from solitonde.model.scene import apply_overrides, load_scene_file
+from solitonde.model.scene import apply_overrides, load_scene_file, scene_from_dict
 
 DEFAULT_TABLE_PATH = DEFAULT_TABLE
 
@@ -60,6 +66,42 @@ def _interrupted(exc: BaseException) -> bool:
     return False
 
 
+def duration(seconds: float) -> str:
+    """``42 s``, ``3.5 min``, ``1.2 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def _mm(values: list[float]) -> str:
+    return ", ".join(f"{v * 1e3:.4g}" for v in values)
+
+
+def plan_text(plan: BuildPlan) -> str:
+    """The plan as the command prints it before the sweep."""
+    sw = plan.sweep
+    n_d, n_t, n_l = sw.shape
+    done = n_d * n_t * n_l - plan.points_todo
+    lines = [f"plan: {n_d * n_t * n_l} points = {n_d} sphere size{'s' * (n_d != 1)} x "
+             f"{n_t} thicknesses x {n_l} distances"
+             + (f" ({done} done before, {plan.points_todo} to go)" if done else ""),
+             f"  sphere diameters, mm: {_mm(sw.diameters_m)}",
+             f"  thicknesses, mm:      {_mm(sw.thicknesses_m)}",
+             f"  distances, mm:        {_mm(sw.distances_m)}"]
+    kinds = {"meshed": "near a support (meshed plate)", "dashpot": "far (Zener's dashpot)"}
+    for kind, n in plan.points_by_kind.items():
+        lines.append(f"  {n} points {kinds[kind]}: pilot {plan.pilots[kind]:.2f} s a point")
+    if plan.compile_s > 10:
+        lines.append(f"  (the pilot first compiled the model's kernels: {duration(plan.compile_s)}"
+                     ", once per installation)")
+    lines.append(f"  estimated time: {duration(plan.eta_s)} on {plan.workers} worker"
+                 f"{'s' * (plan.workers != 1)} (+ their start), after a "
+                 f"{duration(plan.pilot_wall_s)} pilot")
+    return "\n".join(lines)
+
+
 def _fail(message: str) -> None:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(2)
@@ -67,7 +109,8 @@ def _fail(message: str) -> None:
 
 def build_command(
     out: Path = typer.Option(DEFAULT_TABLE_PATH, "--out", "-o", help="table file to write"),
-    diameters: str | None = typer.Option(None, help="sphere diameters D, m (default: the paper's "
+    diameters: str | None = typer.Option(None, help="sphere diameters D, m (default: the "
+                                         "scene's with --scene, else the paper's "
                                          "4.76e-3,9.53e-3,19.05e-3)"),
     thicknesses: str | None = typer.Option(None, help="plate thicknesses t, m "
                                            "(default: geom:1.5e-3:6e-3:8)"),
@@ -97,15 +140,20 @@ def build_command(
     try:
         base: dict[str, Any] = load_scene_file(scene) if scene is not None else {}
         base = apply_overrides(base, set_)
+        own_sphere = scene is not None or any(s.split("=")[0].strip() == "chain.diameter"
+                                              for s in set_)
+        sizes = ([scene_from_dict(base).chain.diameter] if own_sphere
+                 else list(PAPER_DIAMETERS_M))
         sweep = Sweep(
-            parse_axis(diameters, "--diameters", list(PAPER_DIAMETERS_M)),
+            parse_axis(diameters, "--diameters", sizes),
             parse_axis(thicknesses, "--thicknesses", default_thicknesses_m()),
             parse_axis(distances, "--distances", default_distances_m()),
             scene=base, traces=traces,
         )
         command = "solitonde " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
-                             command=command, table_id=table_id)
+                             command=command, table_id=table_id,
+                             plan=lambda p: typer.echo(plan_text(p), err=as_json))
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return

@@ -28,6 +28,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
                                  "and diagnostics."),
     "theory": ("cmd_theory", "Closed-form predictions (Zener impact, ARR, TOF, critical "
                              "distance) for a scene."),
+    "post": ("cmd_post", "Upload waveform files to the service; each is stored once (a repeat "
+                         "is a replay)."),
+    "watch": ("cmd_watch", "Post every new waveform file in a folder once it is complete; a "
+                           "queue on disk survives outages and restarts."),
     "serve": ("cmd_serve", "Start the REST service (OpenAPI docs at /docs); Ctrl-C stops it "
                            "cleanly."),
     "invert": ("cmd_invert", "Estimate plate thickness and distance to the nearest support from "

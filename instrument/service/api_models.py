@@ -144,6 +144,8 @@ class MeasurementOut(BaseModel):
     estimate: dict[str, Any] | None = Field(
         description="thickness_m and distance_m (map, median, ci68, ci95, status), or null")
     estimate_reason: str | None = Field(None, description="why the estimate is null")
+    table: str | None = Field(None, description="id of the model table the estimate used "
+                              "(GET /v1/tables gives its plate family)")
     location: dict[str, float] | None = Field(None, description="x_m and y_m on the plate")
     links: dict[str, str] = Field(default_factory=dict)
     skipped_channels: list[dict[str, str]] = Field(
@@ -162,6 +164,7 @@ class MeasurementSummary(BaseModel):
     source: str
     aggregates: list[dict[str, Any]]
     estimate: dict[str, Any] | None
+    table: str | None = Field(None, description="id of the model table the estimate used")
     location: dict[str, float] | None = Field(None, description="x_m and y_m on the plate")
 
 

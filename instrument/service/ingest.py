@@ -311,6 +311,7 @@ def measurement_dict(record: Any) -> dict[str, Any]:
         "aggregates": record.result.get("aggregates", []),
         "estimate": record.result.get("estimate"),
         "estimate_reason": record.result.get("estimate_reason"),
+        "table": record.result.get("table"),
         "location": record.result.get("location"),
         "links": {"self": f"/v1/measurements/{record.id}",
                   "plot": f"/v1/measurements/{record.id}/plot.png"},

@@ -554,7 +554,7 @@ async def list_measurements(
     items = [{"id": r.id, "created_at": r.created_at, "plate_id": r.plate_id,
               "position": r.position, "n_shots": r.n_shots, "source": r.source,
               "aggregates": r.result.get("aggregates", []),
-              "estimate": r.result.get("estimate"),
+              "estimate": r.result.get("estimate"), "table": r.result.get("table"),
               "location": r.result.get("location")} for r in records]
     next_url = None
     if more and records:

@@ -14,7 +14,8 @@ from fastapi.responses import Response
 
 router = APIRouter(include_in_schema=False)
 _FILES = {"index.html": "text/html; charset=utf-8", "app.js": "text/javascript; charset=utf-8",
-          "style.css": "text/css; charset=utf-8"}
+          "style.css": "text/css; charset=utf-8",
+          "favicon.svg": "image/svg+xml"}
 _HEADERS = {"Cache-Control": "no-cache", "X-Content-Type-Options": "nosniff",
             "Content-Security-Policy": "default-src 'self'; img-src 'self' blob:; "
                                        "style-src 'self'; script-src 'self'"}

@@ -401,6 +401,72 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+@dataclass
+class BuildPlan:
+    """What a build is about to do and how long it should take, from a pilot run.
+
+    ``pilots`` holds, per kind of plate (``meshed``: a plate model with a mesh, near a support;
+    ``dashpot``: every other tier), the seconds one point took in the pilot (the plate of middle
+    thickness of that kind, all its sphere sizes, run in this process and kept in the table), timed
+    on a second, warm run; ``compile_s`` is what the first runs took more (the numba kernels
+    compiled, once per installation). ``eta_s`` spreads the remaining points' cost over the
+    workers.
+    """
+
+    sweep: Sweep
+    points_todo: int
+    plates_todo: int
+    points_by_kind: dict[str, int]
+    pilots: dict[str, float]
+    pilot_wall_s: float
+    eta_s: float
+    workers: int
+    compile_s: float = 0.0
+
+
+def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
+    model = resolve_plate_model(sweep.scene_at(len(sweep.diameters_m) - 1, i_t, i_l))[0]
+    return "meshed" if model in MESHED_PLATE_MODELS else "dashpot"
+
+
+def _pilot(fh: h5py.File, sweep: Sweep, spec: dict[str, Any], workers: int,
+           scheduler: str | None) -> tuple[BuildPlan, int, int]:
+    """Run the first pending plate of each kind here, write it, and plan the rest; returns the
+    plan, and the points and plates written."""
+    tasks = _pending(fh, sweep)
+    kinds = {(i_t, i_l): _kind(sweep, i_t, i_l) for i_t, i_l, _ in tasks}
+    points_by_kind: dict[str, int] = {}
+    for i_t, i_l, todo in tasks:
+        points_by_kind[kinds[i_t, i_l]] = points_by_kind.get(kinds[i_t, i_l], 0) + len(todo)
+    pilots: dict[str, float] = {}
+    written = plates = 0
+    compile_s = 0.0
+    started = time.perf_counter()
+    by_kind: dict[str, list[tuple[int, int, list[int]]]] = {}
+    for task in tasks:
+        by_kind.setdefault(kinds[task[0], task[1]], []).append(task)
+    for kind, of_kind in by_kind.items():
+        # the middle plate of the kind (thin plates cost more, thick ones less)
+        i_t, i_l, todo = sorted(of_kind, key=lambda t: sweep.thicknesses_m[t[0]])[len(of_kind) // 2]
+        t0 = time.perf_counter()
+        written += _write_plate(fh, run_plate(spec, i_t, i_l, todo))
+        plates += 1
+        first = time.perf_counter() - t0
+        # Timed again, warm: the first run of an installation compiles the numba kernels
+        # (minutes), which the workers then load from the cache; that is no plate's cost.
+        t0 = time.perf_counter()
+        run_plate(spec, i_t, i_l, todo)
+        again = time.perf_counter() - t0
+        pilots[kind] = again / len(todo)
+        compile_s += max(0.0, first - again)
+    rest = _pending(fh, sweep)
+    lanes = 1 if scheduler is None and workers <= 1 else max(1, min(workers, len(rest)))
+    work = sum(len(todo) * pilots[kinds[i_t, i_l]] for i_t, i_l, todo in rest)
+    plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, pilots,
+                     time.perf_counter() - started, work / lanes, lanes, compile_s)
+    return plan, written, plates
+
+
 def build_table(
     sweep: Sweep,
     out: str | Path,
@@ -412,6 +478,7 @@ def build_table(
     command: str | None = None,
     on_plate: Callable[[dict[str, Any]], None] | None = None,
     table_id: str | None = None,
+    plan: Callable[[BuildPlan], None] | None = None,
 ) -> BuildReport:
     """Build (or continue building) the table for ``sweep`` at ``out``.
 
@@ -424,6 +491,8 @@ def build_table(
         (what an interruption does; for tests and chunked builds).
     command: the command line, recorded in the provenance.
     table_id: the table's id, recorded in the provenance (default: the file's stem when loaded).
+    plan: called with the :class:`BuildPlan` before the sweep runs: the first plate of each kind
+        is run here as a pilot (and kept), and the time of the rest estimated from it.
 
     Raises
     ------
@@ -471,6 +540,11 @@ def build_table(
                          "git_revision": git_revision(), "runner": runner,
                          "points_done_before": int(fh["done"][...].sum())})
         fh.attrs["sessions"] = json.dumps(sessions)
+        eta = None
+        if plan is not None and max_plates is None and _pending(fh, sweep):
+            the_plan, written, plates = _pilot(fh, sweep, spec, workers, scheduler)
+            eta = the_plan.eta_s
+            plan(the_plan)
         tasks = _pending(fh, sweep)
         if max_plates is not None:
             tasks = tasks[:max(0, max_plates)]
@@ -480,6 +554,8 @@ def build_table(
             from tqdm import tqdm
 
             bar = tqdm(total=total, unit="scene", desc="table", smoothing=0.05)
+            if eta is not None:  # tqdm's own ETA takes over once plates come back
+                bar.set_postfix_str(f"planned {eta:.0f} s", refresh=True)
         try:
             jobs = [(spec, i_t, i_l, todo) for i_t, i_l, todo in tasks]
             for result in run_tasks(run_plate, jobs, workers, scheduler):
@@ -487,6 +563,8 @@ def build_table(
                 written += n
                 plates += 1
                 if bar is not None:
+                    if eta is not None and bar.n == 0:
+                        bar.set_postfix_str("", refresh=False)  # tqdm's ETA from here on
                     bar.update(n)
                 if on_plate is not None:
                     on_plate(result)

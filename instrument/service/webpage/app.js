@@ -1,10 +1,17 @@
-// The solitonde page: plates, a plate's map and measurements, a shot's trace.
-// Everything comes from the REST API under /v1; the API key, when the server asks for one, is
-// kept for this browser tab only (sessionStorage) and sent as X-API-Key.
+// The solitonde page: upload a recording, plates, a plate's map, one estimate per position, its
+// measurements, and every shot's trace with the picks marked. Everything comes from the REST API
+// under /v1; the API key, when the server asks for one, is kept for this browser tab only
+// (sessionStorage) and sent as X-API-Key. The page looks for new measurements every few seconds
+// (GET /v1/plates is cheap) and redraws what changed.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
 const KEY = "solitonde-api-key";
+const POLL_MS = 2000;
+let tables = null; // table id -> its family, from GET /v1/tables (once)
+let seen = null; // what GET /v1/plates said last time: the live update redraws on a change
+let busy = false;
+let again = false; // a forced redraw asked while one was running
 
 function headers() {
   const key = sessionStorage.getItem(KEY);
@@ -52,10 +59,15 @@ function link(td, text, onClick) {
   button.textContent = text;
   button.addEventListener("click", onClick);
   td.appendChild(button);
+  return button;
 }
 
 function mm(value) {
   return value === null || value === undefined ? "-" : (value * 1e3).toFixed(2);
+}
+
+function num(value, digits) {
+  return value === null || value === undefined ? "-" : Number(value).toFixed(digits);
 }
 
 function answer(p) {
@@ -66,13 +78,54 @@ function answer(p) {
   return p.status;
 }
 
-async function loadPlates() {
-  const plates = (await (await api("/v1/plates")).json()).items;
+// --- where we are: #plate=ID&m=N&shot=K -------------------------------------------------------
+
+function here() {
+  const params = new URLSearchParams(location.hash.slice(1));
+  const m = params.get("m");
+  return { plate: params.get("plate"), m: m === null ? null : Number(m),
+           shot: Number(params.get("shot") || 0) };
+}
+
+function go(plate, m = null, shot = 0) {
+  const params = new URLSearchParams();
+  if (plate !== null && plate !== undefined) params.set("plate", plate);
+  if (m !== null) params.set("m", String(m));
+  if (m !== null && shot) params.set("shot", String(shot));
+  location.hash = params.toString();
+}
+
+// --- tables and plate material ------------------------------------------------------------------
+
+function materialName(material) {
+  if (!material) return "?";
+  return material.name || `E ${(material.youngs_modulus / 1e9).toFixed(0)} GPa`;
+}
+
+async function tableText(tableId) {
+  if (!tableId) return "no model table";
+  if (tables === null) {
+    tables = {};
+    try {
+      for (const t of (await (await api("/v1/tables")).json()).items) tables[t.id] = t.family || {};
+    } catch (error) {
+      if (error.message === "unauthorized") throw error;
+    }
+  }
+  const family = tables[tableId];
+  if (!family) return `table ${tableId}`;
+  return `table ${tableId} (plate ${materialName(family.plate_material)}, spheres ` +
+         `${materialName(family.sphere_material)})`;
+}
+
+// --- plates -------------------------------------------------------------------------------------
+
+async function loadPlates(plates) {
   const body = $("plates").querySelector("tbody");
   body.textContent = "";
   for (const p of plates) {
     const row = document.createElement("tr");
-    link(cell(row, ""), p.plate_id, () => { location.hash = `plate=${encodeURIComponent(p.plate_id)}`; });
+    link(cell(row, ""), p.plate_id, () => go(p.plate_id));
     cell(row, p.n_positions);
     cell(row, p.n_measurements);
     cell(row, p.n_shots);
@@ -82,10 +135,21 @@ async function loadPlates() {
   say(`${plates.length} plate${plates.length === 1 ? "" : "s"}`);
 }
 
+function downloads(plateId) {
+  const id = encodeURIComponent(plateId);
+  for (const kind of ["estimates", "shots"]) {
+    for (const format of ["csv", "parquet"]) {
+      const a = $(`dl-${kind}-${format}`);
+      a.href = `/v1/measurements/export?kind=${kind}&format=${format}&plate_id=${id}`;
+      a.download = `${plateId}-${kind}.${format}`;
+    }
+  }
+}
+
 async function showPlate(plateId) {
   $("plate-panel").hidden = false;
-  $("trace-panel").hidden = true;
   $("plate-title").textContent = `Plate ${plateId}`;
+  downloads(plateId);
   const id = encodeURIComponent(plateId);
   const map = await (await api(`/v1/plates/${id}/map`)).json();
   const s = map.support;
@@ -95,12 +159,29 @@ async function showPlate(plateId) {
       `rms residual ${mm(s.residual_m)} mm`
     : `Support not located: ${map.support_reason || "-"}`;
   await image($("map"), `/v1/plates/${id}/map.png`);
+  const positions = $("positions").querySelector("tbody");
+  positions.textContent = "";
+  for (const p of map.positions || []) {
+    const row = document.createElement("tr");
+    cell(row, p.position);
+    cell(row, p.x_m === null || p.x_m === undefined ? "-" : `${mm(p.x_m)}, ${mm(p.y_m)}`);
+    cell(row, p.n_shots);
+    cell(row, answer(p.thickness_m));
+    cell(row, answer(p.distance_m));
+    cell(row, mm(p.distance_to_located_support_m));
+    const ids = cell(row, "");
+    for (const mid of p.measurement_ids || []) {
+      link(ids.appendChild(document.createElement("span")), mid, () => go(plateId, mid));
+    }
+    positions.appendChild(row);
+  }
   const items = (await (await api(`/v1/measurements?plate_id=${id}&limit=500`)).json()).items;
+  const used = new Set();
   const body = $("measurements").querySelector("tbody");
   body.textContent = "";
   for (const m of items) {
     const row = document.createElement("tr");
-    link(cell(row, ""), m.id, () => showTrace(m.id));
+    link(cell(row, ""), m.id, () => go(plateId, m.id));
     cell(row, m.position);
     const loc = m.location || {};
     cell(row, loc.x_m === undefined ? "-" : `${mm(loc.x_m)}, ${mm(loc.y_m)}`);
@@ -118,39 +199,166 @@ async function showPlate(plateId) {
     const est = m.estimate || {};
     cell(row, answer(est.thickness_m));
     cell(row, answer(est.distance_m));
+    cell(row, m.table || "-");
+    if (m.table) used.add(m.table);
     link(cell(row, ""), "delete", () => remove(m.id, plateId));
     body.appendChild(row);
   }
+  const texts = [];
+  for (const t of used) texts.push(await tableText(t));
+  $("plate-tables").textContent = texts.length ? `Estimated with ${texts.join("; ")}` :
+    "No estimate yet (no model table for these measurements)";
 }
 
-async function showTrace(measurementId) {
+// --- one measurement: every shot, its trace with the picks ---------------------------------------
+
+async function showMeasurement(measurementId, shot) {
+  const m = await (await api(`/v1/measurements/${measurementId}`)).json();
   $("trace-panel").hidden = false;
-  $("trace-title").textContent = `Measurement ${measurementId}, shot 0`;
-  await image($("trace"), `/v1/measurements/${measurementId}/plot.png?shot=0`);
+  const where = [m.plate_id && `plate ${m.plate_id}`, m.position && `position ${m.position}`]
+    .filter(Boolean).join(", ");
+  $("measurement-title").textContent = `Measurement ${m.id}${where ? ` (${where})` : ""}: ` +
+    `${m.n_shots} shot${m.n_shots === 1 ? "" : "s"}; thickness ` +
+    `${answer((m.estimate || {}).thickness_m)} mm, distance ${answer((m.estimate || {}).distance_m)} mm`;
+  $("measurement-table").textContent = m.estimate ? `Estimated with ${await tableText(m.table)}` :
+    `No estimate: ${m.estimate_reason || "-"}`;
+  const body = $("shots").querySelector("tbody");
+  body.textContent = "";
+  for (const s of m.shots) {
+    const f = s.features || {};
+    const row = document.createElement("tr");
+    if (s.shot_index === shot) row.className = "current";
+    link(cell(row, ""), `shot ${s.shot_index}`, () => go(m.plate_id, m.id, s.shot_index))
+      .id = `shot-${s.shot_index}`;
+    cell(row, f.tof_s === null || f.tof_s === undefined ? "-" : (f.tof_s * 1e6).toFixed(2));
+    cell(row, num(f.arr, 4));
+    cell(row, num(f.snr_db, 1));
+    cell(row, (f.flags || []).join(", ") || "-");
+    body.appendChild(row);
+  }
+  $("trace-title").textContent = `Measurement ${m.id}, shot ${shot}: the incident and reflected ` +
+    "pulses marked";
+  await image($("trace"), `/v1/measurements/${m.id}/plot.png?shot=${shot}`);
 }
 
 async function remove(measurementId, plateId) {
   if (!confirm(`Delete measurement ${measurementId} and its shots?`)) return;
   await api(`/v1/measurements/${measurementId}`, { method: "DELETE" });
-  await loadPlates();
-  await showPlate(plateId);
+  go(plateId);
+  await refresh(true);
 }
 
-async function route() {
+// --- upload ----------------------------------------------------------------------------------------
+
+async function upload(event) {
+  event.preventDefault();
+  const file = $("file").files[0];
+  if (!file) {
+    $("upload-result").textContent = "Choose or drop a file first.";
+    $("upload-result").className = "error";
+    return;
+  }
+  const form = new FormData();
+  form.append("file", file, file.name);
+  for (const input of $("upload-form").querySelectorAll(".fields input")) {
+    if (input.value.trim() !== "") form.append(input.name, input.value.trim());
+  }
+  $("upload").disabled = true;
+  $("upload-result").className = "";
+  $("upload-result").textContent = `Sending ${file.name} ...`;
   try {
-    await loadPlates();
-    const match = location.hash.match(/^#plate=(.+)$/);
-    if (match) await showPlate(decodeURIComponent(match[1]));
+    const m = await (await api("/v1/measurements", { method: "POST", body: form })).json();
+    const est = m.estimate || {};
+    $("upload-result").textContent = `${file.name}: measurement ${m.id}, ${m.n_shots} shot` +
+      `${m.n_shots === 1 ? "" : "s"}; thickness ${answer(est.thickness_m)} mm, distance ` +
+      `${answer(est.distance_m)} mm` + (m.estimate ? "" : ` (no estimate: ${m.estimate_reason})`);
+    go(m.plate_id, m.id);
+    await refresh(true);
+  } catch (error) {
+    $("upload-result").textContent = `${file.name}: ${error.message}`;
+    $("upload-result").className = "error";
+  } finally {
+    $("upload").disabled = false;
+  }
+}
+
+function dropZone() {
+  const zone = $("drop");
+  for (const name of ["dragenter", "dragover"]) {
+    zone.addEventListener(name, (event) => { event.preventDefault(); zone.classList.add("over"); });
+  }
+  zone.addEventListener("dragleave", () => zone.classList.remove("over"));
+  zone.addEventListener("drop", (event) => {
+    event.preventDefault();
+    zone.classList.remove("over");
+    if (event.dataTransfer.files.length) {
+      $("file").files = event.dataTransfer.files;
+      $("drop-text").textContent = `${event.dataTransfer.files[0].name}: fill in what the file ` +
+        "does not say, then Upload.";
+    }
+  });
+}
+
+// --- downloads with the key ------------------------------------------------------------------------
+
+async function download(event) {
+  if (!sessionStorage.getItem(KEY)) return; // a plain link does it
+  event.preventDefault();
+  const a = event.currentTarget;
+  const blob = await (await api(a.getAttribute("href"))).blob();
+  const save = document.createElement("a");
+  save.href = URL.createObjectURL(blob);
+  save.download = a.download;
+  save.click();
+  setTimeout(() => URL.revokeObjectURL(save.href), 10000);
+}
+
+// --- drawing and the live update ---------------------------------------------------------------------
+
+async function refresh(force = false) {
+  if (busy) { // one drawing at a time; a forced one asked meanwhile runs right after
+    again = again || force;
+    return;
+  }
+  busy = true;
+  try {
+    const plates = (await (await api("/v1/plates")).json()).items;
+    const signature = JSON.stringify(plates.map((p) => [p.plate_id, p.n_measurements, p.n_shots,
+                                                         p.last_activity]));
+    const changed = signature !== seen;
+    seen = signature;
+    if (!changed && !force) return;
+    await loadPlates(plates);
+    const { plate, m, shot } = here();
+    if (plate !== null) await showPlate(plate); else $("plate-panel").hidden = true;
+    if (m !== null && force) await showMeasurement(m, shot);
+    if (m === null) $("trace-panel").hidden = true;
+    $("live").textContent = `live, updated ${new Date().toLocaleTimeString()}`;
   } catch (error) {
     if (error.message !== "unauthorized") say(error.message, true);
+  } finally {
+    busy = false;
+    if (again) {
+      again = false;
+      await refresh(true);
+    }
   }
+}
+
+async function poll() {
+  await refresh(false);
+  setTimeout(poll, POLL_MS);
 }
 
 $("key-form").addEventListener("submit", (event) => {
   event.preventDefault();
   sessionStorage.setItem(KEY, $("key").value);
   $("key-form").hidden = true;
-  route();
+  tables = null;
+  refresh(true);
 });
-window.addEventListener("hashchange", route);
-route();
+$("upload-form").addEventListener("submit", upload);
+for (const a of document.querySelectorAll(".downloads a")) a.addEventListener("click", download);
+dropZone();
+window.addEventListener("hashchange", () => refresh(true));
+refresh(true).then(() => setTimeout(poll, POLL_MS));
