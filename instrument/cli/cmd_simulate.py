@@ -240,8 +240,9 @@ def simulate_command(
         raise typer.Exit(code=2) from None
     features: Features | None = None
     feature_error = None
+    options = detect_options(result.scene)
     try:
-        features = extract(waveform, **detect_options(result.scene))
+        features = extract(waveform, **options)
     except WaveformError as exc:
         feature_error = str(exc)
         typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
@@ -252,7 +253,7 @@ def simulate_command(
         measured: list[Features | str] = []
         for shot in written:
             try:  # the recorded trace with this shot's noise, measured as any recording
-                measured.append(extract(waveform.with_samples(shot.samples)))
+                measured.append(extract(waveform.with_samples(shot.samples), **options))
             except WaveformError as exc:
                 measured.append(str(exc))
         data["shots"] = shot_features(measured)
