@@ -82,6 +82,12 @@ def waveforms_from_shots(shots: Sequence[Any], common: Any = None) -> list[Wavef
     return out
 
 
+def waveforms_from_records(shots: Sequence[ShotRecord]) -> list[Waveform]:
+    """Stored shots (with their samples) as waveforms again, for a reanalysis."""
+    return [Waveform(t0=s.t0, dt=s.dt, samples=s.samples, units=s.units,
+                     calibration=s.calibration, metadata=dict(s.metadata)) for s in shots]
+
+
 def read_file(path: Path, fmt: str, options: Mapping[str, Any],
               client_name: str | None = None) -> list[Waveform]:
     """Read an uploaded file with the signal readers; every failure becomes a 422 on ``file``.

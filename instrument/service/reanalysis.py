@@ -14,11 +14,10 @@ from collections.abc import Callable
 from typing import Any
 
 from solitonde.instrument.inference.table_set import TableSet
-from solitonde.instrument.service.ingest import compute_result
+from solitonde.instrument.service.ingest import compute_result, waveforms_from_records
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.store import Store
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.waveform import Waveform
 
 
 def _brief(result: dict[str, Any]) -> dict[str, Any]:
@@ -51,9 +50,7 @@ def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
             if record is None:  # deleted meanwhile
                 continue
             try:
-                waveforms = [Waveform(t0=s.t0, dt=s.dt, samples=s.samples, units=s.units,
-                                      calibration=s.calibration, metadata=dict(s.metadata))
-                             for s in record.shots]
+                waveforms = waveforms_from_records(record.shots)
                 shots, result = compute_result(waveforms, tables, "shots")
             except Problem as exc:
                 failed.append({"id": record.id, "reason": exc.detail})
