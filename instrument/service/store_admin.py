@@ -135,6 +135,8 @@ def migrate(store: Path, backup_to: Path | None = None) -> dict[str, Any]:
     conn = _connect(store)
     try:
         version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+        if version == 0 and "measurements" in _counts(conn):
+            version = 1  # written before the version was recorded: schema 1's layout
     finally:
         conn.close()
     if version > SCHEMA_VERSION:
