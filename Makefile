@@ -4,6 +4,10 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# `make run PORT=8001 HOST=0.0.0.0`: passed to `solitonde serve`, which refuses a non-loopback
+# HOST unless SOLITONDE_API_KEY is set (or --insecure is given to it directly).
+HOST ?= 127.0.0.1
+PORT ?= 8000
 
 .PHONY: run test lint bench clean
 
@@ -14,7 +18,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/solitonde serve --table data_samples/default_table.h5
+	$(BIN)/solitonde serve --host '$(HOST)' --port '$(PORT)' --table data_samples/default_table.h5
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

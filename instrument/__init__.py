@@ -11,3 +11,7 @@ Sub-packages, by concern (each one's docstring says what it may import):
 
 No import cycles (``tests/test_import_graph.py``).
 """
+
+from solitonde.model.jit_cache import configure as _configure_jit_cache
+
+_configure_jit_cache()  # the kernels' cache follows the source (see solitonde.model.jit_cache)

@@ -66,12 +66,14 @@ def wait_ready(url: str, proc: subprocess.Popen, timeout: float = 180.0) -> None
 
 
 def start_uvicorn(store: Path, workers: int = 1, env: dict[str, str] | None = None,
-                  port: int | None = None) -> tuple[subprocess.Popen, str]:
-    """uvicorn running the app factory in its own process group (so killpg reaches workers)."""
+                  port: int | None = None,
+                  prefix: tuple[str, ...] = ()) -> tuple[subprocess.Popen, str]:
+    """uvicorn running the app factory in its own process group (so killpg reaches workers);
+    ``prefix`` runs it under a wrapper that execs it (``prlimit --fsize=...``)."""
     port = port or free_port()
     full_env = {k: v for k, v in os.environ.items() if not k.startswith("SOLITONDE_")}
     full_env.update({"SOLITONDE_STORE": str(store), **(env or {})})
-    cmd = [sys.executable, "-m", "uvicorn", "--factory",
+    cmd = [*prefix, sys.executable, "-m", "uvicorn", "--factory",
            "solitonde.instrument.service.app:build_app_from_env", "--host", "127.0.0.1", "--port",
            str(port), "--workers", str(workers), "--no-access-log", "--log-level", "warning"]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=full_env, start_new_session=True,

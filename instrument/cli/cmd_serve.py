@@ -15,22 +15,24 @@ from solitonde.instrument.service.settings import (
     Settings,
     SettingsError,
 )
+from solitonde.instrument.tables.bundled import sample_waveforms
 
-SAMPLE_GLOBS = tuple(f"data_samples/waveforms/*.{ext}" for ext in ("csv", "npy", "h5", "tdms"))
+SAMPLE_EXTENSIONS = ("csv", "npy", "h5", "tdms")
 
 
 def sample_file(root: Path | None = None) -> Path | None:
     """A bundled sample waveform file to show in the curl example (CSV preferred).
 
     Relative to the working directory when it holds the samples (the README's `make run`), else
-    the absolute path in the source checkout, so the printed command works from anywhere.
+    the absolute path of the package's own copy, so the printed command works from anywhere.
     """
-    candidates = [root] if root is not None else [Path.cwd(), Path(__file__).resolve().parents[2]]
-    for base in candidates:
-        for pattern in SAMPLE_GLOBS:
-            for path in sorted(base.glob(pattern)):
+    folders = [root / "data_samples" / "waveforms"] if root is not None else [
+        Path("data_samples") / "waveforms", sample_waveforms()]
+    for folder in folders:
+        for ext in SAMPLE_EXTENSIONS:
+            for path in sorted(folder.glob(f"*.{ext}")):
                 if path.is_file():
-                    return path.relative_to(base) if base == Path.cwd() else path
+                    return path
     return None
 
 

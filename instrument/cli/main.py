@@ -46,6 +46,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
                                    "summary.json with the checks."),
     "table": ("cmd_table", "Build and inspect model tables."),
     "bench": ("cmd_bench", "Benchmarks of the model."),
+    "store": ("cmd_store", "Back up, check, migrate and reanalyze a measurement store."),
 }
 """Every command: the module that registers it and its one-line help, in the order listed."""
 

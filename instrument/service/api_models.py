@@ -147,6 +147,14 @@ class MeasurementOut(BaseModel):
     table: str | None = Field(None, description="id of the model table the estimate used "
                               "(GET /v1/tables gives its plate family)")
     location: dict[str, float] | None = Field(None, description="x_m and y_m on the plate")
+    provenance: dict[str, Any] | None = Field(
+        None, description="what the result was computed with: software_version, extractor "
+        "(function, options), table (id, sha256) or null, computed_at (Unix s); null for a "
+        "measurement stored before provenance was recorded")
+    earlier_results: list[dict[str, Any]] = Field(
+        default_factory=list, description="results a reanalysis (`solitonde store reanalyze`) "
+        "replaced, oldest first: superseded_at, provenance, table, aggregates, estimate, "
+        "estimate_reason, shot_features")
     links: dict[str, str] = Field(default_factory=dict)
     skipped_channels: list[dict[str, str]] = Field(
         default_factory=list, description="an upload's channels not analysed: {channel, reason} "

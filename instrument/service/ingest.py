@@ -82,6 +82,12 @@ def waveforms_from_shots(shots: Sequence[Any], common: Any = None) -> list[Wavef
     return out
 
 
+def waveforms_from_records(shots: Sequence[ShotRecord]) -> list[Waveform]:
+    """Stored shots (with their samples) as waveforms again, for a reanalysis."""
+    return [Waveform(t0=s.t0, dt=s.dt, samples=s.samples, units=s.units,
+                     calibration=s.calibration, metadata=dict(s.metadata)) for s in shots]
+
+
 def read_file(path: Path, fmt: str, options: Mapping[str, Any],
               client_name: str | None = None) -> list[Waveform]:
     """Read an uploaded file with the signal readers; every failure becomes a 422 on ``file``.
@@ -261,13 +267,34 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
         raise Problem(422, f"{field}: {exc.message}", kind="invalid-input", field=field) from None
 
 
-def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: TableSet,
-                      source: str, prefix: str,
-                      idempotency: tuple[str, str] | None = None) -> dict[str, Any]:
-    """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
+def provenance(chosen: Any) -> dict[str, Any]:
+    """What a result was computed with: the software version, the feature extractor and its
+    settings, the table (id and SHA-256 of its file) or None, and when."""
+    import dataclasses
+    import time
+    from importlib import metadata
+
+    from solitonde.signal.pulses import DetectOptions
+
+    try:
+        version = metadata.version("solitonde")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+        version = "unknown"
+    table = None
+    if chosen is not None:
+        table = {"id": chosen.table.table_id, "sha256": chosen.table.content_sha256}
+    return {"software_version": version,
+            "extractor": {"function": "solitonde.signal.features.extract",
+                          "options": json_ready(dataclasses.asdict(DetectOptions()))},
+            "table": table, "computed_at": time.time()}
+
+
+def compute_result(waveforms: Sequence[Waveform], tables: TableSet,
+                   prefix: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Features of every shot (as the API shows them) and the measurement's result: aggregates,
+    estimate (or why none), the table, the location, the provenance."""
     chosen = choose_table(waveforms, tables, prefix)
     check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
-    plate_id, position = location_of(waveforms, prefix)
     feats, summaries = analyse(waveforms, prefix)
     estimate, reason = None, tables.reason
     if chosen is not None:
@@ -279,16 +306,26 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
         except Exception as exc:  # an inversion that refuses these features (e.g. out of range)
             reason = f"inversion failed: {exc}"
     shots = [shot_out(i, wf, f) for i, (wf, f) in enumerate(zip(waveforms, feats, strict=True))]
-    records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
-                          calibration=wf.calibration, metadata=s["metadata"],
-                          features=s["features"], shot_index=i)
-               for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
     result = {"aggregates": [m.to_dict() for m in summaries], "estimate": estimate,
               "estimate_reason": reason, "table": chosen.table.table_id if chosen else None}
     coordinates = {k: float(waveforms[0].metadata[k]) for k in ("x_m", "y_m")
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export
         result["location"] = coordinates
+    result["provenance"] = provenance(chosen)
+    return shots, result
+
+
+def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: TableSet,
+                      source: str, prefix: str,
+                      idempotency: tuple[str, str] | None = None) -> dict[str, Any]:
+    """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
+    plate_id, position = location_of(waveforms, prefix)
+    shots, result = compute_result(waveforms, tables, prefix)
+    records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
+                          calibration=wf.calibration, metadata=s["metadata"],
+                          features=s["features"], shot_index=i)
+               for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
     new_id, created_at = store.add(records, result, source=source, plate_id=plate_id,
                                    position=position, idempotency=idempotency)
     return measurement_dict(MeasurementRecord(
@@ -313,6 +350,18 @@ def measurement_dict(record: Any) -> dict[str, Any]:
         "estimate_reason": record.result.get("estimate_reason"),
         "table": record.result.get("table"),
         "location": record.result.get("location"),
+        "provenance": record.result.get("provenance"),
+        "earlier_results": [_earlier(e) for e in getattr(record, "earlier", [])],
         "links": {"self": f"/v1/measurements/{record.id}",
                   "plot": f"/v1/measurements/{record.id}/plot.png"},
     }
+
+
+def _earlier(entry: dict[str, Any]) -> dict[str, Any]:
+    """An earlier result of a measurement, as the API lists it."""
+    result = entry["result"]
+    return {"superseded_at": entry["superseded_at"],
+            "provenance": result.get("provenance"), "table": result.get("table"),
+            "aggregates": result.get("aggregates", []), "estimate": result.get("estimate"),
+            "estimate_reason": result.get("estimate_reason"),
+            "shot_features": entry["shot_features"]}

@@ -32,6 +32,7 @@ _TITLES = {
     422: "Invalid input",
     500: "Internal server error",
     503: "Service unavailable",
+    507: "Insufficient storage",
 }
 
 

@@ -10,6 +10,7 @@ and the metadata in the query), which skips text parsing altogether.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import hashlib
 import hmac
 import io
@@ -51,7 +52,7 @@ from solitonde.instrument.service.problems import (
     from_pydantic,
 )
 from solitonde.instrument.service.state import service
-from solitonde.instrument.service.store import KeyTaken
+from solitonde.instrument.service.store import KeyTaken, StoreFull
 from solitonde.instrument.service.uploads import (
     FORMATS,
     check_self_contained,
@@ -243,6 +244,10 @@ _POST_LINKS = {201: {"description": "the stored measurement", "links": {
                             ("GetShot", "get_shot", {"shot_index": 0}),
                             ("PlotMeasurement", "plot_measurement", {}),
                             ("DeleteMeasurement", "delete_measurement", {}))}}}
+_FULL = {507: {**_PROBLEM, "description": "the store (or the upload's temporary folder) has "
+                "no room: nothing was written; retry later (Retry-After)"}}
+FULL_RETRY_AFTER_S = 60
+"""What a 507 suggests to wait: room comes back when someone frees it, not in milliseconds."""
 _IDEMPOTENCY_HEADER = {
     "name": "Idempotency-Key", "in": "header", "required": False,
     "schema": {"type": "string", "minLength": 1, "maxLength": IDEMPOTENCY_KEY_MAX},
@@ -255,7 +260,7 @@ _IDEMPOTENCY_HEADER = {
     "/measurements",
     status_code=201,
     response_model=MeasurementOut,
-    responses={**ERRORS, **_POST_LINKS},
+    responses={**ERRORS, **_POST_LINKS, **_FULL},
     operation_id="post_measurement",
     summary="Post one or more shots (JSON) or a waveform file (multipart)",
     openapi_extra={"requestBody": {"required": True, "content": {
@@ -291,7 +296,7 @@ async def post_measurement(request: Request) -> JSONResponse:
     "/measurements/raw",
     status_code=201,
     response_model=MeasurementOut,
-    responses={**ERRORS, **_POST_LINKS},
+    responses={**ERRORS, **_POST_LINKS, **_FULL},
     operation_id="post_raw_shot",
     summary="Post one shot's raw samples (binary body, what they are in the query)",
     openapi_extra={"requestBody": {"required": True, "content": {
@@ -338,6 +343,10 @@ async def _post(request: Request, media: str) -> JSONResponse:
             else:
                 result = await anyio.to_thread.run_sync(_ingest_binary, svc, body, query, idem,
                                                         limiter=svc.ingest_lane)
+    except StoreFull as exc:  # the disk (or a file-size limit): the client should retry later
+        log.warning("store full: %s", exc)
+        raise Problem(507, f"store: {exc}", kind="insufficient-storage", field="store",
+                      headers={"Retry-After": str(FULL_RETRY_AFTER_S)}) from None
     except KeyTaken:  # the same request, retried while the first was being stored
         replay = await _replay(svc, key or "", None)
         if replay is None:
@@ -452,6 +461,12 @@ async def _ingest_upload(svc: Any, request: Request, key: str | None = None) -> 
         form = await request.form(max_files=1, max_fields=len(UploadFields.model_fields) + 1)
     except Problem:
         raise
+    except OSError as exc:  # spooling the upload to a temporary file: no room
+        if exc.errno not in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+            raise
+        raise Problem(507, f"file: no room to receive the upload ({exc.strerror}); nothing was "
+                      "stored, retry later", kind="insufficient-storage", field="file",
+                      headers={"Retry-After": str(FULL_RETRY_AFTER_S)}) from None
     except Exception as exc:  # malformed multipart, too many parts
         raise Problem(422, f"body: not a valid multipart form ({exc})", kind="invalid-input",
                       field="body") from None

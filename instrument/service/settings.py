@@ -12,9 +12,12 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.tables.bundled import default_table
+
 DEFAULT_STORE = Path(".solitonde") / "measurements.sqlite"
-DEFAULT_TABLE = Path(__file__).resolve().parents[2] / "data_samples" / "default_table.h5"
-"""The bundled table, found from the package's own place (not the folder ``serve`` starts in)."""
+DEFAULT_TABLE = default_table()
+"""The bundled table, found through the import system (package data of ``solitonde.data``), not
+from the folder ``serve`` starts in."""
 
 API_KEY_MIN = 16
 """Shortest API key accepted; a blank one would silently turn authentication off."""

@@ -64,12 +64,36 @@ CREATE TABLE IF NOT EXISTS idempotency (
     measurement_id  INTEGER NOT NULL,
     created_at      REAL NOT NULL
 );
+CREATE TABLE IF NOT EXISTS earlier_results (
+    measurement_id  INTEGER NOT NULL REFERENCES measurements (id) ON DELETE CASCADE,
+    superseded_at   REAL NOT NULL,
+    result          TEXT NOT NULL,
+    shot_features   TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS earlier_results_by_measurement
+    ON earlier_results (measurement_id, superseded_at);
 """
 
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 """Stored as SQLite's ``user_version``; a store with a larger one was written by a newer
-solitonde and is refused rather than written in a layout this version does not know."""
+solitonde and is refused rather than written in a layout this version does not know; one with a
+smaller one is refused until ``solitonde store migrate`` brings it up (after a backup).
+
+1: measurements, shots, idempotency keys.
+2: ``earlier_results``: the results a reanalysis replaced (the result and each shot's features),
+   kept beside the newest one."""
+
+MIGRATIONS: dict[int, tuple[str, ...]] = {
+    1: ("""CREATE TABLE earlier_results (
+               measurement_id  INTEGER NOT NULL REFERENCES measurements (id) ON DELETE CASCADE,
+               superseded_at   REAL NOT NULL,
+               result          TEXT NOT NULL,
+               shot_features   TEXT NOT NULL)""",
+        """CREATE INDEX earlier_results_by_measurement
+               ON earlier_results (measurement_id, superseded_at)"""),
+}
+"""The statements that take a store from schema ``v`` to ``v + 1``; run by :func:`migrate`."""
 
 _COLUMNS = {
     "measurements": {"id", "created_at", "plate_id", "position", "n_shots", "source", "result"},
@@ -99,6 +123,15 @@ def _journal_mode_wal(conn: sqlite3.Connection, timeout_s: float) -> str:
 
 class StoreError(RuntimeError):
     """The store cannot be opened, or a stored record fails its integrity check."""
+
+
+class StoreFull(StoreError):
+    """The store's disk (or the process's file-size limit) has no room for a write; nothing of
+    that write was kept, reads go on, and writes succeed again once there is room."""
+
+
+class SchemaTooOld(StoreError):
+    """A store of an earlier schema: ``solitonde store migrate`` brings it up."""
 
 
 class KeyTaken(RuntimeError):
@@ -137,6 +170,8 @@ class MeasurementRecord:
     source: str
     result: dict[str, Any]
     shots: list[ShotRecord] = field(default_factory=list)
+    earlier: list[dict[str, Any]] = field(default_factory=list)
+    """Results a reanalysis replaced (:meth:`Store.earlier_results`); :meth:`Store.get` fills it."""
 
 
 def encode_samples(samples: np.ndarray) -> tuple[str, str, bytes]:
@@ -244,6 +279,12 @@ class Store:
             if version > SCHEMA_VERSION:
                 raise StoreError(f"{str(self.path)!r} was written by a newer solitonde (store "
                                  f"schema {version}; this version knows up to {SCHEMA_VERSION})")
+            has_tables = c.execute("SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' "
+                                   "AND name = 'measurements'").fetchone()[0]
+            if has_tables and 0 < version < SCHEMA_VERSION:
+                raise SchemaTooOld(f"{str(self.path)!r} has store schema {version}; this "
+                                   f"version uses {SCHEMA_VERSION}: run `solitonde store migrate "
+                                   f"{self.path}` (it backs the store up first)")
             for table, columns in _COLUMNS.items():
                 have = {row[1] for row in c.execute(f"PRAGMA table_info({table})")}
                 if have and not columns <= have:  # an existing table of some other layout
@@ -326,12 +367,67 @@ class Store:
                               "VALUES (?, ?, ?, ?)", (*idempotency, new_id, now))
                 c.execute("COMMIT")
             except sqlite3.IntegrityError:
-                c.execute("ROLLBACK")
+                _rollback(c)
                 raise KeyTaken(idempotency[0] if idempotency else "") from None
+            except sqlite3.OperationalError as exc:
+                _rollback(c)
+                if _out_of_space(exc):
+                    raise StoreFull(f"the store at {str(self.path)!r} cannot grow ({exc}): "
+                                    "nothing was written; retry when there is room") from None
+                raise
             except BaseException:
-                c.execute("ROLLBACK")
+                _rollback(c)
                 raise
         return new_id, now
+
+    def replace_result(self, measurement_id: int, result: dict[str, Any],
+                       shot_features: Sequence[dict[str, Any]]) -> float:
+        """Make ``result`` (and each shot's ``shot_features``) the measurement's newest, keeping
+        the one it replaces in ``earlier_results``; one transaction. Returns the time."""
+        with self._writer():
+            c = self._conn
+            now = time.time()
+            c.execute("BEGIN IMMEDIATE")
+            try:
+                row = c.execute("SELECT result FROM measurements WHERE id = ?",
+                                (measurement_id,)).fetchone()
+                if row is None:
+                    raise StoreError(f"no measurement {measurement_id}")
+                old = [r[0] for r in c.execute(
+                    "SELECT features FROM shots WHERE measurement_id = ? ORDER BY shot_index",
+                    (measurement_id,))]
+                if len(old) != len(shot_features):
+                    raise StoreError(f"measurement {measurement_id} has {len(old)} shots, "
+                                     f"got features for {len(shot_features)}")
+                c.execute("INSERT INTO earlier_results (measurement_id, superseded_at, result, "
+                          "shot_features) VALUES (?, ?, ?, ?)",
+                          (measurement_id, now, row[0], "[" + ",".join(old) + "]"))
+                c.execute("UPDATE measurements SET result = ? WHERE id = ?",
+                          (json.dumps(result), measurement_id))
+                c.executemany("UPDATE shots SET features = ? WHERE measurement_id = ? AND "
+                              "shot_index = ?", [(json.dumps(f), measurement_id, i)
+                                                 for i, f in enumerate(shot_features)])
+                c.execute("COMMIT")
+            except sqlite3.OperationalError as exc:
+                _rollback(c)
+                if _out_of_space(exc):
+                    raise StoreFull(f"the store at {str(self.path)!r} cannot grow ({exc})") \
+                        from None
+                raise
+            except BaseException:
+                _rollback(c)
+                raise
+        return now
+
+    def earlier_results(self, measurement_id: int) -> list[dict[str, Any]]:
+        """The results a reanalysis replaced, oldest first: ``superseded_at``, ``result`` and
+        ``shot_features`` (each shot's features then)."""
+        with self._lock:
+            rows = self._conn.execute(
+                "SELECT superseded_at, result, shot_features FROM earlier_results WHERE "
+                "measurement_id = ? ORDER BY superseded_at, rowid", (measurement_id,)).fetchall()
+        return [{"superseded_at": r[0], "result": json.loads(r[1]),
+                 "shot_features": json.loads(r[2])} for r in rows]
 
     def idempotent(self, key: str) -> tuple[str, int] | None:
         """The request digest and measurement id stored under ``key``, or None."""
@@ -352,7 +448,7 @@ class Store:
                                  (measurement_id,)).rowcount
                 c.execute("COMMIT")
             except BaseException:
-                c.execute("ROLLBACK")
+                _rollback(c)
                 raise
         return gone > 0
 
@@ -396,6 +492,7 @@ class Store:
                 f"SELECT {columns} FROM shots WHERE measurement_id = ? ORDER BY shot_index",
                 (measurement_id,)).fetchall()
         record = _measurement(row)
+        record.earlier = self.earlier_results(measurement_id)
         for s in shot_rows:
             samples = (decode_samples(s[8], s[10], s[7], s[9], s[11]) if with_samples
                        else np.empty(0))
@@ -462,6 +559,21 @@ class Store:
                 "sphere_diameter": meta.get("sphere_diameter"), "t0_s": r[5], "dt_s": r[6],
                 "units": r[7], "calibration": r[8], "n_samples": r[9], **_flat(feats),
             }
+
+
+def _rollback(conn: sqlite3.Connection) -> None:
+    """Roll back if a transaction is still open (SQLite rolls back by itself after some I/O
+    errors, and a second ROLLBACK would hide the first error)."""
+    if conn.in_transaction:
+        with contextlib.suppress(sqlite3.Error):
+            conn.execute("ROLLBACK")
+
+
+def _out_of_space(exc: BaseException) -> bool:
+    """SQLite could not write: the disk is full (SQLITE_FULL), or a write failed with an I/O
+    error, which is how a file-size limit (EFBIG) reaches it."""
+    text = str(exc).lower()
+    return "disk is full" in text or "disk i/o error" in text
 
 
 def _open_writer_lock(path: Path) -> int | None:

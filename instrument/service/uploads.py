@@ -7,6 +7,7 @@ headers first turns that into a 413 instead of gigabytes of memory.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 import uuid
@@ -38,10 +39,19 @@ class UploadDir:
     def write(self, source: BinaryIO, fmt: str) -> Path:
         """Copy an upload stream into a new file named by the server; returns its path."""
         target = self.path / f"upload-{uuid.uuid4().hex}{FORMATS[fmt]}"
-        fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-        with os.fdopen(fd, "wb") as out:
-            while chunk := source.read(_CHUNK):
-                out.write(chunk)
+        try:
+            fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+            with os.fdopen(fd, "wb") as out:
+                while chunk := source.read(_CHUNK):
+                    out.write(chunk)
+        except OSError as exc:
+            target.unlink(missing_ok=True)
+            if exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+                raise Problem(507, f"file: no room to receive the upload in the server's "
+                              f"temporary folder ({exc.strerror}); nothing was stored, retry "
+                              "later", kind="insufficient-storage", field="file",
+                              headers={"Retry-After": "60"}) from None
+            raise
         return target
 
     def close(self) -> None:

@@ -23,6 +23,7 @@ Missing values are NaN, never a number made up.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,6 +107,12 @@ class ModelTable:
         return str(given) if given else (self.path.stem if self.path else "table")
 
     @property
+    def content_sha256(self) -> str | None:
+        """SHA-256 of the file's bytes when it was loaded (None for a table built in memory):
+        results name the exact table they were computed with."""
+        return self._cache.get("sha256")
+
+    @property
     def family(self) -> dict[str, Any] | None:
         """The plate family the table was built for (instrument.family), None if unrecorded."""
         if "family" not in self._cache:
@@ -128,6 +135,7 @@ class ModelTable:
         path = Path(path)
         if not path.is_file():
             raise TableError("table", f"no such file: {str(path)!r}")
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
         try:
             fh = h5py.File(path, "r")
         except OSError as exc:
@@ -152,7 +160,7 @@ class ModelTable:
             if "diagnostics" in fh:
                 diag = {k: _dataset(fh, f"diagnostics/{k}", None, grid)
                         for k in fh["diagnostics"]}
-            return cls(
+            table = cls(
                 axes=axes,
                 features=features,
                 status=_dataset(fh, "status", np.int8, grid),
@@ -167,6 +175,8 @@ class ModelTable:
                 or PLATE_MODEL_NAMES,
                 path=path,
             )
+            table._cache["sha256"] = digest
+            return table
 
     def diameter_index(self, diameter: float, rel_tol: float = 0.01) -> int:
         """Index of ``diameter`` (m) on the diameter axis.

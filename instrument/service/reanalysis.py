@@ -1,0 +1,70 @@
+"""Recompute stored measurements with the current software and tables, keeping the old results.
+
+A table rebuild or a fix of the feature extractor should reach the measurements already taken:
+:func:`reanalyze` reads each stored measurement's traces (lossless, checked against their
+SHA-256), runs them through the same road as a new upload (:func:`.ingest.compute_result`:
+features, aggregates, table choice, estimate, provenance) and makes that the newest result. The
+result it replaces, with each shot's features, moves to the store's ``earlier_results``; the API
+serves the newest and lists the others.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from solitonde.instrument.inference.table_set import TableSet
+from solitonde.instrument.service.ingest import compute_result, waveforms_from_records
+from solitonde.instrument.service.problems import Problem
+from solitonde.instrument.service.store import Store
+from solitonde.signal.errors import WaveformError
+
+
+def _brief(result: dict[str, Any]) -> dict[str, Any]:
+    """The parts of a result a summary line shows: table (id, hash), thickness MAP, version."""
+    prov = result.get("provenance") or {}
+    table = prov.get("table") or {}
+    est = result.get("estimate") or {}
+    thickness = (est.get("thickness_m") or {}).get("map")
+    return {"table": result.get("table"), "table_sha256": table.get("sha256"),
+            "software_version": prov.get("software_version"), "thickness_m": thickness,
+            "estimate_reason": result.get("estimate_reason")}
+
+
+def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
+              progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+    """Recompute every measurement (of ``plate_id``, or all) and keep the earlier results.
+
+    A measurement the current version refuses (its metadata no longer accepted, no table that
+    fits) keeps its result untouched and is listed under ``failed`` with the reason."""
+    done: list[dict[str, Any]] = []
+    failed: list[dict[str, Any]] = []
+    after = 0
+    while True:
+        page = store.list(plate_id=plate_id, after_id=after, limit=200)
+        if not page:
+            break
+        for summary in page:
+            after = summary.id
+            record = store.get(summary.id, with_samples=True)
+            if record is None:  # deleted meanwhile
+                continue
+            try:
+                waveforms = waveforms_from_records(record.shots)
+                shots, result = compute_result(waveforms, tables, "shots")
+            except Problem as exc:
+                failed.append({"id": record.id, "reason": exc.detail})
+                continue
+            except WaveformError as exc:
+                failed.append({"id": record.id, "reason": str(exc)})
+                continue
+            if "location" in record.result and "location" not in result:
+                result["location"] = record.result["location"]
+            store.replace_result(record.id, result, [s["features"] for s in shots])
+            line = {"id": record.id, "plate_id": record.plate_id, "position": record.position,
+                    "before": _brief(record.result), "after": _brief(result),
+                    "earlier_results": len(record.earlier) + 1}
+            done.append(line)
+            if progress is not None:
+                progress(line)
+    return {"reanalyzed": done, "failed": failed}
