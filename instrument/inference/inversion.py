@@ -658,6 +658,7 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     shape = g0.tof_s.shape
     misfit = np.zeros(shape)
     bound_terms = np.zeros(shape)
+    bound_list: list[np.ndarray] = []
     var = np.empty(shape)
     r = np.empty(shape)
     # the log-variances as one log of a running product, taken every LOG_BATCH terms (a log
@@ -678,7 +679,9 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                          + (f_std * g.arr_reflecting) ** 2)
             z = (item.arr_upper_bound - factor * g.arr_reflecting) / sd
             like = (1.0 - g.reflect_weight) + g.reflect_weight * _normal_cdf(z)
-            bound_terms -= 2.0 * np.log(np.maximum(like, 1e-300))
+            term = -2.0 * np.log(np.maximum(like, 1e-300))
+            bound_terms += term
+            bound_list.append(term)
             continue
         s_tof, s_arr = item.sigmas()
         u_pair = sensitivity(table, g, spread) if spread else None
@@ -727,7 +730,7 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         ok = np.isfinite(penalty)
         misfit[ok] -= quad[ok]
         logdet[ok] += logdet_m[ok]
-    n_terms = 2 * len(seen)
+    n_terms = 2 * len(seen) + len(hidden)
     chi2 = misfit + logdet + penalty + bound_terms
     best = float(chi2.min())
     i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
@@ -735,7 +738,10 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         return _out_of_range(items, cal, best, n_terms,
                              "the model detects no reflection anywhere in the table for these "
                              "sphere sizes, but one was measured")
-    fit = float(misfit[i_best])
+    # a hidden size's misfit: -2 log of its likelihood against an ARR at the bound itself
+    # (1/2), about z^2 once the model's reflection clearly exceeds the bound, 0 below it
+    fit = float(misfit[i_best]) + sum(max(0.0, float(b[i_best]) - 2.0 * math.log(2.0))
+                                      for b in bound_list)
     if n_terms:
         limit = _chi2_limit(n_terms)
         if fit > limit:
