@@ -61,6 +61,17 @@ def _contact_time(table: ModelTable, diameter_m: float, thickness_m: np.ndarray)
     return np.asarray(tau_c) * zener.time_scale(scene.sphere_mass, scene.a_p, v_in)
 
 
+def exchange_rates(plate: Mapping[str, Any], sphere: Mapping[str, Any]) -> dict[str, Any]:
+    """How a plate material change ``(d ln E', d ln rho)`` moves Zener's inelasticity
+    (``d_ln_lambda``) and the guided waves' speed (``d_ln_c``), and the plate's share ``w`` of
+    the contact compliance (``d ln A_p = w d ln E'``); E' = E / (1 - nu^2)."""
+    c_p, c_s = _plane_compliance(plate), _plane_compliance(sphere)
+    w = c_p / (c_p + c_s)
+    # lambda ~ A_p^(2/5) / Z, Z ~ t^2 sqrt(rho E'): d ln lambda = 0.4 w d ln E' - 0.5 (d ln E' +
+    # d ln rho); c ~ sqrt(E' / rho)
+    return {"contact_share": w, "d_ln_lambda": (0.4 * w - 0.5, -0.5), "d_ln_c": (0.5, -0.5)}
+
+
 def sensitivity(table: ModelTable, grid: FineGrid, spread: Mapping[str, float]
                 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The material's covariance factors for one sphere size: ``(U_tof, U_arr)``, each of shape
@@ -85,12 +96,11 @@ def sensitivity(table: ModelTable, grid: FineGrid, spread: Mapping[str, float]
     # E and nu act only through E' = E / (1 - nu^2): two independent directions remain,
     # d ln E' (sd from E's and nu's spreads) and d ln rho
     sd2 = np.array([math.hypot(sd[0], k_nu * sd[1]), sd[2]])
-    c_p, c_s = _plane_compliance(plate), _plane_compliance(sphere)
-    w = c_p / (c_p + c_s)  # the plate's share of the contact compliance: d ln A_p = w d ln E'
+    rates = exchange_rates(plate, sphere)
+    w = rates["contact_share"]
     d_ln_e_prime = np.array([1.0, 0.0])  # per (d ln E', d ln rho)
-    d_ln_rho = np.array([0.0, 1.0])
-    d_ln_lambda = (0.4 * w - 0.5) * d_ln_e_prime - 0.5 * d_ln_rho
-    d_ln_c = 0.5 * (d_ln_e_prime - d_ln_rho)
+    d_ln_lambda = np.array(rates["d_ln_lambda"])
+    d_ln_c = np.array(rates["d_ln_c"])
     log_t = np.log(grid.thickness_m)
     ok = grid.valid
     near = ok.copy()  # a slope across a cell without features is not one
@@ -137,4 +147,4 @@ def describe_spread(spread: Mapping[str, float]) -> str:
     return f"E +- {100 * e:.3g} %, nu +- {nu:.3g}, rho +- {100 * rho:.3g} % (1 sd)"
 
 
-__all__ = ["SPREAD_ORDER", "describe_spread", "sensitivity", "spread_of"]
+__all__ = ["SPREAD_ORDER", "describe_spread", "exchange_rates", "sensitivity", "spread_of"]
