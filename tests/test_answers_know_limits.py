@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
+from independent_chain import sensor_trace, write_shots
 from typer.testing import CliRunner
 
-from independent_chain import sensor_trace, write_shots
 from solitonde.instrument.cli.main import build_app as build_cli
 from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.instrument.service.app import build_app

@@ -19,10 +19,15 @@ thickness and distance (the paper's Sec. 4.1, Zener's sphere-on-plate impact):
   ``d ln L = -d ln c``, read off the table's slope along L.
 
 E and nu act only through ``E' = E / (1 - nu^2)``, so each feature gets a row
-``J = dF / d(ln E', ln rho)`` per fine cell; times the spread it is a low-rank (2) covariance shared by every feature and sphere size of a measurement (one plate, one
-material), which the inversion adds to its per-term variances exactly (Woodbury), not as three
-independent terms (that would count the one material error once per feature). Linear is enough:
-a grade's spread is a few percent, over which the table's features are smooth in ln t and L.
+``J = dF / d(ln E', ln rho)`` per fine cell; times the spread it is a low-rank (2) covariance
+shared by every feature and sphere size of a measurement (one plate, one material), which the
+inversion adds to its per-term variances exactly (Woodbury), not as independent terms (that
+would count the one material error once per feature and shrink it as sizes are added). Linear
+is enough: a grade's spread is a few percent, over which the table's features are smooth in
+ln t and L. Why not a table axis or a marginal over nearby families: either needs tables the
+user does not have (a material axis multiplies a build's cost by its points; a marginal needs a
+table per neighbouring material), while the exchange rates above need only the family's
+materials, which every table records, so the bundled tables carry the spread as they are.
 """
 
 from __future__ import annotations

@@ -23,16 +23,16 @@ with any answer (a thickness with at least one bound, not flagged); ``interval_w
 the median width of the two-sided 95 % intervals relative to the truth; ``inconsistent_rate``,
 the fraction flagged ``inconsistent`` or ``out_of_range`` (on the table's own family: false
 alarms); the distance's coverage (one-sided bounds counted as such); and the status. A size
-whose shots show no reflection enters with its ARR bound (instrument.inference.inversion). The expected status is what the
-noise-free model says the data can tell. For each end of each parameter's range, ``d`` is how
-many standard errors (the inversion's own sigmas, :func:`separations`) separate the truth's
-features from the closest table point on that end: along a slice (the other parameter at its true
-value) and along the profile (any value of the other parameter). A side is open (the parameter is
-not bounded there) when ``d < 1.5``, closed when ``d > 3``, either in between. The slice misses
-joint (t, L) degeneracies (a thin plate near a support can mimic a thicker one far from it); the
-profile flags every one however little posterior mass it carries; a status supported by either
-counts as right (``status_accuracy``), and each is scored on its own as well
-(``status_accuracy_slice``, ``status_accuracy_profile``).
+whose shots show no reflection enters with its ARR bound (instrument.inference.inversion).
+The expected status is what the noise-free model says the data can tell. For each end of each
+parameter's range, ``d`` is how many standard errors (the inversion's own sigmas,
+:func:`separations`) separate the truth's features from the closest table point on that end: along
+a slice (the other parameter at its true value) and along the profile (any value of the other
+parameter). A side is open (the parameter is not bounded there) when ``d < 1.5``, closed when ``d >
+3``, either in between. The slice misses joint (t, L) degeneracies (a thin plate near a support can
+mimic a thicker one far from it); the profile flags every one however little posterior mass it
+carries; a status supported by either counts as right (``status_accuracy``), and each is scored on
+its own as well (``status_accuracy_slice``, ``status_accuracy_profile``).
 L = 0 is a physical end and never open. So far from the support the distance must come back
 ``lower_bound_only``, and right at the support, where TOF and ARR no longer depend on the plate,
 thickness may honestly come back unbounded.
