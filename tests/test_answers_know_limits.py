@@ -127,3 +127,28 @@ def test_invert_without_a_sphere_size_names_the_flag(recording: Path, tmp_path: 
     assert result.exit_code == 1
     assert "--sphere-diameter" in result.output
     assert "(no plate id)" in result.output and "None" not in result.output
+
+
+def test_rest_plate_material_by_properties_and_a_hidden_reflection(tmp_path: Path) -> None:
+    """POST /v1/invert: ``plate_material`` as a property mapping with its spread (the spread is
+    the one the intervals carry; another family is a 422 naming plate_material), and a size
+    whose shots showed no reflection given by its ARR bound (an upper bound on thickness)."""
+    table = ModelTable.load(STEEL_TABLE)
+    tof, arr = float(table.features["tof_s"][0, 5, 13]), float(table.features["arr"][0, 5, 13])
+    own = {**table.family["plate_material"], "youngs_modulus_rel_sd": 0.05}
+    settings = Settings(store_path=tmp_path / "s.sqlite", table_path=STEEL_TABLE)
+    with TestClient(build_app(settings)) as client:
+        item = {"diameter_m": 9.53e-3, "tof_s": tof, "arr": arr, "n_shots": 5}
+        r = client.post("/v1/invert", json={"inputs": [item], "plate_material": own})
+        assert r.status_code == 200, r.text
+        est = r.json()["estimate"]
+        assert est["material_spread"]["youngs_modulus_rel_sd"] == 0.05
+        assert est["thickness_m"]["status"] == "constrained" and est["fit"]["p_value"] > 1e-3
+        other = {"name": "S235", **STEEL}
+        r = client.post("/v1/invert", json={"inputs": [item], "plate_material": other})
+        assert r.status_code == 422 and "plate_material" in r.json()["detail"]
+        hidden = {"diameter_m": 9.53e-3, "arr_upper_bound": 0.02, "n_shots": 5}
+        r = client.post("/v1/invert", json={"inputs": [hidden]})
+        assert r.status_code == 200, r.text
+        t = r.json()["estimate"]["thickness_m"]
+        assert t["status"] == "upper_bound_only" and t["ci95"][0] is None
