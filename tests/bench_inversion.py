@@ -2,7 +2,8 @@
 
 Run with ``.venv/bin/python -m pytest -m bench -s tests/bench_inversion.py``. Each figure is
 printed with a baseline measured in the same run: the inversion against one exp() over its fine
-grid (the least any grid posterior costs) and against itself with the material's spread off, the load against reading the raw datasets with h5py,
+grid (the least any grid posterior costs) and against itself with the material's spread off,
+the load against reading the raw datasets with h5py,
 the cluster build rate against the serial one. Targets (printed, not asserted): inversion <= 2 ms,
 load <= 0.5 s.
 """

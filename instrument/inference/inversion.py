@@ -39,6 +39,14 @@ table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no nu
 several sphere sizes, when all together are out of range but the others are not once one size is
 left out, that answer is given, with the size left out named (``excluded_diameters_m``,
 ``reason``): one disagreeing channel does not void the others.
+
+The plate material's spread (the library's for the table's plate material, or the one a
+property mapping states) adds a rank-2 covariance shared by every term, from Zener's exchange
+rates between material, thickness and distance (:mod:`.material_spread`), applied exactly per
+cell with Woodbury's identity. A sphere size whose shots show no reflection enters with its ARR
+upper bound: a cell weighs ``Phi((bound - ARR_model) / sigma)`` where the model has a reflection
+and 1 where it has none, so such shots alone answer ``upper_bound_only``. Every estimate carries
+``fit`` and ``warnings`` and may be marked ``inconsistent`` (:mod:`.adequacy`).
 """
 
 from __future__ import annotations
