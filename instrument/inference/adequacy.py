@@ -31,14 +31,13 @@ thickness comes out low.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any
 
 from scipy.stats import chi2 as chi2_dist
 
-from solitonde.instrument.inference.inversion import FLOOR_ARR_MAX, Estimate, ParameterEstimate
-
-if TYPE_CHECKING:
-    from solitonde.instrument.tables.table import ModelTable
+# The inversion calls this module on every estimate, so this module does not import it back:
+# an estimate (``Estimate``) and its parameters are used through their attributes, and the
+# floor level comes with the call.
 
 P_INCONSISTENT = 1e-3
 """A best fit less probable than this under the table's family flags the recording."""
@@ -59,15 +58,15 @@ NO_CALIBRATION = ("no calibration on a reference plate: the model's ARR runs abo
                   "calibrate` on a reference plate and give its file")
 
 
-def _dof(est: Estimate) -> float:
+def _dof(est: Any) -> float:
     p_d = float(est.extra.get("p_d", 0.0))
     return max(est.n_terms - min(max(p_d, 0.0), est.n_terms), 1.0)
 
 
-def judge(table: ModelTable, est: Estimate) -> None:
-    """Fill ``est.fit`` and ``est.warnings``; mark the answer ``inconsistent`` when the family
-    does not explain the data (see the module doc)."""
-    del table  # the grids are cached on it; the estimate carries what the check needs
+def judge(est: Any, floor_arr_max: float) -> None:
+    """Fill ``est.fit`` and ``est.warnings`` of an inversion's ``Estimate``; mark the answer
+    ``inconsistent`` when the family does not explain the data (see the module doc);
+    ``floor_arr_max`` is the inversion's floor level of ARR (``FLOOR_ARR_MAX``)."""
     warnings: list[str] = []
     why: str | None = None
     if est.n_terms:
@@ -81,15 +80,14 @@ def judge(table: ModelTable, est: Estimate) -> None:
     else:
         est.fit = {"chi2": None, "dof": None, "p_value": None}
     if why is None and not est.out_of_range:
-        why = _floor_mismatch(est)
+        why = _floor_mismatch(est, floor_arr_max)
     if est.out_of_range:
         warnings.append(f"inconsistent: {est.reason}; likely causes: " + "; ".join(CAUSES))
     elif why is not None:
         warnings.append(f"inconsistent: {why}; the numbers are the table's best reading, not an "
                         "estimate to use. Likely causes: " + "; ".join(CAUSES))
         for name in ("thickness_m", "distance_m"):
-            p_est: ParameterEstimate = getattr(est, name)
-            p_est.status = "inconsistent"
+            getattr(est, name).status = "inconsistent"
         est.reason = (est.reason + "; " if est.reason else "") + f"inconsistent: {why}"
     hidden = [i for i in est.inputs if i.hidden]
     for i in hidden:
@@ -100,7 +98,7 @@ def judge(table: ModelTable, est: Estimate) -> None:
     est.warnings = warnings + [w for w in est.warnings if w not in warnings]
 
 
-def _floor_mismatch(est: Estimate) -> str | None:
+def _floor_mismatch(est: Any, floor_arr_max: float) -> str | None:
     """Why a clear measured reflection is unlike the family's floor-level one where the answer
     lies, or None."""
     explained = est.extra.get("strict_explained") or {}
@@ -111,7 +109,7 @@ def _floor_mismatch(est: Estimate) -> str | None:
         factor, _ = ((1.0, 0.0) if est.calibration is None
                      else est.calibration.for_diameter(item.diameter_m))
         _, s_arr = item.sigmas()
-        level = factor * FLOOR_ARR_MAX
+        level = factor * floor_arr_max
         if item.arr > level + FLOOR_Z * s_arr and explained[item.diameter_m] < STRICT_EXPLAINED:
             return (f"the reflection with D = {item.diameter_m * 1e3:.3g} mm is a clear one "
                     f"(ARR {item.arr:.3g}) but the answer rests on cells where the table's "

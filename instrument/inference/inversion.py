@@ -644,7 +644,7 @@ def invert(
             best.inputs = items
             est = best
     est.material_spread = spread
-    adequacy.judge(table, est)
+    adequacy.judge(est, FLOOR_ARR_MAX)
     return est
 
 

@@ -34,14 +34,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from solitonde.instrument.tables.table import ModelTable
-
-if TYPE_CHECKING:
-    from solitonde.instrument.inference.inversion import FineGrid
 
 SPREAD_ORDER = ("youngs_modulus_rel_sd", "poisson_ratio_sd", "density_rel_sd")
 """The three spread components, in the order of J's columns (d ln E, d nu, d ln rho)."""
@@ -77,13 +74,15 @@ def exchange_rates(plate: Mapping[str, Any], sphere: Mapping[str, Any]) -> dict[
     return {"contact_share": w, "d_ln_lambda": (0.4 * w - 0.5, -0.5), "d_ln_c": (0.5, -0.5)}
 
 
-def sensitivity(table: ModelTable, grid: FineGrid, spread: Mapping[str, float]
+def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
                 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The material's covariance factors for one sphere size: ``(U_tof, U_arr)``, each of shape
-    (2, n_t, n_l) (component first, for fast arithmetic over the grid), ``U = J * sd`` over the
-    two directions the material acts through, ``d ln E'`` (E' = E / (1 - nu^2), whose sd
-    combines E's and nu's) and ``d ln rho``: the features' material covariance between two
-    terms is ``U_a . U_b``. None when the spread is zero or the table records no family.
+    """The material's covariance factors for one sphere size (``grid``, its
+    :class:`~.inversion.FineGrid`; not imported, as the inversion imports this module):
+    ``(U_tof, U_arr)``, each of shape (2, n_t, n_l) (component first, for fast arithmetic over
+    the grid), ``U = J * sd`` over the two directions the material acts through, ``d ln E'`` (E'
+    = E / (1 - nu^2), whose sd combines E's and nu's) and ``d ln rho``: the features' material
+    covariance between two terms is ``U_a . U_b``. None when the spread is zero or the table
+    records no family.
 
     Cached on the table per sphere size and spread.
     """
