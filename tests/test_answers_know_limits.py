@@ -152,3 +152,28 @@ def test_rest_plate_material_by_properties_and_a_hidden_reflection(tmp_path: Pat
         assert r.status_code == 200, r.text
         t = r.json()["estimate"]["thickness_m"]
         assert t["status"] == "upper_bound_only" and t["ci95"][0] is None
+
+
+def _node(table: ModelTable, i_d: int, i_t: int, i_l: int) -> FeatureSummary:
+    return FeatureSummary(float(table.axes["diameter_m"][i_d]),
+                          float(table.features["tof_s"][i_d, i_t, i_l]),
+                          float(table.features["arr"][i_d, i_t, i_l]), None, None, 5)
+
+
+def test_a_size_left_out_where_its_reflection_is_clear_flags_the_answer() -> None:
+    """All sizes together out of range, the others agreeing once one is left out: that is the
+    known floor-train case only when the left-out size is beyond D/t = 5 at the answer. The
+    4.76 mm sphere's features of a 1.5 mm plate beside a 4.04 mm plate's 9.53 and 19.05 mm ones
+    are flagged; the three sizes' features of one plate are answered as before."""
+    table = ModelTable.load(ALUMINIUM)
+    far = table.axes["distance_m"].size - 1
+    odd = invert(table, [_node(table, 0, 0, far), _node(table, 1, 5, far),
+                         _node(table, 2, 5, far)])
+    assert odd.extra["excluded_diameters_m"] == [table.axes["diameter_m"][0]]
+    assert odd.thickness_m.status == "inconsistent"
+    assert "clear one" in odd.warnings[0]
+    same = invert(table, [_node(table, d, 3, far) for d in range(3)])  # one plate, 2.72 mm
+    assert same.thickness_m.status == "constrained" and not same.extra.get(
+        "excluded_diameters_m")
+    low, high = same.thickness_m.ci95
+    assert low <= table.axes["thickness_m"][3] <= high

@@ -13,6 +13,12 @@ Every estimate carries ``fit = {chi2, dof, p_value}`` and ``warnings``. A record
   and at least 1: one sphere size near a support leaves no degree of freedom, and a test with
   one is then conservative;
 * no table point explains it at all (``out_of_range``, a TOF/ARR pair the family cannot reach);
+* or a sphere size had to be left out to answer at all (with every size no table point explains
+  the data) where the answer puts that size's reflection clear (D/t below 5 over the whole 95 %
+  interval): the known reason to leave a size out is a large sphere on a thin plate, whose
+  "reflection" beyond D/t = 5 is a train at the detection floor; anything else is the family
+  disagreeing with the sizes together (a steel plate read against the aluminium table shows it
+  most often this way: each size alone maps onto some aluminium thickness, not all at once);
 * or its reflection is unlike the family's where the answer lies: the answer leans on cells
   whose features come in part from floor nodes (D/t beyond 5, where the family's reflection is
   a train at the detection floor, ARR below 0.3, so the table states it loosely: 10 % in TOF,
@@ -63,10 +69,12 @@ def _dof(est: Any) -> float:
     return max(est.n_terms - min(max(p_d, 0.0), est.n_terms), 1.0)
 
 
-def judge(est: Any, floor_arr_max: float) -> None:
+def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
     """Fill ``est.fit`` and ``est.warnings`` of an inversion's ``Estimate``; mark the answer
     ``inconsistent`` when the family does not explain the data (see the module doc);
-    ``floor_arr_max`` is the inversion's floor level of ARR (``FLOOR_ARR_MAX``)."""
+    ``floor_arr_max`` and ``floor_d_over_t`` are the inversion's floor level of ARR and the D/t
+    beyond which the family's reflection is at the floor (``FLOOR_ARR_MAX``,
+    ``REFLECTION_D_OVER_T``)."""
     warnings: list[str] = []
     why: str | None = None
     if est.n_terms:
@@ -81,6 +89,8 @@ def judge(est: Any, floor_arr_max: float) -> None:
         est.fit = {"chi2": None, "dof": None, "p_value": None}
     if why is None and not est.out_of_range:
         why = _floor_mismatch(est, floor_arr_max)
+    if why is None and not est.out_of_range:
+        why = _unexplained_exclusion(est, floor_d_over_t)
     if est.out_of_range:
         warnings.append(f"inconsistent: {est.reason}; likely causes: " + "; ".join(CAUSES))
     elif why is not None:
@@ -117,4 +127,22 @@ def _floor_mismatch(est: Any, floor_arr_max: float) -> str | None:
                     f"{100 * floor_mass[item.diameter_m]:.0f} % of the posterior's weight), and "
                     "without the looseness the table allows there no cell of the answer "
                     "explains it")
+    return None
+
+
+def _unexplained_exclusion(est: Any, floor_d_over_t: float) -> str | None:
+    """Why a sphere size the inversion left out (all sizes together were out of range, the
+    others agree) is not the known case, or None. The known case is a large sphere on a thin
+    plate, beyond D/t = ``floor_d_over_t``, whose "reflection" is a train at the detection floor;
+    a size left out where the answer puts its reflection clear (D / t below that over the whole
+    95 % interval) disagrees with the family itself."""
+    low = (est.thickness_m.ci95 or (None, None))[0]
+    if low is None:
+        return None
+    for d in est.extra.get("excluded_diameters_m", []):
+        if d / low <= floor_d_over_t:
+            return (f"with the sphere size D = {d * 1e3:.3g} mm no table point explains the "
+                    f"measurement, and the other sizes' answer (t >= {low * 1e3:.3g} mm, D/t <= "
+                    f"{d / low:.2g}) is where that size's reflection is a clear one, not the "
+                    "detection-floor train that may disagree")
     return None

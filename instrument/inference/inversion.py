@@ -644,7 +644,7 @@ def invert(
             best.inputs = items
             est = best
     est.material_spread = spread
-    adequacy.judge(est, FLOOR_ARR_MAX)
+    adequacy.judge(est, FLOOR_ARR_MAX, REFLECTION_D_OVER_T)
     return est
 
 
