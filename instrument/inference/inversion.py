@@ -38,7 +38,10 @@ quantile of a density flat out to the table's end would follow the table's exten
 table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no numbers at all. With
 several sphere sizes, when all together are out of range but the others are not once one size is
 left out, that answer is given, with the size left out named (``excluded_diameters_m``,
-``reason``): one disagreeing channel does not void the others.
+``reason``): one disagreeing channel does not void the others. Unless the size left out is a
+large sphere beyond D/t = 5 at the answer (its floor-level train), the answer is then marked
+``inconsistent`` (:mod:`.adequacy`): its numbers are the other sizes', but the family does not
+explain the sizes together.
 
 The plate material's spread (the library's for the table's plate material, or the one a
 property mapping states) adds a rank-2 covariance shared by every term, from Zener's exchange
