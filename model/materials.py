@@ -4,6 +4,14 @@ A scene names a material from :data:`MATERIALS` or gives its properties (``{name
 youngs_modulus, poisson_ratio, density}``, SI units), which :func:`properties_from` checks. The
 library's values are room-temperature handbook values; each entry names its source. The source
 paper's set-up is 440C spheres on an Al 6061 plate.
+
+A material also states how well a user who names it knows its properties: the spread of a plate
+bought as "structural steel" or "6061-T6" (:data:`SPREAD_KEYS`: the relative standard deviation
+of E and of rho, the standard deviation of nu). The library's spreads are the handbooks' ranges
+for the grade read as uniform (a range of width w has standard deviation w / sqrt(12)); each entry
+names the range it comes from. A property mapping may state its own (``youngs_modulus_rel_sd``
+...); a material given by properties without them is taken as known exactly. The inversion
+propagates the plate's spread into its intervals (instrument.inference).
 """
 
 from __future__ import annotations
@@ -24,12 +32,17 @@ class Material:
     youngs_modulus: E in Pa.
     poisson_ratio: nu, dimensionless, in (-1, 0.5).
     density: rho in kg/m^3.
+    youngs_modulus_rel_sd, poisson_ratio_sd, density_rel_sd: the spread of the grade (relative
+        for E and rho, absolute for nu); 0 when the properties are known exactly.
     """
 
     name: str
     youngs_modulus: float
     poisson_ratio: float
     density: float
+    youngs_modulus_rel_sd: float = 0.0
+    poisson_ratio_sd: float = 0.0
+    density_rel_sd: float = 0.0
 
     @property
     def plane_stress_modulus(self) -> float:
@@ -73,39 +86,58 @@ MATERIALS: dict[str, Material] = {
     for m in (
         # --- spheres -------------------------------------------------------------------------
         # 440C stainless steel spheres: the paper's values (Sec. 2).
-        Material("steel_440c", 200e9, 0.28, 7800.0),
+        # Spread: 440C balls, E 200-204 GPa, nu 0.28-0.30 (ASM; AISI 440C datasheets).
+        Material("steel_440c", 200e9, 0.28, 7800.0, 0.006, 0.006, 0.002),
         # AISI 52100 chrome steel (bearing balls): ASM Handbook Vol. 1; MatWeb "AISI 52100".
-        Material("steel_52100", 210e9, 0.30, 7810.0),
+        # Spread: E 201-210 GPa, nu 0.27-0.30 (ASM; MatWeb).
+        Material("steel_52100", 210e9, 0.30, 7810.0, 0.013, 0.009, 0.002),
         # Tungsten carbide, WC with 6 % Co (carbide balls): MatWeb "Tungsten Carbide, 6% Co".
-        Material("tungsten_carbide", 614e9, 0.22, 14900.0),
+        # Spread: 6 % Co grades, E 600-650 GPa, nu 0.21-0.24, rho 14,800-15,000 (MatWeb).
+        Material("tungsten_carbide", 614e9, 0.22, 14900.0, 0.024, 0.009, 0.004),
         # Soda-lime glass (glass balls and plates): MatWeb "Soda-Lime Glass".
-        Material("glass", 72e9, 0.23, 2500.0),
+        # Spread: soda-lime, E 69-74 GPa, nu 0.21-0.25, rho 2,440-2,520 (MatWeb).
+        Material("glass", 72e9, 0.23, 2500.0, 0.02, 0.012, 0.009),
         # --- plates (and brass spheres) ---------------------------------------------------------
         # Al 6061-T6 with the handbook density; the paper's own wave speeds need it (ASM
         # Aerospace Specification Metals, "Aluminum 6061-T6").
-        Material("al_6061", 68.9e9, 0.33, 2700.0),
+        # Spread: E 68.0-70.0 GPa (MMPDS: 68.3 tension, 69.6 compression), nu 0.32-0.35,
+        # rho 2,690-2,720 (ASM; MatWeb "6061-T6").
+        Material("al_6061", 68.9e9, 0.33, 2700.0, 0.008, 0.009, 0.003),
         # Al 6061 with the density the paper prints, to reproduce its printed numbers.
-        Material("al_6061_paper", 68.9e9, 0.33, 2360.0),
+        Material("al_6061_paper", 68.9e9, 0.33, 2360.0, 0.008, 0.009, 0.003),
         # Al 2024-T3: ASM Aerospace Specification Metals, "Aluminum 2024-T3".
-        Material("al_2024_t3", 73.1e9, 0.33, 2780.0),
+        # Spread: E 72.4-73.8 GPa, nu 0.33 +- 0.015, rho 2,770-2,790 (ASM; MMPDS).
+        Material("al_2024_t3", 73.1e9, 0.33, 2780.0, 0.006, 0.009, 0.002),
         # Al 7075-T6: ASM Aerospace Specification Metals, "Aluminum 7075-T6".
-        Material("al_7075_t6", 71.7e9, 0.33, 2810.0),
+        # Spread: E 71.0-72.4 GPa, nu 0.32-0.35, rho 2,800-2,810 (ASM; MMPDS).
+        Material("al_7075_t6", 71.7e9, 0.33, 2810.0, 0.006, 0.009, 0.001),
         # Structural carbon steel ASTM A36: MatWeb "ASTM A36 Steel, plate".
-        Material("steel_structural", 200e9, 0.26, 7850.0),
+        # Spread: structural carbon steels, E 190-210 GPa (ASM; EN 1993-1-1 takes 210 GPa, AISC
+        # 200 GPa), nu 0.25-0.30 (MatWeb A36 0.26; EN 1993-1-1 0.30), rho 7,800-7,870.
+        Material("steel_structural", 200e9, 0.26, 7850.0, 0.029, 0.014, 0.003),
         # Stainless steel AISI 304: ASM Aerospace Specification Metals, "AISI Type 304".
-        Material("steel_304", 193e9, 0.29, 8000.0),
+        # Spread: E 190-203 GPa, nu 0.27-0.30, rho 7,900-8,030 (ASM; MatWeb "AISI 304").
+        Material("steel_304", 193e9, 0.29, 8000.0, 0.019, 0.009, 0.005),
         # Titanium Ti-6Al-4V (grade 5), annealed: ASM Aerospace Specification Metals.
-        Material("ti_6al_4v", 113.8e9, 0.342, 4430.0),
+        # Spread: E 110-119 GPa, nu 0.31-0.37, rho 4,420-4,430 (ASM; MatWeb "Ti-6Al-4V").
+        Material("ti_6al_4v", 113.8e9, 0.342, 4430.0, 0.023, 0.017, 0.001),
         # Copper C11000 (electrolytic tough pitch): MatWeb "Copper, Cu; Annealed" / ASM.
-        Material("copper", 115e9, 0.31, 8890.0),
+        # Spread: E 110-128 GPa, nu 0.31-0.34, rho 8,890-8,940 (ASM; MatWeb "C11000").
+        Material("copper", 115e9, 0.31, 8890.0, 0.045, 0.009, 0.002),
         # Cartridge brass C26000: MatWeb "Brass, UNS C26000".
-        Material("brass", 110e9, 0.375, 8530.0),
+        # Spread: E 100-110 GPa, nu 0.33-0.38, rho 8,470-8,550 (MatWeb "C26000").
+        Material("brass", 110e9, 0.375, 8530.0, 0.027, 0.014, 0.003),
         # PMMA (cast acrylic sheet): MatWeb "Polymethyl Methacrylate (PMMA), cast".
-        Material("pmma", 3.1e9, 0.37, 1190.0),
+        # Spread: cast sheet, E 2.4-3.4 GPa, nu 0.35-0.40, rho 1,170-1,200 (MatWeb).
+        Material("pmma", 3.1e9, 0.37, 1190.0, 0.093, 0.014, 0.007),
     )
 }
 """The bundled library: spheres (440C, 52100, tungsten carbide, glass, brass) and plates."""
 PROPERTY_KEYS = ("name", "youngs_modulus", "poisson_ratio", "density")
+SPREAD_KEYS = ("youngs_modulus_rel_sd", "poisson_ratio_sd", "density_rel_sd")
+"""The optional spread of a material given by properties (relative sd of E and rho, sd of nu)."""
+SPREAD_MAX = {"youngs_modulus_rel_sd": 0.5, "poisson_ratio_sd": 0.2, "density_rel_sd": 0.5}
+"""Largest spread a mapping may state: beyond it the linearised propagation means nothing."""
 PROPERTY_RANGES = {"youngs_modulus": (1e6, 1e13, "Pa"), "density": (1.0, 1e5, "kg/m^3")}
 """Physical bounds of a material given by its properties: from soft rubber (1 MPa) past diamond
 (1.05 TPa), from foams to beyond osmium (22,590 kg/m^3). Outside them no solid is meant, and the
@@ -120,6 +152,8 @@ def properties_from(value: object) -> dict[str, object]:
 
     if isinstance(value, Material):
         return {k: getattr(value, k) for k in PROPERTY_KEYS}
+    # (a library material's spread is looked up by :func:`material_spread`, not copied here: a
+    # table's family compares properties only)
     if isinstance(value, str):
         if value not in MATERIALS:
             raise ValueError(f"unknown material {value!r}; known: {', '.join(sorted(MATERIALS))}, "
@@ -128,9 +162,10 @@ def properties_from(value: object) -> dict[str, object]:
     if not isinstance(value, Mapping):
         raise ValueError(f"expected a material name or a mapping {{{', '.join(PROPERTY_KEYS)}}}, "
                          f"got {type(value).__name__}")
-    unknown = [str(k) for k in value if k not in PROPERTY_KEYS]
+    unknown = [str(k) for k in value if k not in PROPERTY_KEYS + SPREAD_KEYS]
     if unknown:
-        raise ValueError(f"[{unknown[0]}] unknown key (allowed: {', '.join(PROPERTY_KEYS)})")
+        raise ValueError(f"[{unknown[0]}] unknown key (allowed: "
+                         f"{', '.join(PROPERTY_KEYS + SPREAD_KEYS)})")
     out: dict[str, object] = {"name": str(value.get("name") or "custom")[:80]}
     rules = {key: (f"{low:g} <= {key} <= {high:g} {unit}", lambda v, lo=low, hi=high: lo <= v <= hi)
              for key, (low, high, unit) in PROPERTY_RANGES.items()}
@@ -146,7 +181,42 @@ def properties_from(value: object) -> dict[str, object]:
         if not (isfinite(number) and ok(number)):
             raise ValueError(f"[{key}] {raw!r} is out of range (allowed: {allowed})")
         out[key] = number
+    for key in SPREAD_KEYS:
+        if value.get(key) is None:
+            continue
+        raw = value[key]
+        try:
+            number = float(raw) if not isinstance(raw, bool) else float("nan")
+        except (TypeError, ValueError):
+            number = float("nan")
+        if not (isfinite(number) and 0.0 <= number <= SPREAD_MAX[key]):
+            raise ValueError(f"[{key}] {raw!r} is out of range (allowed: 0 <= {key} <= "
+                             f"{SPREAD_MAX[key]:g})")
+        out[key] = number
     return out
+
+
+def material_spread(props: object) -> dict[str, float]:
+    """The spread of a material (:data:`SPREAD_KEYS`): the one a property mapping states, else
+    the library's for a library name whose properties it has (a table's family records the
+    properties it was built with), else none (0: the properties are taken as exact)."""
+    from collections.abc import Mapping
+    from math import isclose
+
+    if isinstance(props, str):
+        props = properties_from(props)
+    if isinstance(props, Material):
+        return {k: float(getattr(props, k)) for k in SPREAD_KEYS}
+    if not isinstance(props, Mapping):
+        return dict.fromkeys(SPREAD_KEYS, 0.0)
+    if any(props.get(k) is not None for k in SPREAD_KEYS):
+        return {k: float(props.get(k) or 0.0) for k in SPREAD_KEYS}
+    known = MATERIALS.get(str(props.get("name")))
+    if known is not None and all(
+            isclose(float(props.get(k, float("nan"))), getattr(known, k), rel_tol=1e-6)
+            for k in ("youngs_modulus", "poisson_ratio", "density")):
+        return {k: float(getattr(known, k)) for k in SPREAD_KEYS}
+    return dict.fromkeys(SPREAD_KEYS, 0.0)
 
 
 def material_of(spec: object, field: str = "material") -> Material:

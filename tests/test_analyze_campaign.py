@@ -83,14 +83,18 @@ def test_the_same_with_flags_instead_of_a_manifest(tmp_path: Path) -> None:
 
 
 def test_without_a_sphere_size_there_is_no_estimate_and_the_file_says_why(tmp_path: Path) -> None:
+    """An inversion asked for without a sphere size fails (exit 1) naming the flag that gives
+    it; the estimates file still has the position's row, saying why it has no numbers."""
     day = _plain_folder(tmp_path)
     out = tmp_path / "est.csv"
     res = _run("analyze", day, "--calibration", "20", "--plate-id", "P7", "--position", "A1",
                "--estimates-out", out)
     frame = _estimates(out)
     assert len(frame) == 1 and pd.isna(frame.iloc[0]["thickness_m_median"])
-    assert "sphere_diameter" in frame.iloc[0]["reason"]
-    assert res.exit_code == 0, res.output  # nothing failed; the estimate says what it lacks
+    assert "--sphere-diameter:" in frame.iloc[0]["reason"]  # CSV-neutralised: a leading quote
+    assert res.exit_code == 1, res.output
+    assert "failed: estimate for plate P7, position A1: --sphere-diameter:" in " ".join(
+        res.output.split())
 
 
 def test_a_manifest_row_that_matches_no_file_is_a_usage_error_naming_the_row(tmp_path):

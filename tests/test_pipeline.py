@@ -63,7 +63,10 @@ def test_every_entry_point_gives_the_same_estimate(tmp_path: Path) -> None:
     assert all(a["table"] == "default_table" and a["skipped"] == [] for a in answers)
 
 
-def test_a_size_without_a_reflection_is_left_out_with_its_reason() -> None:
+def test_a_size_without_a_reflection_enters_as_the_bound_of_its_hidden_reflection() -> None:
+    """Shots with no reflection still bound the plate: alone they answer 'at most ... mm'
+    (upper_bound_only); beside a size with a reflection they enter as a bound, named in the
+    warnings and adding to the fit's chi^2. Shots without a sphere size give no input."""
     feats = [extract(w) for w in signal_io.read(CSV)]
     sizes = summarise([9.53e-3] * len(feats), feats)
     tables = TableSet([TABLE], warm_up=False)
@@ -72,10 +75,18 @@ def test_a_size_without_a_reflection_is_left_out_with_its_reason() -> None:
     dt = 5e-7  # an incident pulse and nothing after it
     lone = Waveform(0.0, dt, pulse_train(4000, dt, [(300e-6, 50.0, 40e-6)]))
     silent = summarise([19.05e-3], [extract(lone)])
-    assert "has a detected reflection" in silent[0].skip_reason()
+    assert silent[0].skip_reason() is None
+    bound = silent[0].inputs()
+    assert bound.hidden and 0 < bound.arr_upper_bound < 0.05
+    alone = estimate(tables, silent).estimate
+    assert alone.thickness_m.status == "upper_bound_only"
+    low, high = alone.thickness_m.ci95
+    assert low is None and 1.5e-3 < high < 6e-3
     both = estimate(tables, [*sizes, *silent])
-    assert both.estimate.thickness_m.median == result.estimate.thickness_m.median
-    assert both.skipped == [{"sphere_diameter": 19.05e-3, "reason": silent[0].skip_reason()}]
+    assert both.skipped == [] and both.estimate.n_terms == 3
+    assert any("no reflection with D = 19.1 mm" in w for w in both.estimate.warnings)
+    # the 19.05 mm model reflection at the 9.53 mm answer is far above the bound: it adds misfit
+    assert both.estimate.fit["chi2"] > result.estimate.fit["chi2"] + 4
     no_size = summarise([None] * len(feats), feats)
     with pytest.raises(EstimateUnavailable, match="sphere_diameter is missing"):
         estimate(tables, no_size)
@@ -92,10 +103,11 @@ def test_no_module_but_the_pipeline_calls_the_inversion() -> None:
     assert callers == {"inference/pipeline.py", *STUDIES}, callers
 
 
-def test_the_service_leaves_a_silent_size_out_and_exports_the_sizes_it_used(tmp_path) -> None:
+def test_the_service_inverts_a_silent_size_as_its_bound_and_exports_the_sizes_it_used(
+        tmp_path) -> None:
     """One measurement, two sphere sizes, the larger without a reflection: the estimate comes
-    from the other, lists the silent one in ``skipped``, and the estimates export names only the
-    size that was inverted."""
+    from the other with the silent one's ARR bound beside it (not skipped, named in the
+    warnings), and the estimates export names both sizes, as both were inverted."""
     import csv as csv_module
     import io
 
@@ -109,7 +121,10 @@ def test_the_service_leaves_a_silent_size_out_and_exports_the_sizes_it_used(tmp_
         assert r.status_code == 201, r.text
         est = r.json()["estimate"]
         assert est["thickness_m"]["status"] == "constrained"
-        assert [s["sphere_diameter"] for s in est["skipped"]] == [0.01905]
+        assert est["skipped"] == []
+        assert [i["arr_upper_bound"] is not None for i in est["inputs"]] == [False, True]
+        assert any("no reflection with D = 19.1 mm" in w for w in est["warnings"])
         rows = list(csv_module.DictReader(io.StringIO(client.get(
             "/v1/measurements/export", params={"kind": "estimates"}).text)))
-    assert [row["sphere_diameters_m"] for row in rows] == ["0.00953"]
+    assert [row["sphere_diameters_m"] for row in rows] == ["0.00953;0.01905"]
+    assert rows[0]["fit_p_value"] and "no calibration" in rows[0]["warnings"]

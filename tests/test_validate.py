@@ -54,8 +54,30 @@ def test_validate_cli_json_keys(tiny: Path) -> None:
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     for key in ("thickness_error_median", "thickness_error_p90", "coverage_95",
-                "status_accuracy"):
+                "status_accuracy", "coverage_95_two_sided", "answered", "interval_width_median",
+                "inconsistent_rate", "flagged_or_covered", "missed_unflagged"):
         assert key in data
+    assert data["wrong_family"] is None and 0.0 <= data["answered"] <= 1.0
+
+
+def test_validate_wrong_family_simulates_another_material(tiny: Path) -> None:
+    """`--wrong-family MATERIAL`: the truths on that plate, the table's own reference plates;
+    the scores say how often the answer is flagged or covers. A name not in the library is one
+    error line naming the flag."""
+    runner = CliRunner()
+    result = runner.invoke(build_app(), ["validate", "--n", "2", "--seed", "1", "--table",
+                                         str(tiny), "--workers", "1", "--no-progress",
+                                         "--diameters", "9.53e-3", "--json",
+                                         "--wrong-family", "steel_structural"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["wrong_family"] == "steel_structural"
+    assert 0.0 <= data["flagged_or_covered"] <= 1.0
+    assert data["missed_unflagged"] + data["flagged_or_covered"] <= 1.0 + 1e-12
+    bad = runner.invoke(build_app(), ["validate", "--n", "1", "--table", str(tiny),
+                                      "--workers", "1", "--no-progress", "--wrong-family",
+                                      "unobtainium"])
+    assert bad.exit_code == 2 and bad.output.startswith("error: --wrong-family:")
 
 
 def test_table_and_invert_cli(tiny: Path) -> None:

@@ -58,6 +58,8 @@ FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m"
          "dt": "--sample-rate", "units": "--units", "calibration": "--calibration",
          "channel": "--channel", "group": "--group", "format": "--format"}
 """Command-line flags by the option or metadata key they set (for messages)."""
+MISSING_SIZE_FLAG = ("--sphere-diameter: --invert needs the sphere size, and these shots state "
+                     "none (give --sphere-diameter M, or a manifest's sphere_diameter_m)")
 
 
 def collect(paths: Iterable[Path], fmt: str | None = None
@@ -267,7 +269,7 @@ def aggregates(groups: list[Position]) -> list[dict[str, Any]]:
 
 def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Path] | None,
                             calibration_file: Path | None,
-                            plate_material: str | None = None) -> list[dict[str, Any]]:
+                            plate_material: Any = None) -> list[dict[str, Any]]:
     """Estimates per (plate_id, position) from `analyze`'s summaries, sphere sizes combined,
     each against the table of its family (instrument.table_set's rule), through the one
     estimate path (instrument.inference.pipeline).
@@ -277,7 +279,7 @@ def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Pa
     from solitonde.instrument.cli.cmd_invert import choice_error, table_set
     from solitonde.instrument.inference.calibration import Calibration
     from solitonde.instrument.inference.inversion import InversionError
-    from solitonde.instrument.inference.pipeline import estimate
+    from solitonde.instrument.inference.pipeline import MISSING_SIZE, estimate
     from solitonde.instrument.inference.table_set import TableChoiceError
     from solitonde.instrument.tables.table import TableError
 
@@ -291,8 +293,10 @@ def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Pa
     for (plate, position, x_m, y_m), sizes in by_location.items():
         row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
         usable = [g.summary for g in sizes if g.skip_reason() is None]
+        # the command line names its flag, not the metadata key the inversion reads
         row["skipped"] = [{"sphere_diameter": g.location["sphere_diameter"],
-                           "reason": g.skip_reason()} for g in sizes if g.skip_reason()]
+                           "reason": MISSING_SIZE_FLAG if g.skip_reason() == MISSING_SIZE
+                           else g.skip_reason()} for g in sizes if g.skip_reason()]
         row["diameters_m"] = [s.diameter_m for s in usable]
         row["n_shots"] = sum(s.inputs().n_shots for s in usable)
         row["estimate"] = None
@@ -401,8 +405,12 @@ def analyze(
     table: list[Path] = typer.Option([], "--table", help="Model table (or folder of tables) for "
                                      "--invert; repeat for several plate families."),
     plate_material: str | None = typer.Option(None, "--plate-material", help="The plate's "
-                                              "material (a library name): --invert uses the "
-                                              "table of that family, refuses another."),
+                                              "material: a library name, or a JSON property "
+                                              "mapping {name, youngs_modulus, poisson_ratio, "
+                                              "density[, youngs_modulus_rel_sd, poisson_ratio_sd,"
+                                              " density_rel_sd]}: --invert uses the table of "
+                                              "that family, refuses another, and carries the "
+                                              "stated spread."),
     calibration_file: Path | None = typer.Option(None, "--calibration-file", help="Calibration "
                                                  "JSON (solitonde calibrate) for --invert."),
     plots: Path | None = typer.Option(None, "--plots", help="Folder for one PNG per shot (trace "
@@ -431,6 +439,14 @@ def analyze(
             usage(f"--format: {exc.message} (allowed: {exc.allowed})")
     if units is not None and units not in UNITS:
         usage(f"--units: {units!r} is not N or V")
+    material: Any = None
+    if plate_material is not None:
+        from solitonde.instrument.cli.cmd_invert import parse_material
+
+        try:
+            material = parse_material(plate_material)
+        except ValueError as exc:
+            usage(f"--plate-material: {exc}")
     for flag, value in (("--x", x), ("--y", y), ("--sample-rate", sample_rate),
                         ("--calibration", calibration)):
         if value is not None and not math.isfinite(value):
@@ -489,16 +505,27 @@ def analyze(
         from solitonde.instrument.tables.table import TableError
 
         try:
-            estimates = estimates_for_locations(groups, table, calibration_file, plate_material)
+            estimates = estimates_for_locations(groups, table, calibration_file, material)
         except CalibrationError as exc:
             errors.append({"source": str(calibration_file), "error": str(exc)})
         except (TableError, ValueError, OSError) as exc:  # table unreadable
             errors.append({"source": ", ".join(map(str, table)) or str(table_path(None)),
                            "error": str(exc)})
+        from solitonde.instrument.cli.cmd_invert import where_estimated
+
         for est in estimates or []:
+            where = where_estimated(est)
             if est.get("error"):  # an inversion that failed (e.g. a size the table lacks)
-                errors.append({"source": f"estimate for plate {est['plate_id']}, position "
-                               f"{est['position']}", "error": est["error"]})
+                errors.append({"source": where, "error": est["error"]})
+            elif est.get("estimate") is None and any(
+                    s.get("reason") == MISSING_SIZE_FLAG for s in est.get("skipped", [])):
+                errors.append({"source": where, "error": MISSING_SIZE_FLAG})
+            elif (est.get("estimate") or {}).get("thickness_m", {}).get("status") in (
+                    "inconsistent", "out_of_range"):
+                # an answer the table's family does not explain is no answer to act on
+                errors.append({"source": where, "error": est["estimate"]["warnings"][0]
+                               if est["estimate"].get("warnings") else
+                               est["estimate"].get("reason")})
     outputs = [("--out", out, lambda target: _write_rows(target, rows)),
                ("--plots", plots, lambda target: _write_plots(target, rows))]
     if estimates is not None:

@@ -49,6 +49,10 @@ def summaries_from_files(files: list[Path], diameter: float | None) -> list[Feat
             raise CalibrationError("sphere_diameter", "the shots carry no sphere_diameter "
                                    "metadata; give --diameter")
         reason = g.summary.skip_reason()
+        if reason is None and g.summary.hidden:  # a bound is no reference measurement
+            from solitonde.instrument.inference.pipeline import no_reflection
+
+            reason = no_reflection(g.summary.diameter_m)
         if reason is not None:
             raise CalibrationError("files", reason)
         out.append(g.summary.inputs())

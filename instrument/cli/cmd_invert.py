@@ -48,6 +48,33 @@ def choice_error(exc: TableChoiceError) -> str:
     return f"{flag}: {exc.message}"
 
 
+def parse_material(text: str) -> Any:
+    """``--plate-material``: a library name, or a JSON property mapping (checked here, so a bad
+    key is named before anything runs). Raises ValueError naming the key."""
+    from solitonde.model.materials import properties_from
+
+    text = text.strip()
+    if not text.startswith("{"):
+        properties_from(text)
+        return text
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"not a library name nor a JSON mapping ({exc.msg} at character "
+                         f"{exc.pos})") from None
+    properties_from(value)
+    return value
+
+
+def where_estimated(row: Mapping[str, Any]) -> str:
+    """Where an `analyze --invert` estimate was made, in words (a missing plate id or position
+    is said so, never printed as None)."""
+    plate = row.get("plate_id")
+    position = row.get("position")
+    return (f"estimate for plate {plate if plate is not None else '(no plate id)'}, position "
+            f"{position if position is not None else '(no position)'}")
+
+
 def _fail(message: str) -> None:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(2)
@@ -58,9 +85,10 @@ def _fmt_mm(v: float | None) -> str:
 
 
 def describe(est: Estimate) -> str:
-    """Human-readable lines for an estimate."""
+    """Human-readable lines for an estimate, its warnings last."""
     if est.out_of_range:
-        return f"out of range: {est.reason}"
+        return "\n".join([f"out of range: {est.reason}", *(f"warning: {w}" for w in
+                                                          est.warnings)])
     lines = []
     for name, p in (("thickness", est.thickness_m), ("distance to support", est.distance_m)):
         if p.status == "constrained":
@@ -73,8 +101,15 @@ def describe(est: Estimate) -> str:
         elif p.status == "upper_bound_only":
             lines.append(f"{name}: at most {_fmt_mm(p.ci95[1])} mm (95 %); the data do not "
                          "bound it from below")
+        elif p.status == "inconsistent":
+            lines.append(f"{name}: INCONSISTENT with the table's family (no estimate)")
         else:
             lines.append(f"{name}: unconstrained by these data")
+    fit = est.fit
+    if fit.get("p_value") is not None:
+        lines.append(f"fit: chi^2 {fit['chi2']:.3g} for {fit['dof']:.2g} degrees of freedom, "
+                     f"p = {fit['p_value']:.2g}")
+    lines += [f"warning: {w}" for w in est.warnings]
     return "\n".join(lines)
 
 
@@ -90,8 +125,9 @@ def invert_command(
                                      "(repeat for several plate families; default: "
                                      "$SOLITONDE_TABLE, else data_samples/default_table.h5)"),
     plate_material: str | None = typer.Option(None, "--plate-material", help="the plate's "
-                                              "material (a library name): picks the table of "
-                                              "that family; another family is refused"),
+                                              "material, a library name or a JSON property "
+                                              "mapping (spread keys optional): picks the table "
+                                              "of that family; another family is refused"),
     calibration: Path | None = typer.Option(None, "--calibration", help="calibration JSON from "
                                             "`solitonde calibrate`"),
     posterior: bool = typer.Option(False, "--posterior", help="include the 2-D posterior (JSON)"),
@@ -109,9 +145,14 @@ def invert_command(
         items = [FeatureSummary(diameter[i], tof[i], arr[i],
                                 tof_std[i] if tof_std else None, arr_std[i] if arr_std else None,
                                 shots[i] if shots else 1) for i in range(n)]
+        try:
+            material = None if plate_material is None else parse_material(plate_material)
+        except ValueError as exc:
+            _fail(f"--plate-material: {exc}")
+            return
         tables = table_set(table)
         cal = Calibration.load(calibration) if calibration else None
-        result = estimate(tables, items, cal, plate_material=plate_material, posterior=posterior)
+        result = estimate(tables, items, cal, plate_material=material, posterior=posterior)
     except TableChoiceError as exc:
         _fail(choice_error(exc))
         return
@@ -131,7 +172,7 @@ def register(app: typer.Typer) -> None:
 
 def describe_row(row: Mapping[str, Any]) -> str:
     """One `analyze --invert` estimate as text."""
-    head = f"estimate for plate {row.get('plate_id')}, position {row.get('position')}"
+    head = where_estimated(row)
     if row.get("x_m") is not None and row.get("y_m") is not None:
         head += f" (x {row['x_m']:g} m, y {row['y_m']:g} m)"
     head += ":"
@@ -149,6 +190,13 @@ def describe_row(row: Mapping[str, Any]) -> str:
             lines.append(f"  {name}: at least {_fmt_mm(p['ci95'][0])} mm (95 %)")
         elif p["status"] == "upper_bound_only":
             lines.append(f"  {name}: at most {_fmt_mm(p['ci95'][1])} mm (95 %)")
+        elif p["status"] == "inconsistent":
+            lines.append(f"  {name}: INCONSISTENT with the table's family (no estimate)")
         else:
             lines.append(f"  {name}: {p['status']}")
+    fit = est.get("fit") or {}
+    if fit.get("p_value") is not None:
+        lines.append(f"  fit: chi^2 {fit['chi2']:.3g} for {fit['dof']:.2g} degrees of freedom, "
+                     f"p = {fit['p_value']:.2g}")
+    lines += [f"  warning: {w}" for w in est.get("warnings", [])]
     return "\n".join(lines)

@@ -57,6 +57,10 @@ def validate_command(
         "auto", "--truth-plate-theory", help="plate theory of the simulated truths near a support "
         "(sem.plate_theory: auto, 3d, mindlin): 3d checks a table built on the Mindlin plate "
         "against 3-D plates"),
+    wrong_family: str | None = typer.Option(
+        None, "--wrong-family", help="simulate the truths on a plate of this library material "
+        "(e.g. steel_structural against the aluminium table): how often the answer is flagged "
+        "or covers the truth anyway"),
     out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
@@ -79,7 +83,8 @@ def validate_command(
         report = validate(model, n, seed,
                           workers=default_workers() if workers is None else workers,
                           scheduler=scheduler, progress=progress, diameters=sizes,
-                          measurements=measurements, truth_plate_theory=truth_plate_theory)
+                          measurements=measurements, truth_plate_theory=truth_plate_theory,
+                          wrong_family=wrong_family)
     except ValidationInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
     m = report.metrics
@@ -91,12 +96,22 @@ def validate_command(
     if as_json:
         typer.echo(json.dumps(m, indent=2))
         return
-    typer.echo(f"validation on {m['table']}: {m['n']} plates, seed {m['seed']}")
-    typer.echo(f"  thickness error (relative): median {m['thickness_error_median']:.4f}, "
-               f"90th percentile {m['thickness_error_p90']:.4f} ({m['n_estimated']} estimated)")
-    typer.echo(f"  coverage of the 95 % interval: thickness {m['coverage_95']:.3f}, "
-               f"distance {m['distance_coverage_95']:.3f}")
-    typer.echo(f"  status right: {m['status_accuracy']:.3f}; distance statuses "
+    def num(v: float | None, fmt: str = ".3f") -> str:
+        return "-" if v is None else format(v, fmt)
+
+    typer.echo(f"validation on {m['table']}: {m['n']} plates, seed {m['seed']}"
+               + (f", truths on {m['wrong_family']}" if m.get("wrong_family") else ""))
+    typer.echo(f"  thickness error (relative): median {num(m['thickness_error_median'], '.4f')}, "
+               f"90th percentile {num(m['thickness_error_p90'], '.4f')} ({m['n_estimated']} "
+               "estimated)")
+    typer.echo(f"  answered {num(m['answered'])}; coverage of the 95 % interval: thickness "
+               f"{num(m['coverage_95'])} (two-sided only {num(m['coverage_95_two_sided'])}), "
+               f"distance {num(m['distance_coverage_95'])}; median width "
+               f"{num(m['interval_width_median'], '.4f')} of t")
+    typer.echo(f"  flagged inconsistent {num(m['inconsistent_rate'])}; flagged or covered "
+               f"{num(m['flagged_or_covered'])}; constrained, missed, unflagged "
+               f"{num(m['missed_unflagged'])}")
+    typer.echo(f"  status right: {num(m['status_accuracy'])}; distance statuses "
                f"{m['distance_status_counts']}")
 
 

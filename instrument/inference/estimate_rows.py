@@ -3,6 +3,8 @@
 `analyze --estimates-out` and the service's ``/v1/measurements/export?kind=estimates`` write the
 same columns, so a script reads either. Every interval bound is its own column
 (``thickness_m_ci95_low``); a side the data leave open is empty, and ``*_status`` says why.
+``fit_chi2``, ``fit_dof``, ``fit_p_value`` are the estimate's fit; ``warnings`` its warnings,
+joined by "; ".
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ PARAMETERS = ("thickness_m", "distance_m")
 STATS = ("map", "median", "ci68_low", "ci68_high", "ci95_low", "ci95_high", "status")
 LOCATION_COLUMNS = ("plate_id", "position", "x_m", "y_m", "sphere_diameters_m", "n_shots")
 ESTIMATE_COLUMNS = (*LOCATION_COLUMNS, *(f"{p}_{s}" for p in PARAMETERS for s in STATS),
-                    "reason")
+                    "reason", "fit_chi2", "fit_dof", "fit_p_value", "warnings")
 """The columns of an estimates file, in order."""
 
 
@@ -65,6 +67,10 @@ def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shot
            "n_shots": int(n_shots)}
     row.update(parameter_columns(estimate))
     row["reason"] = reason if reason else (estimate or {}).get("reason")
+    fit = (estimate or {}).get("fit") or {}
+    for key in ("chi2", "dof", "p_value"):
+        row[f"fit_{key}"] = _finite(fit.get(key))
+    row["warnings"] = "; ".join((estimate or {}).get("warnings") or []) or None
     return row
 
 
@@ -96,7 +102,7 @@ def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
     for col in ("n_shots", "measurement_id"):
         if col in frame:
             frame[col] = frame[col].astype("Int64")
-    for col in ("plate_id", "position", "sphere_diameters_m", "reason", "created_at",
+    for col in ("plate_id", "position", "sphere_diameters_m", "reason", "warnings", "created_at",
                 *(f"{p}_status" for p in PARAMETERS)):
         if col in frame:
             frame[col] = frame[col].astype("string")

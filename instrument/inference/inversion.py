@@ -38,7 +38,18 @@ quantile of a density flat out to the table's end would follow the table's exten
 table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no numbers at all. With
 several sphere sizes, when all together are out of range but the others are not once one size is
 left out, that answer is given, with the size left out named (``excluded_diameters_m``,
-``reason``): one disagreeing channel does not void the others.
+``reason``): one disagreeing channel does not void the others. Unless the size left out is a
+large sphere beyond D/t = 5 at the answer (its floor-level train), the answer is then marked
+``inconsistent`` (:mod:`.adequacy`): its numbers are the other sizes', but the family does not
+explain the sizes together.
+
+The plate material's spread (the library's for the table's plate material, or the one a
+property mapping states) adds a rank-2 covariance shared by every term, from Zener's exchange
+rates between material, thickness and distance (:mod:`.material_spread`), applied exactly per
+cell with Woodbury's identity. A sphere size whose shots show no reflection enters with its ARR
+upper bound: a cell weighs ``Phi((bound - ARR_model) / sigma)`` where the model has a reflection
+and 1 where it has none, so such shots alone answer ``upper_bound_only``. Every estimate carries
+``fit`` and ``warnings`` and may be marked ``inconsistent`` (:mod:`.adequacy`).
 """
 
 from __future__ import annotations
@@ -95,6 +106,9 @@ LR_LEVELS = (math.exp(-0.5), math.exp(-0.5 * 3.841458820694124))
 """Ratios of the marginal posterior density to its peak that bound a one-sided 68 % and 95 %
 answer, the levels of a likelihood-ratio interval for one parameter (chi^2_1 of 1 and 3.84): the
 bound then follows the data, not how far the table extends."""
+MIN_FLOOR_MASS = 0.1
+"""Posterior mean weight on floor nodes above which the adequacy check asks whether a size's
+features are explained without the floor's looseness (instrument.inference.adequacy)."""
 PARAMETERS = ("thickness_m", "distance_m")
 LOG_BATCH = 8
 """Variances multiplied before one log. A variance lies between about 1e-19 s^2 (the TOF floor
@@ -112,27 +126,45 @@ class InversionError(ValueError):
 
 @dataclass(frozen=True)
 class FeatureSummary:
-    """The shots of one sphere size: mean TOF and ARR, their scatter and the shot count."""
+    """The shots of one sphere size: mean TOF and ARR, their scatter and the shot count.
+
+    A size whose shots show no reflection gives no TOF and no ARR but ``arr_upper_bound``, the
+    largest ARR that could have hidden under the noise: it still bounds the plate (a reflection
+    that small means a thin plate), and enters the likelihood as such.
+    """
 
     diameter_m: float
-    tof_s: float
-    arr: float
+    tof_s: float | None
+    arr: float | None
     tof_std_s: float | None = None
     arr_std: float | None = None
     n_shots: int = 1
+    arr_upper_bound: float | None = None
 
     def __post_init__(self) -> None:
         def check(name: str, value: Any, ok: bool, allowed: str) -> None:
             if not ok:
                 raise InversionError(name, f"got {value!r} (allowed: {allowed})")
 
-        for name in ("diameter_m", "tof_s", "arr"):
+        def number(v: Any) -> bool:
+            return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+        hidden = self.tof_s is None and self.arr is None
+        names = ("diameter_m", "arr_upper_bound") if hidden else ("diameter_m", "tof_s", "arr")
+        for name in names:
             v = getattr(self, name)
-            check(name, v, isinstance(v, int | float) and not isinstance(v, bool)
-                  and math.isfinite(v), "a finite number")
+            check(name, v, number(v), "a finite number" + (
+                " (a size without TOF and ARR needs the bound of its hidden reflection)"
+                if name == "arr_upper_bound" else ""))
         check("diameter_m", self.diameter_m, self.diameter_m > 0, "> 0 m")
-        check("tof_s", self.tof_s, self.tof_s > 0, "> 0 s")
-        check("arr", self.arr, self.arr >= 0, ">= 0")
+        if hidden:
+            check("arr_upper_bound", self.arr_upper_bound, 0 < self.arr_upper_bound <= 1.5,
+                  "0 < bound <= 1.5")
+        else:
+            check("tof_s", self.tof_s, self.tof_s > 0, "> 0 s")
+            check("arr", self.arr, self.arr >= 0, ">= 0")
+            check("arr_upper_bound", self.arr_upper_bound, self.arr_upper_bound is None,
+                  "null when TOF and ARR are given")
         for name in ("tof_std_s", "arr_std"):
             v = getattr(self, name)
             check(name, v, v is None or (isinstance(v, int | float) and math.isfinite(v)
@@ -140,33 +172,50 @@ class FeatureSummary:
         check("n_shots", self.n_shots, isinstance(self.n_shots, int) and self.n_shots >= 1,
               "an integer >= 1")
 
+    @property
+    def hidden(self) -> bool:
+        """Whether this size shows no reflection (only its ARR bound)."""
+        return self.tof_s is None
+
     @classmethod
     def from_any(cls, item: FeatureSummary | Mapping[str, Any]) -> FeatureSummary:
         if isinstance(item, FeatureSummary):
             return item
         if not isinstance(item, Mapping):
             raise InversionError("inputs", f"expected a mapping, got {type(item).__name__}")
-        known = {"diameter_m", "tof_s", "arr", "tof_std_s", "arr_std", "n_shots"}
+        known = {"diameter_m", "tof_s", "arr", "tof_std_s", "arr_std", "n_shots",
+                 "arr_upper_bound"}
         extra = set(item) - known
         if extra:
             raise InversionError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
-        for key in ("diameter_m", "tof_s", "arr"):
+        hidden = (item.get("tof_s") is None and item.get("arr") is None
+                  and item.get("arr_upper_bound") is not None)
+        for key in ("diameter_m",) if hidden else ("diameter_m", "tof_s", "arr"):
             if item.get(key) is None:
                 raise InversionError(key, "missing")
         n = item.get("n_shots", 1)
         if isinstance(n, float) and n.is_integer():
             n = int(n)
-        return cls(float(item["diameter_m"]), float(item["tof_s"]), float(item["arr"]),
-                   None if item.get("tof_std_s") is None else float(item["tof_std_s"]),
-                   None if item.get("arr_std") is None else float(item["arr_std"]),
-                   1 if n is None else n)
+
+        def opt(key: str) -> float | None:
+            return None if item.get(key) is None else float(item[key])
+
+        return cls(float(item["diameter_m"]), opt("tof_s"), opt("arr"), opt("tof_std_s"),
+                   opt("arr_std"), 1 if n is None else n, opt("arr_upper_bound"))
 
     def sigmas(self) -> tuple[float, float]:
         """Standard errors of the mean TOF (s) and mean ARR, before the model error."""
+        if self.hidden:
+            raise InversionError("tof_s", "a size without a reflection has no TOF")
         s_tof = self.tof_std_s if self.tof_std_s is not None else DEFAULT_TOF_REL_STD * self.tof_s
         s_arr = self.arr_std if self.arr_std is not None else DEFAULT_ARR_STD
         root = math.sqrt(self.n_shots)
         return max(s_tof, MIN_TOF_STD_S) / root, max(s_arr, MIN_ARR_STD) / root
+
+    def bound_sigma(self) -> float:
+        """Standard error of a hidden reflection's ARR against its bound: the per-shot default
+        ARR scatter over the shots."""
+        return max(DEFAULT_ARR_STD, MIN_ARR_STD) / math.sqrt(self.n_shots)
 
 
 # The fine grid ----------------------------------------------------------------------------
@@ -247,6 +296,16 @@ class FineGrid:
     model_arr_var: np.ndarray
     weight_t: np.ndarray
     weight_l: np.ndarray
+    floor_weight: np.ndarray
+    """Each cell's interpolation weight on floor nodes (a reflection at the detection floor)."""
+    reflect_weight: np.ndarray
+    """Each cell's interpolation weight on nodes where the model detects a reflection."""
+    arr_reflecting: np.ndarray
+    """ARR interpolated over those nodes alone (what a hidden reflection is compared with)."""
+    model_tof_var_strict: np.ndarray
+    model_arr_var_strict: np.ndarray
+    """The interpolation error alone, without the floor nodes' looseness (the adequacy check
+    asks whether a clear reflection is explained without it)."""
 
     @property
     def model_tof_std_s(self) -> float:
@@ -311,12 +370,18 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
         arr=wt @ arr @ wl.T,
         valid=valid,
         penalty=np.where(valid, 0.0, np.inf),
-        model_tof_var=wt @ (_node_variance(tof, ok, np.log(t_nodes), l_nodes)
+        model_tof_var=wt @ ((tof_var := _node_variance(tof, ok, np.log(t_nodes), l_nodes))
                             + floor * (FLOOR_TOF_REL_STD * tof) ** 2) @ wl.T,
-        model_arr_var=wt @ (_node_variance(arr, ok, np.log(t_nodes), l_nodes)
+        model_arr_var=wt @ ((arr_var := _node_variance(arr, ok, np.log(t_nodes), l_nodes))
                             + floor * (FLOOR_ARR_REL_STD * arr) ** 2) @ wl.T,
+        model_tof_var_strict=wt @ tof_var @ wl.T,
+        model_arr_var_strict=wt @ arr_var @ wl.T,
         weight_t=_cell_widths(log_t),
         weight_l=_cell_widths(l_f),
+        floor_weight=wt @ floor @ wl.T,
+        reflect_weight=(h := wt @ ok.astype(float) @ wl.T),
+        arr_reflecting=np.divide(wt @ np.where(ok, table.features["arr"][i_d], 0.0) @ wl.T, h,
+                                 out=np.zeros_like(h), where=h > 1e-12),
     )
     table._cache[key] = grid
     return grid
@@ -377,7 +442,8 @@ class ParameterEstimate:
 
 @dataclass
 class Estimate:
-    """Thickness and distance to the support, with what the inversion used."""
+    """Thickness and distance to the support, with what the inversion used, how well the table's
+    family explains the data (``fit``) and what the answer should be read with (``warnings``)."""
 
     thickness_m: ParameterEstimate
     distance_m: ParameterEstimate
@@ -388,10 +454,18 @@ class Estimate:
     reason: str | None = None
     posterior: dict[str, np.ndarray] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    fit: dict[str, float | None] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    material_spread: dict[str, float] | None = None
 
     @property
     def out_of_range(self) -> bool:
         return self.thickness_m.status == "out_of_range"
+
+    @property
+    def inconsistent(self) -> bool:
+        """Whether the table's family does not explain the data (out of range included)."""
+        return self.thickness_m.status in ("inconsistent", "out_of_range")
 
     def to_dict(self, posterior: bool = False) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -399,10 +473,14 @@ class Estimate:
             "distance_m": self.distance_m.to_dict(),
             "chi2_min": self.chi2_min,
             "n_terms": self.n_terms,
+            "fit": dict(self.fit) or {"chi2": None, "dof": None, "p_value": None},
+            "warnings": list(self.warnings),
             "reason": self.reason,
             "inputs": [vars(i).copy() for i in self.inputs],
             "excluded_diameters_m": list(self.extra.get("excluded_diameters_m", [])),
             "calibration": None if self.calibration is None else self.calibration.to_dict(),
+            "material_spread": None if self.material_spread is None else dict(
+                self.material_spread),
         }
         if posterior and self.posterior is not None:
             out["posterior"] = {k: v.tolist() for k, v in self.posterior.items()}
@@ -492,6 +570,11 @@ def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
                              "constrained")
 
 
+@functools.lru_cache(maxsize=8)
+def _chi2_limit_at(n_terms: int, tail: float) -> float:
+    return float(chi2_dist.isf(tail, n_terms))
+
+
 @functools.lru_cache(maxsize=64)
 def _chi2_limit(n_terms: int) -> float:
     """The chi^2 beyond which no table point explains ``n_terms`` terms (scipy's isf costs a
@@ -506,27 +589,13 @@ def _out_of_range(inputs: list[FeatureSummary], cal: Calibration | None, chi2_mi
                     cal, chi2_min, n_terms, reason)
 
 
-def _misfit(items: Sequence[FeatureSummary], grids: Sequence[FineGrid], cal: Calibration | None,
-            cell: tuple[Any, ...]) -> float:
-    """chi^2 (residuals over sigma, squared and summed) at one cell of the fine grid."""
-    total = 0.0
-    for item, g in zip(items, grids, strict=True):
-        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
-        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
-        s_tof, s_arr = item.sigmas()
-        total += (item.tof_s - offset - g.tof_s[cell]) ** 2 / (s_tof**2 + o_std**2
-                                                               + g.model_tof_var[cell])
-        total += (item.arr - factor * g.arr[cell]) ** 2 / (
-            s_arr**2 + factor**2 * g.model_arr_var[cell] + (f_std * g.arr[cell]) ** 2)
-    return float(total)
-
-
 def invert(
     table: ModelTable,
     inputs: Sequence[FeatureSummary | Mapping[str, Any]],
     calibration: Calibration | Mapping[str, Any] | None = None,
     *,
     return_posterior: bool = False,
+    material_spread: Mapping[str, float] | None = None,
 ) -> Estimate:
     """Posterior estimate of plate thickness and distance to the support.
 
@@ -536,62 +605,101 @@ def invert(
     inputs: one summary per sphere size (:class:`FeatureSummary` or a mapping with its fields).
     calibration: ARR factor and TOF offset (:class:`Calibration` or its dict).
     return_posterior: keep the 2-D posterior (``Estimate.posterior``: axes and density).
+    material_spread: the plate material's spread (``youngs_modulus_rel_sd``,
+        ``poisson_ratio_sd``, ``density_rel_sd``); None takes the library's for the table's
+        plate material (instrument.inference.material_spread), zeros turn it off.
 
     Raises
     ------
     InversionError, TableError
         Bad input, or a sphere size the table does not hold.
     """
+    from solitonde.instrument.inference import adequacy
+    from solitonde.instrument.inference.material_spread import spread_of
+
     if isinstance(inputs, Mapping | FeatureSummary) or not inputs:
         raise InversionError("inputs", "give a non-empty list of per-sphere-size summaries")
     items = [FeatureSummary.from_any(i) for i in inputs]
     cal = Calibration.from_any(calibration)
-    est = _invert_items(table, items, cal, return_posterior)
-    if not est.out_of_range or len(items) < 2:
-        return est
-    # One sphere size may disagree with the others and the table (e.g. a large sphere on a thin
-    # plate whose "reflection" is a train at the detection floor): leave each out in turn and
-    # keep the best in-range answer of the others, saying which size was left out and why.
-    kept: list[tuple[float, int, Estimate]] = []
-    for skip in range(len(items)):
-        rest = items[:skip] + items[skip + 1:]
-        trial = _invert_items(table, rest, cal, return_posterior)
-        if not trial.out_of_range:
-            tail = float(chi2_dist.sf(trial.chi2_min, trial.n_terms))
-            kept.append((tail, skip, trial))
-    if not kept:
-        return est
-    _, skip, best = max(kept, key=lambda k: k[0])
-    left_out = items[skip]
-    best.reason = (f"sphere size D = {left_out.diameter_m * 1e3:.2f} mm left out: with it no "
-                   f"table point explains the measurement ({est.reason}); the other sizes agree "
-                   "with the table")
-    best.extra["excluded_diameters_m"] = [left_out.diameter_m]
-    best.inputs = items
-    return best
+    spread = dict(spread_of(table) if material_spread is None else material_spread)
+    est = _invert_items(table, items, cal, return_posterior, spread)
+    if est.out_of_range and len(items) >= 2:
+        # One sphere size may disagree with the others and the table (e.g. a large sphere on a
+        # thin plate whose "reflection" is a train at the detection floor): leave each out in
+        # turn and keep the best in-range answer of the others, saying which size was left out
+        # and why.
+        kept: list[tuple[float, int, Estimate]] = []
+        for skip in range(len(items)):
+            rest = items[:skip] + items[skip + 1:]
+            if all(i.hidden for i in rest):
+                continue
+            trial = _invert_items(table, rest, cal, return_posterior, spread)
+            if not trial.out_of_range:
+                tail = float(chi2_dist.sf(trial.chi2_min, max(trial.n_terms, 1)))
+                kept.append((tail, skip, trial))
+        if kept:
+            _, skip, best = max(kept, key=lambda k: k[0])
+            left_out = items[skip]
+            best.reason = (f"sphere size D = {left_out.diameter_m * 1e3:.2f} mm left out: with "
+                           f"it no table point explains the measurement ({est.reason}); the "
+                           "other sizes agree with the table")
+            best.extra["excluded_diameters_m"] = [left_out.diameter_m]
+            best.inputs = items
+            est = best
+    est.material_spread = spread
+    adequacy.judge(est, FLOOR_ARR_MAX, REFLECTION_D_OVER_T)
+    return est
 
 
 def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibration | None,
-                  return_posterior: bool) -> Estimate:
-    """The grid posterior of :func:`invert` for exactly these sphere sizes."""
+                  return_posterior: bool, spread: Mapping[str, float] | None = None) -> Estimate:
+    """The grid posterior of :func:`invert` for exactly these sphere sizes.
+
+    Per cell, -2 log likelihood = chi^2 + log det C (+ the hidden sizes' bound terms), with C the
+    terms' covariance: diagonal (shot scatter, the table's interpolation error, the calibration)
+    plus, when the plate material has a spread, the rank-2 covariance ``U U^T`` it induces
+    across every term (instrument.inference.material_spread), applied with Woodbury's identity.
+    """
+    from solitonde.instrument.inference.material_spread import sensitivity
+
+    seen = [i for i in items if not i.hidden]
+    hidden = [i for i in items if i.hidden]
     grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
-    # -2 log likelihood, up to a constant: sum of r^2 / var + log var (the variance differs from
-    # cell to cell through the model error, so its log-determinant matters)
-    chi2 = np.zeros_like(grids[0].tof_s)
-    var = np.empty_like(chi2)
-    r = np.empty_like(chi2)
+    g0 = grids[0]
+    shape = g0.tof_s.shape
+    misfit = np.zeros(shape)
+    bound_terms = np.zeros(shape)
+    bound_list: list[np.ndarray] = []
+    var = np.empty(shape)
+    r = np.empty(shape)
     # the log-variances as one log of a running product, taken every LOG_BATCH terms (a log
     # over the grid costs as much as the rest of a term)
-    det = np.ones_like(chi2)
+    logdet = np.zeros(shape)
+    det = np.ones(shape)
     terms = 0
+    penalty = np.zeros(shape)
+    ur_sum: np.ndarray | None = None
+    m_sum: np.ndarray | None = None
     for item, g in zip(items, grids, strict=True):
         factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
         f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
+        if item.hidden:
+            # no reflection seen: the model's ARR (where it has a reflection) must lie under the
+            # bound; cells where the model itself detects none agree with it
+            sd = np.sqrt(item.bound_sigma() ** 2 + factor**2 * g.model_arr_var
+                         + (f_std * g.arr_reflecting) ** 2)
+            z = (item.arr_upper_bound - factor * g.arr_reflecting) / sd
+            like = (1.0 - g.reflect_weight) + g.reflect_weight * _normal_cdf(z)
+            term = -2.0 * np.log(np.maximum(like, 1e-300))
+            bound_terms += term
+            bound_list.append(term)
+            continue
         s_tof, s_arr = item.sigmas()
-        for model, obs, scale, s2, model_var, rel2 in (
+        u_pair = sensitivity(table, g, spread) if spread else None
+        for k, (model, obs, scale, s2, model_var, rel2) in enumerate((
             (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + o_std**2, g.model_tof_var, 0.0),
             (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
-        ):
+        )):
             # the calibration's own uncertainty: offset adds, factor scales the model ARR
             if scale == 1.0:
                 np.add(model_var, s2, out=var)
@@ -605,37 +713,60 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                 rel = np.multiply(model, model)
                 rel *= rel2
                 var += rel
+            if u_pair is not None:
+                u = u_pair[k] * scale if scale != 1.0 else u_pair[k]
+                u_over = u / var
+                ur = u_over * r
+                ur_sum = ur if ur_sum is None else ur_sum + ur
+                # the three distinct entries of U^T D^-1 U (symmetric 2 x 2)
+                if m_sum is None:
+                    m_sum = np.zeros((3, *shape))
+                for n_e, (a, b) in enumerate(_UPPER):
+                    m_sum[n_e] += u_over[a] * u[b]
             r *= r
             r /= var
-            chi2 += r
+            misfit += r
             det *= var
             terms += 1
             if terms % LOG_BATCH == 0:
-                chi2 += np.log(det, out=det)
+                logdet += np.log(det)
                 det.fill(1.0)
-        chi2 += g.penalty
+        penalty += g.penalty
     if terms % LOG_BATCH:
-        chi2 += np.log(det, out=det)
-    n_terms = 2 * len(items)
+        logdet += np.log(det)
+    if m_sum is not None and ur_sum is not None:
+        # Woodbury: C = D + U U^T  ->  chi^2 -= b^T M^-1 b, log det C += log det M, with
+        # M = I + U^T D^-1 U and b = U^T D^-1 r (2 x 2 per cell, solved in closed form)
+        quad, logdet_m = _solve2(m_sum, ur_sum)
+        ok = np.isfinite(penalty)
+        misfit[ok] -= quad[ok]
+        logdet[ok] += logdet_m[ok]
+    n_terms = 2 * len(seen) + len(hidden)
+    chi2 = misfit + logdet + penalty + bound_terms
     best = float(chi2.min())
     i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
     if not math.isfinite(best):
         return _out_of_range(items, cal, best, n_terms,
                              "the model detects no reflection anywhere in the table for these "
                              "sphere sizes, but one was measured")
-    limit = _chi2_limit(n_terms)
-    fit = _misfit(items, grids, cal, i_best)
-    if fit > limit:
-        return _out_of_range(items, cal, fit, n_terms,
-                             f"no table point explains the measurement (best chi^2 {fit:.3g} > "
-                             f"{limit:.3g} for {n_terms} terms): outside the table's range or "
-                             "not this kind of plate; no extrapolated number is given")
+    # a hidden size's misfit: -2 log of its likelihood against an ARR at the bound itself
+    # (1/2), about z^2 once the model's reflection clearly exceeds the bound, 0 below it
+    fit = float(misfit[i_best]) + sum(max(0.0, float(b[i_best]) - 2.0 * math.log(2.0))
+                                      for b in bound_list)
+    if n_terms:
+        limit = _chi2_limit(n_terms)
+        if fit > limit:
+            return _out_of_range(items, cal, fit, n_terms,
+                                 f"no table point explains the measurement (best chi^2 "
+                                 f"{fit:.3g} > {limit:.3g} for {n_terms} terms): outside the "
+                                 "table's range or not this kind of plate; no extrapolated "
+                                 "number is given")
     chi2 -= best
+    finite = np.isfinite(chi2)
     chi2 *= -0.5
     post = np.exp(chi2, out=chi2)
     # the profile likelihood of each parameter (the best over the other), before the prior
     profile_t, profile_l = post.max(axis=1), post.max(axis=0)
-    g0 = grids[0]
     post *= g0.weight_t[:, None]  # prior mass of each cell: uniform in log t and in L
     post *= g0.weight_l[None, :]
     post /= post.sum()
@@ -644,10 +775,58 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     distance = _summarise(g0.distance_m, post.sum(axis=0), g0.weight_l,
                           lower_physical=bool(g0.distance_m[0] <= 0.0), profile=profile_l)
     est = Estimate(thickness, distance, items, cal, fit, n_terms)
+    # what the adequacy check reads: the effective number of parameters the data fix (the
+    # posterior mean of the deviance over its minimum, Spiegelhalter et al.'s p_D) and, per
+    # seen size, the posterior's weight on floor cells
+    deviance = misfit + logdet + bound_terms
+    d_best = float(deviance[i_best])
+    p_d = float(np.sum(post[finite] * (deviance[finite] - d_best)))
+    est.extra["p_d"] = p_d
+    est.extra["floor_mass"] = {
+        i.diameter_m: float(np.sum(post * g.floor_weight))
+        for i, g in zip(items, grids, strict=True) if not i.hidden}
+    # per seen size resting on floor cells: the posterior probability that its TOF and ARR are
+    # explained without the floor nodes' looseness (their chi^2 within the 1e-3 tail)
+    est.extra["strict_explained"] = {}
+    for item, g in zip(items, grids, strict=True):
+        if item.hidden or est.extra["floor_mass"][item.diameter_m] < MIN_FLOOR_MASS:
+            continue
+        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
+        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
+        s_tof, s_arr = item.sigmas()
+        strict = ((item.tof_s - offset - g.tof_s) ** 2
+                  / (s_tof**2 + o_std**2 + g.model_tof_var_strict)
+                  + (item.arr - factor * g.arr) ** 2
+                  / (s_arr**2 + factor**2 * g.model_arr_var_strict + (f_std * g.arr) ** 2))
+        est.extra["strict_explained"][item.diameter_m] = float(
+            np.sum(post[strict <= _chi2_limit_at(2, 1e-3)]))
     if return_posterior:
         est.posterior = {"thickness_m": g0.thickness_m, "distance_m": g0.distance_m,
                          "density": post}
     return est
+
+
+_UPPER = ((0, 0), (0, 1), (1, 1))
+
+
+def _solve2(m3: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``b^T (I + M)^-1 b`` and ``log det (I + M)`` per cell, for M symmetric positive
+    semi-definite given by its three upper entries (:data:`_UPPER`, first axis; ``b`` likewise
+    component first), in closed form."""
+    a00, a01, a11 = m3
+    a00 = a00 + 1.0
+    a11 = a11 + 1.0
+    det = a00 * a11 - a01 * a01
+    b0, b1 = b
+    quad = (a11 * b0 * b0 - 2.0 * a01 * b0 * b1 + a00 * b1 * b1) / det
+    return quad, np.log(det)
+
+
+def _normal_cdf(z: np.ndarray) -> np.ndarray:
+    """Phi(z), vectorised (scipy's ndtr)."""
+    from scipy.special import ndtr
+
+    return ndtr(z)
 
 
 __all__ = ["Estimate", "FeatureSummary", "InversionError", "ParameterEstimate", "TableError",

@@ -5,8 +5,10 @@
 ``analyze --invert``, ``invert``, ``calibrate``, ``POST /v1/measurements``, ``POST /v1/invert``
 and plate maps all go through :func:`estimate`; dictionaries appear only where data leaves or
 enters (JSON over HTTP and on the command line, the measurement store). A sphere size whose shots
-give no inversion input (no size in the metadata, no detected reflection) is left out with its
-reason in ``TableEstimate.skipped``; the other sizes are still inverted.
+show no reflection still gives an input, the ARR bound of its hidden reflection (a reflection
+that small bounds the thickness from above); one that gives none (no size in the metadata, no
+reflection and no bound) is left out with its reason in ``TableEstimate.skipped``; the other
+sizes are still inverted.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from solitonde.signal.features import Aggregate, Features, aggregate
 from solitonde.signal.json_ready import json_ready
 
 MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sphere size"
+"""Why shots without a sphere size give no input (the command line names its flag instead)."""
 
 
 def no_reflection(diameter_m: float) -> str:
@@ -43,15 +46,25 @@ class SizeSummary:
         """Why these shots give no inversion input, or None when they give one."""
         if self.diameter_m is None:
             return MISSING_SIZE
-        if self.aggregate["tof_s"].mean is None or self.aggregate["arr"].mean is None:
+        if self.hidden and self.aggregate.arr_upper_bound is None:
             return no_reflection(self.diameter_m)
         return None
 
+    @property
+    def hidden(self) -> bool:
+        """Whether no shot shows a reflection (the input is then the ARR bound alone)."""
+        return self.aggregate["tof_s"].mean is None or self.aggregate["arr"].mean is None
+
     def inputs(self) -> FeatureSummary:
-        """Mean TOF and ARR with their shot scatter and count (EstimateUnavailable if none)."""
+        """Mean TOF and ARR with their shot scatter and count, or for shots without a
+        reflection the ARR bound of the hidden one (EstimateUnavailable if neither)."""
         reason = self.skip_reason()
         if reason is not None:
             raise EstimateUnavailable(reason)
+        if self.hidden:
+            return FeatureSummary(float(self.diameter_m), None, None,
+                                  n_shots=max(int(self.aggregate.n_shots), 1),
+                                  arr_upper_bound=float(self.aggregate.arr_upper_bound))
         tof, arr = self.aggregate["tof_s"], self.aggregate["arr"]
         return FeatureSummary(float(self.diameter_m), float(tof.mean), float(arr.mean),
                               tof.std, arr.std, max(int(tof.count), 1))
@@ -99,6 +112,9 @@ def estimate(
     one that covers the sizes).
 
     ``skipped`` lists sizes the caller already left out (``{"sphere_diameter", "reason"}``).
+    ``plate_material`` (a library name or a property mapping, which may state its spread) also
+    sets the material spread the intervals carry; without it, the library's for the table's
+    plate material (instrument.inference.material_spread).
 
     Raises
     ------
@@ -123,6 +139,9 @@ def estimate(
     if not inputs:
         raise EstimateUnavailable("; ".join(s["reason"] for s in left_out)
                                   or "no shot gave a usable TOF")
+    from solitonde.instrument.inference.material_spread import spread_of
+
     chosen = tables.choose([i.diameter_m for i in inputs], table, plate_material)
-    result = invert(chosen.table, inputs, calibration, return_posterior=posterior)
+    result = invert(chosen.table, inputs, calibration, return_posterior=posterior,
+                    material_spread=spread_of(chosen.table, plate_material))
     return TableEstimate(result, chosen.table.table_id, left_out)

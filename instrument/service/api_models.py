@@ -29,6 +29,32 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
+class PlateMaterialIn(Strict):
+    """A plate material by its properties (SI units), optionally with the spread of its grade;
+    the inversion carries that spread in its intervals (without one: the properties are exact)."""
+
+    name: str | None = Field(None, max_length=80)
+    youngs_modulus: float = Field(ge=1e6, le=1e13, description="E, Pa")
+    poisson_ratio: float = Field(gt=-1.0, lt=0.5, description="nu")
+    density: float = Field(ge=1.0, le=1e5, description="rho, kg/m^3")
+    youngs_modulus_rel_sd: float | None = Field(None, ge=0, le=0.5,
+                                                description="relative sd of E")
+    poisson_ratio_sd: float | None = Field(None, ge=0, le=0.2, description="sd of nu")
+    density_rel_sd: float | None = Field(None, ge=0, le=0.5, description="relative sd of rho")
+
+
+PLATE_MATERIAL_HELP = ("the plate's material, a library name or its properties (with their "
+                       "spread, optionally): picks the table of that family, a named table of "
+                       "another family is refused, and the stated spread widens the intervals")
+
+
+def plate_material_value(value: Any) -> Any:
+    """A request's ``plate_material`` as the inversion takes it (a name, or a plain mapping)."""
+    if isinstance(value, PlateMaterialIn):
+        return value.model_dump(exclude_none=True)
+    return value
+
+
 class ShotMetadata(Strict):
     """Where and how a shot was taken."""
 
@@ -44,9 +70,8 @@ class ShotMetadata(Strict):
     y_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position, y, m")
     table: str | None = Field(None, max_length=64, description="the model table to invert "
                               "against, by id (GET /v1/tables); needed when several could serve")
-    plate_material: str | None = Field(None, max_length=80, description="the plate's material "
-                                       "(a library name): picks the table of that family, and "
-                                       "a named table of another family is refused")
+    plate_material: Annotated[str, StringConstraints(max_length=80)] | PlateMaterialIn | None = (
+        Field(None, description=PLATE_MATERIAL_HELP))
     extra: dict[Key, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
                                                  "not the fields above, nor 'source' (a 422)")
@@ -187,12 +212,16 @@ class InversionInput(Strict):
     """Summary of the shots with one sphere size."""
 
     diameter_m: float = Field(gt=0, le=1.0, description="sphere diameter D, m")
-    tof_s: float = Field(gt=0, le=1.0, description="mean time of flight, s")
+    tof_s: float | None = Field(None, gt=0, le=1.0, description="mean time of flight, s (null "
+                                "with arr for a size whose shots show no reflection)")
     tof_std_s: float | None = Field(None, ge=0, le=1.0,
                                     description="scatter of TOF, s (default: stated default)")
-    arr: float = Field(ge=0, le=10.0, description="mean amplitude ratio")
+    arr: float | None = Field(None, ge=0, le=10.0, description="mean amplitude ratio")
     arr_std: float | None = Field(None, ge=0, le=10.0, description="scatter of ARR")
     n_shots: int = Field(1, ge=1, le=100_000)
+    arr_upper_bound: float | None = Field(None, gt=0, le=1.5, description="for a size without a "
+                                          "reflection (tof_s and arr null): the largest ARR that "
+                                          "could hide under the noise; it bounds the thickness")
 
 
 class CalibrationEntry(Strict):
@@ -226,8 +255,8 @@ class InvertIn(Strict):
     inputs: list[InversionInput] = Field(min_length=1, max_length=16)
     calibration: Calibration | None = None
     table: str | None = Field(None, max_length=64, description="the model table, by id")
-    plate_material: str | None = Field(None, max_length=80,
-                                       description="the plate's material (a library name)")
+    plate_material: Annotated[str, StringConstraints(max_length=80)] | PlateMaterialIn | None = (
+        Field(None, description=PLATE_MATERIAL_HELP))
 
 
 class InvertOut(BaseModel):

@@ -299,7 +299,9 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet,
     estimate, reason = None, tables.reason
     if chosen is not None:
         try:
-            estimate = estimate_from(tables, summaries, table=chosen.table.table_id).to_dict()
+            estimate = estimate_from(tables, summaries, table=chosen.table.table_id,
+                                     plate_material=waveforms[0].metadata.get(
+                                         "plate_material")).to_dict()
             reason = None
         except EstimateUnavailable as exc:
             reason = str(exc)

@@ -115,8 +115,11 @@ def narrow_to_tables(components: dict[str, Any], tables: TableSet) -> None:
         if "table" in props:
             props["table"] = _nullable({"type": "string", "enum": ids}, props["table"])
         if "plate_material" in props:
+            by_properties = [a for a in props["plate_material"].get("anyOf", [])
+                             if "$ref" in a or a.get("type") == "object"]
             props["plate_material"] = _nullable({"type": "string", "enum": materials},
                                                 props["plate_material"])
+            props["plate_material"]["anyOf"][1:1] = by_properties
     props = components.get("InversionInput", {}).get("properties", {})
     if "diameter_m" in props:  # a table serves its sizes within 1 % (TableSet's rule)
         props["diameter_m"] = {

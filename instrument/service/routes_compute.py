@@ -25,6 +25,7 @@ from solitonde.instrument.service.api_models import (
     InvertOut,
     SimulateIn,
     SimulateOut,
+    plate_material_value,
 )
 from solitonde.instrument.service.heavy import run_for_client
 from solitonde.instrument.service.problems import Problem, from_pydantic
@@ -67,7 +68,8 @@ async def invert(request: Request) -> dict[str, Any]:
         raise Problem(503, f"table: {svc.estimator.reason}", kind="no-table", field="table")
     try:
         estimate = await run_in_threadpool(_invert, svc.estimator, inputs, calibration,
-                                           payload.table, payload.plate_material)
+                                           payload.table,
+                                           plate_material_value(payload.plate_material))
     except EstimateUnavailable as exc:
         raise Problem(503, f"table: {exc}", kind="no-table", field="table") from None
     except TableChoiceError as exc:

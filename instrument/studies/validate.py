@@ -15,17 +15,24 @@ nearly but not exactly a constant factor and delay, and the spread between the t
 the calibration states as its transfer uncertainty.
 
 Scored: relative thickness error of the posterior median (median and 90th percentile, over the
-plates where thickness comes back ``constrained``), coverage of the 95 % interval (thickness;
-distance too, one-sided bounds counted as such), and the status. The expected status is what the
-noise-free model says the data can tell. For each end of each parameter's range, ``d`` is how
-many standard errors (the inversion's own sigmas, :func:`separations`) separate the truth's
-features from the closest table point on that end: along a slice (the other parameter at its true
-value) and along the profile (any value of the other parameter). A side is open (the parameter is
-not bounded there) when ``d < 1.5``, closed when ``d > 3``, either in between. The slice misses
-joint (t, L) degeneracies (a thin plate near a support can mimic a thicker one far from it); the
-profile flags every one however little posterior mass it carries; a status supported by either
-counts as right (``status_accuracy``), and each is scored on its own as well
-(``status_accuracy_slice``, ``status_accuracy_profile``).
+plates where thickness comes back ``constrained``); ``coverage_95``, the fraction of thickness
+answers whose 95 % bounds hold the truth, every answer counted with its bounds (a one-sided
+``lower_bound_only`` / ``upper_bound_only`` answer covers when its bound holds), and
+``coverage_95_two_sided`` over the two-sided ones alone; ``answered``, the fraction of plates
+with any answer (a thickness with at least one bound, not flagged); ``interval_width_median``,
+the median width of the two-sided 95 % intervals relative to the truth; ``inconsistent_rate``,
+the fraction flagged ``inconsistent`` or ``out_of_range`` (on the table's own family: false
+alarms); the distance's coverage (one-sided bounds counted as such); and the status. A size
+whose shots show no reflection enters with its ARR bound (instrument.inference.inversion).
+The expected status is what the noise-free model says the data can tell. For each end of each
+parameter's range, ``d`` is how many standard errors (the inversion's own sigmas,
+:func:`separations`) separate the truth's features from the closest table point on that end: along
+a slice (the other parameter at its true value) and along the profile (any value of the other
+parameter). A side is open (the parameter is not bounded there) when ``d < 1.5``, closed when ``d >
+3``, either in between. The slice misses joint (t, L) degeneracies (a thin plate near a support can
+mimic a thicker one far from it); the profile flags every one however little posterior mass it
+carries; a status supported by either counts as right (``status_accuracy``), and each is scored on
+its own as well (``status_accuracy_slice``, ``status_accuracy_profile``).
 L = 0 is a physical end and never open. So far from the support the distance must come back
 ``lower_bound_only``, and right at the support, where TOF and ARR no longer depend on the plate,
 thickness may honestly come back unbounded.
@@ -66,6 +73,9 @@ REFERENCE2_THICKNESS_M = 2.5e-3
 REFERENCE_DISTANCE_M = 0.457
 OPEN_BELOW = 1.5
 CLOSED_ABOVE = 3.0
+STATUSES = ("constrained", "lower_bound_only", "upper_bound_only", "unconstrained")
+ANSWERS = ("constrained", "lower_bound_only", "upper_bound_only")
+"""Thickness statuses that are an answer (with at least one bound)."""
 
 
 class ValidationInputError(ValueError):
@@ -110,7 +120,12 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
                 continue
         agg = aggregate(feats) if feats else None
         if agg is None or agg["tof_s"].mean is None or agg["arr"].mean is None:
-            summaries[d] = None
+            # no reflection: its ARR bound still bounds the thickness (None without one)
+            bound = None if agg is None else agg.arr_upper_bound
+            summaries[d] = None if bound is None else {
+                "diameter_m": d, "tof_s": None, "tof_std_s": None, "arr": None, "arr_std": None,
+                "n_shots": agg.n_shots, "arr_upper_bound": bound,
+                "plate_model": result.plate_model}
             continue
         summaries[d] = {"diameter_m": d, "tof_s": agg["tof_s"].mean,
                         "tof_std_s": agg["tof_s"].std, "arr": agg["arr"].mean,
@@ -122,7 +137,8 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
 
 def _inputs(summaries: Mapping[float, Any]) -> list[FeatureSummary]:
     return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"], s["arr_std"],
-                           int(s["n_shots"])) for s in summaries.values() if s is not None]
+                           int(s["n_shots"]), s.get("arr_upper_bound"))
+            for s in summaries.values() if s is not None]
 
 
 def separations(table: ModelTable, inputs: Sequence[FeatureSummary], thickness_m: float,
@@ -189,7 +205,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
              scheduler: str | None = None, progress: bool = False,
              diameters: Sequence[float] | None = None,
              measurements: str | Path | None = None,
-             truth_plate_theory: str = "auto") -> ValidationReport:
+             truth_plate_theory: str = "auto",
+             wrong_family: str | None = None) -> ValidationReport:
     """Run the synthetic validation on ``table`` (see the module doc).
 
     ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
@@ -198,6 +215,12 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     ``truth_plate_theory`` (``sem.plate_theory`` of the simulated plates: auto, 3d, mindlin)
     lets the truths come from another plate model than the table's, e.g. the 3-D plate behind a
     table built on the Mindlin plate, so the model's own error shows in the scores.
+    ``wrong_family`` (a library material) simulates the truths on a plate of that material
+    while the table is of its own: the reference plates (the calibration) stay of the table's
+    family, as a user's reference block would be, and the scores say how often the answer is
+    flagged (``inconsistent`` or ``out_of_range``) or covers the truth anyway
+    (``flagged_or_covered``), and how often a constrained interval misses with no flag
+    (``missed_unflagged``).
 
     Raises
     ------
@@ -221,16 +244,25 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     if truth_plate_theory not in ("auto", "3d", "mindlin"):
         raise ValidationInputError("truth_plate_theory", f"must be auto, 3d or mindlin, got "
                                    f"{truth_plate_theory!r}")
-    base = table.sweep.get("scene", {})
+    from solitonde.model.materials import MATERIALS
+
+    if wrong_family is not None and wrong_family not in MATERIALS:
+        raise ValidationInputError("wrong_family", f"unknown material {wrong_family!r} (known: "
+                                   f"{', '.join(sorted(MATERIALS))})")
+    reference_base = table.sweep.get("scene", {})
     if truth_plate_theory != "auto":
-        base = apply_overrides(dict(base), {"sem.plate_theory": truth_plate_theory})
+        reference_base = apply_overrides(dict(reference_base),
+                                         {"sem.plate_theory": truth_plate_theory})
+    base = reference_base
+    if wrong_family is not None:
+        base = apply_overrides(dict(base), {"plate.material": wrong_family})
     lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
     draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_axis[-1])))
              for _ in range(n)]
     seeds = rng.integers(0, 2**31, size=n + 1)
     t_ref = float(np.clip(REFERENCE_THICKNESS_M, t_axis[0], t_axis[-1]))
     l_ref = float(np.clip(REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
-    tasks = [(base, diameters, t_ref, l_ref, int(seeds[0]))]
+    tasks = [(reference_base, diameters, t_ref, l_ref, int(seeds[0]))]
     tasks += [(base, diameters, t, length, int(s)) for (t, length), s in zip(draws, seeds[1:],
                                                                              strict=True)]
     bar = None
@@ -241,7 +273,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     key = {"n": n, "seed": seed, "diameters_m": diameters, "scene": base,
            "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
            "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
-           "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB}
+           "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB,
+           "wrong_family": wrong_family}
     stored = _load_measurements(measurements, key)
     started = time.perf_counter()
     if stored is not None:
@@ -262,10 +295,10 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     # the second reference plate (far from the supports: a cheap run) shows how far the fitted
     # factor and offset carry over between plates
     t_ref2 = float(np.clip(REFERENCE2_THICKNESS_M, t_axis[0], t_axis[-1]))
-    ref2 = measure_plate(base, diameters, t_ref2, l_ref,
+    ref2 = measure_plate(reference_base, diameters, t_ref2, l_ref,
                          int(np.random.default_rng([seed, 2]).integers(0, 2**31)))
-    refs = [Reference(t_ref, l_ref, s) for s in _inputs(ref["summaries"])]
-    refs += [Reference(t_ref2, l_ref, s) for s in _inputs(ref2["summaries"])]
+    refs = [Reference(t_ref, l_ref, s) for s in _inputs(ref["summaries"]) if not s.hidden]
+    refs += [Reference(t_ref2, l_ref, s) for s in _inputs(ref2["summaries"]) if not s.hidden]
     calibration = fit_calibration(table, refs)
     order = {(t, length): i for i, (t, length) in enumerate(draws)}
     measured.sort(key=lambda m: order[(m["thickness_m"], m["distance_m"])])
@@ -282,44 +315,74 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         est = invert(table, inputs, calibration)
         t_est, l_est = est.thickness_m, est.distance_m
         true_l = m["distance_m"]
+        true_t = m["thickness_m"]
         # What the data the inversion used can tell: a size it left out as disagreeing with the
         # others (see :func:`invert`) does not count towards the expected status either.
         excluded = est.extra.get("excluded_diameters_m", [])
-        used = [i for i in inputs if i.diameter_m not in excluded]
-        sep = separations(table, used, m["thickness_m"], true_l, calibration)
+        used = [i for i in inputs if i.diameter_m not in excluded and not i.hidden]
         phys = bool(l_axis[0] <= 0.0)
-        # a slice (the other parameter at its true value) misses joint (t, L) degeneracies, the
-        # profile flags every one however little posterior mass it carries: both are answers
-        # the noise-free model supports, and both are scored separately too
-        exp_ts = expected_statuses(sep["thickness_m_slice"], lower_physical=False)
-        exp_ls = expected_statuses(sep["distance_m_slice"], lower_physical=phys)
-        exp_tp = expected_statuses(sep["thickness_m"], lower_physical=False)
-        exp_lp = expected_statuses(sep["distance_m"], lower_physical=phys)
+        flagged = est.inconsistent
+        answered = t_est.status in ANSWERS and not flagged
+        row.update(thickness=t_est.to_dict(), distance=l_est.to_dict(),
+                   excluded_diameters_m=excluded, fit=est.fit, warnings=est.warnings,
+                   hidden_diameters_m=[i.diameter_m for i in inputs if i.hidden],
+                   flagged=flagged, answered=answered)
+        if used:
+            sep = separations(table, used, true_t, true_l, calibration)
+            # a slice (the other parameter at its true value) misses joint (t, L)
+            # degeneracies, the profile flags every one however little posterior mass it
+            # carries: both are answers the noise-free model supports, and both are scored
+            # separately too
+            exp_ts = expected_statuses(sep["thickness_m_slice"], lower_physical=False)
+            exp_ls = expected_statuses(sep["distance_m_slice"], lower_physical=phys)
+            exp_tp = expected_statuses(sep["thickness_m"], lower_physical=False)
+            exp_lp = expected_statuses(sep["distance_m"], lower_physical=phys)
+            row["separations"] = {k: v.tolist() for k, v in sep.items()}
+        else:  # no reflection at all: the bound is what the data can tell
+            exp_ts = exp_tp = {"upper_bound_only"}
+            exp_ls = exp_lp = set(STATUSES)
         exp_t, exp_l = exp_ts | exp_tp, exp_ls | exp_lp
         row.update(
-            thickness=t_est.to_dict(), distance=l_est.to_dict(), excluded_diameters_m=excluded,
-            separations={k: v.tolist() for k, v in sep.items()},
             expected_thickness_status=sorted(exp_t), expected_distance_status=sorted(exp_l),
             status_ok=t_est.status in exp_t and l_est.status in exp_l,
             status_ok_slice=t_est.status in exp_ts and l_est.status in exp_ls,
             status_ok_profile=t_est.status in exp_tp and l_est.status in exp_lp,
-            thickness_error=(abs(t_est.median - m["thickness_m"]) / m["thickness_m"]
-                             if t_est.median is not None else None),
-            thickness_covered=(t_est.ci95 is not None and t_est.ci95[0] is not None
-                               and t_est.ci95[1] is not None
-                               and t_est.ci95[0] <= m["thickness_m"] <= t_est.ci95[1]),
-            distance_covered=_covered(l_est.ci95, true_l),
+            thickness_error=(abs(t_est.median - true_t) / true_t
+                             if t_est.median is not None and not flagged else None),
+            # every answer with its bounds: a one-sided one covers when its bound holds
+            thickness_covered=_covered(t_est.ci95, true_t) if answered else None,
+            thickness_covered_two_sided=(
+                t_est.ci95[0] <= true_t <= t_est.ci95[1]
+                if answered and t_est.status == "constrained" else None),
+            thickness_width=((t_est.ci95[1] - t_est.ci95[0]) / true_t
+                             if answered and t_est.status == "constrained" else None),
+            distance_covered=_covered(l_est.ci95, true_l) if not flagged else None,
         )
         rows.append(row)
     errors = np.array([r["thickness_error"] for r in rows if r.get("thickness_error") is not None])
-    t_cov = [r["thickness_covered"] for r in rows if "thickness_covered" in r]
+    t_cov = [r["thickness_covered"] for r in rows if r.get("thickness_covered") is not None]
+    t_cov2 = [r["thickness_covered_two_sided"] for r in rows
+              if r.get("thickness_covered_two_sided") is not None]
+    widths = [r["thickness_width"] for r in rows if r.get("thickness_width") is not None]
     l_cov = [r["distance_covered"] for r in rows if r.get("distance_covered") is not None]
+    flagged = [bool(r.get("flagged")) for r in rows]
+    # a wrong family is handled when the answer is flagged or covers the truth anyway
+    handled = [bool(r.get("flagged")) or bool(r.get("thickness_covered")) for r in rows]
+    missed = [not r.get("flagged") and r.get("thickness", {}).get("status") == "constrained"
+              and not r.get("thickness_covered") for r in rows]
     metrics = {
         "n": n,
         "seed": seed,
         "thickness_error_median": float(np.median(errors)) if errors.size else None,
         "thickness_error_p90": float(np.percentile(errors, 90)) if errors.size else None,
         "coverage_95": float(np.mean(t_cov)) if t_cov else None,
+        "coverage_95_two_sided": float(np.mean(t_cov2)) if t_cov2 else None,
+        "answered": float(np.mean([bool(r.get("answered")) for r in rows])) if rows else None,
+        "interval_width_median": float(np.median(widths)) if widths else None,
+        "inconsistent_rate": float(np.mean(flagged)) if rows else None,
+        "flagged_or_covered": float(np.mean(handled)) if rows else None,
+        "missed_unflagged": float(np.mean(missed)) if rows else None,
+        "wrong_family": wrong_family,
         "distance_coverage_95": float(np.mean(l_cov)) if l_cov else None,
         "status_accuracy": float(np.mean([r["status_ok"] for r in rows])) if rows else None,
         "status_accuracy_slice": float(np.mean([r.get("status_ok_slice", False) for r in rows])),
@@ -382,7 +445,8 @@ def _load_measurements(path: str | Path | None,
             m["summaries"] = {float(d): s for d, s in m["summaries"].items()}
             for s in m["summaries"].values():
                 if s is not None:
-                    FeatureSummary(float(s["diameter_m"]), float(s["tof_s"]), float(s["arr"]))
+                    FeatureSummary.from_any({k: s.get(k) for k in (
+                        "diameter_m", "tof_s", "arr", "arr_upper_bound")})
         wall = float(data["wall_s"])
     except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise bad(f"{type(exc).__name__}: {exc}") from None

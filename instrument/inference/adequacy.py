@@ -1,0 +1,148 @@
+"""Whether the table's family explains a measurement, and what an answer should be read with.
+
+Every estimate carries ``fit = {chi2, dof, p_value}`` and ``warnings``. A recording is
+*inconsistent* with the table's family (thickness and distance then carry the status
+``inconsistent``, with a warning naming the likely causes) when
+
+* its best fit is improbable: ``p_value`` below :data:`P_INCONSISTENT`. ``chi2`` is the misfit
+  (residuals against the full covariance: shot scatter, the table's interpolation error, the
+  calibration and the plate material's spread) at the most probable cell; ``dof`` is the number
+  of terms (TOF and ARR per sphere size with a reflection) less the parameters the data
+  actually fix, Spiegelhalter et al.'s p_D (the posterior mean of the deviance over its
+  minimum: about 1 far from a support, where TOF and ARR do not depend on L, about 2 near one),
+  and at least 1: one sphere size near a support leaves no degree of freedom, and a test with
+  one is then conservative;
+* no table point explains it at all (``out_of_range``, a TOF/ARR pair the family cannot reach);
+* or a sphere size had to be left out to answer at all (with every size no table point explains
+  the data) where the answer puts that size's reflection clear (D/t below 5 over the whole 95 %
+  interval): the known reason to leave a size out is a large sphere on a thin plate, whose
+  "reflection" beyond D/t = 5 is a train at the detection floor; anything else is the family
+  disagreeing with the sizes together (a steel plate read against the aluminium table shows it
+  most often this way: each size alone maps onto some aluminium thickness, not all at once);
+* or its reflection is unlike the family's where the answer lies: the answer leans on cells
+  whose features come in part from floor nodes (D/t beyond 5, where the family's reflection is
+  a train at the detection floor, ARR below 0.3, so the table states it loosely: 10 % in TOF,
+  the whole ARR), the measured ARR of that size is a clear reflection (above that floor by
+  three standard errors), and less than 5 % of the posterior lies on cells that explain the
+  size's TOF and ARR with the table's interpolation error alone (chi^2 of its two terms within
+  the 1e-3 tail). A right-family plate between a floor node and a clear one is explained by
+  the interpolation there; a plate of another material is not: a 4 mm steel plate read as
+  1.83 mm of aluminium 12 mm from the support, through those loose cells alone.
+
+An estimate made without a calibration says so: the model's ARR runs above measured ones (the
+paper's Figs. 5 and 7: the experiment loses energy the model does not), so an uncalibrated
+thickness comes out low.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from scipy.stats import chi2 as chi2_dist
+
+# The inversion calls this module on every estimate, so this module does not import it back:
+# an estimate (``Estimate``) and its parameters are used through their attributes, and the
+# floor level comes with the call.
+
+P_INCONSISTENT = 1e-3
+"""A best fit less probable than this under the table's family flags the recording."""
+STRICT_EXPLAINED = 0.05
+"""A clear reflection is unlike the family's when less than this posterior probability lies on
+cells that explain it without the floor nodes' looseness."""
+FLOOR_Z = 3.0
+"""Standard errors by which a measured ARR must exceed the floor level to be a clear one."""
+CAUSES = ("the plate's material is not the table's (check the plate, or give "
+          "--plate-material / plate_material to pick the right table)",
+          "the table's family (sphere size and material, plate size, supports, striker) is not "
+          "the set-up measured",
+          "no calibration, or one made on another set-up (solitonde calibrate on a reference "
+          "plate)",
+          "the units or the sensor's calibration of the recording (N, V, N/V)")
+NO_CALIBRATION = ("no calibration on a reference plate: the model's ARR runs above measured ones "
+                  "(the paper's Figs. 5 and 7), so thickness comes out low; run `solitonde "
+                  "calibrate` on a reference plate and give its file")
+
+
+def _dof(est: Any) -> float:
+    p_d = float(est.extra.get("p_d", 0.0))
+    return max(est.n_terms - min(max(p_d, 0.0), est.n_terms), 1.0)
+
+
+def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
+    """Fill ``est.fit`` and ``est.warnings`` of an inversion's ``Estimate``; mark the answer
+    ``inconsistent`` when the family does not explain the data (see the module doc);
+    ``floor_arr_max`` and ``floor_d_over_t`` are the inversion's floor level of ARR and the D/t
+    beyond which the family's reflection is at the floor (``FLOOR_ARR_MAX``,
+    ``REFLECTION_D_OVER_T``)."""
+    warnings: list[str] = []
+    why: str | None = None
+    if est.n_terms:
+        dof = float(est.n_terms) if est.out_of_range else _dof(est)
+        chi2 = float(est.chi2_min)
+        p = float(chi2_dist.sf(chi2, dof)) if math.isfinite(chi2) else 0.0
+        est.fit = {"chi2": chi2 if math.isfinite(chi2) else None, "dof": dof, "p_value": p}
+        if not est.out_of_range and p < P_INCONSISTENT:
+            why = (f"the best fit is improbable under the table's family (chi^2 {chi2:.3g} for "
+                   f"{dof:.2g} degrees of freedom, p = {p:.2g} < {P_INCONSISTENT:g})")
+    else:
+        est.fit = {"chi2": None, "dof": None, "p_value": None}
+    if why is None and not est.out_of_range:
+        why = _floor_mismatch(est, floor_arr_max)
+    if why is None and not est.out_of_range:
+        why = _unexplained_exclusion(est, floor_d_over_t)
+    if est.out_of_range:
+        warnings.append(f"inconsistent: {est.reason}; likely causes: " + "; ".join(CAUSES))
+    elif why is not None:
+        warnings.append(f"inconsistent: {why}; the numbers are the table's best reading, not an "
+                        "estimate to use. Likely causes: " + "; ".join(CAUSES))
+        for name in ("thickness_m", "distance_m"):
+            getattr(est, name).status = "inconsistent"
+        est.reason = (est.reason + "; " if est.reason else "") + f"inconsistent: {why}"
+    hidden = [i for i in est.inputs if i.hidden]
+    for i in hidden:
+        warnings.append(f"no reflection with D = {i.diameter_m * 1e3:.3g} mm: its ARR bound "
+                        f"{i.arr_upper_bound:.3g} enters as an upper bound on the reflection")
+    if est.calibration is None:
+        warnings.append(NO_CALIBRATION)
+    est.warnings = warnings + [w for w in est.warnings if w not in warnings]
+
+
+def _floor_mismatch(est: Any, floor_arr_max: float) -> str | None:
+    """Why a clear measured reflection is unlike the family's floor-level one where the answer
+    lies, or None."""
+    explained = est.extra.get("strict_explained") or {}
+    floor_mass = est.extra.get("floor_mass") or {}
+    for item in est.inputs:
+        if item.hidden or item.diameter_m not in explained:
+            continue
+        factor, _ = ((1.0, 0.0) if est.calibration is None
+                     else est.calibration.for_diameter(item.diameter_m))
+        _, s_arr = item.sigmas()
+        level = factor * floor_arr_max
+        if item.arr > level + FLOOR_Z * s_arr and explained[item.diameter_m] < STRICT_EXPLAINED:
+            return (f"the reflection with D = {item.diameter_m * 1e3:.3g} mm is a clear one "
+                    f"(ARR {item.arr:.3g}) but the answer rests on cells where the table's "
+                    f"family has one at the detection floor (ARR below {level:.2g}; "
+                    f"{100 * floor_mass[item.diameter_m]:.0f} % of the posterior's weight), and "
+                    "without the looseness the table allows there no cell of the answer "
+                    "explains it")
+    return None
+
+
+def _unexplained_exclusion(est: Any, floor_d_over_t: float) -> str | None:
+    """Why a sphere size the inversion left out (all sizes together were out of range, the
+    others agree) is not the known case, or None. The known case is a large sphere on a thin
+    plate, beyond D/t = ``floor_d_over_t``, whose "reflection" is a train at the detection floor;
+    a size left out where the answer puts its reflection clear (D / t below that over the whole
+    95 % interval) disagrees with the family itself."""
+    low = (est.thickness_m.ci95 or (None, None))[0]
+    if low is None:
+        return None
+    for d in est.extra.get("excluded_diameters_m", []):
+        if d / low <= floor_d_over_t:
+            return (f"with the sphere size D = {d * 1e3:.3g} mm no table point explains the "
+                    f"measurement, and the other sizes' answer (t >= {low * 1e3:.3g} mm, D/t <= "
+                    f"{d / low:.2g}) is where that size's reflection is a clear one, not the "
+                    "detection-floor train that may disagree")
+    return None

@@ -1,0 +1,154 @@
+"""The plate material's spread in the features: a linearised term from Zener's scaling.
+
+A table holds the features of one plate material, but a user knows their plate's E, nu and rho
+only to the spread of its grade (:data:`solitonde.model.materials.SPREAD_KEYS`). Rebuilding
+tables over material axes would multiply their cost; instead the features' sensitivity to the
+material is taken from the table's own slopes, through how the physics trades material against
+thickness and distance (the paper's Sec. 4.1, Zener's sphere-on-plate impact):
+
+* The plate meets the last sphere as Zener's dashpot of impedance ``Z = 8 sqrt(rho t D_p)`` with
+  ``D_p = E t^3 / (12 (1 - nu^2))``, behind the Hertz spring ``A_p`` whose effective modulus
+  mixes sphere and plate (``1/E* = (1 - nu_s^2)/E_s + (1 - nu_p^2)/E_p``). ARR and the contact
+  part of TOF follow the inelasticity ``lambda = A_p^(2/5) m^(3/5) v^(1/5) / Z`` (Eq. 6), which
+  goes as ``t^-2``: a material change ``d ln lambda`` acts as a thickness change
+  ``d ln t = -d ln lambda / 2``, read off the table's slope along ln t.
+* The contact time also scales with ``T_0 ~ A_p^(-2/5)`` (Eq. 7) at fixed lambda: TOF moves by
+  ``-0.4 T_c d ln A_p``, with ``T_c`` Zener's contact time for the table's chain.
+* Near a support the guided waves return after a time ~ L / c with
+  ``c ~ sqrt(E / (rho (1 - nu^2)))``: a material change acts as a distance change
+  ``d ln L = -d ln c``, read off the table's slope along L.
+
+E and nu act only through ``E' = E / (1 - nu^2)``, so each feature gets a row
+``J = dF / d(ln E', ln rho)`` per fine cell; times the spread it is a low-rank (2) covariance
+shared by every feature and sphere size of a measurement (one plate, one material), which the
+inversion adds to its per-term variances exactly (Woodbury), not as independent terms (that
+would count the one material error once per feature and shrink it as sizes are added). Linear
+is enough: a grade's spread is a few percent, over which the table's features are smooth in
+ln t and L. Why not a table axis or a marginal over nearby families: either needs tables the
+user does not have (a material axis multiplies a build's cost by its points; a marginal needs a
+table per neighbouring material), while the exchange rates above need only the family's
+materials, which every table records, so the bundled tables carry the spread as they are.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from solitonde.instrument.tables.table import ModelTable
+
+SPREAD_ORDER = ("youngs_modulus_rel_sd", "poisson_ratio_sd", "density_rel_sd")
+"""The three spread components, in the order of J's columns (d ln E, d nu, d ln rho)."""
+
+
+def _plane_compliance(props: Mapping[str, Any]) -> float:
+    return (1.0 - float(props["poisson_ratio"]) ** 2) / float(props["youngs_modulus"])
+
+
+def _contact_time(table: ModelTable, diameter_m: float, thickness_m: np.ndarray) -> np.ndarray:
+    """Zener's contact time T_c (s) of the table's chain on its plate, per thickness."""
+    from solitonde.model import zener
+    from solitonde.model.scene import apply_overrides, scene_from_dict
+
+    base = (table.provenance or {}).get("scene_defaults") or table.sweep.get("scene") or {}
+    t_ref = float(thickness_m[len(thickness_m) // 2])
+    scene = scene_from_dict(apply_overrides(dict(base), {"chain.diameter": diameter_m,
+                                                         "plate.thickness": t_ref}))
+    v_in = zener.incident_velocity(scene)
+    lam_ref = zener.inelasticity(scene)
+    _, tau_c = zener.restitution_and_contact_time_many(lam_ref * (t_ref / thickness_m) ** 2)
+    return np.asarray(tau_c) * zener.time_scale(scene.sphere_mass, scene.a_p, v_in)
+
+
+def exchange_rates(plate: Mapping[str, Any], sphere: Mapping[str, Any]) -> dict[str, Any]:
+    """How a plate material change ``(d ln E', d ln rho)`` moves Zener's inelasticity
+    (``d_ln_lambda``) and the guided waves' speed (``d_ln_c``), and the plate's share ``w`` of
+    the contact compliance (``d ln A_p = w d ln E'``); E' = E / (1 - nu^2)."""
+    c_p, c_s = _plane_compliance(plate), _plane_compliance(sphere)
+    w = c_p / (c_p + c_s)
+    # lambda ~ A_p^(2/5) / Z, Z ~ t^2 sqrt(rho E'): d ln lambda = 0.4 w d ln E' - 0.5 (d ln E' +
+    # d ln rho); c ~ sqrt(E' / rho)
+    return {"contact_share": w, "d_ln_lambda": (0.4 * w - 0.5, -0.5), "d_ln_c": (0.5, -0.5)}
+
+
+def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
+                ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The material's covariance factors for one sphere size (``grid``, its
+    :class:`~.inversion.FineGrid`; not imported, as the inversion imports this module):
+    ``(U_tof, U_arr)``, each of shape (2, n_t, n_l) (component first, for fast arithmetic over
+    the grid), ``U = J * sd`` over the two directions the material acts through, ``d ln E'`` (E'
+    = E / (1 - nu^2), whose sd combines E's and nu's) and ``d ln rho``: the features' material
+    covariance between two terms is ``U_a . U_b``. None when the spread is zero or the table
+    records no family.
+
+    Cached on the table per sphere size and spread.
+    """
+    sd = np.array([float(spread.get(k) or 0.0) for k in SPREAD_ORDER])
+    family = table.family
+    if not sd.any() or not family:
+        return None
+    key = f"material:{grid.diameter_m}:{tuple(sd)}"
+    cached = table._cache.get(key)
+    if cached is not None:
+        return cached
+    plate, sphere = family["plate_material"], family["sphere_material"]
+    nu = float(plate["poisson_ratio"])
+    k_nu = 2.0 * nu / (1.0 - nu**2)  # d ln E' / d nu, E' = E / (1 - nu^2)
+    # E and nu act only through E' = E / (1 - nu^2): two independent directions remain,
+    # d ln E' (sd from E's and nu's spreads) and d ln rho
+    sd2 = np.array([math.hypot(sd[0], k_nu * sd[1]), sd[2]])
+    rates = exchange_rates(plate, sphere)
+    w = rates["contact_share"]
+    d_ln_e_prime = np.array([1.0, 0.0])  # per (d ln E', d ln rho)
+    d_ln_lambda = np.array(rates["d_ln_lambda"])
+    d_ln_c = np.array(rates["d_ln_c"])
+    log_t = np.log(grid.thickness_m)
+    ok = grid.valid
+    near = ok.copy()  # a slope across a cell without features is not one
+    near[1:] &= ok[:-1]
+    near[:-1] &= ok[1:]
+    near[:, 1:] &= ok[:, :-1]
+    near[:, :-1] &= ok[:, 1:]
+    out = []
+    t_c = _contact_time(table, grid.diameter_m, grid.thickness_m)[:, None]
+    for values, explicit in ((grid.tof_s, True), (grid.arr, False)):
+        slope_t = np.gradient(values, log_t, axis=0) if log_t.size > 1 else np.zeros_like(values)
+        slope_l = (np.gradient(values, grid.distance_m, axis=1) if grid.distance_m.size > 1
+                   else np.zeros_like(values))
+        jac = (slope_t[..., None] * (-0.5 * d_ln_lambda)
+               + (slope_l * grid.distance_m[None, :])[..., None] * (-d_ln_c))
+        if explicit:
+            jac += (-0.4 * w * t_c)[..., None] * d_ln_e_prime
+        jac[~near] = 0.0
+        out.append(np.ascontiguousarray(np.moveaxis(jac * sd2, -1, 0)))
+    result = (out[0], out[1])
+    table._cache[key] = result
+    return result
+
+
+def spread_of(table: ModelTable, plate_material: Any = None) -> dict[str, float]:
+    """The plate's spread for an inversion on ``table``: the one ``plate_material`` states (a
+    property mapping with spread keys), else the library's for the table's plate material."""
+    from solitonde.model.materials import material_spread
+
+    if plate_material is not None:
+        stated = material_spread(plate_material)
+        if isinstance(plate_material, Mapping) and any(
+                plate_material.get(k) is not None for k in SPREAD_ORDER):
+            return stated
+    family = table.family or {}
+    if not family.get("plate_material"):
+        return dict.fromkeys(SPREAD_ORDER, 0.0)
+    return material_spread(family["plate_material"])
+
+
+def describe_spread(spread: Mapping[str, float]) -> str:
+    """The spread in words (for reasons and docs)."""
+    e, nu, rho = (float(spread.get(k) or 0.0) for k in SPREAD_ORDER)
+    return f"E +- {100 * e:.3g} %, nu +- {nu:.3g}, rho +- {100 * rho:.3g} % (1 sd)"
+
+
+__all__ = ["SPREAD_ORDER", "describe_spread", "exchange_rates", "sensitivity", "spread_of"]
