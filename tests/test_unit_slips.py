@@ -18,10 +18,10 @@ import pytest
 from typer.testing import CliRunner
 
 sys.path.insert(0, str(Path(__file__).parent))
-from scipy_chain import ChainTrace, solve  # noqa: E402
+from scipy_chain import ChainTrace, solve
 
-from solitonde.instrument.cli.main import build_app  # noqa: E402
-from solitonde.model.scene import scene_from_dict  # noqa: E402
+from solitonde.instrument.cli.main import build_app
+from solitonde.model.scene import scene_from_dict
 
 CAL = 20.0  # N/V
 RATE = 2e6
@@ -94,3 +94,27 @@ def test_a_calibration_off_by_ten_is_flagged(tmp_path: Path, trace) -> None:
     out = _analyze(str(path), "--calibration", str(10 * CAL), "--sphere-diameter", "9.53e-3")
     assert out.exit_code == 1, out.output
     assert "implausible_units" in out.output
+
+
+def test_the_service_keeps_an_implausible_shot_out_of_the_estimate(tmp_path: Path, trace) -> None:
+    """Over REST the shot is stored with its flag (201), rejected from the aggregate with the
+    reason, and the estimate says why it has none."""
+    from fastapi.testclient import TestClient
+
+    from solitonde.instrument.service.app import build_app
+    from solitonde.instrument.service.settings import Settings
+    from solitonde.instrument.tables.bundled import default_table
+
+    t, v = trace
+    shot = {"t0": float(t[0]), "dt": float(t[1] - t[0]), "samples": (v * 1e-3).tolist(),
+            "units": "V", "calibration": CAL,
+            "metadata": {"plate_id": "P", "position": "A", "sphere_diameter": 9.53e-3}}
+    settings = Settings(store_path=tmp_path / "s.sqlite", table_paths=(default_table(),))
+    with TestClient(build_app(settings)) as client:
+        r = client.post("/v1/measurements", json={"shots": [shot]})
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert "implausible_units" in body["shots"][0]["features"]["flags"]
+    (agg,) = body["aggregates"]
+    assert agg["rejected"][0]["reason"].startswith("implausible_units")
+    assert body["estimate"] is None and "implausible_units" in body["estimate_reason"]

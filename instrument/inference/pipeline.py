@@ -46,6 +46,12 @@ class SizeSummary:
         """Why these shots give no inversion input, or None when they give one."""
         if self.diameter_m is None:
             return MISSING_SIZE
+        implausible = [r for r in self.aggregate.rejected
+                       if str(r.get("reason", "")).startswith("implausible_units")]
+        if implausible and len(implausible) == self.aggregate.n_shots:
+            return (f"sphere_diameter {self.diameter_m:g} m: every shot is implausible_units "
+                    "(its incident's width and force disagree with this chain's solitary wave: "
+                    "check the calibration, the units of the file's force and time columns)")
         if self.hidden and self.aggregate.arr_upper_bound is None:
             return no_reflection(self.diameter_m)
         return None
