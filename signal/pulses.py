@@ -36,8 +36,15 @@ number is never picked out of noise:
    height, the widest estimate (the template's last) that agrees with every narrower one within
    its noise is kept, time and height apart. A clean trace gets the trace's own peak; a noisy one
    keeps the template's wherever the data cannot tell it wrong. The incident and the reflection
-   are read on the same window for the ARR. The template's height above the level before the
-   pulse stays as ``rise_N`` (drift-immune; see :mod:`solitonde.signal.features`).
+   are read on the same window for the ARR. That choice follows the noise, and so did the mean
+   of what it read: the template's own peak (``time_s``, ``peak_N``: TOF and ARR) is therefore
+   the reading, a fixed rule at the Cramer-Rao scatter whose mean under noise is its noise-free
+   value, and the refined peak is kept beside it (``peak_time_s``, ``peak_height_N``). The
+   template's height above the level before the pulse stays as ``rise_N`` (drift-immune; see
+   :mod:`solitonde.signal.features`).
+7. Where the chain is known (``travel_time_1n_s``, ``pulse_width_1n_s``), the reflection is the
+   first pulse inside the travel gate (a heavy striker's train before it is secondary), and an
+   incident whose width disagrees with a solitary wave of its force is ``implausible_units``.
 """
 
 from __future__ import annotations
