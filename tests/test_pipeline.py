@@ -113,7 +113,9 @@ def test_the_service_inverts_a_silent_size_as_its_bound_and_exports_the_sizes_it
 
     shots = [w.to_dict() for w in signal_io.read(CSV)]
     dt = 5e-7
-    lone = Waveform(0.0, dt, pulse_train(4000, dt, [(300e-6, 50.0, 40e-6)]),
+    # 87 us at half height: a 50 N solitary wave of 19.05 mm spheres (a narrower one would be
+    # implausible_units for that size)
+    lone = Waveform(0.0, dt, pulse_train(4000, dt, [(400e-6, 50.0, 290e-6)]),
                     metadata={**signal_io.read(CSV)[0].metadata, "sphere_diameter": 0.01905})
     settings = Settings(store_path=tmp_path / "s.sqlite", table_path=TABLE)
     with TestClient(build_app(settings)) as client:
