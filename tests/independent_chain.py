@@ -24,10 +24,12 @@ def _plane(m: Mapping[str, float]) -> float:
 def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: float = 9.53e-3,
                  *, sphere: Mapping[str, float] = SPHERE_440C, n_particles: int = 20,
                  sensor_index: int = 7, drop_height_m: float = 5e-3, duration_s: float = 8e-4,
-                 sample_rate: float = 2e6) -> tuple[np.ndarray, np.ndarray]:
+                 sample_rate: float = 2e6, gravity: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Sensor force (N) sampled from the impact on: the mean of the contact forces above and
     below sphere ``sensor_index`` (1 = the top sphere) of a chain at static equilibrium under
-    gravity, struck by a sphere like its own dropped from ``drop_height_m``."""
+    gravity (or without it: the spheres just touching), struck by a sphere like its own dropped
+    from ``drop_height_m``."""
+    g = G if gravity else 0.0
     r = 0.5 * diameter_m
     m = sphere["density"] * math.pi * diameter_m**3 / 6.0
     a_s = 4.0 / 3.0 * (_plane(sphere) / 2.0) * math.sqrt(r / 2.0)
@@ -36,11 +38,11 @@ def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: flo
     bending = _plane(plate) * thickness_m**3 / 12.0
     z = 8.0 * math.sqrt(plate["density"] * thickness_m * bending)
     n = n_particles
-    f_static = n * m * G
+    f_static = n * m * g
     u = np.empty(n + 1)  # u[0] the striker, u[1..n] the chain; positive downwards
     u[n] = (f_static / a_p) ** (2.0 / 3.0)
     for k in range(n - 1, -1, -1):  # contact k (between u[k] and u[k+1]) carries k m g
-        u[k] = u[k + 1] + (k * m * G / a_s) ** (2.0 / 3.0)
+        u[k] = u[k + 1] + (k * m * g / a_s) ** (2.0 / 3.0)
     v = np.zeros(n + 1)
     v[0] = math.sqrt(2.0 * G * drop_height_m)
 
@@ -51,7 +53,7 @@ def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: flo
     def rhs(_t: float, y: np.ndarray) -> np.ndarray:
         pos, vel, w = y[: n + 1], y[n + 1: 2 * n + 2], y[-1]
         f, fb = contacts(pos, w)
-        acc = np.full(n + 1, G)
+        acc = np.full(n + 1, g)
         acc[1:] += f / m
         acc[:-1] -= f / m
         acc[-1] -= fb / m

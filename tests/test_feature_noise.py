@@ -1,10 +1,11 @@
 """TOF and ARR under white noise, on traces of an independent solve (issue 27).
 
 The traces come from SciPy's DOP853 on the chain's equations written out in
-``tests/scipy_chain.py`` (Hertz contacts, gravity, Zener's dashpot), not from this project's
-integrators. Each cell (a sphere size, a plate, gravity on or off, a sample rate) is sampled at
-random sub-sample offsets with white noise of standard deviation ``incident peak / 10^(SNR/20)``,
-200 draws per SNR. The reference is what the extractor reads on the same trace without noise
+``tests/independent_chain.py`` (Hertz contacts from the materials, gravity, Zener's dashpot), not
+from this project's integrators; ``tests/scipy_chain.py`` samples them with their peaks. Each
+cell (a sphere size, a plate, gravity on or off, a sample rate) is sampled at random sub-sample
+offsets with white noise of standard deviation ``incident peak / 10^(SNR/20)``, 200 draws per
+SNR. The reference is what the extractor reads on the same trace without noise
 (averaged over the offsets): the reading the model tables hold for their points. Its offset from
 the trace's own peaks (the template's shape against the pulse's) is printed beside it.
 
@@ -18,16 +19,11 @@ noise (:func:`solitonde.signal.accuracy.cramer_rao`). Run with ``-s`` for the ta
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
 from scipy_chain import ChainTrace, solve
 
-from solitonde.model.scene import scene_from_dict
 from solitonde.signal.accuracy import Truth, cramer_rao
 from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform
@@ -50,12 +46,8 @@ CELLS = {  # name: (diameter, thickness, gravity, sample rate, record after the 
 @pytest.fixture(scope="module")
 def traces() -> dict[str, ChainTrace]:
     """Every cell solved once at 20 MHz (a few seconds each)."""
-    out = {}
-    for name, (d, t, gravity, _rate, t_end) in CELLS.items():
-        scene = scene_from_dict({"chain": {"diameter": d}, "plate": {"thickness": t},
-                                 "effects": {"plate_model": "infinite", "gravity": gravity}})
-        out[name] = solve(scene, t_end, rate=FINE_RATE)
-    return out
+    return {name: solve(d, t, gravity, t_end, rate=FINE_RATE)
+            for name, (d, t, gravity, _rate, t_end) in CELLS.items()}
 
 
 def _read(trace: ChainTrace, step: int, offset: int, noise: np.ndarray | None
@@ -133,9 +125,7 @@ def test_the_docs_table_of_errors_against_snr_rate_and_gravity() -> None:
           "| ARR sd % (bound) |")
     print("|---|---|---|---|---|---|---|")
     for gravity in (False, True):
-        scene = scene_from_dict({"plate": {"thickness": 4.83e-3},
-                                 "effects": {"plate_model": "infinite", "gravity": gravity}})
-        trace = solve(scene, 0.9e-3, rate=FINE_RATE)
+        trace = solve(9.53e-3, 4.83e-3, gravity, 0.9e-3, rate=FINE_RATE)
         for rate in (1e6, 2e6, 10e6):
             for r in _cell(trace, rate):
                 print(f"| {'on' if gravity else 'off'} | {rate / 1e6:g} | {r['snr']:.0f} | "

@@ -3,25 +3,21 @@
 A solitary wave ties its width to its force and the sphere size (Nesterenko: it is about five
 diameters long and travels at a speed that grows as F^(1/6)), so a recording whose force or time
 axis is in other units than its file says cannot be the chain's. The traces come from the
-independent SciPy solve of ``tests/scipy_chain.py`` (D 9.53 mm on a 4.83 mm plate, gravity on,
+independent SciPy solve of ``tests/independent_chain.py`` (D 9.53 mm on a 4.83 mm plate, gravity on,
 2 MHz, 40 dB), written as PicoScope and spreadsheet CSVs the way those programs write them, in
 volts through a 20 N/V sensor.
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy_chain import ChainTrace, solve
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent))
-from scipy_chain import ChainTrace, solve
-
 from solitonde.instrument.cli.main import build_app
-from solitonde.model.scene import scene_from_dict
 
 CAL = 20.0  # N/V
 RATE = 2e6
@@ -30,9 +26,7 @@ RATE = 2e6
 @pytest.fixture(scope="module")
 def trace() -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and the sensor in volts: the solve at 2 MHz with noise at 40 dB."""
-    scene = scene_from_dict({"plate": {"thickness": 4.83e-3},
-                             "effects": {"plate_model": "infinite", "gravity": True}})
-    tr: ChainTrace = solve(scene, 0.9e-3, rate=RATE)
+    tr: ChainTrace = solve(9.53e-3, 4.83e-3, True, 0.9e-3, rate=RATE)
     rng = np.random.default_rng(7)
     sigma = (tr.incident_peak_N - tr.static_N) / 100.0
     volts = (tr.samples + rng.normal(0.0, sigma, tr.samples.size)) / CAL
