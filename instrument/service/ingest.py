@@ -267,13 +267,15 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
         raise Problem(422, f"{field}: {exc.message}", kind="invalid-input", field=field) from None
 
 
-def provenance(chosen: Any) -> dict[str, Any]:
+def provenance(chosen: Any, waveforms: Sequence[Waveform] = ()) -> dict[str, Any]:
     """What a result was computed with: the software version, the feature extractor and its
-    settings, the table (id and SHA-256 of its file) or None, and when."""
+    settings (the defaults, and the chain's options each stated sphere size added), the table
+    (id and SHA-256 of its file) or None, and when."""
     import dataclasses
     import time
     from importlib import metadata
 
+    from solitonde.instrument.inference.chain_geometry import shot_options
     from solitonde.signal.pulses import DetectOptions
 
     try:
@@ -285,7 +287,11 @@ def provenance(chosen: Any) -> dict[str, Any]:
         table = {"id": chosen.table.table_id, "sha256": chosen.table.content_sha256}
     return {"software_version": version,
             "extractor": {"function": "solitonde.signal.features.extract",
-                          "options": json_ready(dataclasses.asdict(DetectOptions()))},
+                          "options": json_ready(dataclasses.asdict(DetectOptions())),
+                          "chain_options": {
+                              f"{d}": shot_options(d) for d in
+                              {wf.metadata.get("sphere_diameter") for wf in waveforms}
+                              if shot_options(d)}},
             "table": table, "computed_at": time.time()}
 
 
@@ -314,7 +320,7 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet,
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export
         result["location"] = coordinates
-    result["provenance"] = provenance(chosen)
+    result["provenance"] = provenance(chosen, waveforms)
     return shots, result
 
 
