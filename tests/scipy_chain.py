@@ -15,31 +15,21 @@ from dataclasses import dataclass
 import numpy as np
 from independent_chain import sensor_trace
 
+from solitonde.signal.accuracy import Truth
+
 AL_6061 = {"youngs_modulus": 68.9e9, "poisson_ratio": 0.33, "density": 2700.0}
 
 
 @dataclass(frozen=True)
 class ChainTrace:
-    """A sensor trace sampled at ``dt`` from ``t0`` (the impact at t = 0), the static reading
-    ``static_N`` and the true peaks of the incident and of the reflection (the largest maximum
-    once the sensor has fallen below a tenth of the incident's height after it)."""
+    """A sensor trace sampled at ``dt`` from ``t0`` (the impact at t = 0) and its ``truth``: the
+    incident's and the reflection's peaks (the largest maximum once the sensor has fallen below
+    a tenth of the incident's height after it), heights above the static reading."""
 
     t0: float
     dt: float
     samples: np.ndarray
-    static_N: float
-    incident_time_s: float
-    incident_peak_N: float
-    reflected_time_s: float
-    reflected_peak_N: float
-
-    @property
-    def tof_s(self) -> float:
-        return self.reflected_time_s - self.incident_time_s
-
-    @property
-    def arr(self) -> float:
-        return (self.reflected_peak_N - self.static_N) / (self.incident_peak_N - self.static_N)
+    truth: Truth
 
 
 def solve(diameter: float, thickness: float, gravity: bool, t_end: float, rate: float = 20e6,
@@ -57,8 +47,8 @@ def solve(diameter: float, thickness: float, gravity: bool, t_end: float, rate: 
     while k < x.size and x[k] - static > 0.1 * (inc_f - static):
         k += 1
     ref_t, ref_f = _peak(t, x, k)
-    return ChainTrace(-n_pre * dt, dt, np.concatenate([np.full(n_pre, static), x]), static,
-                      inc_t, inc_f, ref_t, ref_f)
+    return ChainTrace(-n_pre * dt, dt, np.concatenate([np.full(n_pre, static), x]),
+                      Truth(inc_t, ref_t, inc_f - static, ref_f - static))
 
 
 def _peak(t: np.ndarray, x: np.ndarray, lo: int) -> tuple[float, float]:

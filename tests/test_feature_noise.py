@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from scipy_chain import ChainTrace, solve
 
-from solitonde.signal.accuracy import Truth, cramer_rao
+from solitonde.signal.accuracy import cramer_rao
 from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform
 
@@ -67,8 +67,7 @@ def _cell(trace: ChainTrace, rate: float) -> list[dict[str, float]]:
     assert all(c is not None for c in clean)
     tof0 = float(np.mean([c[0] for c in clean]))
     arr0 = float(np.mean([c[1] for c in clean]))
-    truth = Truth(trace.incident_time_s, trace.reflected_time_s,
-                  trace.incident_peak_N - trace.static_N, trace.reflected_peak_N - trace.static_N)
+    truth = trace.truth
     rows = []
     for snr in SNRS:
         rng = np.random.default_rng(int(snr))

@@ -28,7 +28,7 @@ def trace() -> tuple[np.ndarray, np.ndarray]:
     """Times (s) and the sensor in volts: the solve at 2 MHz with noise at 40 dB."""
     tr: ChainTrace = solve(9.53e-3, 4.83e-3, True, 0.9e-3, rate=RATE)
     rng = np.random.default_rng(7)
-    sigma = (tr.incident_peak_N - tr.static_N) / 100.0
+    sigma = tr.truth.incident_peak_N / 100.0
     volts = (tr.samples + rng.normal(0.0, sigma, tr.samples.size)) / CAL
     return tr.t0 + tr.dt * np.arange(tr.samples.size), volts
 
