@@ -182,3 +182,23 @@ def test_a_size_left_out_where_its_reflection_is_clear_flags_the_answer() -> Non
         "excluded_diameters_m")
     low, high = same.thickness_m.ci95
     assert low <= table.axes["thickness_m"][3] <= high
+
+
+def test_invert_exits_1_on_an_inconsistent_answer(recording: Path) -> None:
+    """`solitonde invert` with the steel recording's features against the aluminium table:
+    the answer is printed in full, but the exit status is 1 and stderr says why (issue 28)."""
+    _, out = _analyze(str(recording), "--invert", "--sphere-diameter", "9.53e-3", "--table",
+                      str(ALUMINIUM))
+    agg = out["estimates"][0]["estimate"]["inputs"][0]
+    args = ["invert", "--tof", repr(agg["tof_s"]), "--arr", repr(agg["arr"]), "--diameter",
+            "9.53e-3", "--tof-std", repr(agg["tof_std_s"]), "--arr-std", repr(agg["arr_std"]),
+            "--shots", str(agg["n_shots"]), "--table", str(ALUMINIUM)]
+    result = CliRunner().invoke(build_cli(), [*args, "--json"])
+    assert result.exit_code == 1, result.output
+    assert json.loads(result.stdout)["thickness_m"]["status"] == "inconsistent"
+    assert "error: inconsistent: inconsistent:" not in result.stderr
+    assert result.stderr.startswith("error: inconsistent")
+    assert "plate's material is not the table's" in result.stderr
+    text = CliRunner().invoke(build_cli(), args)
+    assert text.exit_code == 1
+    assert "INCONSISTENT" in text.stdout

@@ -3,6 +3,9 @@
 One ``--tof/--arr/--diameter`` triple per sphere size (repeat the options, in the same order, to
 combine sizes). Without ``--tof-std``/``--arr-std`` the inversion's stated defaults are used
 (1 % of TOF, 0.03 in ARR per shot).
+
+Exit status: 0 with an answer (bounds included), 1 when the answer is ``inconsistent`` or
+``out_of_range`` (printed in full, with the reason on stderr), 2 for bad options.
 """
 
 from __future__ import annotations
@@ -163,6 +166,13 @@ def invert_command(
         typer.echo(json.dumps(result.to_dict(posterior=posterior)))
     else:
         typer.echo(describe(result.estimate))
+    if result.estimate.inconsistent:
+        # printed in full above, but no answer to act on: a script must not take it for one
+        est = result.estimate
+        reason = est.reason or "the table does not explain these features"
+        why = est.warnings[0] if est.warnings else f"{est.thickness_m.status}: {reason}"
+        typer.echo(f"error: {why}", err=True)
+        raise typer.Exit(1)
 
 
 def register(app: typer.Typer) -> None:
