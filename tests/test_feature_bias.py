@@ -18,47 +18,21 @@ from __future__ import annotations
 import math
 
 import pytest
+from feature_grid import D_OVER_T, DIAMETERS, GREENS, grid_scenes
 
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.batch import simulate_many
-from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.model.simulate import SimulationResult
 from solitonde.signal.features import extract
 
-DIAMETERS = (4.76e-3, 9.53e-3, 19.05e-3)
-D_OVER_T = (0.5, 1.5, 3.0, 4.0)
-RATES = (1e6, 2e6, 5e6, 10e6)
 TOF_BIAS_S = 0.1e-6
 ARR_BIAS = 0.005
-COARSE = {"elements": [8, 8, 1], "order": [4, 4, 2], "contact_refinement": 0}
-GREENS = (  # thickness, distance to the support, gravity, sample rate
-    (2.29e-3, 0.02, True, 5e6),
-    (3.18e-3, 0.03, False, 2e6),
-    (4.83e-3, 0.01, True, 1e6),
-)
-
-
-def _scenes() -> list[Scene]:
-    scenes = []
-    for gravity in (True, False):
-        for i, d in enumerate(DIAMETERS):
-            for j, ratio in enumerate(D_OVER_T):
-                scenes.append(scene_from_dict({
-                    "chain": {"diameter": d}, "plate": {"thickness": d / ratio},
-                    "effects": {"plate_model": "infinite", "gravity": gravity},
-                    "output": {"sample_rate": RATES[(i + j) % len(RATES)]}}))
-    for thickness, distance, gravity, rate in GREENS:
-        scenes.append(scene_from_dict({
-            "plate": {"thickness": thickness, "distance_to_support": distance},
-            "effects": {"plate_model": "greens", "gravity": gravity}, "sem": COARSE,
-            "output": {"sample_rate": rate}}))
-    return scenes
 
 
 @pytest.fixture(scope="module")
 def shots() -> list[SimulationResult]:
     """Every scene simulated once (27 runs, a few seconds on two cores)."""
-    return [r for r in simulate_many(_scenes(), workers=2) if isinstance(r, SimulationResult)]
+    return [r for r in simulate_many(grid_scenes(), workers=2) if isinstance(r, SimulationResult)]
 
 
 def _bias(result: SimulationResult) -> tuple[float, float, float, float]:
