@@ -103,7 +103,7 @@ def calibrate_command(
     try:
         cal.save(out)
     except CalibrationError as exc:
-        _fail(f"--out: {str(exc).partition(': ')[2]}")
+        _fail(f"--out: {exc.full_message}")
         return
     if as_json:
         typer.echo(json.dumps(cal.to_dict(), indent=2))

@@ -34,7 +34,7 @@ def parse_diameters(text: str | None, model: ModelTable) -> list[float] | None:
         try:
             d = float(model.axes["diameter_m"][model.diameter_index(d)])
         except TableError as exc:
-            _fail(f"--diameters: {str(exc).partition(': ')[2]}")
+            _fail(f"--diameters: {exc.full_message}")
         if d in out:
             _fail(f"--diameters: {item.strip()} is listed twice")
         out.append(d)
@@ -86,7 +86,7 @@ def validate_command(
                           measurements=measurements, truth_plate_theory=truth_plate_theory,
                           wrong_family=wrong_family)
     except ValidationInputError as exc:
-        _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
+        _fail(f"--{exc.field.replace('_', '-')}: {exc.full_message}")
     m = report.metrics
     if out is not None:
         try:

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.errors import MessageError
+
 KEYS = ("file", "plate_id", "position", "x_m", "y_m", "sphere_diameter_m",
         "calibration_N_per_V")
 """The manifest's columns; ``file`` is required, the others optional."""
@@ -29,8 +31,10 @@ TEXT_LIMIT = 200
 """Longest plate_id or position (the service's limit)."""
 
 
-class ManifestError(ValueError):
+class ManifestError(MessageError, ValueError):
     """A manifest that cannot be used; the message names the file, the row and the key."""
+
+    subject = "--manifest"
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.errors import MessageError
+
 QUEUED, DONE, FAILED = "queued", "done", "failed"
 VERSION = 1
 
@@ -36,8 +38,10 @@ class Entry:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-class QueueLocked(RuntimeError):
+class QueueLocked(MessageError, RuntimeError):
     """Another `watch` holds this state folder."""
+
+    subject = "--state"
 
 
 class Queue:

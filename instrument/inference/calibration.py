@@ -24,13 +24,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.errors import InstrumentError
 
-class CalibrationError(ValueError):
+
+class CalibrationError(InstrumentError, ValueError):
     """A calibration that cannot be used; ``field`` names what is wrong."""
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
 
 
 def _positive(name: str, value: Any) -> float:

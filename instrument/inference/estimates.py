@@ -11,6 +11,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.errors import MessageError
 from solitonde.instrument.inference.inversion import fine_grid
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.json_ready import json_ready
@@ -18,8 +19,10 @@ from solitonde.signal.json_ready import json_ready
 log = logging.getLogger("solitonde.instrument")
 
 
-class EstimateUnavailable(RuntimeError):
+class EstimateUnavailable(MessageError, RuntimeError):
     """No estimate can be made: no table loaded, or no shots that give an inversion input."""
+
+    subject = "table"
 
 
 class Estimator:

@@ -64,6 +64,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.tables.table import (
     STATUS_NO_REFLECTION,
@@ -116,12 +117,9 @@ over 1e5 shots) and 1e2 (an ARR scatter of 10, the most an input may state): a p
 stays between 1e-152 and 1e16, far from underflow and overflow."""
 
 
-class InversionError(ValueError):
+class InversionError(InstrumentError, ValueError):
     """Bad inversion input; ``field`` names it."""
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
 
 
 @dataclass(frozen=True)

@@ -14,19 +14,15 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.estimates import Estimator
 from solitonde.instrument.tables.family import describe, differences
 
 log = logging.getLogger("solitonde.instrument")
 
 
-class TableChoiceError(ValueError):
+class TableChoiceError(InstrumentError, ValueError):
     """No table, or more than one, fits a measurement; ``field`` names the metadata key."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
-        self.message = message
 
 
 def table_files(paths: Iterable[Path]) -> list[Path]:

@@ -19,6 +19,8 @@ import anyio
 from starlette.requests import Request
 from starlette.responses import Response
 
+from solitonde.instrument.errors import MessageError
+
 log = logging.getLogger("solitonde.instrument")
 
 T = TypeVar("T")
@@ -28,8 +30,13 @@ CLIENT_CLOSED = 499
 client never sees it."""
 
 
-class ClientGone(Exception):
+class ClientGone(MessageError):
     """The client disconnected before its job started; nothing was done."""
+
+    subject = "request"
+
+    def __init__(self, message: str = "the client disconnected before its job started") -> None:
+        super().__init__(message)
 
 
 async def run_for_client(request: Request, limiter: anyio.CapacityLimiter,

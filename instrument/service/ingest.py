@@ -36,10 +36,7 @@ from solitonde.signal.waveform import Waveform
 def waveform_error(exc: WaveformError, prefix: str) -> Problem:
     """422 for a signal-layer error, with the field under the request's own path."""
     field = f"{prefix}.{exc.field}" if prefix else exc.field
-    message = getattr(exc, "message", None) or str(exc).partition(": ")[2] or str(exc)
-    if getattr(exc, "allowed", None):
-        message += f" (allowed: {exc.allowed})"
-    return Problem(422, f"{field}: {message}", kind="invalid-input", field=field)
+    return Problem(422, f"{field}: {exc.full_message}", kind="invalid-input", field=field)
 
 
 RESERVED_EXTRA = frozenset(ShotMetadata.model_fields) | {"source"}

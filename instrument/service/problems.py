@@ -16,6 +16,8 @@ from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from solitonde.instrument.errors import InstrumentError
+
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 TYPE_BASE = "urn:solitonde:problem:"
 
@@ -36,7 +38,7 @@ _TITLES = {
 }
 
 
-class Problem(Exception):
+class Problem(InstrumentError):
     """An error to send to the client as problem+json.
 
     Parameters
@@ -53,6 +55,8 @@ class Problem(Exception):
         Every failing field as ``{"field": ..., "message": ...}``.
     """
 
+    field_in_text = False
+
     def __init__(
         self,
         status: int,
@@ -64,7 +68,7 @@ class Problem(Exception):
         headers: Mapping[str, str] | None = None,
         title: str | None = None,
     ) -> None:
-        super().__init__(detail)
+        super().__init__(field or "", detail)
         self.status = status
         self.detail = detail
         self.kind = kind or _slug(_TITLES.get(status, "error"))

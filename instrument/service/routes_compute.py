@@ -16,6 +16,7 @@ from fastapi import APIRouter, Request
 from fastapi.concurrency import run_in_threadpool
 from pydantic import ValidationError
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import (
@@ -81,7 +82,7 @@ async def invert(request: Request) -> dict[str, Any]:
             field = f"inputs.{field}"
         elif field in Calibration.model_fields or field.startswith("per_diameter["):
             field = f"calibration.{field}"
-        message = str(exc).partition(": ")[2] or str(exc)
+        message = exc.full_message if isinstance(exc, InstrumentError) else str(exc)
         raise Problem(422, f"{field}: {message}", kind="invalid-input", field=field) from None
     return {"estimate": estimate}
 
@@ -141,11 +142,11 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
         cost = simulation_cost(scene, budget)
     except WaveformError as exc:  # a sample rate that cannot resolve the pulse
         field = f"scene.{exc.field}"
-        raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
+        raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
                       field=field) from None
     except SceneError as exc:
         field = f"scene.{exc.field}"
-        raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
+        raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
                       field=field) from None
     except SimulationError as exc:
         raise Problem(422, f"scene: cannot be simulated ({exc})", kind="invalid-input",
@@ -164,7 +165,7 @@ def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str,
         result = run_scene(scene)
     except SceneError as exc:
         field = f"scene.{exc.field}"
-        raise Problem(422, f"{field}: {str(exc).partition(': ')[2]}", kind="invalid-input",
+        raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
                       field=field) from None
     except SimulationError as exc:
         raise Problem(422, f"scene: the simulation could not be carried out ({exc})",

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.tables.bundled import default_table
 
 DEFAULT_STORE = Path(".solitonde") / "measurements.sqlite"
@@ -40,12 +41,8 @@ ENV_VARS: dict[str, str] = {
 }
 
 
-class SettingsError(ValueError):
-    """A setting with a value the service cannot run with; names the setting."""
-
-    def __init__(self, name: str, message: str) -> None:
-        self.field = name
-        super().__init__(f"{name}: {message}")
+class SettingsError(InstrumentError, ValueError):
+    """A setting with a value the service cannot run with; ``field`` names the setting."""
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from solitonde.instrument.errors import MessageError
+
 CODEC = "zstd"
 
 _SCHEMA = """
@@ -121,8 +123,10 @@ def _journal_mode_wal(conn: sqlite3.Connection, timeout_s: float) -> str:
             time.sleep(0.05)
 
 
-class StoreError(RuntimeError):
+class StoreError(MessageError, RuntimeError):
     """The store cannot be opened, or a stored record fails its integrity check."""
+
+    subject = "store"
 
 
 class StoreFull(StoreError):
@@ -134,9 +138,11 @@ class SchemaTooOld(StoreError):
     """A store of an earlier schema: ``solitonde store migrate`` brings it up."""
 
 
-class KeyTaken(RuntimeError):
+class KeyTaken(MessageError, RuntimeError):
     """An ``Idempotency-Key`` another request stored first (a concurrent retry): nothing was
-    written; the caller answers with that request's measurement."""
+    written; the caller answers with that request's measurement. The message is the key."""
+
+    subject = "Idempotency-Key"
 
 
 @dataclass

@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
@@ -78,12 +79,9 @@ ANSWERS = ("constrained", "lower_bound_only", "upper_bound_only")
 """Thickness statuses that are an answer (with at least one bound)."""
 
 
-class ValidationInputError(ValueError):
+class ValidationInputError(InstrumentError, ValueError):
     """A validation request that cannot be run; ``field`` names what is wrong."""
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
 
 
 def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> dict[str, Any]:

@@ -32,6 +32,8 @@ from typing import Any
 import h5py
 import numpy as np
 
+from solitonde.instrument.errors import InstrumentError
+
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
 AXES = ("diameter_m", "thickness_m", "distance_m")
@@ -57,12 +59,9 @@ PLATE_MODEL_NAMES = ("rigid", "halfspace", "infinite", "sem", "greens", "mindlin
                      "mindlin_greens", "unknown")
 
 
-class TableError(ValueError):
+class TableError(InstrumentError, ValueError):
     """A table file that cannot be used; ``field`` names what is wrong."""
 
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
 
 
 @dataclass
