@@ -68,7 +68,9 @@ def _run_chunk(
     out: list[SimulationResult | Exception] = []
     for scene_dict, options in payload:
         r = _run_one(scene_from_dict(scene_dict), options)
-        out.append(replace(r, scene=None) if isinstance(r, SimulationResult) else r)
+        # the parent puts the scene back (it holds it): only this crossing carries None
+        out.append(replace(r, scene=None) if isinstance(r, SimulationResult)  # type: ignore[arg-type]
+                   else r)
     return out
 
 

@@ -42,7 +42,7 @@ the peak truth carries the interpolant's accuracy, not the sample grid's.
 from __future__ import annotations
 
 from math import exp, log, sqrt
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
@@ -351,7 +351,7 @@ class Ode(NamedTuple):
 # The steps of integrate_dopri5. Each is inlined into the driver (numba IR inlining), so the
 # driver compiles as one function, under its own flags, exactly as when the steps were written
 # in its body.
-_STEP = {"cache": True, "inline": "always", "fastmath": FASTMATH, "error_model": "numpy"}
+_STEP: dict[str, Any] = {"cache": True, "inline": "always", "fastmath": FASTMATH, "error_model": "numpy"}
 
 
 @njit(**_STEP)

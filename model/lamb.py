@@ -341,14 +341,14 @@ class _Tracer:
                 return False
             old = before[1][m] if before is not None else np.nan
             if m == "A1":
-                if not np.isfinite(old):
+                if before is None or not np.isfinite(old):
                     continue  # second point after the cut-off: nothing to extrapolate from
                 change = prev**2 - old**2
                 guess = prev**2 + change * (W - w_prev) / (w_prev - before[0])
                 if abs(value**2 - guess) > 0.05 * prev**2 + abs(change):
                     return False
                 continue
-            if np.isfinite(old):
+            if before is not None and np.isfinite(old):
                 slope = np.log(prev / old) / np.log(w_prev / before[0])
                 tolerance = 0.02 + 0.3 * abs(d_ln_w)
             else:

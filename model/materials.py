@@ -16,6 +16,7 @@ propagates the plate's spread into its intervals (instrument.inference).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from math import sqrt
 
@@ -144,6 +145,11 @@ PROPERTY_RANGES = {"youngs_modulus": (1e6, 1e13, "Pa"), "density": (1.0, 1e5, "k
 contact laws under- or overflow (a modulus of 1e-300 Pa)."""
 
 
+def _within(low: float, high: float) -> Callable[[float], bool]:
+    """The check ``low <= v <= high``."""
+    return lambda v: low <= v <= high
+
+
 def properties_from(value: object) -> dict[str, object]:
     """A material given by name or by ``{name, youngs_modulus, poisson_ratio, density}``, as its
     property mapping; raises ValueError naming the key at fault (``[density] ...``)."""
@@ -167,8 +173,9 @@ def properties_from(value: object) -> dict[str, object]:
         raise ValueError(f"[{unknown[0]}] unknown key (allowed: "
                          f"{', '.join(PROPERTY_KEYS + SPREAD_KEYS)})")
     out: dict[str, object] = {"name": str(value.get("name") or "custom")[:80]}
-    rules = {key: (f"{low:g} <= {key} <= {high:g} {unit}", lambda v, lo=low, hi=high: lo <= v <= hi)
-             for key, (low, high, unit) in PROPERTY_RANGES.items()}
+    rules: dict[str, tuple[str, Callable[[float], bool]]] = {
+        key: (f"{low:g} <= {key} <= {high:g} {unit}", _within(low, high))
+        for key, (low, high, unit) in PROPERTY_RANGES.items()}
     rules["poisson_ratio"] = ("-1 < nu < 0.5", lambda v: -1.0 < v < 0.5)
     for key, (allowed, ok) in rules.items():
         if key not in value:

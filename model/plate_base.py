@@ -9,6 +9,7 @@ booking their energy are the same, and live here.
 from __future__ import annotations
 
 from functools import cached_property
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.sparse.linalg import LinearOperator, eigsh
@@ -56,6 +57,16 @@ class ExplicitPlate:
     per dof, 0 on constrained dofs), ``dof_mass``, ``operator`` (for :func:`stiffness_product`),
     ``load_dofs``/``load_weights`` (the contact patch, weights summing to the share) and
     ``element_bound`` (an upper bound of the largest eigenvalue of M^-1 K)."""
+
+    mesh: PlateMesh
+    inv_mass: np.ndarray
+    operator: tuple[Any, ...]
+    load_dofs: np.ndarray
+    load_weights: np.ndarray
+
+    if TYPE_CHECKING:  # a field of one plate, a property of the other: declared for the checker
+        @property
+        def dof_mass(self) -> np.ndarray: ...
 
     @property
     def n_dofs(self) -> int:

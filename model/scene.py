@@ -464,7 +464,7 @@ def _describe(error: Mapping[str, Any]) -> str:
     kind = error["type"]
     ctx = error.get("ctx") or {}
     if kind == "extra_forbidden":
-        parent = Scene
+        parent: Any = Scene
         for part in error["loc"][:-1]:
             field = parent.model_fields.get(str(part)) if hasattr(parent, "model_fields") else None
             parent = field.annotation if field is not None else None

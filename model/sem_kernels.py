@@ -310,9 +310,10 @@ def stiffness_product(op: tuple, u: np.ndarray, out: np.ndarray) -> None:
     if len(op) == DENSE_LEN:
         apply_stiffness(u, op[0], op[1], op[2], op[3], op[4], out)
     elif len(op) == SUMFACT_LEN:
-        apply_stiffness_sumfact(u, *op, out)
+        # numba's stubs type a dispatcher's call from its signature and cannot count *op
+        apply_stiffness_sumfact(u, *op, out)  # type: ignore[call-arg]
     elif len(op) == MINDLIN_LEN:
-        apply_stiffness_mindlin(u, *op, out)
+        apply_stiffness_mindlin(u, *op, out)  # type: ignore[call-arg]
     else:
         raise TypeError(f"not a stiffness operator: a tuple of {len(op)} items")
 

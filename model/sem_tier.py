@@ -103,7 +103,7 @@ def mindlin_elements(scene: Scene) -> tuple[int, int, int]:
     s = scene.sem
     per = float(s.elements_per_wavelength)
     if per <= 0.0 or s.preset == "paper":
-        return tuple(s.elements)
+        return int(s.elements[0]), int(s.elements[1]), int(s.elements[2])
     size = per / flexural_wavelength(scene)
     return (max(int(s.elements[0]), math.ceil(scene.plate.size[0] * size)),
             max(int(s.elements[1]), math.ceil(scene.plate.size[1] * size)), int(s.elements[2]))
@@ -112,7 +112,7 @@ def mindlin_elements(scene: Scene) -> tuple[int, int, int]:
 def plate_for(scene: Scene, theory: str = "3d") -> ElasticPlate | MindlinPlate:
     """The meshed plate of a scene, 3-D or Mindlin (kept for reuse within the process)."""
     p, s = scene.plate, scene.sem
-    refinement = 0 if s.preset == "paper" else s.contact_refinement
+    refinement: float = 0 if s.preset == "paper" else s.contact_refinement
     elements = tuple(s.elements)
     if theory == "mindlin":
         elements = mindlin_elements(scene)

@@ -102,13 +102,13 @@ def select(waves: Sequence[Waveform], channels: Sequence[str] | None = None,
     if group is not None:
         groups = sorted({str(w.metadata.get("group")) for w in waves
                          if w.metadata.get("group") is not None})
-        kept = [i for i, w in enumerate(waves) if w.metadata.get("group") == group]
-        if not kept:
+        in_group = [i for i, w in enumerate(waves) if w.metadata.get("group") == group]
+        if not in_group:
             raise WaveformError("group", f"no group {group!r} in {where}",
                                 ", ".join(groups) or "(the file has no groups)")
-        waves, names = [waves[i] for i in kept], [names[i] for i in kept]
+        waves, names = [waves[i] for i in in_group], [names[i] for i in in_group]
     if channels:
-        chosen = []
+        chosen: list[int] = []
         for spec in channels:
             hits = [i for i, (w, name) in enumerate(zip(waves, names, strict=True))
                     if spec in (name, str(w.metadata.get("channel")))]

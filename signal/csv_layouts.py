@@ -424,7 +424,7 @@ def _assemble(layout: str, labels: list[str] | None, units_row: list[str] | None
         else:
             kind, factor = None, 1.0
         values = data[:, j] * factor if factor != 1.0 else data[:, j]
-        columns.append(Column(names[j] if names[j] else f"column_{j + 1}", values, kind))
+        columns.append(Column(names[j] or f"column_{j + 1}", values, kind))
     if not columns:
         raise WaveformError("channel", f"{name}: no value column", "time, then value columns")
     _over_range(columns, name)
@@ -515,12 +515,12 @@ def _tek_legacy(cells: list[tuple[int, list[str]]], decimal_comma: bool, name: s
         unit = meta.get("Vertical Units")
         kind, factor = _value_unit(unit, f"{name} {label}") if unit else ("V", 1.0)
         columns.append(Column(label, data[:, 2 * b + 1] * factor, kind))
-    meta: dict[str, Any] = {"layout": "tektronix-legacy"}
+    info: dict[str, Any] = {"layout": "tektronix-legacy"}
     if meta_all[0].get("Model Number"):
-        meta["instrument"] = f"Tektronix {meta_all[0]['Model Number']}"
+        info["instrument"] = f"Tektronix {meta_all[0]['Model Number']}"
     _over_range(columns, name)
     length = meta_all[0].get("Record Length")
-    return Table("tektronix-legacy", time, columns, meta,
+    return Table("tektronix-legacy", time, columns, info,
                  time_resolution=_resolution([r[1][0] for r in rows], decimal_comma),
                  declared_rows=None if length is None else _count(length, "Record Length", name))
 

@@ -5,6 +5,8 @@ vectorise). Used by :mod:`.kernels` and :mod:`.robust`.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from llvmlite import ir
 from numba import njit
@@ -12,7 +14,7 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 
-def _fp_extremum(name: str) -> object:
+def _fp_extremum(name: str) -> Any:
     """``llvm.maxnum``/``llvm.minnum`` with fast-math flags: a max or min reduction written with it
     vectorises (numba's ``max`` does not). Exact for finite input, so the order is free."""
 

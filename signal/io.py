@@ -377,6 +377,7 @@ def _read_csv(
     table = parse(text, path.name)
     meta = {k: _decode(v, k) for k, v in table.metadata.items()}
     file_t0, file_dt, file_rate = (meta.pop(k, None) for k in ("t0", "dt", "sample_rate"))
+    own: float | None
     if table.time is not None:
         own_t0, own = uniform_grid(table.time, rounding=table.time_resolution)
     else:
@@ -493,7 +494,8 @@ def _write_npz(path: Path, waves: list[Waveform]) -> None:
     for w in waves[1:]:
         if w.n != ref.n or w.t0 != ref.t0 or w.dt != ref.dt or w.units != ref.units:
             raise WaveformError("waveforms", "NPZ shots must share t0, dt, length and units")
-    extra = {"calibration": np.float64(ref.calibration)} if ref.calibration is not None else {}
+    extra: dict[str, Any] = ({"calibration": np.float64(ref.calibration)}
+                             if ref.calibration is not None else {})
     with path.open("wb") as fh:
         np.savez_compressed(
             fh, samples=np.vstack([w.samples for w in waves]), t0=np.float64(ref.t0),
