@@ -16,10 +16,12 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
+from solitonde.instrument.inference.inversion import predict
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.tables.measured import as_measured
+from solitonde.instrument.tables.table import ModelTable
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.synth import degrade
@@ -134,12 +136,16 @@ def test_the_service_serves_both_and_a_steel_shot_gets_its_thickness(tables, tmp
 
 
 def test_the_command_line_takes_several_tables_by_the_same_rule(tables):
-    base = ["invert", "--tof", "5.3e-4", "--arr", "0.5", "--diameter", str(D), "--table",
+    # features the steel table holds at 3.5 mm (an answer, not an inconsistent one, which
+    # exits 1)
+    tof, arr = predict(ModelTable.load(tables["steel"]), D, 3.5e-3, 0.35)
+    base = ["invert", "--tof", repr(tof), "--arr", repr(arr), "--diameter", str(D), "--table",
             str(tables["al"]), "--table", str(tables["steel"]), "--json"]
     res = CliRunner().invoke(build_cli(), base)
     assert res.exit_code == 2 and "al_plates, steel-A36" in res.stderr
     res = CliRunner().invoke(build_cli(), [*base, "--plate-material", "steel_structural"])
     assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["table"] == "steel-A36"
     res = CliRunner().invoke(build_cli(), [*base[:-5], "--table", str(tables["al"]),
                                            "--plate-material", "steel_structural"])
     assert res.exit_code == 2 and "--plate-material" in res.stderr
