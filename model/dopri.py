@@ -351,7 +351,8 @@ class Ode(NamedTuple):
 # The steps of integrate_dopri5. Each is inlined into the driver (numba IR inlining), so the
 # driver compiles as one function, under its own flags, exactly as when the steps were written
 # in its body.
-_STEP: dict[str, Any] = {"cache": True, "inline": "always", "fastmath": FASTMATH, "error_model": "numpy"}
+_STEP: dict[str, Any] = {"cache": True, "inline": "always", "fastmath": FASTMATH,
+                         "error_model": "numpy"}
 
 
 @njit(**_STEP)
