@@ -28,10 +28,10 @@ from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from dataclasses import replace
 from typing import Any, Literal
 
-from .boundary import resolve_plate_model
 from .errors import SceneError, SimulationError
 from .scene import Scene, scene_from_dict
 from .simulate import SimulationResult, simulate
+from .tiers import resolve_plate_model
 
 #: Plate models whose compiled driver releases the GIL (``nogil``), so that threads run in parallel.
 GIL_FREE_PLATE_MODELS = frozenset({"rigid", "halfspace", "infinite"})

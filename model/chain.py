@@ -8,7 +8,7 @@ plate is ``u[N] - w`` (w: the plate's top surface under the chain). Contact forc
 
 The contact laws themselves live in :mod:`solitonde.model.laws` (written once for every driver).
 Every function here is a small ``@njit(cache=True)`` kernel that knows nothing about the plate:
-a driver loop in :mod:`solitonde.model.boundary` (or a later plate tier) owns the bottom surface
+a driver loop in :mod:`solitonde.model.tiers` (or a later plate tier) owns the bottom surface
 ``w``, advances it, and calls these kernels in the order
 
     plate half step -> :func:`verlet_step` (w frozen) -> plate half step -> :func:`track_peaks`

@@ -1,6 +1,6 @@
 """Adaptive Dormand-Prince 5(4) driver for the chain on a wall or a Zener dashpot (``dopri5``).
 
-The same equations as :func:`solitonde.model.boundary.dashpot_run` (the paper's Secs. 3.1,
+The same equations as :func:`solitonde.model.tiers.dashpot.dashpot_run` (the paper's Secs. 3.1,
 3 and 5), written as one first-order system and integrated with the explicit Runge-Kutta pair of
 Dormand and Prince (J. Comp. Appl. Math. 6, 19, 1980) in the form of Hairer's DOPRI5 (Hairer,
 Norsett, Wanner, *Solving ODEs I*, 2nd ed., section II.5): FSAL, a PI step-size controller and the

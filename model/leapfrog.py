@@ -1,8 +1,8 @@
 """Fused compiled driver for the elastic chain on a wall or a Zener dashpot (the fast path).
 
-It integrates exactly the scheme of :func:`solitonde.model.boundary.dashpot_steps_run` (velocity
-Verlet for the chain inside a Strang splitting with the dashpot, the paper's Secs. 3.1 and
-4.1.1) for the common case without dissipation, but arranged for speed:
+It integrates exactly the scheme of :func:`solitonde.model.tiers.dashpot.dashpot_steps_run`
+(velocity Verlet for the chain inside a Strang splitting with the dashpot, the paper's Secs. 3.1
+and 4.1.1) for the common case without dissipation, but arranged for speed:
 
 * the closing half kick of one step and the opening half kick of the next are merged into one full
   kick (leapfrog form), so velocities are synchronous only at samples, where they are read;
@@ -102,7 +102,7 @@ def integrate_elastic(
     rec: ChainRecord, w: float, inv_z: float, dt: float, n_sub: int, n_samples: int
 ) -> tuple[int, int, float, float]:
     """Elastic chain on a wall (``inv_z = 0``) or a dashpot; arguments as
-    :func:`solitonde.model.boundary.dashpot_run`.
+    :func:`solitonde.model.tiers.dashpot.dashpot_run`.
 
     Returns (status, samples recorded, final w, work done on the plate J).
     """

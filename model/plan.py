@@ -14,18 +14,19 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from .boundary import (
+from .errors import SceneError, SimulationError
+from .mindlin import SHEAR_FACTOR
+from .scene import STANDARD_GRAVITY, Scene
+from .tiers import (
     CONVOLVED_PLATE_MODELS,
     DOPRI5_PLATE_MODELS,
     MESHED_PLATE_MODELS,
+    STATIC_PLATE_MODELS,
     BottomBoundary,
     StepPlan,
     make_boundary,
     resolve_plate_model,
 )
-from .errors import SceneError, SimulationError
-from .mindlin import SHEAR_FACTOR
-from .scene import STANDARD_GRAVITY, Scene
 
 #: Verlet steps per period of the stiffest chain oscillation (see :func:`choose_time_step`).
 STEPS_PER_PERIOD = 1600
@@ -35,8 +36,6 @@ DASHPOT_STEP_FRACTION = 0.0125
 #: Upper bound of that fraction at coarse resolution: the explicit midpoint sub-step of the
 #: dashpot is stable up to h k_b / Z = 2 (linearised); half a relaxation time keeps a margin.
 DASHPOT_STEP_FRACTION_MAX = 0.5
-#: Plate models whose plate never moves: their auto duration uses lambda = 0.
-STATIC_PLATE_MODELS = ("rigid", "halfspace")
 #: Sample counts beyond this are refused outright (steps and costs stay exact floats below it).
 MAX_COUNTABLE = 2.0**53
 #: Default limits on one run.

@@ -2,7 +2,7 @@
 
 The chain starts in static equilibrium (gravity on: the contact below particle k carries k m g,
 the plate contact N m g) with the striker just touching particle 1 and moving at v_imp, so nothing
-moves before the impact. The bottom boundary comes from :mod:`solitonde.model.boundary`; the time
+moves before the impact. The bottom boundary comes from :mod:`solitonde.model.tiers`; the time
 step, the duration (the Zener/Nesterenko theory unless the scene gives one) and the sample count
 from :func:`solitonde.model.plan.plan`.
 """
@@ -17,18 +17,13 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .boundary import (
-    ChainRun,
-    ChainSetup,
-    StepPlan,
-    make_boundary,
-)
 from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T
 from .errors import SimulationError
 from .greens import GreensCache
 from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, check_solver, plan
 from .scene import STANDARD_GRAVITY, Scene
 from .status import RUN_OK, RUN_SHORT_RESPONSE, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
+from .tiers import ChainRun, ChainSetup, StepPlan, make_boundary
 
 
 @dataclass

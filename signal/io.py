@@ -63,14 +63,13 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import tempfile
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .atomic import atomic_path
 from .errors import WaveformError
 from .waveform import MIN_SAMPLES, UNIFORM_TOLERANCE, UNITS, Waveform, _jsonable, uniform_grid
 
@@ -188,17 +187,8 @@ def write(
     waves = [waveforms] if isinstance(waveforms, Waveform) else list(waveforms)
     if not waves:
         raise WaveformError("waveforms", "nothing to write", "at least one shot")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
-    os.close(fd)
-    try:
-        _WRITERS[fmt](Path(tmp), waves, **options)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp:
+        _WRITERS[fmt](tmp, waves, **options)
     return path
 
 

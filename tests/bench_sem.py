@@ -18,8 +18,8 @@ from solitonde.model import greens
 from solitonde.model.scene import load_scene
 from solitonde.model.sem import single_threaded_blas
 from solitonde.model.sem_kernels import run_plate_load, stiffness_product
-from solitonde.model.sem_tier import plate_for
 from solitonde.model.simulate import simulate
+from solitonde.model.tiers.meshed import plate_for
 
 pytestmark = pytest.mark.bench
 

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from solitonde.model.batch import scene_grid, simulate_many
-from solitonde.model.boundary import integrate_dashpot, integrate_dashpot_steps, make_boundary
 from solitonde.model.chain import new_peak_tracker
 from solitonde.model.plan import (
     DASHPOT_STEP_FRACTION,
@@ -21,8 +20,11 @@ from solitonde.model.plan import (
     STEPS_PER_PERIOD,
     choose_time_step,
 )
+from solitonde.model.record import chain_record
 from solitonde.model.scene import STANDARD_GRAVITY, scene_from_dict
 from solitonde.model.simulate import initial_state, simulate
+from solitonde.model.tiers import make_boundary
+from solitonde.model.tiers.dashpot import dashpot_run, dashpot_steps_run
 from solitonde.model.zener import (
     restitution_and_contact_time_many,
     restitution_and_contact_time_one,
@@ -39,11 +41,10 @@ def _run(driver, scene, dt, n_sub, n_samples, traces):
     out = {k: np.empty((rows, n + 1)) for k in ("u", "v", "f")}
     out["w"] = np.empty(rows)
     samples, energy, pk = np.empty(n_samples), np.empty(n_samples), new_peak_tracker()
-    status, done, w, work, _dissipated = driver(
-        u, v, 0.0, u.copy(), m, g, scene.a_s, b.a_bottom, inv_z, n * m * g, 0.0,
-        scene.chain.sensor_index, dt, n_sub, n_samples, samples, energy,
-        out["u"], out["v"], out["f"], out["w"], pk,
-    )
+    record = chain_record(u, v, u.copy(), m, g, scene.a_s, b.a_bottom, n * m * g, 0.0,
+                          scene.chain.sensor_index, samples, energy, out["u"], out["v"],
+                          out["f"], out["w"], pk)
+    status, done, w, work, _dissipated = driver(record, 0.0, inv_z, dt, n_sub, n_samples)
     assert status == 0 and done == n_samples
     return samples, energy, pk, w, work, out
 
@@ -55,8 +56,8 @@ def test_fused_driver_matches_step_by_step(plate_model, gravity):
     scene = scene_from_dict({"effects": {"plate_model": plate_model, "gravity": gravity}})
     dt, n_sub = choose_time_step(scene, make_boundary(scene), 400)
     args = (scene, dt, n_sub, 700, True)
-    fast = _run(integrate_dashpot, *args)
-    ref = _run(integrate_dashpot_steps, *args)
+    fast = _run(dashpot_run, *args)
+    ref = _run(dashpot_steps_run, *args)
     scale = np.abs(ref[0]).max()
     assert scale > 0.0
     np.testing.assert_allclose(fast[0], ref[0], rtol=0, atol=1e-11 * scale)

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 from chain_checks import check_chatterjee, check_nesterenko
 
-from solitonde.model.boundary import integrate_dashpot, make_boundary
 from solitonde.model.chain import new_peak_tracker
+from solitonde.model.record import chain_record
 from solitonde.model.scene import STANDARD_GRAVITY, scene_from_dict
 from solitonde.model.simulate import simulate
+from solitonde.model.tiers import make_boundary
+from solitonde.model.tiers.dashpot import dashpot_run
 
 
 @pytest.fixture(scope="module")
@@ -93,11 +95,10 @@ def test_static_equilibrium_is_exact(plate_model):
     samples, energy = np.empty(2001), np.empty(2001)
     empty = np.empty((0, n + 1))
     inv_z = 1.0 / b.impedance if plate_model == "infinite" else 0.0
-    status, *_ = integrate_dashpot(
-        u, v, 0.0, u.copy(), m, g, a_s, b.a_bottom, inv_z, (n + 1) * m * g, 0.0,
-        scene.chain.sensor_index, 2e-8, 50, samples.size, samples, energy, empty, empty, empty,
-        np.empty(0), new_peak_tracker(),
-    )
+    record = chain_record(u, v, u.copy(), m, g, a_s, b.a_bottom, (n + 1) * m * g, 0.0,
+                          scene.chain.sensor_index, samples, energy, empty, empty, empty,
+                          np.empty(0), new_peak_tracker())
+    status, *_ = dashpot_run(record, 0.0, inv_z, 2e-8, 50, samples.size)
     assert status == 0
     static = (scene.chain.sensor_index + 0.5) * m * g
     assert np.max(np.abs(samples - static)) < 1e-9 * static

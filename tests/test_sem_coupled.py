@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solitonde.model.boundary import resolve_plate_model
 from solitonde.model.scene import load_scene
-from solitonde.model.sem_tier import plate_for
 from solitonde.model.simulate import simulate
+from solitonde.model.tiers import resolve_plate_model
+from solitonde.model.tiers.meshed import plate_for
 from solitonde.model.zener import critical_distance
 
 #: A coarse mesh of the paper's plate: the coupling is tested, not the plate's accuracy (the

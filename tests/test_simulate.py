@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from solitonde.model import boundary
+from solitonde.model import tiers
 from solitonde.model.batch import scene_grid, simulate_many
 from solitonde.model.contact import hertz_sphere_flat
 from solitonde.model.errors import SceneError, SimulationError
@@ -63,11 +63,11 @@ def test_explicit_duration_and_traces():
 def test_rigid_wall_uses_sphere_material():
     """rigid: Hertz sphere-on-flat with the sphere material on both sides; halfspace: A_p."""
     scene = scene_from_dict({"effects": {"plate_model": "rigid"}})
-    b = boundary.make_boundary(scene)
+    b = tiers.make_boundary(scene)
     steel = scene.sphere_material
     assert b.a_bottom == hertz_sphere_flat(scene.chain.diameter, steel, steel)
     assert b.a_bottom > scene.a_p
-    half = boundary.make_boundary(scene.with_overrides({"effects.plate_model": "halfspace"}))
+    half = tiers.make_boundary(scene.with_overrides({"effects.plate_model": "halfspace"}))
     assert half.a_bottom == scene.a_p
 
 
@@ -92,7 +92,7 @@ def test_step_budget_is_a_clear_error():
 
 def test_unavailable_plate_model_is_a_scene_error(monkeypatch):
     """A plate model without a registered tier names the field and the available ones."""
-    monkeypatch.delitem(boundary.TIERS, "halfspace")
+    monkeypatch.delitem(tiers.TIERS, "halfspace")
     with pytest.raises(SceneError) as err:
         simulate(scene_from_dict({"effects": {"plate_model": "halfspace"}}))
     assert err.value.field == "effects.plate_model"

@@ -79,12 +79,15 @@ def test_plate_step_floor_is_below_the_real_step_count(sem: dict, plate: dict,
 def test_a_huge_mesh_at_a_low_sample_rate_is_refused_before_it_is_built(monkeypatch) -> None:
     """[512, 512, 1] elements (19 million degrees of freedom, 1.1 GB and 4 s to build) at 1 kHz:
     one plate step per sample priced it under the budget, so the mesh was built to be refused."""
-    from solitonde.model import boundary
+    from solitonde.model import plan, tiers
+    from solitonde.model.tiers import meshed
 
     def refuse(*args, **kwargs):
         raise AssertionError("the plate mesh was built")
 
-    monkeypatch.setattr(boundary, "make_boundary", refuse)
+    for module in (plan, tiers, meshed):  # wherever a boundary or a plate could be made
+        monkeypatch.setattr(module, "make_boundary" if module is not meshed else "plate_for",
+                            refuse)
     scene = scene_from_dict({"effects": {"plate_model": "sem"},
                              "sem": {"elements": [512, 512, 1]},
                              "output": {"sample_rate": 1000.0}})

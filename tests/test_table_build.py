@@ -138,7 +138,7 @@ def test_one_greens_function_serves_every_sphere_size() -> None:
 def test_the_mindlin_plate_computes_one_response_per_mesh() -> None:
     """The Mindlin plate's mesh follows each size's flexural wavelength: a response per distinct
     mesh, none computed twice."""
-    from solitonde.model.sem_tier import mindlin_elements
+    from solitonde.model.tiers.meshed import mindlin_elements
 
     sweep = tiny_sweep()
     result = run_plate(sweep.to_dict(), 0, 1)

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 from solitonde.instrument.errors import MessageError
+from solitonde.signal.atomic import write_text
 
 QUEUED, DONE, FAILED = "queued", "done", "failed"
 VERSION = 1
@@ -94,15 +94,4 @@ class Queue:
 
     def save(self) -> None:
         doc = {"version": VERSION, "files": {rel: asdict(e) for rel, e in self.entries.items()}}
-        tmp = self.path.with_name(f".queue-{os.getpid()}.tmp")
-        with tmp.open("w") as fh:
-            json.dump(doc, fh, indent=1, sort_keys=True)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, self.path)
-        with contextlib.suppress(OSError):  # the rename itself durable, where the OS allows
-            fd = os.open(self.state, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+        write_text(self.path, json.dumps(doc, indent=1, sort_keys=True), durable=True)

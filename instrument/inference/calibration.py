@@ -15,16 +15,15 @@ as JSON (written to a temporary name, then renamed).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from solitonde.instrument.errors import InstrumentError
+from solitonde.signal.atomic import write_text
 
 
 class CalibrationError(InstrumentError, ValueError):
@@ -167,7 +166,6 @@ class Calibration:
         if path.is_dir():
             raise CalibrationError("path", f"{str(path)!r} is a directory; give the name of "
                                    "the JSON file to write")
-        tmp = path.with_name(f".{path.name}.tmp")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except (FileExistsError, NotADirectoryError):
@@ -177,11 +175,8 @@ class Calibration:
             raise CalibrationError("path", f"cannot write {str(path)!r}: "
                                    f"{exc.strerror or exc}") from None
         try:
-            tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-            os.replace(tmp, path)
+            write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
         except OSError as exc:
-            with contextlib.suppress(OSError):  # absent, or its folder is not one
-                tmp.unlink(missing_ok=True)
             raise CalibrationError("path", f"cannot write {str(path)!r}: "
                                    f"{exc.strerror or exc}") from None
         return path

@@ -33,10 +33,10 @@ import pandas as pd
 from solitonde.instrument.plotting import spread_labels
 from solitonde.instrument.studies.figures import new_figure, save_csv, save_json, save_png
 from solitonde.instrument.tables.measured import as_measured, detect_options
-from solitonde.model import greens, sem_tier
-from solitonde.model.boundary import CONVOLVED_PLATE_MODELS
+from solitonde.model import greens
 from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.model.simulate import simulate
+from solitonde.model.tiers import CONVOLVED_PLATE_MODELS, meshed
 from solitonde.signal.features import extract
 
 DIAMETER_M = 9.53e-3
@@ -151,7 +151,7 @@ def first_shot(scene: Scene, cache: greens.GreensCache | None = None) -> dict[st
     """TOF and ARR as the extractor reads them, the model's own peaks, and the cost of a shot at
     a new plate: the plate assembled (its process cache cleared) and, without ``cache``, its
     response computed."""
-    sem_tier._plate_cached.cache_clear()  # time the plate assembly too
+    meshed._plate_cached.cache_clear()  # time the plate assembly too
     started = time.perf_counter()
     r = simulate(scene, greens_cache=greens.MemoryCache() if cache is None else cache)
     wall = time.perf_counter() - started

@@ -8,7 +8,7 @@ measurements; the errors are relative to the 3-D plate. A scene is within the ta
 both errors are (:data:`solitonde.instrument.studies.accuracy.BUDGETS`).
 
 The Mindlin plate takes more in-plane elements than ``sem.elements`` on thin plates (one per
-flexural wavelength, :func:`solitonde.model.sem_tier.mindlin_elements`). The 3-D reference runs
+flexural wavelength, :func:`solitonde.model.tiers.meshed.mindlin_elements`). The 3-D reference runs
 either on that same in-plane mesh (``same-mesh``: the two plate theories compared, nothing else)
 or on its own default mesh (``default-mesh``: what the 3-D tier gives out of the box).
 
@@ -26,8 +26,8 @@ from typing import Any
 from solitonde.instrument.studies.accuracy import BUDGETS, first_shot
 from solitonde.model import greens
 from solitonde.model.scene import Scene, load_scene, scene_from_dict
-from solitonde.model.sem_tier import mindlin_elements
 from solitonde.model.simulate import simulate
+from solitonde.model.tiers.meshed import mindlin_elements
 
 PAIRS = {"greens": ("greens", "mindlin_greens"), "coupled": ("sem", "mindlin")}
 """The 3-D model and its Mindlin counterpart, per kind of run."""

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -60,6 +59,7 @@ from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
+from solitonde.signal.atomic import write_text
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import aggregate, extract
 from solitonde.signal.synth import degrade
@@ -453,10 +453,7 @@ def _load_measurements(path: str | Path | None,
 
 def _save_measurements(path: str | Path, key: Mapping[str, Any], plates: list[dict[str, Any]],
                        wall: float) -> None:
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps({"key": key, "plates": plates, "wall_s": wall}))
-    os.replace(tmp, path)
+    write_text(path, json.dumps({"key": key, "plates": plates, "wall_s": wall}))
 
 
 def _covered(ci: Any, truth: float) -> bool | None:

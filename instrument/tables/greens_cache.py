@@ -10,13 +10,13 @@ processes computing the same response at once both end with a whole one.
 from __future__ import annotations
 
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from solitonde.model import greens
+from solitonde.signal.atomic import atomic_path
 
 
 def cache_dir() -> Path:
@@ -49,16 +49,10 @@ class DiskGreensCache:
         path = self.path(key)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".npz", dir=path.parent)
-        except OSError:
-            return  # a read-only home must not stop a simulation; the response stays in memory
-        try:
-            with os.fdopen(fd, "wb") as fh:
+            with atomic_path(path) as tmp, tmp.open("wb") as fh:
                 np.savez(fh, response=np.asarray(response, dtype=float))
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        except OSError:
+            return  # a read-only or full disk must not stop a simulation: it stays in memory
 
 
 class LayeredCache:

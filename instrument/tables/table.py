@@ -33,6 +33,7 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
+from solitonde.model.scene import PLATE_MODELS
 
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
@@ -55,8 +56,7 @@ STATUS_NAMES = {
     STATUS_NO_REFLECTION: "no_reflection",
     STATUS_FAILED: "failed",
 }
-PLATE_MODEL_NAMES = ("rigid", "halfspace", "infinite", "sem", "greens", "mindlin",
-                     "mindlin_greens", "unknown")
+PLATE_MODEL_NAMES = (*(m for m in PLATE_MODELS if m != "auto"), "unknown")
 
 
 class TableError(InstrumentError, ValueError):

@@ -49,11 +49,11 @@ from solitonde.instrument.tables.table import (
     TableError,
 )
 from solitonde.model import greens
-from solitonde.model.boundary import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.model.errors import SceneError, SimulationError
 from solitonde.model.greens import GreensCache
 from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
 from solitonde.model.simulate import SimulationResult, simulate
+from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import Features, extract
 from solitonde.signal.pulses import FLAGS

@@ -18,23 +18,16 @@ from functools import lru_cache
 
 import numpy as np
 
-from .boundary import (
-    BottomBoundary,
-    ChainRun,
-    ChainSetup,
-    StepPlan,
-    register_tier,
-    setup_record,
-)
-from .chain import new_peak_tracker
-from .errors import SceneError
-from .greens import GreensCache, contact_response, integrate_greens
-from .materials import Material
-from .mesh import plate_mesh
-from .mindlin import MindlinPlate, build_mindlin_plate
-from .scene import Scene
-from .sem import ElasticPlate, build_plate, single_threaded_blas
-from .sem_kernels import SemPlate, integrate_sem
+from ..chain import new_peak_tracker
+from ..errors import SceneError
+from ..greens import GreensCache, contact_response, integrate_greens
+from ..materials import Material
+from ..mesh import plate_mesh
+from ..mindlin import MindlinPlate, build_mindlin_plate
+from ..scene import Scene
+from ..sem import ElasticPlate, build_plate, single_threaded_blas
+from ..sem_kernels import SemPlate, integrate_sem
+from .base import BottomBoundary, ChainRun, ChainSetup, StepPlan, Tier, setup_record
 
 
 @lru_cache(maxsize=8)
@@ -83,8 +76,8 @@ def flexural_wavelength(scene: Scene) -> float:
     is a little longer than the plate's own; ``sem.elements_per_wavelength`` (1 by default; its
     convergence is in the README, "Where a 2-D plate suffices") allows for it.
     """
-    from .lamb import kirchhoff_phase_velocity
-    from .zener import incident_velocity, solitary_wave_speed
+    from ..lamb import kirchhoff_phase_velocity
+    from ..zener import incident_velocity, solitary_wave_speed
 
     d = scene.chain.diameter
     v_s = solitary_wave_speed(d, scene.a_s, scene.sphere_mass, incident_velocity(scene))
@@ -215,8 +208,14 @@ class GreensBoundary(_PlateTier):
         return ChainRun(status, done, plate_work, dissipated, peaks, wall + spent, extra)
 
 
-register_tier("sem", lambda scene, reason, cache: SemBoundary("sem", scene, reason))
-register_tier("greens", lambda scene, reason, cache: GreensBoundary("greens", scene, reason, cache))
-register_tier("mindlin", lambda scene, reason, cache: SemBoundary("mindlin", scene, reason))
-register_tier("mindlin_greens",
-              lambda scene, reason, cache: GreensBoundary("mindlin_greens", scene, reason, cache))
+TIERS = (
+    Tier("sem", lambda scene, reason, cache: SemBoundary("sem", scene, reason), meshed=True),
+    Tier("greens", lambda scene, reason, cache: GreensBoundary("greens", scene, reason, cache),
+         meshed=True, convolved=True),
+    Tier("mindlin", lambda scene, reason, cache: SemBoundary("mindlin", scene, reason),
+         meshed=True),
+    Tier("mindlin_greens",
+         lambda scene, reason, cache: GreensBoundary("mindlin_greens", scene, reason, cache),
+         meshed=True, convolved=True),
+)
+"""The meshed tiers, for :mod:`.registry`."""
