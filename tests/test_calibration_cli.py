@@ -65,12 +65,12 @@ def test_save_removes_its_temp_file_when_the_rename_fails(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """A directory appearing at the target after the check (os.replace then fails): the
     temporary file is removed and the error names the path."""
-    from solitonde.instrument.inference import calibration
+    from solitonde.signal import atomic  # the one atomic write, which calibrations use
 
     def replace(src: Path, dst: Path) -> None:
         raise IsADirectoryError(21, "Is a directory")
 
-    monkeypatch.setattr(calibration.os, "replace", replace)
+    monkeypatch.setattr(atomic.os, "replace", replace)
     with pytest.raises(CalibrationError) as info:
         Calibration().save(tmp_path / "cal.json")
     assert info.value.field == "path" and "Is a directory" in str(info.value)
