@@ -20,17 +20,13 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
+from noise_draws import DRAWS, SNRS, noise_rows
 from scipy_chain import ChainTrace, solve
 
-from solitonde.signal.accuracy import cramer_rao
-from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform
 
 FINE_RATE = 20e6
-SNRS = (20.0, 30.0, 40.0, 60.0)
-DRAWS = 200
 TOF_LIMIT_S = 0.1e-6
 ARR_LIMIT = 0.003
 SD_OVER_BOUND = 1.5
@@ -50,45 +46,13 @@ def traces() -> dict[str, ChainTrace]:
             for name, (d, t, gravity, _rate, t_end) in CELLS.items()}
 
 
-def _read(trace: ChainTrace, step: int, offset: int, noise: np.ndarray | None
-          ) -> tuple[float, float] | None:
-    x = trace.samples[offset::step]
-    if noise is not None:
-        x = x + noise[: x.size]
-    f = extract(Waveform(trace.t0 + offset * trace.dt, trace.dt * step, x))
-    if f.tof_s is None or f.arr is None:
-        return None
-    return f.tof_s, f.arr
-
-
 def _cell(trace: ChainTrace, rate: float) -> list[dict[str, float]]:
-    step = round(FINE_RATE / rate)
-    clean = [_read(trace, step, k, None) for k in range(step)]
-    assert all(c is not None for c in clean)
-    tof0 = float(np.mean([c[0] for c in clean]))
-    arr0 = float(np.mean([c[1] for c in clean]))
-    truth = trace.truth
-    rows = []
-    for snr in SNRS:
-        rng = np.random.default_rng(int(snr))
-        sigma = truth.incident_peak_N / 10 ** (snr / 20)
-        tof, arr = [], []
-        for _ in range(DRAWS):
-            got = _read(trace, step, int(rng.integers(step)),
-                        rng.normal(0.0, sigma, trace.samples.size // step + 1))
-            if got is not None:
-                tof.append(got[0])
-                arr.append(got[1])
-        t, a = np.array(tof), np.array(arr) / arr0 - 1.0
-        bound = cramer_rao(trace.samples, trace.dt, truth, rate, sigma, trace.t0)
-        rows.append({
-            "snr": snr, "found": t.size / DRAWS,
-            "tof_mean": float(t.mean() - tof0), "tof_sd": float(t.std(ddof=1)),
-            "tof_crb": bound["tof_samples"] / rate,
-            "arr_mean": float(a.mean()), "arr_sd": float(a.std(ddof=1)),
-            "arr_crb": bound["arr_rel"],
-            "tof_offset": tof0 - truth.tof_s, "arr_offset": arr0 / truth.arr - 1.0,
-        })
+    """:func:`noise_rows` with the clean reading's offset from the trace's own peaks."""
+    rows = noise_rows(Waveform(trace.t0, trace.dt, trace.samples), trace.truth, rate,
+                      SNRS, DRAWS)
+    for r in rows:
+        r["tof_offset"] = r["tof0"] - trace.truth.tof_s
+        r["arr_offset"] = r["arr0"] / trace.truth.arr - 1.0
     return rows
 
 

@@ -25,20 +25,16 @@ its block averages move by whole samples; at 60 dB that phase jitter outweighs t
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from feature_grid import grid_rates, grid_scenes
+from noise_draws import noise_rows
 
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.batch import simulate_many
 from solitonde.model.simulate import SimulationResult
-from solitonde.signal.accuracy import Truth, cramer_rao
-from solitonde.signal.features import extract
-from solitonde.signal.waveform import Waveform
+from solitonde.signal.accuracy import Truth
 
 FINE_RATE = 20e6
-SNRS = (20.0, 30.0, 40.0, 60.0)
-DRAWS = 200
 TOF_LIMIT_S = 0.1e-6
 ARR_LIMIT = 0.003
 SD_OVER_BOUND = 1.5
@@ -47,48 +43,9 @@ KNOWN_SHORTFALLS = {("infinite", False, 19.05, 4.0, 60.0)}
 """(plate model, gravity, D mm, D/t, SNR dB) of the pairs outside the limits (module doc)."""
 
 
-def _read(w: Waveform, step: int, offset: int, noise: np.ndarray | None
-          ) -> tuple[float, float] | None:
-    x = w.samples[offset::step]
-    if noise is not None:
-        x = x + noise[: x.size]
-    f = extract(Waveform(w.t0 + offset * w.dt, w.dt * step, x, w.units))
-    if f.tof_s is None or f.arr is None:
-        return None
-    return f.tof_s, f.arr
-
-
-def _cell(result: SimulationResult, rate: float) -> list[dict[str, float]]:
+def _truth(result: SimulationResult) -> Truth:
     w = as_measured(result)
-    step = round(FINE_RATE / rate)
-    clean = [_read(w, step, k, None) for k in range(step)]
-    assert all(c is not None for c in clean), result.scene
-    tof0 = float(np.mean([c[0] for c in clean]))
-    arr0 = float(np.mean([c[1] for c in clean]))
-    truth = Truth.from_peaks(w.samples, w.dt, w.t0, result.truth)
-    rows = []
-    for snr in SNRS:
-        rng = np.random.default_rng(int(snr))
-        sigma = truth.incident_peak_N / 10 ** (snr / 20)
-        tof, arr = [], []
-        for _ in range(DRAWS):
-            got = _read(w, step, int(rng.integers(step)),
-                        rng.normal(0.0, sigma, w.samples.size // step + 1))
-            if got is not None:
-                tof.append(got[0])
-                arr.append(got[1])
-        t, a = np.array(tof), np.array(arr) / arr0 - 1.0
-        bound = cramer_rao(w.samples, w.dt, truth, rate, sigma, w.t0)
-        rows.append({
-            "snr": snr, "found": t.size / DRAWS,
-            "tof_mean": float(t.mean() - tof0) if t.size > 1 else float("nan"),
-            "tof_sd": float(t.std(ddof=1)) if t.size > 1 else float("nan"),
-            "tof_crb": bound["tof_samples"] / rate,
-            "arr_mean": float(a.mean()) if a.size > 1 else float("nan"),
-            "arr_sd": float(a.std(ddof=1)) if a.size > 1 else float("nan"),
-            "arr_crb": bound["arr_rel"], "arr0": arr0,
-        })
-    return rows
+    return Truth.from_peaks(w.samples, w.dt, w.t0, result.truth)
 
 
 @pytest.mark.slow
@@ -103,7 +60,7 @@ def test_means_do_not_move_with_noise_over_the_whole_grid() -> None:
     skipped = 0
     for result, rate in zip(results, grid_rates(), strict=True):
         s = result.scene
-        for r in _cell(result, rate):
+        for r in noise_rows(as_measured(result), _truth(result), rate):
             distance = s.plate.distance_to_support
             where = "-" if s.effects.plate_model == "infinite" else f"{distance * 1e3:.0f}"
             line = (f"| {s.effects.plate_model} | {'on' if s.effects.gravity else 'off'} | "
