@@ -9,7 +9,8 @@ Sub-packages, by concern (each one's docstring says what it may import):
 - :mod:`.studies`: reproduction of the paper, accuracy against cost, validation;
 - :mod:`.plotting`: PNG figures of traces and maps, shared by the others.
 
-No import cycles (``tests/test_import_graph.py``).
+Their layers and the absence of import cycles are import-linter contracts in pyproject.toml
+(``tests/test_import_contracts.py``); the layer's error base is :mod:`.errors`.
 """
 
 from solitonde.model.jit_cache import configure as _configure_jit_cache
