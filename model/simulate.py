@@ -17,13 +17,14 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T
+from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T, new_peak_tracker
 from .errors import SimulationError
 from .greens import GreensCache
 from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, check_solver, plan
+from .record import chain_record
 from .scene import STANDARD_GRAVITY, Scene
 from .status import RUN_OK, RUN_SHORT_RESPONSE, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
-from .tiers import ChainRun, ChainSetup, StepPlan, make_boundary
+from .tiers import ChainRun, StepPlan, make_boundary
 
 
 @dataclass
@@ -154,17 +155,15 @@ def simulate(
     u, v = initial_state(n, m, g, a_s, boundary.a_bottom, v_imp)
     traces_on = scene.output.traces
     rows = n_samples if traces_on else 0
-    setup = ChainSetup(
-        u=u, v=v, w=0.0, m=m, g=g, a_s=a_s, a_b=boundary.a_bottom,
-        f_static=n * m * g, tau=tau, sensor=scene.chain.sensor_index,
-        samples=np.empty(n_samples), energy=np.empty(n_samples),
-        u_trace=np.empty((rows, n + 1)), v_trace=np.empty((rows, n + 1)),
-        f_trace=np.empty((rows, n + 1)), w_trace=np.empty(rows),
-        m0=scene.striker_mass, a_0=scene.a_0,
+    record = chain_record(
+        u, v, u.copy(), m, g, a_s, boundary.a_bottom, n * m * g, tau, scene.chain.sensor_index,
+        np.empty(n_samples), np.empty(n_samples), np.empty((rows, n + 1)),
+        np.empty((rows, n + 1)), np.empty((rows, n + 1)), np.empty(rows), new_peak_tracker(),
+        scene.striker_mass, scene.a_0,
     )
     step_plan = StepPlan(dt, n_sub, n_samples, integrator=solver.integrator, rtol=solver.rtol,
                          max_steps=max_steps)
-    run = boundary.integrate(setup, step_plan)
+    run = boundary.integrate(record, step_plan)
     if run.status != RUN_OK:
         raise SimulationError(_failure(run, step_plan, boundary.name))
     if adaptive:
@@ -174,7 +173,7 @@ def simulate(
     # Relative to the energy in play: the striker's, or what left the chain if that is more
     # (with gravity a chain that keeps sinking into an infinite plate feeds it without end).
     e_scale = max(0.5 * scene.striker_mass * v_imp**2, abs(run.plate_work) + run.dissipated)
-    balance = setup.energy
+    balance = record.energy
     if adaptive:
         # dopri5's samples interpolate the balance between step ends: drift is measured there.
         drift = float(run.extra["energy_deviation_step_ends_J"])
@@ -222,10 +221,10 @@ def simulate(
     traces = None
     if traces_on:
         traces = {
-            "u_m": setup.u_trace,
-            "v_m_s": setup.v_trace,
-            "contact_force_N": setup.f_trace,
-            "plate_deflection_m": setup.w_trace,
+            "u_m": record.u_trace,
+            "v_m_s": record.v_trace,
+            "contact_force_N": record.f_trace,
+            "plate_deflection_m": record.w_trace,
         }
     return SimulationResult(
         scene=scene,
@@ -233,7 +232,7 @@ def simulate(
         plate_model_reason=boundary.reason,
         t0=0.0,
         dt=interval,
-        samples=setup.samples,
+        samples=record.samples,
         diagnostics=diagnostics,
         truth=truth,
         traces=traces,

@@ -3,7 +3,7 @@ the ODE ones in :mod:`.dashpot` (rigid, halfspace, Zener's infinite plate) and t
 :mod:`.meshed` (3-D spectral elements and Mindlin, stepped or as a cached Green's function),
 listed with their capabilities in :mod:`.registry`, which also decides ``auto``."""
 
-from .base import BottomBoundary, ChainRun, ChainSetup, StepPlan, Tier
+from .base import BottomBoundary, ChainRun, StepPlan, Tier
 from .registry import (
     CONVOLVED_PLATE_MODELS,
     DOPRI5_PLATE_MODELS,
@@ -24,7 +24,6 @@ __all__ = [
     "TIERS",
     "BottomBoundary",
     "ChainRun",
-    "ChainSetup",
     "StepPlan",
     "Tier",
     "make_boundary",

@@ -1,13 +1,14 @@
-"""What every plate model ("tier") shares: the chain's setup and time grid handed to it, what
+"""What every plate model ("tier") shares: the chain's record and time grid handed to it, what
 its driver hands back, the :class:`BottomBoundary` interface, and a tier's record in the registry
 (:class:`Tier`, its capabilities as attributes).
 
 A new tier subclasses :class:`BottomBoundary`, gives it ``name``, ``reason`` and ``a_bottom``,
 implements :meth:`BottomBoundary.integrate` (and :meth:`BottomBoundary.max_rate` if the plate has
-a time scale of its own), and lists a :class:`Tier` in :mod:`.registry`. ``integrate`` receives a
-:class:`ChainSetup` (initial state, constants, preallocated output arrays) and a :class:`StepPlan`
-(dt, steps per sample, samples) and returns a :class:`ChainRun`. Its compiled driver loop calls
-the kernels of :mod:`solitonde.model.chain` per step, as
+a time scale of its own), and lists a :class:`Tier` in :mod:`.registry`. ``integrate`` receives
+the chain's :class:`~solitonde.model.record.ChainRecord` (initial state, constants, preallocated
+output arrays: the one record type, which the compiled drivers take too) and a
+:class:`StepPlan` (dt, steps per sample, samples) and returns a :class:`ChainRun`. Its compiled
+driver loop calls the kernels of :mod:`solitonde.model.chain` per step, as
 :func:`~solitonde.model.tiers.dashpot.dashpot_steps_run` does:
 
     1. advance the plate by dt/2 with the chain frozen, book the work ``int F dw`` done on it,
@@ -33,49 +34,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..record import ChainRecord, chain_record
+from ..record import ChainRecord
 
 if TYPE_CHECKING:
     from ..greens import GreensCache
     from ..scene import Scene
-
-
-@dataclass
-class ChainSetup:
-    """Everything a driver needs about the chain; arrays are modified in place by the run.
-
-    Attributes
-    ----------
-    u, v: displacements (down, m) and velocities (m/s) of particles 0..N (0 = striker).
-    w: initial top-surface deflection of the plate under the chain, m.
-    m: particle mass, kg. g: gravity, m/s^2 (0 when gravity is off).
-    a_s: sphere-sphere Hertz constant, N/m^1.5. a_b: bottom contact constant, N/m^1.5.
-    f_static: static force the bottom contact carries at the start, N (N m g, or 0).
-    tau: Kuwabara-Kono dissipative time, s (0: elastic).
-    sensor: sensor particle, 1..N.
-    samples, energy: outputs per sample (sensor force N, energy balance J).
-    u_trace, v_trace, f_trace, w_trace: per-sample fields, zero rows when traces are off.
-    m0, a_0: the striker's mass and its contact constant with particle 1 (None: a chain sphere).
-    """
-
-    u: np.ndarray
-    v: np.ndarray
-    w: float
-    m: float
-    g: float
-    a_s: float
-    a_b: float
-    f_static: float
-    tau: float
-    sensor: int
-    samples: np.ndarray
-    energy: np.ndarray
-    u_trace: np.ndarray
-    v_trace: np.ndarray
-    f_trace: np.ndarray
-    w_trace: np.ndarray
-    m0: float | None = None
-    a_0: float | None = None
 
 
 @dataclass(frozen=True)
@@ -101,7 +64,8 @@ class StepPlan:
 
 @dataclass
 class ChainRun:
-    """What a driver hands back (the arrays of the setup hold the sampled outputs)."""
+    """What a driver hands back (the record's arrays hold the sampled outputs); ``w_end`` is the
+    plate's top surface under the chain at the end, m."""
 
     status: int
     samples_done: int
@@ -110,6 +74,7 @@ class ChainRun:
     peaks: np.ndarray
     wall_s: float
     extra: dict[str, Any] = field(default_factory=dict)
+    w_end: float = 0.0
 
 
 class BottomBoundary(ABC):
@@ -127,17 +92,9 @@ class BottomBoundary(ABC):
         return 0.0
 
     @abstractmethod
-    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
-        """Advance chain and plate over ``plan``, filling the setup's output arrays."""
-
-
-def setup_record(setup: ChainSetup, peaks: np.ndarray) -> ChainRecord:
-    """The compiled drivers' view of a setup: its arrays (shared) and constants, u0 a copy of u."""
-    return chain_record(
-        setup.u, setup.v, setup.u.copy(), setup.m, setup.g, setup.a_s, setup.a_b, setup.f_static,
-        setup.tau, setup.sensor, setup.samples, setup.energy, setup.u_trace, setup.v_trace,
-        setup.f_trace, setup.w_trace, peaks, setup.m0, setup.a_0,
-    )
+    def integrate(self, record: ChainRecord, plan: StepPlan) -> ChainRun:
+        """Advance chain and plate over ``plan`` from the plate at rest (w = 0), filling the
+        record's output arrays and its peak tracker."""
 
 
 TierFactory = Callable[["Scene", str, "GreensCache | None"], BottomBoundary]

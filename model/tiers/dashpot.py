@@ -32,7 +32,6 @@ from ..chain import (
     chain_energy,
     contact_forces,
     damped_contact_forces,
-    new_peak_tracker,
     record_into,
     sensor_reading,
     track_peaks,
@@ -44,7 +43,7 @@ from ..laws import dashpot_step, hertz, hertz_energy
 from ..leapfrog import integrate_elastic
 from ..record import ChainRecord
 from ..status import RUN_NONFINITE, RUN_OK
-from .base import BottomBoundary, ChainRun, ChainSetup, StepPlan, Tier, setup_record
+from .base import BottomBoundary, ChainRun, StepPlan, Tier
 
 
 class Wall(BottomBoundary):
@@ -55,8 +54,8 @@ class Wall(BottomBoundary):
         self.reason = reason
         self.a_bottom = a_bottom
 
-    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
-        return _run_dashpot(setup, plan, inv_z=0.0)
+    def integrate(self, record: ChainRecord, plan: StepPlan) -> ChainRun:
+        return _run_dashpot(record, plan, inv_z=0.0)
 
 
 class ZenerDashpot(BottomBoundary):
@@ -71,41 +70,34 @@ class ZenerDashpot(BottomBoundary):
     def max_rate(self, bottom_stiffness: float) -> float:
         return bottom_stiffness / self.impedance
 
-    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
-        return _run_dashpot(setup, plan, inv_z=1.0 / self.impedance)
+    def integrate(self, record: ChainRecord, plan: StepPlan) -> ChainRun:
+        return _run_dashpot(record, plan, inv_z=1.0 / self.impedance)
 
 
-def _run_dashpot(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
+def _run_dashpot(record: ChainRecord, plan: StepPlan, inv_z: float) -> ChainRun:
     if plan.integrator == "dopri5":
-        return _run_dopri5(setup, plan, inv_z)
-    peaks = new_peak_tracker()
-    record = setup_record(setup, peaks)
-    args = (record, float(setup.w), float(inv_z), float(plan.dt), int(plan.n_sub),
-            int(plan.n_samples))
+        return _run_dopri5(record, plan, inv_z)
+    args = (record, 0.0, float(inv_z), float(plan.dt), int(plan.n_sub), int(plan.n_samples))
     start = time.perf_counter()
     # The driver is chosen here, not in dashpot_run: compiled together, the damped driver's code
     # slows the elastic loop by about 10 % (3.3 against 3.8 ms on the default scene).
-    if setup.tau > 0.0:
+    if record.tau > 0.0:
         status, done, w, plate_work, dissipated = dashpot_steps_run(*args)
     else:
         status, done, w, plate_work = integrate_elastic(*args)
         dissipated = 0.0
     wall = time.perf_counter() - start
-    setup.w = w
-    return ChainRun(status, done, plate_work, dissipated, peaks, wall)
+    return ChainRun(status, done, plate_work, dissipated, record.pk, wall, w_end=w)
 
 
-def _run_dopri5(setup: ChainSetup, plan: StepPlan, inv_z: float) -> ChainRun:
+def _run_dopri5(record: ChainRecord, plan: StepPlan, inv_z: float) -> ChainRun:
     """The same tiers with the adaptive Dormand-Prince driver (:mod:`~solitonde.model.dopri`)."""
-    peaks = new_peak_tracker()
-    record = setup_record(setup, peaks)
     start = time.perf_counter()
-    out = integrate_dopri5(record, float(setup.w), float(inv_z), float(plan.dt),
+    out = integrate_dopri5(record, 0.0, float(inv_z), float(plan.dt),
                            int(plan.n_samples), float(plan.rtol), int(plan.max_steps))
     wall = time.perf_counter() - start
     status, done, w, plate_work, dissipated, accepted, rejected, nfev, deviation = out
-    setup.w = w
-    return ChainRun(status, done, plate_work, dissipated, peaks, wall, extra={
+    return ChainRun(status, done, plate_work, dissipated, record.pk, wall, w_end=w, extra={
         "steps_accepted": accepted, "steps_rejected": rejected, "rhs_evaluations": nfev,
         "energy_deviation_step_ends_J": deviation,
     })

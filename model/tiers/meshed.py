@@ -18,16 +18,16 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..chain import new_peak_tracker
 from ..errors import SceneError
 from ..greens import GreensCache, contact_response, integrate_greens
 from ..materials import Material
 from ..mesh import plate_mesh
 from ..mindlin import MindlinPlate, build_mindlin_plate
+from ..record import ChainRecord
 from ..scene import Scene
 from ..sem import ElasticPlate, build_plate, single_threaded_blas
 from ..sem_kernels import SemPlate, integrate_sem
-from .base import BottomBoundary, ChainRun, ChainSetup, StepPlan, Tier, setup_record
+from .base import BottomBoundary, ChainRun, StepPlan, Tier
 
 
 @lru_cache(maxsize=8)
@@ -165,10 +165,8 @@ class _PlateTier(BottomBoundary):
 class SemBoundary(_PlateTier):
     """Chain and spectral-element plate stepped together."""
 
-    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+    def integrate(self, record: ChainRecord, plan: StepPlan) -> ChainRun:
         plate = self.plate
-        peaks = new_peak_tracker()
-        record = setup_record(setup, peaks)
         state = SemPlate(plate.inv_mass, plate.dof_mass, plate.operator,
                          plate.load_dofs, plate.load_weights, np.zeros(plate.n_dofs),
                          np.zeros(plate.n_dofs), float(plate.force_share))
@@ -177,10 +175,9 @@ class SemBoundary(_PlateTier):
         status, done, w, e_plate, dissipated = integrate_sem(
             record, float(h), int(r), int(per_sample), int(plan.n_samples), state)
         wall = time.perf_counter() - start
-        setup.w = w
         extra = self._extra(h, r, per_sample, plan)
         extra["plate_energy_J"] = e_plate
-        return ChainRun(status, done, e_plate, dissipated, peaks, wall, extra)
+        return ChainRun(status, done, e_plate, dissipated, record.pk, wall, extra, w_end=w)
 
 
 class GreensBoundary(_PlateTier):
@@ -191,21 +188,19 @@ class GreensBoundary(_PlateTier):
         super().__init__(name, scene, reason)
         self.cache = cache
 
-    def integrate(self, setup: ChainSetup, plan: StepPlan) -> ChainRun:
+    def integrate(self, record: ChainRecord, plan: StepPlan) -> ChainRun:
         h, r, per_sample = self.steps(plan)
         n_plate = per_sample * (plan.n_samples - 1)
         response, cached, spent = contact_response(self.plate, h, n_plate, self.cache)
-        peaks = new_peak_tracker()
-        record = setup_record(setup, peaks)
         start = time.perf_counter()
         with single_threaded_blas():
             status, done, w, plate_work, dissipated = integrate_greens(
                 record, float(h), int(r), int(per_sample), int(plan.n_samples), response)
         wall = time.perf_counter() - start
-        setup.w = w
         extra = self._extra(h, r, per_sample, plan)
         extra.update({"greens_cached": cached, "greens_compute_s": spent, "chain_wall_s": wall})
-        return ChainRun(status, done, plate_work, dissipated, peaks, wall + spent, extra)
+        return ChainRun(status, done, plate_work, dissipated, record.pk, wall + spent, extra,
+                        w_end=w)
 
 
 TIERS = (
