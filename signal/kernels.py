@@ -7,6 +7,13 @@ pulse model and its fit); the names are re-exported here. It returns plain array
 (:data:`HEAD` and :data:`PULSE` name their columns), so a 10,000-sample shot costs a few O(n)
 passes and no Python work per sample or per pulse; :mod:`solitonde.signal.pulses` only turns the
 arrays into objects.
+
+The kernels are written in loops over scalars and preallocated arrays, without numpy's sorting,
+linear algebra, ``np.diff``, array arithmetic (``s - line``) or whole-array assignments
+(``a[i] = row``): for each of those numba compiles a tree of helper functions of its own (a
+quicksort, LAPACK wrappers, broadcasting checks with their error messages), and together they
+were a third of the time a fresh install spent compiling :func:`analyze`, for no run-time gain
+on records of this size.
 """
 
 from __future__ import annotations
@@ -16,7 +23,15 @@ from numba import njit
 
 from .extrema import vargmax, vmax, vmin
 from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
-from .pulse_fit import R_MAX, R_MIN, fit_pulse, parabola_top, solve_spd, template  # noqa: F401
+from .pulse_fit import (  # noqa: F401
+    R_MAX,
+    R_MIN,
+    fit_pulse,
+    parabola_top,
+    solve_lu,
+    solve_spd,
+    template,
+)
 from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
 from .smoothing import (  # noqa: F401
     prefix_and_triangle,
@@ -243,25 +258,29 @@ def quadratic_fit(x: np.ndarray, runs: np.ndarray, degree: int) -> tuple[np.ndar
     for k in range(runs.shape[0]):
         _power_sums(x, runs[k, 0], runs[k, 1], acc)
         count += runs[k, 1] - runs[k, 0]
-    s1, s2, s3, s4, r0, r1, r2 = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5], acc[6]
     coef = np.zeros(3)
     if count == 0:
         return coef, 0
-    m = np.empty((3, 3))
-    m[0, 0] = float(count)
-    m[0, 1] = m[1, 0] = s1
-    m[0, 2] = m[1, 1] = m[2, 0] = s2
-    m[1, 2] = m[2, 1] = s3
-    m[2, 2] = s4
-    rhs = np.array([r0, r1, r2])
+    # power sums: sum(u^0) = count, then acc[0..3]; right-hand sides acc[4..6]
+    sums = np.empty(5)
+    sums[0] = float(count)
+    for i in range(4):
+        sums[i + 1] = acc[i]
     k = degree + 1
     if count < 3:
         k = 1
-    sub = m[:k, :k].copy()
-    if k > 1 and abs(np.linalg.det(sub)) < 1e-14 * m[0, 0] ** k:
-        k = 1
-        sub = m[:1, :1].copy()
-    coef[:k] = np.linalg.solve(sub, rhs[:k].copy())
+    if k > 1:
+        m = np.empty((k, k))
+        rhs = np.empty(k)
+        for i in range(k):
+            rhs[i] = acc[4 + i]
+            for j in range(k):
+                m[i, j] = sums[i + j]
+        if abs(solve_lu(m, rhs, coef)) < 1e-14 * sums[0] ** k:
+            coef[:] = 0.0
+            k = 1
+    if k == 1:
+        coef[0] = acc[4] / sums[0]
     return coef, count
 
 
@@ -275,8 +294,17 @@ def quiet_runs(centres: np.ndarray, reach: np.ndarray, n: int) -> np.ndarray:
         starts[j] = centres[j] - reach[j]
     runs = np.empty((m + 1, 2), dtype=np.int64)
     k = 0
+    # the windows by start: a handful of pulses, so an insertion sort (ties in any order give the
+    # same runs)
+    order = np.empty(m, dtype=np.int64)
+    for j in range(m):
+        i = j
+        while i > 0 and starts[order[i - 1]] > starts[j]:
+            order[i] = order[i - 1]
+            i -= 1
+        order[i] = j
     free = 0  # first sample not yet covered by a window or a run
-    for j in np.argsort(starts):
+    for j in order:
         a = max(0, starts[j])
         if a > free:
             runs[k, 0] = free
@@ -354,7 +382,9 @@ def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[f
     """
     if n_pre > 0:
         return median(y[:n_pre]), max(MAD_TO_SIGMA * detrended_mad(y[:n_pre]), floor)
-    d = np.diff(y)
+    d = np.empty(y.size - 1)
+    for i in range(d.size):
+        d[i] = y[i + 1] - y[i]
     med = median_inplace(d)
     for i in range(d.size):
         d[i] = abs(d[i] - med)
@@ -412,13 +442,17 @@ def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, 
     """(sign, record median in the sign-corrected trace, prefix sums, lightly smoothed trace
     (sign-corrected)): the polarity from the smoothed trace against the record's median."""
     step = max(1, x.size // 1024)
-    ref = median(x[::step])
+    spread = np.empty((x.size + step - 1) // step)  # every step-th sample (median reorders it)
+    for i in range(spread.size):
+        spread[i] = x[i * step]
+    ref = median_inplace(spread)
     csum, s1 = prefix_and_triangle(x, 2)
     sign = sign_in
     if sign == 0.0:
         sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
     if sign < 0:
-        s1 *= -1.0
+        for i in range(s1.size):
+            s1[i] = -s1[i]
     return sign, ref * sign, csum, s1
 
 
@@ -430,7 +464,9 @@ def _smoother(x: np.ndarray, csum: np.ndarray, s1: np.ndarray, line: np.ndarray,
     n = x.size
     h = h_in if h_in >= 0 else 2
     s = s1 if h == 2 else triangle_prefix(x, csum, h, sign)
-    v = s - line
+    v = np.empty(n)
+    for i in range(n):
+        v[i] = s[i] - line[i]
     if h_in < 0:
         for _ in range(3):
             hn = max(1, _fwhm(v, vargmax(v), 0, n) // 6)
@@ -477,7 +513,11 @@ def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks:
         widths = _widths(v, peaks, bounds)
         # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
         # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
-        cap = 3.0 * widths[np.argmax(v[peaks])]
+        big = 0  # the largest pulse (the first of equals)
+        for j in range(1, peaks.size):
+            if v[peaks[j]] > v[peaks[big]]:
+                big = j
+        cap = 3.0 * widths[big]
         reach = np.empty(peaks.size, dtype=np.int64)
         for j in range(peaks.size):
             reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
@@ -497,8 +537,12 @@ def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks:
             v[i] = s[i] - line[i]
         before = peaks
         peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
-        if it == 0 and peaks.size == before.size and np.all(np.abs(peaks - before) <= h):
-            break  # the same pulses: the quiet samples, hence the line, would not change
+        if it == 0 and peaks.size == before.size:
+            same = True
+            for j in range(peaks.size):
+                same = same and abs(peaks[j] - before[j]) <= h
+            if same:
+                break  # the same pulses: the quiet samples, hence the line, would not change
     return peaks, thr
 
 
@@ -621,7 +665,20 @@ def _gate_reflection(out: np.ndarray, gate_1n: float, head: np.ndarray) -> np.nd
         if j != pick:
             order[k] = j
             k += 1
-    return out[order].copy()
+    moved = np.empty_like(out)
+    for j in range(m):
+        for c in range(out.shape[1]):
+            moved[j, c] = out[order[j], c]
+    return moved
+
+
+@njit(cache=True)
+def _negated(x: np.ndarray) -> np.ndarray:
+    """``-x`` as a new array."""
+    out = np.empty(x.size)
+    for i in range(x.size):
+        out[i] = -x[i]
+    return out
 
 
 @njit(cache=True)
@@ -686,7 +743,7 @@ def analyze(
     n = x.size
     head = np.zeros(HEAD)
     sign, ref, csum, s1 = _polarity(x, sign_in)
-    y = x if sign > 0 else -x  # read only: a positive trace is used in place
+    y = x if sign > 0 else _negated(x)  # read only: a positive trace is used in place
     head[H_SIGN] = sign
     ymax = vmax(y)
 
@@ -696,7 +753,8 @@ def analyze(
     span = max(0.0, ymax - ref, ref - vmin(y))  # = max |y[i] - ref| (monotonic rounding)
     floor = NOISE_FLOOR * max(span, 1e-300)
     base, sigma = _level_noise(y, n_pre, ref, floor)
-    line = np.full(n, base)
+    line = np.empty(n)
+    line[:] = base
     h, s, v = _smoother(x, csum, s1, line, sign, h_in)
     sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
     peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
@@ -709,7 +767,8 @@ def analyze(
             n_pre = new_pre
             base, sigma = _level_noise(y, n_pre, ref, floor)
             line[:] = base
-            v = s - line
+            for i in range(n):
+                v[i] = s[i] - line[i]
             sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
             peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
     peaks, thr = _trend(y, s, v, line, peaks, n_pre, h, sigma_s, thr_sigma, min_ratio, thr)
@@ -800,8 +859,10 @@ def analyze_batch(
     for i in range(m):
         head, rows = analyze(x[i], sign_in, n_pre_in, h_in, thr_sigma, min_ratio, fit_fraction,
                              shape_r, skew, free_r, max_iter, gate_1n)
-        heads[i] = head
+        for c in range(HEAD):
+            heads[i, c] = head[c]
         counts[i] = rows.shape[0]
         for j in range(min(rows.shape[0], keep)):
-            pulses[i, j] = rows[j]
+            for c in range(PULSE):
+                pulses[i, j, c] = rows[j, c]
     return heads, pulses, counts

@@ -164,7 +164,9 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
     sol = np.zeros(5)
     for k in range(2):
         g = gt if k == 0 else ga
-        work[:, :] = m
+        for i in range(5):
+            for q in range(5):
+                work[i, q] = m[i, q]
         if not solve_spd(work, g, sol):
             return out
         acc = 0.0
@@ -219,7 +221,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
         c = round(centre)
         if c <= lo or c >= hi:
             continue
-        est[k] = poly_peak(y, c, halves[k], lo, hi, sigma, curvature)
+        _set_row(est, k, poly_peak(y, c, halves[k], lo, hi, sigma, curvature))
         # Usable only where the noise leaves the peak well inside the window: beyond that the
         # cubic's maximum is a root of a noisy derivative, far from Gaussian, and would overrule
         # the wider windows by chance.
@@ -244,13 +246,21 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
                 first == nl or alt[1] > est[first, 1] + AGREE_SIGMAS * max(alt[3],
                                                                            est[first, 3])):
             est[:, 4] = 0.0
-            est[0] = alt
+            _set_row(est, 0, alt)
     t_pk, k_t = _lepski(est, 0, 2, t_fit)
     v_pk, k_v = _lepski(est, 1, 3, top_fit)
     for k in range(nl):
         values[k] = est[k, 1] if est[k, 4] > 0 else np.nan
     values[nl] = top_fit
     return t_pk, v_pk, k_t < nl or k_v < nl, k_v
+
+
+@njit(cache=True)
+def _set_row(a: np.ndarray, k: int, row: np.ndarray) -> None:
+    """``a[k] = row`` as a loop (numba compiles a broadcasting check, with its error message,
+    for the assignment of one array to another)."""
+    for q in range(row.size):
+        a[k, q] = row[q]
 
 
 @njit(cache=True)

@@ -19,6 +19,34 @@ input; noise never gets there: about 2 log2(n) rounds are typical)."""
 
 
 @njit(cache=True)
+def heapsort(a: np.ndarray, lo: int, hi: int) -> None:
+    """Sorts ``a[lo:hi]`` in place in O(n log n) whatever the input: the fallback of
+    :func:`select`. Numba's ``ndarray.sort`` would do too, but compiling its quicksort took
+    about a second, more than the rest of this module; this path is almost never taken."""
+    n = hi - lo
+    for start in range(n // 2 - 1, -1, -1):
+        _sift_down(a, lo, start, n)
+    for end in range(n - 1, 0, -1):
+        a[lo], a[lo + end] = a[lo + end], a[lo]
+        _sift_down(a, lo, 0, end)
+
+
+@njit(cache=True)
+def _sift_down(a: np.ndarray, lo: int, root: int, n: int) -> None:
+    """Restores the max-heap ``a[lo:lo + n]`` below ``root``."""
+    while True:
+        child = 2 * root + 1
+        if child >= n:
+            return
+        if child + 1 < n and a[lo + child + 1] > a[lo + child]:
+            child += 1
+        if not a[lo + child] > a[lo + root]:
+            return
+        a[lo + root], a[lo + child] = a[lo + child], a[lo + root]
+        root = child
+
+
+@njit(cache=True)
 def _partition(a: np.ndarray, lo: int, hi: int, pivot: float, inclusive: bool) -> int:
     """Moves the values of ``a[lo:hi]`` below ``pivot`` (or not above it, when ``inclusive``) to
     the front of that range and returns where they end. Branch-free: on noise every comparison
@@ -57,7 +85,7 @@ def select(a: np.ndarray, k: int) -> float:
         if k < j:
             return pivot
         lo = j
-    a[lo:hi].sort()
+    heapsort(a, lo, hi)
     return a[k]
 
 
