@@ -14,6 +14,13 @@ linear algebra, ``np.diff``, array arithmetic (``s - line``) or whole-array assi
 quicksort, LAPACK wrappers, broadcasting checks with their error messages), and together they
 were a third of the time a fresh install spent compiling :func:`analyze`, for no run-time gain
 on records of this size.
+
+Each function is compiled once. numba types a constant passed to a compiled function as that
+literal (``Literal[int](0)``) and compiles the callee for it apart from ``int64``, also for a
+loop variable that starts as a constant: such arguments are ``np.int64(...)``. The small helpers
+are compiled with ``inline="always"``: typed inside each caller for whatever it passes (the
+read-only record or a writable work array, a literal or not), they cost no compilation of their
+own. None of them carries ``fastmath`` flags, which an inlined body would take from its caller.
 """
 
 from __future__ import annotations
@@ -66,13 +73,15 @@ TRUNC_SPAN = 2.5
 """A pulse counts as truncated when the record ends (or starts) within this many FWHM of its peak
 while the pulse is still above ``fit_fraction`` of its height."""
 
-# Columns of the head array returned by analyze (H_PRE0, H_PRE1: the pre-impact baseline
+# Columns of the head array returned by analyze and locate (H_PRE0, H_PRE1: the pre-impact baseline
 # H_PRE0 + H_PRE1 * i at sample i, in the sign-corrected trace).
 # H_TRAIN: pulses between the incident and a gated reflection (the incident's train); H_NOREF: 1
 # when the travel gate holds no pulse (the later pulses are then all secondary).
+# H_SIGMA_S, H_FLOOR, H_YMAX: the smoothed trace's noise, the noise floor and the largest sample of
+# the sign-corrected trace, which locate hands to measure.
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
- H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF) = range(14)
-HEAD = 14
+ H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF, H_SIGMA_S, H_FLOOR, H_YMAX) = range(17)
+HEAD = 17
 
 GATE_LO, GATE_HI = 0.75, 3.2
 """With a travel gate, a reflection arrives between these multiples of the round trip at the
@@ -197,7 +206,7 @@ def find_peaks_hysteresis(v: np.ndarray, thr: float, delta: float) -> np.ndarray
     return out[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pulse_extent(v: np.ndarray, peak: int, level: float, lo: int, hi: int) -> tuple[int, int]:
     """First and last sample around ``peak`` where ``v`` stays above ``level``, within [lo, hi)."""
     a = peak
@@ -209,7 +218,7 @@ def pulse_extent(v: np.ndarray, peak: int, level: float, lo: int, hi: int) -> tu
     return a, b
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def valley(v: np.ndarray, a: int, b: int) -> int:
     """Index of the smallest value of ``v`` in [a, b]."""
     best = a
@@ -318,7 +327,7 @@ def quiet_runs(centres: np.ndarray, reach: np.ndarray, n: int) -> np.ndarray:
     return runs[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def run_count(runs: np.ndarray, lo: int, hi: int) -> int:
     """How many samples of ``runs`` lie in lo..hi-1."""
     count = 0
@@ -391,7 +400,7 @@ def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[f
     return ref, max(MAD_TO_SIGMA * median_inplace(d) / np.sqrt(2.0), floor)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: float) -> float:
     """Noise of the smoothed trace: the smoother's gain (exact for white noise), or the MAD of
     the smoothed pre-trigger if larger (coloured noise). The latter only over at least eight
@@ -402,13 +411,13 @@ def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: floa
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fwhm(v: np.ndarray, peak: int, lo: int, hi: int) -> int:
     a, b = pulse_extent(v, peak, 0.5 * v[peak], lo, hi)
     return b - a + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _peaks(v: np.ndarray, sigma_s: float, thr_sigma: float, min_ratio: float
            ) -> tuple[np.ndarray, float]:
     largest = vmax(v)
@@ -416,7 +425,7 @@ def _peaks(v: np.ndarray, sigma_s: float, thr_sigma: float, min_ratio: float
     return find_peaks_hysteresis(v, thr, thr), thr
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bounds(v: np.ndarray, peaks: np.ndarray) -> np.ndarray:
     """Valleys between consecutive peaks, with the record ends: pulse j lives in [b[j], b[j+1]]."""
     m = peaks.size
@@ -428,7 +437,7 @@ def _bounds(v: np.ndarray, peaks: np.ndarray) -> np.ndarray:
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _widths(v: np.ndarray, peaks: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     m = peaks.size
     w = np.empty(m)
@@ -446,7 +455,7 @@ def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, 
     for i in range(spread.size):
         spread[i] = x[i * step]
     ref = median_inplace(spread)
-    csum, s1 = prefix_and_triangle(x, 2)
+    csum, s1 = prefix_and_triangle(x, np.int64(2))  # int64, not a literal
     sign = sign_in
     if sign == 0.0:
         sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
@@ -479,7 +488,7 @@ def _smoother(x: np.ndarray, csum: np.ndarray, s1: np.ndarray, line: np.ndarray,
     return h, s, v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _pretrigger_after_peaks(v: np.ndarray, peaks: np.ndarray, n_pre: int, h: int
                             ) -> tuple[int, bool, bool]:
     """(pre-trigger length, early onset, whether to re-estimate): everything before the first
@@ -672,7 +681,7 @@ def _gate_reflection(out: np.ndarray, gate_1n: float, head: np.ndarray) -> np.nd
     return moved
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _negated(x: np.ndarray) -> np.ndarray:
     """``-x`` as a new array."""
     out = np.empty(x.size)
@@ -681,7 +690,7 @@ def _negated(x: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _saturated(y: np.ndarray, ymax: float, incident_width: float) -> bool:
     """Clipping: the record's top value repeats over more than a twentieth of the incident's
     width."""
@@ -690,6 +699,11 @@ def _saturated(y: np.ndarray, ymax: float, incident_width: float) -> bool:
     for i in range(y.size):
         count += y[i] >= top
     return count >= max(3.0, 0.05 * incident_width)
+
+
+LOCATE_ARGS = 5
+"""How many of :func:`analyze`'s arguments after the samples are :func:`locate`'s; the rest are
+:func:`measure`'s."""
 
 
 @njit(cache=True)
@@ -734,11 +748,33 @@ def analyze(
         trace's units); the reflection is then gated (:func:`_gate_reflection`). 0: no gate,
         the pulse after the incident is the reflection.
 
+    The work is :func:`locate` then :func:`measure`, two compilations of about equal size: the
+    per-shot path (:func:`solitonde.signal.pulses.detect`) calls them one after the other, so a
+    fresh install can compile them side by side (:mod:`solitonde.signal.precompile`); this
+    composition serves :func:`analyze_batch`.
+
     Returns
     -------
     head, pulses:
         ``head[H_*]`` and one row ``pulses[j, P_*]`` per pulse, times in samples from the record
         start, amplitudes above each pulse's own baseline in the sign-corrected trace.
+    """
+    head, y, s, v, line, peaks = locate(x, sign_in, n_pre_in, h_in, thr_sigma, min_ratio)
+    return head, measure(head, y, s, v, line, peaks, fit_fraction, shape_r, skew, free_r,
+                         max_iter, gate_1n)
+
+
+@njit(cache=True)
+def locate(x: np.ndarray, sign_in: float, n_pre_in: int, h_in: int, thr_sigma: float,
+           min_ratio: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                      np.ndarray]:
+    """The first half of :func:`analyze` (same arguments): polarity, pre-trigger, baseline and
+    noise, smoothing, the pulses and the slow trend.
+
+    Returns ``head`` (its ``H_*`` columns up to ``H_NPEAKS``, and ``H_SIGMA_S``, ``H_FLOOR``,
+    ``H_YMAX``), the sign-corrected trace ``y`` (read only; ``x`` itself when positive), the
+    smoothed trace ``s``, ``v = s - line``, the slow trend ``line`` and the pulses' peak indices:
+    what :func:`measure` takes.
     """
     n = x.size
     head = np.zeros(HEAD)
@@ -780,10 +816,32 @@ def analyze(
     head[H_SMOOTH] = h
     m = peaks.size
     head[H_NPEAKS] = m
+    head[H_SIGMA_S] = sigma_s
+    head[H_FLOOR] = floor
+    head[H_YMAX] = ymax
+    return head, y, s, v, line, peaks
+
+
+@njit(cache=True)
+def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray,
+            peaks: np.ndarray, fit_fraction: float, shape_r: float, skew: float, free_r: bool,
+            max_iter: int, gate_1n: float) -> np.ndarray:
+    """The second half of :func:`analyze`: every pulse :func:`locate` found, measured (its
+    template fit and refined peak, :func:`_measure_pulse`), the reflection gated, the upper bound
+    on the ARR and the saturation flag. Fills the rest of ``head``; returns ``pulses[j, P_*]``.
+    The other arguments are :func:`analyze`'s."""
+    n = y.size
+    m = peaks.size
     out = np.zeros((m, PULSE))
     if m == 0:
-        return head, out
-
+        return out
+    thr = head[H_THR]
+    n_pre = int(head[H_NPRE])
+    h = int(head[H_SMOOTH])
+    sigma = head[H_SIGMA]
+    sigma_s = head[H_SIGMA_S]
+    floor = head[H_FLOOR]
+    ymax = head[H_YMAX]
     bounds = _bounds(v, peaks)
     widths = _widths(v, peaks, bounds)
     # The pre-impact baseline from the pre-trigger up to BASELINE_SPAN FWHM before the incident's
@@ -800,7 +858,7 @@ def analyze(
         sigma_top = max(pre[3], floor)
     else:
         sigma_top = sigma * max(1.0, sigma_s / max(smoother_gain(h) * sigma, 1e-300))
-    prev_end = 0
+    prev_end = np.int64(0)  # int64, not a literal (module docstring)
     for j in range(m):
         sk = skew if j == 0 else -skew  # the later pulses travel back up the chain
         prev_end = _measure_pulse(y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
@@ -827,7 +885,7 @@ def analyze(
     after = max(0.0, vmax(v[first:last])) if first < last else 0.0
     head[H_UPPER] = max(thr, after) / max(out[0, P_AMP], 1e-300)
     head[H_SATURATED] = 1.0 if _saturated(y, ymax, out[0, P_WIDTH]) else 0.0
-    return head, out
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -2,7 +2,10 @@
 
 Run from the repository root, after ``make run``'s or ``make test``'s install::
 
-    .venv/bin/python tests/first_answer.py [--repeat 2] [--sample FILE]
+    .venv/bin/python tests/first_answer.py [--repeat 2] [--only a|b] [--sample FILE]
+
+With another checkout's interpreter (``/elsewhere/.venv/bin/python tests/first_answer.py``) it
+times that checkout's commands, on this checkout's table and sample file.
 
 Two first answers, each in a fresh process pointed at a fresh, empty cache folder
 (``SOLITONDE_CACHE_DIR``, see :mod:`solitonde.model.jit_cache`), so every numba kernel it needs
@@ -114,10 +117,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--sample", type=Path, default=SAMPLE)
+    parser.add_argument("--only", choices=("a", "b"), help="time only (a) or only (b)")
     args = parser.parse_args()
-    print(f"cpus {os.cpu_count()}, load before {_load()}")
+    print(f"{BIN.parent}: cpus {os.cpu_count()}, load before {_load()}")
+    names = {"a": ("serve_readyz",), "b": ("analyze",), None: ("serve_readyz", "analyze")}
     for k in range(args.repeat):
-        for name in ("serve_readyz", "analyze"):
+        for name in names[args.only]:
             with tempfile.TemporaryDirectory(prefix="first-answer-") as tmp:
                 cache, work = Path(tmp) / "cache", Path(tmp) / "work"
                 work.mkdir()
