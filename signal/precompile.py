@@ -6,9 +6,11 @@ extraction compiles them: most of the time to the first answer of ``solitonde se
 ``solitonde analyze``. :func:`solitonde.signal.pulses.detect` runs two kernels of about equal
 size one after the other, :func:`~solitonde.signal.kernels.locate` and
 :func:`~solitonde.signal.kernels.measure`, and numba compiles a function only in the process that
-calls it. So :func:`start` has a child process compile ``measure`` into the on-disk cache while
-this one goes on (importing, reading files, loading tables), and :func:`finish` compiles
-``locate`` here and waits for the child; ``detect`` then loads ``measure`` from the cache.
+calls it. So :func:`start` has a child process compile ``measure`` (and the samples' check,
+:func:`~solitonde.signal.kernels.first_invalid`, which every Waveform runs) into the on-disk
+cache while this one goes on (importing, reading files, loading tables), and :func:`finish`
+compiles ``locate`` here and waits for the child; the first shot then loads the rest from the
+cache.
 
 Once both are in the cache, :func:`finish` leaves a marker file beside them, named for the CPU
 numba compiles for, and later runs start no child. Nothing depends on it for correctness: when a
@@ -37,7 +39,8 @@ _done = False
 
 def _example_args(n: int = 64) -> tuple[tuple[object, ...], tuple[object, ...]]:
     """Arguments of the types :func:`~solitonde.signal.pulses.detect` passes to ``locate`` and
-    ``measure`` (default options): numba compiles for the types, whatever the values."""
+    ``measure`` (default options): numba compiles for the types, whatever the values. The
+    samples (``locate``'s first argument) are also what a Waveform passes to ``first_invalid``."""
     from . import kernels as K
     from .pulses import DetectOptions, kernel_args
 
@@ -106,11 +109,13 @@ def _stop_child() -> None:
 
 
 def _compile_measure() -> None:
-    """The child's work: compile ``measure`` into the cache (running it on no pulses)."""
+    """The child's work: compile ``measure`` (running it on no pulses) and ``first_invalid``
+    into the cache."""
     from . import kernels as K
 
-    _, measure_args = _example_args()
+    locate_args, measure_args = _example_args()
     K.measure(*measure_args)
+    K.first_invalid(locate_args[0])
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from solitonde.signal import kernels as K
-from solitonde.signal import precompile
+from solitonde.signal import precompile, waveform
 from solitonde.signal.pulses import detect
 from solitonde.signal.synth import pulse_train
 from solitonde.signal.waveform import Waveform
@@ -42,7 +42,8 @@ def _types(args: tuple[object, ...]) -> tuple[object, ...]:
 @pytest.mark.parametrize(("units", "options"), [("N", {}), ("V", {}), ("N", {"lowpass_hz": 2e5})])
 def test_the_example_arguments_have_the_types_detect_passes(monkeypatch, units, options):
     """Newtons (read-only samples), volts scaled (a new, writable array) and a low-passed trace:
-    detect hands each half the types precompile compiles them for, so one compilation serves."""
+    detect hands each half the types precompile compiles them for, and a Waveform its samples'
+    check, so one compilation serves."""
     seen: dict[str, tuple[object, ...]] = {}
 
     def recorder(name: str, real):  # real: a numba dispatcher
@@ -53,11 +54,13 @@ def test_the_example_arguments_have_the_types_detect_passes(monkeypatch, units, 
 
     monkeypatch.setattr(K, "locate", recorder("locate", K.locate))
     monkeypatch.setattr(K, "measure", recorder("measure", K.measure))
+    monkeypatch.setattr(waveform, "first_invalid", recorder("first_invalid", K.first_invalid))
     detection = detect(_shot(units), **options)
     assert detection.incident is not None and detection.reflected is not None
     locate_args, measure_args = precompile._example_args()
     assert seen["locate"] == _types(locate_args)
     assert seen["measure"] == _types(measure_args)
+    assert seen["first_invalid"] == _types(locate_args[:1])
 
 
 def test_finish_waits_for_the_child_and_marks_the_cache(tmp_path, monkeypatch):
@@ -83,8 +86,9 @@ def test_finish_waits_for_the_child_and_marks_the_cache(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_from_an_empty_cache_detect_loads_the_childs_half(tmp_path: Path) -> None:
-    """A fresh cache folder: start and finish compile ``locate`` here and ``measure`` in the
-    child; detect then compiles nothing: ``measure`` comes from the cache the child wrote."""
+    """A fresh cache folder: start and finish compile ``locate`` here and ``measure`` and
+    ``first_invalid`` in the child; the first shot then compiles nothing: they come from the
+    cache the child wrote."""
     code = """
         import json
         import solitonde.instrument  # configures the cache folder
@@ -99,6 +103,7 @@ def test_from_an_empty_cache_detect_loads_the_childs_half(tmp_path: Path) -> Non
         print(json.dumps({
             "measure_hits": sum(K.measure.stats.cache_hits.values()),
             "measure_misses": sum(K.measure.stats.cache_misses.values()),
+            "first_invalid_misses": sum(K.first_invalid.stats.cache_misses.values()),
             "locate_signatures": len(K.locate.signatures),
             "marker": precompile._marker().is_file(),
             "tof": d.reflected.time_s - d.incident.time_s}))
@@ -110,6 +115,7 @@ def test_from_an_empty_cache_detect_loads_the_childs_half(tmp_path: Path) -> Non
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["measure_hits"] == 1 and result["measure_misses"] == 0
+    assert result["first_invalid_misses"] == 0
     assert result["locate_signatures"] == 1
     assert result["marker"]
     assert result["tof"] == pytest.approx(600e-6, abs=2 * DT)
