@@ -36,7 +36,7 @@ _fmax = _fp_extremum("maxnum")
 _fmin = _fp_extremum("minnum")
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def vmax(a: np.ndarray) -> float:
     """Largest value of a non-empty finite array (vectorised; equals ``a.max()``)."""
     m = a[0]
@@ -45,7 +45,7 @@ def vmax(a: np.ndarray) -> float:
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def vmin(a: np.ndarray) -> float:
     """Smallest value of a non-empty finite array (vectorised; equals ``a.min()``)."""
     m = a[0]
@@ -54,7 +54,7 @@ def vmin(a: np.ndarray) -> float:
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def vargmax(a: np.ndarray) -> int:
     """Index of the first largest value, as ``np.argmax`` (vectorised maximum, then a scan)."""
     m = vmax(a)

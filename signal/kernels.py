@@ -7,6 +7,20 @@ pulse model and its fit); the names are re-exported here. It returns plain array
 (:data:`HEAD` and :data:`PULSE` name their columns), so a 10,000-sample shot costs a few O(n)
 passes and no Python work per sample or per pulse; :mod:`solitonde.signal.pulses` only turns the
 arrays into objects.
+
+The kernels are written in loops over scalars and preallocated arrays, without numpy's sorting,
+linear algebra, ``np.diff``, array arithmetic (``s - line``) or whole-array assignments
+(``a[i] = row``): for each of those numba compiles a tree of helper functions of its own (a
+quicksort, LAPACK wrappers, broadcasting checks with their error messages), and together they
+were a third of the time a fresh install spent compiling :func:`analyze`, for no run-time gain
+on records of this size.
+
+Each function is compiled once. numba types a constant passed to a compiled function as that
+literal (``Literal[int](0)``) and compiles the callee for it apart from ``int64``, also for a
+loop variable that starts as a constant: such arguments are ``np.int64(...)``. The small helpers
+are compiled with ``inline="always"``: typed inside each caller for whatever it passes (the
+read-only record or a writable work array, a literal or not), they cost no compilation of their
+own. None of them carries ``fastmath`` flags, which an inlined body would take from its caller.
 """
 
 from __future__ import annotations
@@ -16,7 +30,15 @@ from numba import njit
 
 from .extrema import vargmax, vmax, vmin
 from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
-from .pulse_fit import R_MAX, R_MIN, fit_pulse, parabola_top, solve_spd, template  # noqa: F401
+from .pulse_fit import (  # noqa: F401
+    R_MAX,
+    R_MIN,
+    fit_pulse,
+    parabola_top,
+    solve_lu,
+    solve_spd,
+    template,
+)
 from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
 from .smoothing import (  # noqa: F401
     prefix_and_triangle,
@@ -51,13 +73,15 @@ TRUNC_SPAN = 2.5
 """A pulse counts as truncated when the record ends (or starts) within this many FWHM of its peak
 while the pulse is still above ``fit_fraction`` of its height."""
 
-# Columns of the head array returned by analyze (H_PRE0, H_PRE1: the pre-impact baseline
+# Columns of the head array returned by analyze and locate (H_PRE0, H_PRE1: the pre-impact baseline
 # H_PRE0 + H_PRE1 * i at sample i, in the sign-corrected trace).
 # H_TRAIN: pulses between the incident and a gated reflection (the incident's train); H_NOREF: 1
 # when the travel gate holds no pulse (the later pulses are then all secondary).
+# H_SIGMA_S, H_FLOOR, H_YMAX: the smoothed trace's noise, the noise floor and the largest sample of
+# the sign-corrected trace, which locate hands to measure.
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
- H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF) = range(14)
-HEAD = 14
+ H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF, H_SIGMA_S, H_FLOOR, H_YMAX) = range(17)
+HEAD = 17
 
 GATE_LO, GATE_HI = 0.75, 3.2
 """With a travel gate, a reflection arrives between these multiples of the round trip at the
@@ -182,7 +206,7 @@ def find_peaks_hysteresis(v: np.ndarray, thr: float, delta: float) -> np.ndarray
     return out[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pulse_extent(v: np.ndarray, peak: int, level: float, lo: int, hi: int) -> tuple[int, int]:
     """First and last sample around ``peak`` where ``v`` stays above ``level``, within [lo, hi)."""
     a = peak
@@ -194,7 +218,7 @@ def pulse_extent(v: np.ndarray, peak: int, level: float, lo: int, hi: int) -> tu
     return a, b
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def valley(v: np.ndarray, a: int, b: int) -> int:
     """Index of the smallest value of ``v`` in [a, b]."""
     best = a
@@ -243,25 +267,29 @@ def quadratic_fit(x: np.ndarray, runs: np.ndarray, degree: int) -> tuple[np.ndar
     for k in range(runs.shape[0]):
         _power_sums(x, runs[k, 0], runs[k, 1], acc)
         count += runs[k, 1] - runs[k, 0]
-    s1, s2, s3, s4, r0, r1, r2 = acc[0], acc[1], acc[2], acc[3], acc[4], acc[5], acc[6]
     coef = np.zeros(3)
     if count == 0:
         return coef, 0
-    m = np.empty((3, 3))
-    m[0, 0] = float(count)
-    m[0, 1] = m[1, 0] = s1
-    m[0, 2] = m[1, 1] = m[2, 0] = s2
-    m[1, 2] = m[2, 1] = s3
-    m[2, 2] = s4
-    rhs = np.array([r0, r1, r2])
+    # power sums: sum(u^0) = count, then acc[0..3]; right-hand sides acc[4..6]
+    sums = np.empty(5)
+    sums[0] = float(count)
+    for i in range(4):
+        sums[i + 1] = acc[i]
     k = degree + 1
     if count < 3:
         k = 1
-    sub = m[:k, :k].copy()
-    if k > 1 and abs(np.linalg.det(sub)) < 1e-14 * m[0, 0] ** k:
-        k = 1
-        sub = m[:1, :1].copy()
-    coef[:k] = np.linalg.solve(sub, rhs[:k].copy())
+    if k > 1:
+        m = np.empty((k, k))
+        rhs = np.empty(k)
+        for i in range(k):
+            rhs[i] = acc[4 + i]
+            for j in range(k):
+                m[i, j] = sums[i + j]
+        if abs(solve_lu(m, rhs, coef)) < 1e-14 * sums[0] ** k:
+            coef[:] = 0.0
+            k = 1
+    if k == 1:
+        coef[0] = acc[4] / sums[0]
     return coef, count
 
 
@@ -275,8 +303,17 @@ def quiet_runs(centres: np.ndarray, reach: np.ndarray, n: int) -> np.ndarray:
         starts[j] = centres[j] - reach[j]
     runs = np.empty((m + 1, 2), dtype=np.int64)
     k = 0
+    # the windows by start: a handful of pulses, so an insertion sort (ties in any order give the
+    # same runs)
+    order = np.empty(m, dtype=np.int64)
+    for j in range(m):
+        i = j
+        while i > 0 and starts[order[i - 1]] > starts[j]:
+            order[i] = order[i - 1]
+            i -= 1
+        order[i] = j
     free = 0  # first sample not yet covered by a window or a run
-    for j in np.argsort(starts):
+    for j in order:
         a = max(0, starts[j])
         if a > free:
             runs[k, 0] = free
@@ -290,7 +327,7 @@ def quiet_runs(centres: np.ndarray, reach: np.ndarray, n: int) -> np.ndarray:
     return runs[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def run_count(runs: np.ndarray, lo: int, hi: int) -> int:
     """How many samples of ``runs`` lie in lo..hi-1."""
     count = 0
@@ -354,14 +391,16 @@ def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[f
     """
     if n_pre > 0:
         return median(y[:n_pre]), max(MAD_TO_SIGMA * detrended_mad(y[:n_pre]), floor)
-    d = np.diff(y)
+    d = np.empty(y.size - 1)
+    for i in range(d.size):
+        d[i] = y[i + 1] - y[i]
     med = median_inplace(d)
     for i in range(d.size):
         d[i] = abs(d[i] - med)
     return ref, max(MAD_TO_SIGMA * median_inplace(d) / np.sqrt(2.0), floor)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: float) -> float:
     """Noise of the smoothed trace: the smoother's gain (exact for white noise), or the MAD of
     the smoothed pre-trigger if larger (coloured noise). The latter only over at least eight
@@ -372,13 +411,13 @@ def _smoothed_noise(s: np.ndarray, n_pre: int, h: int, sigma: float, floor: floa
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fwhm(v: np.ndarray, peak: int, lo: int, hi: int) -> int:
     a, b = pulse_extent(v, peak, 0.5 * v[peak], lo, hi)
     return b - a + 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _peaks(v: np.ndarray, sigma_s: float, thr_sigma: float, min_ratio: float
            ) -> tuple[np.ndarray, float]:
     largest = vmax(v)
@@ -386,7 +425,7 @@ def _peaks(v: np.ndarray, sigma_s: float, thr_sigma: float, min_ratio: float
     return find_peaks_hysteresis(v, thr, thr), thr
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bounds(v: np.ndarray, peaks: np.ndarray) -> np.ndarray:
     """Valleys between consecutive peaks, with the record ends: pulse j lives in [b[j], b[j+1]]."""
     m = peaks.size
@@ -398,7 +437,7 @@ def _bounds(v: np.ndarray, peaks: np.ndarray) -> np.ndarray:
     return b
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _widths(v: np.ndarray, peaks: np.ndarray, bounds: np.ndarray) -> np.ndarray:
     m = peaks.size
     w = np.empty(m)
@@ -412,13 +451,17 @@ def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, 
     """(sign, record median in the sign-corrected trace, prefix sums, lightly smoothed trace
     (sign-corrected)): the polarity from the smoothed trace against the record's median."""
     step = max(1, x.size // 1024)
-    ref = median(x[::step])
-    csum, s1 = prefix_and_triangle(x, 2)
+    spread = np.empty((x.size + step - 1) // step)  # every step-th sample (median reorders it)
+    for i in range(spread.size):
+        spread[i] = x[i * step]
+    ref = median_inplace(spread)
+    csum, s1 = prefix_and_triangle(x, np.int64(2))  # int64, not a literal
     sign = sign_in
     if sign == 0.0:
         sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
     if sign < 0:
-        s1 *= -1.0
+        for i in range(s1.size):
+            s1[i] = -s1[i]
     return sign, ref * sign, csum, s1
 
 
@@ -430,7 +473,9 @@ def _smoother(x: np.ndarray, csum: np.ndarray, s1: np.ndarray, line: np.ndarray,
     n = x.size
     h = h_in if h_in >= 0 else 2
     s = s1 if h == 2 else triangle_prefix(x, csum, h, sign)
-    v = s - line
+    v = np.empty(n)
+    for i in range(n):
+        v[i] = s[i] - line[i]
     if h_in < 0:
         for _ in range(3):
             hn = max(1, _fwhm(v, vargmax(v), 0, n) // 6)
@@ -443,7 +488,7 @@ def _smoother(x: np.ndarray, csum: np.ndarray, s1: np.ndarray, line: np.ndarray,
     return h, s, v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _pretrigger_after_peaks(v: np.ndarray, peaks: np.ndarray, n_pre: int, h: int
                             ) -> tuple[int, bool, bool]:
     """(pre-trigger length, early onset, whether to re-estimate): everything before the first
@@ -477,7 +522,11 @@ def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks:
         widths = _widths(v, peaks, bounds)
         # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
         # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
-        cap = 3.0 * widths[np.argmax(v[peaks])]
+        big = 0  # the largest pulse (the first of equals)
+        for j in range(1, peaks.size):
+            if v[peaks[j]] > v[peaks[big]]:
+                big = j
+        cap = 3.0 * widths[big]
         reach = np.empty(peaks.size, dtype=np.int64)
         for j in range(peaks.size):
             reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
@@ -497,8 +546,12 @@ def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks:
             v[i] = s[i] - line[i]
         before = peaks
         peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
-        if it == 0 and peaks.size == before.size and np.all(np.abs(peaks - before) <= h):
-            break  # the same pulses: the quiet samples, hence the line, would not change
+        if it == 0 and peaks.size == before.size:
+            same = True
+            for j in range(peaks.size):
+                same = same and abs(peaks[j] - before[j]) <= h
+            if same:
+                break  # the same pulses: the quiet samples, hence the line, would not change
     return peaks, thr
 
 
@@ -621,10 +674,23 @@ def _gate_reflection(out: np.ndarray, gate_1n: float, head: np.ndarray) -> np.nd
         if j != pick:
             order[k] = j
             k += 1
-    return out[order].copy()
+    moved = np.empty_like(out)
+    for j in range(m):
+        for c in range(out.shape[1]):
+            moved[j, c] = out[order[j], c]
+    return moved
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _negated(x: np.ndarray) -> np.ndarray:
+    """``-x`` as a new array."""
+    out = np.empty(x.size)
+    for i in range(x.size):
+        out[i] = -x[i]
+    return out
+
+
+@njit(cache=True, inline="always")
 def _saturated(y: np.ndarray, ymax: float, incident_width: float) -> bool:
     """Clipping: the record's top value repeats over more than a twentieth of the incident's
     width."""
@@ -633,6 +699,11 @@ def _saturated(y: np.ndarray, ymax: float, incident_width: float) -> bool:
     for i in range(y.size):
         count += y[i] >= top
     return count >= max(3.0, 0.05 * incident_width)
+
+
+LOCATE_ARGS = 5
+"""How many of :func:`analyze`'s arguments after the samples are :func:`locate`'s; the rest are
+:func:`measure`'s."""
 
 
 @njit(cache=True)
@@ -677,16 +748,38 @@ def analyze(
         trace's units); the reflection is then gated (:func:`_gate_reflection`). 0: no gate,
         the pulse after the incident is the reflection.
 
+    The work is :func:`locate` then :func:`measure`, two compilations of about equal size: the
+    per-shot path (:func:`solitonde.signal.pulses.detect`) calls them one after the other, so a
+    fresh install can compile them side by side (:mod:`solitonde.signal.precompile`); this
+    composition serves :func:`analyze_batch`.
+
     Returns
     -------
     head, pulses:
         ``head[H_*]`` and one row ``pulses[j, P_*]`` per pulse, times in samples from the record
         start, amplitudes above each pulse's own baseline in the sign-corrected trace.
     """
+    head, y, s, v, line, peaks = locate(x, sign_in, n_pre_in, h_in, thr_sigma, min_ratio)
+    return head, measure(head, y, s, v, line, peaks, fit_fraction, shape_r, skew, free_r,
+                         max_iter, gate_1n)
+
+
+@njit(cache=True)
+def locate(x: np.ndarray, sign_in: float, n_pre_in: int, h_in: int, thr_sigma: float,
+           min_ratio: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                      np.ndarray]:
+    """The first half of :func:`analyze` (same arguments): polarity, pre-trigger, baseline and
+    noise, smoothing, the pulses and the slow trend.
+
+    Returns ``head`` (its ``H_*`` columns up to ``H_NPEAKS``, and ``H_SIGMA_S``, ``H_FLOOR``,
+    ``H_YMAX``), the sign-corrected trace ``y`` (read only; ``x`` itself when positive), the
+    smoothed trace ``s``, ``v = s - line``, the slow trend ``line`` and the pulses' peak indices:
+    what :func:`measure` takes.
+    """
     n = x.size
     head = np.zeros(HEAD)
     sign, ref, csum, s1 = _polarity(x, sign_in)
-    y = x if sign > 0 else -x  # read only: a positive trace is used in place
+    y = x if sign > 0 else _negated(x)  # read only: a positive trace is used in place
     head[H_SIGN] = sign
     ymax = vmax(y)
 
@@ -696,7 +789,8 @@ def analyze(
     span = max(0.0, ymax - ref, ref - vmin(y))  # = max |y[i] - ref| (monotonic rounding)
     floor = NOISE_FLOOR * max(span, 1e-300)
     base, sigma = _level_noise(y, n_pre, ref, floor)
-    line = np.full(n, base)
+    line = np.empty(n)
+    line[:] = base
     h, s, v = _smoother(x, csum, s1, line, sign, h_in)
     sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
     peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
@@ -709,7 +803,8 @@ def analyze(
             n_pre = new_pre
             base, sigma = _level_noise(y, n_pre, ref, floor)
             line[:] = base
-            v = s - line
+            for i in range(n):
+                v[i] = s[i] - line[i]
             sigma_s = _smoothed_noise(s, n_pre, h, sigma, floor)
             peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
     peaks, thr = _trend(y, s, v, line, peaks, n_pre, h, sigma_s, thr_sigma, min_ratio, thr)
@@ -721,10 +816,32 @@ def analyze(
     head[H_SMOOTH] = h
     m = peaks.size
     head[H_NPEAKS] = m
+    head[H_SIGMA_S] = sigma_s
+    head[H_FLOOR] = floor
+    head[H_YMAX] = ymax
+    return head, y, s, v, line, peaks
+
+
+@njit(cache=True)
+def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray,
+            peaks: np.ndarray, fit_fraction: float, shape_r: float, skew: float, free_r: bool,
+            max_iter: int, gate_1n: float) -> np.ndarray:
+    """The second half of :func:`analyze`: every pulse :func:`locate` found, measured (its
+    template fit and refined peak, :func:`_measure_pulse`), the reflection gated, the upper bound
+    on the ARR and the saturation flag. Fills the rest of ``head``; returns ``pulses[j, P_*]``.
+    The other arguments are :func:`analyze`'s."""
+    n = y.size
+    m = peaks.size
     out = np.zeros((m, PULSE))
     if m == 0:
-        return head, out
-
+        return out
+    thr = head[H_THR]
+    n_pre = int(head[H_NPRE])
+    h = int(head[H_SMOOTH])
+    sigma = head[H_SIGMA]
+    sigma_s = head[H_SIGMA_S]
+    floor = head[H_FLOOR]
+    ymax = head[H_YMAX]
     bounds = _bounds(v, peaks)
     widths = _widths(v, peaks, bounds)
     # The pre-impact baseline from the pre-trigger up to BASELINE_SPAN FWHM before the incident's
@@ -741,7 +858,7 @@ def analyze(
         sigma_top = max(pre[3], floor)
     else:
         sigma_top = sigma * max(1.0, sigma_s / max(smoother_gain(h) * sigma, 1e-300))
-    prev_end = 0
+    prev_end = np.int64(0)  # int64, not a literal (module docstring)
     for j in range(m):
         sk = skew if j == 0 else -skew  # the later pulses travel back up the chain
         prev_end = _measure_pulse(y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
@@ -768,7 +885,7 @@ def analyze(
     after = max(0.0, vmax(v[first:last])) if first < last else 0.0
     head[H_UPPER] = max(thr, after) / max(out[0, P_AMP], 1e-300)
     head[H_SATURATED] = 1.0 if _saturated(y, ymax, out[0, P_WIDTH]) else 0.0
-    return head, out
+    return out
 
 
 @njit(cache=True, nogil=True)
@@ -800,8 +917,10 @@ def analyze_batch(
     for i in range(m):
         head, rows = analyze(x[i], sign_in, n_pre_in, h_in, thr_sigma, min_ratio, fit_fraction,
                              shape_r, skew, free_r, max_iter, gate_1n)
-        heads[i] = head
+        for c in range(HEAD):
+            heads[i, c] = head[c]
         counts[i] = rows.shape[0]
         for j in range(min(rows.shape[0], keep)):
-            pulses[i, j] = rows[j]
+            for c in range(PULSE):
+                pulses[i, j, c] = rows[j, c]
     return heads, pulses, counts

@@ -111,10 +111,32 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
     claim a precision it does not have.
     """
     out = np.zeros(6)
+    _poly_peak_into(y, c, h, lo, hi, sigma, curvature, out)
+    return out
+
+
+@njit(cache=True)
+def _template_curvature(height: float, w: float, r: float, hw: int, frac: float) -> float:
+    """:func:`poly_peak`'s curvature (``out[5]``) of the template ``height exp(-|u / w|^r)``
+    sampled at ``u = i - hw - frac``, ``i = 0 .. 2 hw``, over its whole width (0: none)."""
+    shape = np.empty(2 * hw + 1)
+    for i in range(shape.size):
+        shape[i] = height * np.exp(-(abs(i - hw - frac) / w) ** r)
+    out = np.zeros(6)
+    _poly_peak_into(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0, out)
+    return out[5]
+
+
+@njit(cache=True, inline="always")
+def _poly_peak_into(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
+                    curvature: float, out: np.ndarray) -> None:
+    """:func:`poly_peak` into ``out`` (zeros): the sums over the window, then
+    :func:`_quartic_peak`. Inlined into its two callers, which pass the record (read only) and
+    the template (writable); the rest is compiled once for both."""
     a = max(c - h, lo)
     b = min(c + h, hi)
     if b - a < 6 or a >= c or b <= c:
-        return out
+        return
     m = np.zeros((5, 5))
     rhs = np.zeros(5)
     pw = np.empty(5)
@@ -128,29 +150,39 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
             rhs[k] += pw[k] * y[i]
             for q in range(5):
                 m[k, q] += pw[k] * pw[q]
+    _quartic_peak(m, rhs, c, h, a, b, sigma, curvature, out)
+
+
+@njit(cache=True)
+def _quartic_peak(m: np.ndarray, rhs: np.ndarray, c: int, h: int, a: int, b: int, sigma: float,
+                  curvature: float, out: np.ndarray) -> None:
+    """The rest of :func:`poly_peak` from the normal equations ``m coef = rhs`` of the window
+    ``[a, b]`` (``u = (i - c) / h``): the quartic's maximum and its standard errors into
+    ``out`` (left zero where there is none)."""
+    inv_h = 1.0 / h
     work = m.copy()
     coef = np.zeros(5)
     if not solve_spd(work, rhs, coef):
-        return out
+        return
     c1, c2, c3, c4 = coef[1], coef[2], coef[3], coef[4]
     if not c2 < 0:
-        return out
+        return
     ua, ub = (a - c) * inv_h, (b - c) * inv_h
     u = min(max(-c1 / (2.0 * c2), ua), ub)
     for _ in range(20):
         d1 = c1 + u * (2.0 * c2 + u * (3.0 * c3 + 4.0 * c4 * u))
         d2 = 2.0 * c2 + u * (6.0 * c3 + 12.0 * c4 * u)
         if not d2 < 0:
-            return out
+            return
         step = d1 / d2
         u = min(max(u - step, ua), ub)
         if abs(step) < 1e-12:
             break
     if u <= ua or u >= ub:
-        return out  # the maximum lies outside the window
+        return  # the maximum lies outside the window
     curv = 2.0 * c2 + u * (6.0 * c3 + 12.0 * c4 * u)
     if not curv < 0:
-        return out
+        return
     out[5] = curv * inv_h * inv_h
     if curvature < 0:
         curv = curvature * h * h
@@ -164,9 +196,11 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
     sol = np.zeros(5)
     for k in range(2):
         g = gt if k == 0 else ga
-        work[:, :] = m
+        for i in range(5):
+            for q in range(5):
+                work[i, q] = m[i, q]
         if not solve_spd(work, g, sol):
-            return out
+            return
         acc = 0.0
         for q in range(5):
             acc += g[q] * sol[q]
@@ -176,7 +210,6 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
     out[2] = sigma * np.sqrt(var[0]) * h
     out[3] = sigma * np.sqrt(var[1])
     out[4] = 1.0
-    return out
 
 
 @njit(cache=True)
@@ -202,12 +235,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
         halves[k] = max(MIN_HALF, round(w * (-np.log(1.0 - LADDER[k])) ** (1.0 / r)))
     # The errors use the template's curvature over the widest window, not each fit's own: noise
     # that sharpens a fitted top would otherwise claim a precision the window does not have.
-    hw = halves[nl - 1]
-    shape = np.empty(2 * hw + 1)
-    frac = t_fit - np.floor(t_fit)
-    for i in range(shape.size):
-        shape[i] = height * np.exp(-(abs(i - hw - frac) / w) ** r)
-    curvature = poly_peak(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0)[5]
+    curvature = _template_curvature(height, w, r, halves[nl - 1], t_fit - np.floor(t_fit))
     values[:] = np.nan
     values[nl] = top_fit
     if not curvature < 0:
@@ -219,7 +247,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
         c = round(centre)
         if c <= lo or c >= hi:
             continue
-        est[k] = poly_peak(y, c, halves[k], lo, hi, sigma, curvature)
+        _set_row(est, k, poly_peak(y, c, halves[k], lo, hi, sigma, curvature))
         # Usable only where the noise leaves the peak well inside the window: beyond that the
         # cubic's maximum is a root of a noisy derivative, far from Gaussian, and would overrule
         # the wider windows by chance.
@@ -244,7 +272,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
                 first == nl or alt[1] > est[first, 1] + AGREE_SIGMAS * max(alt[3],
                                                                            est[first, 3])):
             est[:, 4] = 0.0
-            est[0] = alt
+            _set_row(est, 0, alt)
     t_pk, k_t = _lepski(est, 0, 2, t_fit)
     v_pk, k_v = _lepski(est, 1, 3, top_fit)
     for k in range(nl):
@@ -253,7 +281,15 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     return t_pk, v_pk, k_t < nl or k_v < nl, k_v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _set_row(a: np.ndarray, k: int, row: np.ndarray) -> None:
+    """``a[k] = row`` as a loop (numba compiles a broadcasting check, with its error message,
+    for the assignment of one array to another)."""
+    for q in range(row.size):
+        a[k, q] = row[q]
+
+
+@njit(cache=True, inline="always")
 def _lepski(est: np.ndarray, col: int, se_col: int, fit: float) -> tuple[float, int]:
     """The widest usable estimate ``est[k, col]`` (``fit`` the widest of all, index ``len(est)``)
     within :data:`AGREE_SIGMAS` standard errors ``est[j, se_col]`` of every narrower usable one,
@@ -272,7 +308,7 @@ def _lepski(est: np.ndarray, col: int, se_col: int, fit: float) -> tuple[float, 
     return chosen_v, chosen
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def common_rung(values: np.ndarray, rungs: np.ndarray) -> int:
     """The rung to read both pulses of a ratio on: the narrower of the two chosen, moved out to
     the first rung usable for both. Each rung's shape bias is nearly the same fraction of either

@@ -1,14 +1,19 @@
-"""The pulse model and its fit: a skewed super-Gaussian ``A exp(-|u|^r)`` with its Jacobian, a
-small Cholesky solver, the Levenberg-Marquardt fit of amplitude, peak time, width and shape, and
+"""The pulse model and its fit: a skewed super-Gaussian ``A exp(-|u|^r)`` with its Jacobian, small
+Cholesky and LU solvers, the Levenberg-Marquardt fit of amplitude, peak time, width and shape, and
 a parabola through the top as the fallback.
 
-Compiled with numba; used by :mod:`.kernels`.
+Compiled with numba; used by :mod:`.kernels`. Written in loops over scalars, without numpy's
+linear algebra or whole-array assignments (``a[:, :] = b``): numba compiles those from dozens of
+helper functions of its own (LAPACK wrappers, shape checks and their error messages), which
+made up a fifth of the extractor's first compilation and nothing of its run time.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from .extrema import vmax
 
 R_MIN, R_MAX = 1.2, 8.0
 """Bounds on the shape exponent r of the template A exp(-|u|^r)."""
@@ -77,6 +82,40 @@ def solve_spd(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> bool:
 
 
 @njit(cache=True)
+def solve_lu(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> float:
+    """Solves ``a x = b`` for a small square ``a`` by Gaussian elimination with partial pivoting
+    (what LAPACK's ``gesv`` does), overwriting ``a`` and ``b``; returns ``det(a)``, 0 (``x``
+    undefined) when a pivot is exactly zero. The least-squares polynomials' 2x2 and 3x3 normal
+    equations, whose callers test the determinant before they use ``x``."""
+    m = a.shape[0]
+    det = 1.0
+    for k in range(m):
+        p = k
+        for i in range(k + 1, m):
+            if abs(a[i, k]) > abs(a[p, k]):
+                p = i
+        if a[p, k] == 0.0:
+            return 0.0
+        if p != k:
+            det = -det
+            for j in range(m):
+                a[k, j], a[p, j] = a[p, j], a[k, j]
+            b[k], b[p] = b[p], b[k]
+        det *= a[k, k]
+        for i in range(k + 1, m):
+            f = a[i, k] / a[k, k]
+            for j in range(k + 1, m):
+                a[i, j] -= f * a[k, j]
+            b[i] -= f * b[k]
+    for i in range(m - 1, -1, -1):
+        acc = b[i]
+        for j in range(i + 1, m):
+            acc -= a[i, j] * x[j]
+        x[i] = acc / a[i, i]
+    return det
+
+
+@njit(cache=True)
 def fit_pulse(
     t: np.ndarray, y: np.ndarray, p0: np.ndarray, skew: float, nfree: int, max_iter: int
 ) -> tuple[np.ndarray, bool]:
@@ -118,8 +157,9 @@ def fit_pulse(
                 jtj[q, k] = acc
         improved = False
         for _inner in range(8):
-            a[:, :] = jtj
             for k in range(nfree):
+                for q in range(nfree):
+                    a[k, q] = jtj[k, q]
                 a[k, k] += lam * (jtj[k, k] + 1e-12)
             if not solve_spd(a, g, step):
                 lam *= 10.0
@@ -135,9 +175,10 @@ def fit_pulse(
                 c += (y[i] - ft[i]) ** 2
             if c <= cost:
                 rel = abs(step[1]) + abs(step[0]) / max(abs(p[0]), 1e-12)
-                p[:] = trial
-                f[:] = ft
-                jac[:, :] = jt
+                for k in range(p.size):
+                    p[k] = trial[k]
+                f, ft = ft, f  # the trial's values and Jacobian become the current ones
+                jac, jt = jt, jac
                 small = cost - c <= 1e-10 * cost + 1e-300
                 cost = c
                 lam = max(lam * 0.3, 1e-9)
@@ -154,7 +195,7 @@ def fit_pulse(
 @njit(cache=True)
 def parabola_top(tb: np.ndarray, yb: np.ndarray) -> tuple[float, float, bool]:
     """Least-squares parabola through the top 30 % of (tb, yb): (peak time, peak value, ok)."""
-    top = yb.max()
+    top = vmax(yb)
     s0 = 0.0
     s1 = 0.0
     s2 = 0.0
@@ -181,9 +222,17 @@ def parabola_top(tb: np.ndarray, yb: np.ndarray) -> tuple[float, float, bool]:
             hi = max(hi, u)
             count += 1
     if count >= 3:
-        m = np.array([[s0, s1, s2], [s1, s2, s3], [s2, s3, s4]])
-        if abs(np.linalg.det(m)) > 1e-12 * max(s4, 1.0) ** 3:
-            c0, c1, c2 = np.linalg.solve(m, np.array([r0, r1, r2]))
+        m = np.empty((3, 3))
+        m[0, 0] = s0
+        m[0, 1] = m[1, 0] = s1
+        m[0, 2] = m[1, 1] = m[2, 0] = s2
+        m[1, 2] = m[2, 1] = s3
+        m[2, 2] = s4
+        rhs = np.empty(3)
+        rhs[0], rhs[1], rhs[2] = r0, r1, r2
+        c = np.empty(3)
+        if abs(solve_lu(m, rhs, c)) > 1e-12 * max(s4, 1.0) ** 3:
+            c0, c1, c2 = c[0], c[1], c[2]
             if c2 < 0:
                 tc = -c1 / (2 * c2)
                 if lo <= tc <= hi:

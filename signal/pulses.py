@@ -1,8 +1,8 @@
 """Pulse detection: baseline and noise, incident, reflected and secondary pulses, quality flags.
 
-All the work on the samples is one numba pass (:func:`solitonde.signal.kernels.analyze`); this
-module holds the options, the result types and the flag logic. The steps, each chosen so that a
-number is never picked out of noise:
+All the work on the samples is one numba pass (:func:`solitonde.signal.kernels.analyze`, here
+called as its two halves ``locate`` and ``measure``); this module holds the options, the result
+types and the flag logic. The steps, each chosen so that a number is never picked out of noise:
 
 1. Pre-trigger segment: everything before the first rise (first crossing of a quarter of the
    largest excursion, walked back to its onset), then, once pulses are known, everything before
@@ -316,7 +316,15 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     if opts.lowpass_hz is not None:
         x = lowpass(x, dt, opts.lowpass_hz)
     x = np.ascontiguousarray(x, dtype=np.float64)
-    head_array, rows_array = K.analyze(x, *kernel_args(opts, x.size, dt))
+    if x.flags.writeable:  # volts scaled, or low-passed: the kernels' one type is read-only
+        x = x.view()
+        x.setflags(write=False)
+    # K.analyze in two calls: each half is compiled on its own (side by side on a fresh install,
+    # solitonde.signal.precompile) and nothing compiles the whole again for this path.
+    args = kernel_args(opts, x.size, dt)
+    located = K.locate(x, *args[: K.LOCATE_ARGS])
+    rows_array = K.measure(*located, *args[K.LOCATE_ARGS :])
+    head_array = located[0]
     head = head_array.tolist()  # Python floats: cheaper to read one by one than numpy scalars
     rows = rows_array.tolist()
     sign = head[K.H_SIGN]

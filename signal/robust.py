@@ -18,7 +18,35 @@ SELECT_ROUNDS = 64
 input; noise never gets there: about 2 log2(n) rounds are typical)."""
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def heapsort(a: np.ndarray, lo: int, hi: int) -> None:
+    """Sorts ``a[lo:hi]`` in place in O(n log n) whatever the input: the fallback of
+    :func:`select`. Numba's ``ndarray.sort`` would do too, but compiling its quicksort took
+    about a second, more than the rest of this module; this path is almost never taken.
+
+    One loop: first the heap is built (``start`` walks down to 0), then its top is swapped to
+    the end of the shrinking heap; either way the element at ``root`` is sifted down."""
+    n = hi - lo
+    start = n // 2
+    end = n
+    while end > 1:
+        if start > 0:
+            start -= 1
+        else:
+            end -= 1
+            a[lo], a[lo + end] = a[lo + end], a[lo]
+        root = start
+        while 2 * root + 1 < end:
+            child = 2 * root + 1
+            if child + 1 < end and a[lo + child + 1] > a[lo + child]:
+                child += 1
+            if not a[lo + child] > a[lo + root]:
+                break
+            a[lo + root], a[lo + child] = a[lo + child], a[lo + root]
+            root = child
+
+
+@njit(cache=True, inline="always")
 def _partition(a: np.ndarray, lo: int, hi: int, pivot: float, inclusive: bool) -> int:
     """Moves the values of ``a[lo:hi]`` below ``pivot`` (or not above it, when ``inclusive``) to
     the front of that range and returns where they end. Branch-free: on noise every comparison
@@ -57,7 +85,7 @@ def select(a: np.ndarray, k: int) -> float:
         if k < j:
             return pivot
         lo = j
-    a[lo:hi].sort()
+    heapsort(a, lo, hi)
     return a[k]
 
 
@@ -76,7 +104,7 @@ def median_inplace(a: np.ndarray) -> float:
     return 0.5 * (lower + upper)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def median(x: np.ndarray) -> float:
     """:func:`median_inplace` of a copy: ``np.median(x)`` for finite ``x``, faster on noise."""
     return median_inplace(x.copy())
@@ -87,7 +115,7 @@ MAD_POINTS = 512
 which sets thresholds and the reported SNR; every pulse's own baseline uses all samples)."""
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def detrended_mad(x: np.ndarray) -> float:
     """MAD of ``x`` about its least-squares line, so slow drift does not count as noise."""
     n = x.size

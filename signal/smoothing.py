@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def prefix_sum(x: np.ndarray) -> np.ndarray:
     """``c[0] = 0``, ``c[i + 1] = c[i] + x[i]``: the running sum every moving average here uses."""
     c = np.empty(x.size + 1)
@@ -22,7 +22,7 @@ def prefix_sum(x: np.ndarray) -> np.ndarray:
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _box_from_prefix(c: np.ndarray, h: int, out: np.ndarray) -> None:
     """Centred moving average over 2h+1 samples from the running sum ``c``; shrinks at the ends."""
     n = out.size
@@ -42,7 +42,7 @@ def _box_from_prefix(c: np.ndarray, h: int, out: np.ndarray) -> None:
         out[i] = (c[n] - c[lo]) / (n - lo)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _box_into(x: np.ndarray, h: int, c: np.ndarray, out: np.ndarray) -> None:
     """Centred moving average over 2h+1 samples by a running (prefix) sum; shrinks at the ends."""
     n = x.size
@@ -132,7 +132,7 @@ def triangle_prefix(x: np.ndarray, c: np.ndarray, h: int, sign: float) -> np.nda
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def smoother_gain(h: int) -> float:
     """Standard deviation of white noise after :func:`triangle` with half-width ``h``."""
     if h < 1:

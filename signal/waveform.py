@@ -54,7 +54,9 @@ def check_samples(samples: Any, name: str = "samples") -> np.ndarray:
         raise WaveformError(
             name, f"too few samples ({array.size})", f"at least {MIN_SAMPLES} samples per shot"
         )
-    bad = first_invalid(array)
+    checked = array.view()
+    checked.setflags(write=False)  # whatever the caller's flag: one compiled first_invalid
+    bad = first_invalid(checked)
     if bad >= 0:
         raise WaveformError(name, f"{invalid_sample(array[bad])} at sample {bad}",
                             f"finite numbers of magnitude at most {MAX_ABS_SAMPLE:g}")

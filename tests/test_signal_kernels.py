@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from solitonde.signal import kernels as K
+from solitonde.signal.robust import heapsort
 
 
 def _peaks_reference(v: np.ndarray, thr: float, delta: float) -> list[int]:
@@ -170,3 +171,32 @@ def test_spd_solve_matches_numpy_and_refuses_indefinite_systems(m):
     indefinite[m - 1, m - 1] = -1.0
     assert not K.solve_spd(indefinite, b, x)
     assert not K.solve_spd(np.zeros((m, m)), b, x)
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_lu_solve_matches_numpy_with_its_determinant(m):
+    """The least-squares fits' small solver: the solution and determinant LAPACK gives, also
+    where the first pivot is zero (rows swapped), and 0 for a singular system."""
+    rng = np.random.default_rng(m)
+    a = rng.normal(size=(m, m))
+    if m > 1:
+        a[0, 0] = 0.0
+    b = rng.normal(size=m)
+    x = np.empty(m)
+    det = K.solve_lu(a.copy(), b.copy(), x)
+    np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-12)
+    assert det == pytest.approx(np.linalg.det(a), rel=1e-12)
+    assert K.solve_lu(np.zeros((m, m)), b.copy(), x) == 0.0
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 5, 64, 1001])
+def test_heapsort_sorts_a_range_in_place(n):
+    """select's fallback (after SELECT_ROUNDS partitions) sorts what is left: any range, ties
+    and sorted or reversed input included, the rest of the array untouched."""
+    rng = np.random.default_rng(n)
+    for x in (rng.normal(size=n + 6), np.round(rng.normal(size=n + 6)), np.arange(n + 6.0)[::-1]):
+        a = x.copy()
+        heapsort(a, 3, 3 + n)
+        np.testing.assert_array_equal(a[3 : 3 + n], np.sort(x[3 : 3 + n]))
+        np.testing.assert_array_equal(a[:3], x[:3])
+        np.testing.assert_array_equal(a[3 + n :], x[3 + n :])

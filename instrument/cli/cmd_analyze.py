@@ -469,6 +469,11 @@ def analyze(
         jobs = _manifest_jobs(manifest, paths if files else None, fmt, usage)
     invert = invert or estimates_out is not None
     options = {"sample_rate": sample_rate, "units": units}
+    if jobs:  # a fresh install: the extractor's two halves compile side by side
+        from solitonde.signal import precompile
+
+        precompile.start()
+        precompile.finish()
     calibration_used = False
     rows: list[dict[str, Any]] = []
     errors: list[dict[str, Any]] = []

@@ -91,6 +91,14 @@ def register(app: typer.Typer) -> None:
             if not p.exists():
                 typer.echo(f"error: --table: no such file or folder: {p}", err=True)
                 raise typer.Exit(2)
+        from solitonde.signal import precompile
+
+        # A fresh install compiles half of the feature extractor in a child process while this
+        # one imports the service and compiles the other half (the lifespan's warm-up, which
+        # waits for the child). Several workers would each start a child: compile here, first.
+        precompile.start()
+        if workers > 1:
+            precompile.finish()
         if not given or not given[0].exists():
             where = settings.table_path or DEFAULT_TABLE
             typer.echo(f"warning: no model table at {where}: serving without estimates "
