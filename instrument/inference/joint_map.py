@@ -43,6 +43,7 @@ understates how far the positions may move together.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -88,6 +89,15 @@ P_INCONSISTENT = 1e-3
 DISAGREE_CHI2 = 9.0
 """A position whose misfit at the joint answer exceeds its own best by this disagrees."""
 WIDE_ANGLE_DEG = 20.0
+PROFILE_SUPPORT = 1e-4
+"""A position's thickness profile ranges over the distances whose joint posterior density is
+at least this fraction of its peak."""
+POSITION_SD_M = 1.0e-3
+"""How well a position's distance from the edge follows from its recorded coordinates (1 sd):
+the coordinates' own error (the chain's contact point against the mark, read off a rule) and the
+table's coarse distance axis next to the clamp (nodes 10 mm apart, where TOF and ARR turn fast),
+so a joint edge is not sharper than the positions can place it. Each position's likelihood is
+averaged over it along L."""
 
 
 class JointMapError(ValueError):
@@ -201,8 +211,43 @@ def position_likelihood(table: ModelTable, position: ScanPosition
     best = float(dev[finite].min())
     like = np.where(finite, np.exp(-0.5 * (np.where(finite, dev, best) - best)), 0.0)
     g = keep["grid"]
+    misfit = keep["misfit"]
+    if POSITION_SD_M > 0:  # where the chain stood is known to its recorded coordinates' error
+        blurred = like @ _blur(g.distance_m, POSITION_SD_M).T
+        with np.errstate(divide="ignore"):
+            dev_b = np.where(blurred > 0, best - 2.0 * np.log(blurred), np.inf)
+        # the terms beside the misfit (log det of the covariance) vary slowly: kept per row
+        rest = np.where(finite, dev - misfit, np.nan)
+        row_mean = np.nanmean(np.where(finite.any(axis=1, keepdims=True), rest, 0.0), axis=1)
+        rest = np.where(finite, rest, row_mean[:, None])
+        misfit = np.where(np.isfinite(dev_b), np.maximum(dev_b - rest, 0.0), np.inf)
+        dev = dev_b
+        best = float(dev[np.isfinite(dev)].min())
+        like = np.where(np.isfinite(dev), np.exp(-0.5 * (np.where(np.isfinite(dev), dev, best)
+                                                        - best)), 0.0)
     return PositionLikelihood(position, est, np.log(g.thickness_m), g.distance_m, g.weight_t,
-                              like, dev, keep["misfit"], int(keep["n_terms"])), None
+                              like, dev, misfit, int(keep["n_terms"])), None
+
+
+@functools.lru_cache(maxsize=8)
+def _blur_cached(grid: tuple[float, ...], sd: float) -> np.ndarray:
+    x = np.asarray(grid)
+    step = sd / 8.0
+    fine = np.arange(x[0], x[-1] + 0.5 * step, step)
+    interp = _Interp.on(x, fine)  # linear interpolation of the grid onto the fine points
+    to_fine = np.zeros((fine.size, x.size))
+    rows = np.arange(fine.size)
+    to_fine[rows, interp.idx] += 1.0 - interp.frac
+    to_fine[rows, interp.idx + 1] += interp.frac
+    kernel = np.exp(-0.5 * ((x[:, None] - fine[None, :]) / sd) ** 2)
+    kernel /= kernel.sum(axis=1, keepdims=True)  # truncated at the grid's ends (L >= 0)
+    return kernel @ to_fine
+
+
+def _blur(grid: np.ndarray, sd: float) -> np.ndarray:
+    """The matrix that averages a function given by its values on ``grid`` (linear between
+    them) over a Gaussian of ``sd`` around each grid point."""
+    return _blur_cached(tuple(float(v) for v in grid), float(sd))
 
 
 # --- the thickness prior -------------------------------------------------------------------
@@ -518,8 +563,11 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
     q = np.divide(w_bins, m, out=np.zeros_like(w_bins), where=m > 0)
     r = lk.like @ q.T  # (t, hyper)
     mass_t = (post.p_matrix.T * r).sum(axis=1)
-    support = w_bins.sum(axis=0) > 1e-4 * w_bins.sum(axis=0).max()
-    profile = lk.like[:, support].max(axis=1)
+    # as in a single inversion, a side is open where the profile likelihood (the best over
+    # distance) is within the 95 % level of the best; the distances are those the joint
+    # posterior leaves possible (density at least 1e-4 of its peak), not any
+    possible = w_bins.sum(axis=0) > PROFILE_SUPPORT * w_bins.sum(axis=0).max()
+    profile = lk.like[:, possible].max(axis=1)
     profile = profile / profile.max() if profile.max() > 0 else profile
     thickness = summarise_marginal(lk.log_t, mass_t / mass_t.sum(), lk.weight_t,
                                    lower_physical=False, transform=np.exp, profile=profile)
@@ -550,10 +598,25 @@ def _tie_z2(post: JointPosterior, log_t: np.ndarray) -> np.ndarray:
 
 
 def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
-    """At the joint best answer (the edge's best cell, and there the best thickness of each
-    position, with the common mean's best value for ``common``): each position's misfit, the
-    total deviance (the tie's terms included) and the number of terms (the tie's included)."""
-    cells = post.cells.take(np.array([post.best]))
+    """At the joint best fit (the edge's cell, and there each position's thickness, with the
+    common mean's best value for ``common``, that together have the least deviance): each
+    position's misfit, the total deviance (the tie's terms included) and the number of terms
+    (the tie's included)."""
+    common = post.prior.kind == "common"
+    z2 = _tie_z2(post, post.likes[0].log_t) if common else np.zeros((1, post.likes[0].log_t.size))
+    support = np.flatnonzero(post.mass > 1e-9 * post.mass.max())
+    cand = post.cells.take(support)
+    total = np.zeros((z2.shape[0], support.size))
+    for lk in post.likes:
+        d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]),
+                                  cand)[0]
+        it = _Interp.on(lk.distance_m, np.clip(post.model.distance(d), lk.distance_m[0],
+                                               lk.distance_m[-1]))
+        dev = np.where(np.isfinite(lk.deviance), lk.deviance, 1e300)
+        best_l = (dev[None, :, :] + z2[:, :, None]).min(axis=1)  # (hyper, L)
+        total += it(best_l)
+    k = int(np.argmin(total.min(axis=0)))
+    cells = cand.take(np.array([k]))
     columns = []
     for lk in post.likes:
         d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]),
@@ -570,7 +633,6 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
         picks = [int(np.argmin(dev)) for dev, _ in columns]
         return ([float(mis[k]) for (_, mis), k in zip(columns, picks, strict=True)],
                 float(sum(dev[k] for (dev, _), k in zip(columns, picks, strict=True))), n_terms)
-    z2 = _tie_z2(post, post.likes[0].log_t)  # (hyper, t)
     best: tuple[float, list[int], int] | None = None
     for h in range(z2.shape[0]):
         picks = [int(np.argmin(dev + z2[h])) for dev, _ in columns]
@@ -590,6 +652,35 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
     total = float(sum(dev[k] + z[k] for (dev, _), k in zip(columns, picks, strict=True)))
     misfits = [float(mis[k] + z[k]) for (_, mis), k in zip(columns, picks, strict=True)]
     return misfits, total, n_terms + len(post.likes)
+
+
+def mean_edge(post: JointPosterior) -> tuple[float, float]:
+    """The posterior mean edge: the line through the mean positions of the edge at the two
+    ends of the scan's extent along it (at least 0.2 m either side of its centre), as ``(theta,
+    offset)``. The best cell of (angle, offset) is a density's mode that depends on how the
+    edge is parametrised; where the edge is, on average, does not."""
+    b = post.best
+    theta_b = float(post.cells.theta[b])
+    n = np.array([math.cos(theta_b), math.sin(theta_b)])
+    along = np.array([-n[1], n[0]])
+    offset_b = float(post.offsets()[b])
+    xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in post.likes])
+    s = xy @ along
+    centre = 0.5 * (s.min() + s.max())
+    half = max(0.5 * (s.max() - s.min()), 0.2)
+    q = np.array([offset_b * n + (centre + k * half) * along for k in (-1.0, 1.0)])
+    # the signed distance of q from each cell's edge (q lies on the best edge: its mean is
+    # where the edge lies on average, along the best normal)
+    z = (q[:, :1] * np.cos(post.cells.theta)[None, :]
+         + q[:, 1:] * np.sin(post.cells.theta)[None, :] - post.offsets()[None, :])
+    mean = z @ post.mass
+    p = q - mean[:, None] * n[None, :]
+    d = p[1] - p[0]
+    normal = np.array([d[1], -d[0]]) / float(np.hypot(*d))
+    if normal @ n < 0:
+        normal = -normal
+    theta = math.atan2(normal[1], normal[0]) % (2 * math.pi)
+    return theta, float(p[0] @ normal)
 
 
 def summary(post: JointPosterior, region: Sequence[float] | None = None) -> dict[str, Any]:
@@ -633,24 +724,28 @@ def summary(post: JointPosterior, region: Sequence[float] | None = None) -> dict
         from solitonde.instrument.inference.adequacy import NO_CALIBRATION
 
         warnings.append(NO_CALIBRATION)
-    normal = math.degrees(theta_map) % 360.0
-    residuals = [ans.distance_map_m - lk.estimate.distance_m.median
-                 for lk, ans in zip(post.likes, answers, strict=True)
+    theta_line, offset_line = mean_edge(post)
+    normal = math.degrees(theta_line) % 360.0
+    line_n = np.array([math.cos(theta_line), math.sin(theta_line)])
+    to_line = [float(post.model.distance(np.array([lk.position.x_m, lk.position.y_m]) @ line_n
+                                         - offset_line)) for lk in post.likes]
+    residuals = [d - lk.estimate.distance_m.median
+                 for lk, d in zip(post.likes, to_line, strict=True)
                  if lk.estimate.distance_m.status == "constrained"]
     support = {
         "normal_angle_deg": normal,
-        "offset_m": float(offsets[b]),
+        "offset_m": offset_line,
         "ci95_offset_m": [o_lo, o_hi],
         "n_positions": len(post.likes),
         "residual_m": float(np.sqrt(np.mean(np.square(residuals)))) if residuals else None,
         "ci95_normal_angle_deg": [(normal + a_lo) % 360.0, (normal + a_hi) % 360.0],
         "model": post.model.kind,
-        "second_offset_m": (float(offsets[b]) + post.model.width_m
+        "second_offset_m": (offset_line + post.model.width_m
                             if post.model.kind == "opposite_edges" else None),
         "status": "inconsistent" if inconsistent else "located",
     }
     positions = []
-    for lk, ans in zip(post.likes, answers, strict=True):
+    for lk, ans, line_d in zip(post.likes, answers, to_line, strict=True):
         t, d = ans.thickness, ans.distance
         if inconsistent:
             t = ParameterEstimate(t.map, t.median, t.ci68, t.ci95, "inconsistent")
@@ -658,7 +753,7 @@ def summary(post: JointPosterior, region: Sequence[float] | None = None) -> dict
         positions.append({"position": lk.position.name, "x_m": lk.position.x_m,
                           "y_m": lk.position.y_m, "thickness_m": t.to_dict(),
                           "distance_m": d.to_dict(),
-                          "distance_to_located_support_m": ans.distance_map_m})
+                          "distance_to_located_support_m": line_d})
     prior = post.prior.to_dict()
     if post.prior.kind == "common":
         w = post.mass_hyper.sum(axis=1)
