@@ -28,8 +28,9 @@ Expected variance reduction, by simulating the measurement from the table under 
 
 Candidates lie on lines parallel to the located edge (along its extent inside the region, at
 distances from 2 mm to the middle of the plate from either support), inside the region (the
-plate's rectangle in the scan's frame where the family states its size) and on the plate under
-every particle.
+plate's rectangle in the scan's frame where the family states its size). Where a likely edge
+puts a candidate off the plate, the chain would stand on the clamp, which reads as the clamped
+edge itself (L = 0).
 """
 
 from __future__ import annotations
@@ -260,13 +261,12 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
     pts = (offset_b * normal)[None, :] + ss.ravel()[:, None] * along + uu.ravel()[:, None] * normal
     inside = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
     pts = pts[inside]
-    if pts.size:
-        d_all = _signed(post, parts, pts[:, 0], pts[:, 1])
-        pts = pts[post.model.on_plate(d_all).all(axis=1)]
     if not pts.size:
-        out["reason"] = "no point of the region lies on the plate under every likely edge"
+        out["reason"] = "no point of the region lies on the plate under the located edge"
         return out
     d_c = _signed(post, parts, pts[:, 0], pts[:, 1])
+    # where a likely edge puts a candidate off the plate, the chain would stand on the clamp:
+    # as at the clamped edge itself (L = 0)
     l_c = np.clip(post.model.distance(d_c), grid[0], grid[-1])  # (candidates, particles)
     truths = np.arange(min(TRUTHS, PARTICLES))
     draws = rng.integers(0, NOISE_DRAWS, truths.size)
