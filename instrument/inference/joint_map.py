@@ -654,11 +654,12 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
     return misfits, total, n_terms + len(post.likes)
 
 
-def mean_edge(post: JointPosterior) -> tuple[float, float]:
-    """The posterior mean edge: the line through the mean positions of the edge at the two
+def median_edge(post: JointPosterior) -> tuple[float, float]:
+    """The posterior median edge: the line through the median positions of the edge at the two
     ends of the scan's extent along it (at least 0.2 m either side of its centre), as ``(theta,
-    offset)``. The best cell of (angle, offset) is a density's mode that depends on how the
-    edge is parametrised; where the edge is, on average, does not."""
+    offset)``. The best cell of (angle, offset) is a density's mode that depends on how the edge
+    is parametrised, and a mean is pulled by a second mode (the edge's mirror image, an edge
+    labelled from the opposite side); the median of where the edge lies is neither."""
     b = post.best
     theta_b = float(post.cells.theta[b])
     n = np.array([math.cos(theta_b), math.sin(theta_b)])
@@ -673,8 +674,8 @@ def mean_edge(post: JointPosterior) -> tuple[float, float]:
     # where the edge lies on average, along the best normal)
     z = (q[:, :1] * np.cos(post.cells.theta)[None, :]
          + q[:, 1:] * np.sin(post.cells.theta)[None, :] - post.offsets()[None, :])
-    mean = z @ post.mass
-    p = q - mean[:, None] * n[None, :]
+    middle = np.array([weighted_quantiles(zz, post.mass, (0.5,))[0] for zz in z])
+    p = q - middle[:, None] * n[None, :]
     d = p[1] - p[0]
     normal = np.array([d[1], -d[0]]) / float(np.hypot(*d))
     if normal @ n < 0:
@@ -683,7 +684,7 @@ def mean_edge(post: JointPosterior) -> tuple[float, float]:
     return theta, float(p[0] @ normal)
 
 
-def summary(post: JointPosterior, region: Sequence[float] | None = None) -> dict[str, Any]:
+def summary(post: JointPosterior) -> dict[str, Any]:
     """The joint answer: ``support``, per-position answers, ``fit``, ``warnings``,
     ``thickness_prior``."""
     cells, mass = post.cells, post.mass
@@ -724,7 +725,7 @@ def summary(post: JointPosterior, region: Sequence[float] | None = None) -> dict
         from solitonde.instrument.inference.adequacy import NO_CALIBRATION
 
         warnings.append(NO_CALIBRATION)
-    theta_line, offset_line = mean_edge(post)
+    theta_line, offset_line = median_edge(post)
     normal = math.degrees(theta_line) % 360.0
     line_n = np.array([math.cos(theta_line), math.sin(theta_line)])
     to_line = [float(post.model.distance(np.array([lk.position.x_m, lk.position.y_m]) @ line_n
@@ -766,5 +767,6 @@ def summary(post: JointPosterior, region: Sequence[float] | None = None) -> dict
 
 
 __all__ = ["EDGE_MODELS", "THICKNESS_PRIORS", "EdgeModel", "JointMapError", "JointPosterior",
-           "ScanPosition", "ThicknessPrior", "edge_model", "position_likelihood", "posterior",
+           "ScanPosition", "ThicknessPrior", "edge_model", "median_edge", "position_likelihood",
+           "posterior",
            "summary", "weighted_quantiles"]

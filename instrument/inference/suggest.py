@@ -27,15 +27,16 @@ Expected variance reduction, by simulating the measurement from the table under 
    earlier ones (each truth's weights multiply), and its gain is what it adds to them.
 
 Candidates lie on lines parallel to the located edge (along its extent inside the region, at
-distances from 2 mm to the middle of the plate from either support), inside the region (the
-plate's rectangle in the scan's frame where the family states its size). Where a likely edge
-puts a candidate off the plate, the chain would stand on the clamp, which reads as the clamped
-edge itself (L = 0).
+distances from 2 mm to the middle of the plate from either support) and on a 24 x 24 grid over
+the region (where the located edge may be the wrong one, points that tell the likely edges
+apart), inside the region (the
+plate's rectangle in the scan's frame where the family states its size) and on the plate under
+at least half the likely edges. Where a likely edge puts a candidate off the plate, the chain
+would stand on the clamp, which reads as the clamped edge itself (L = 0).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -63,6 +64,7 @@ Z95 = 3.919927969080108
 CANDIDATE_DISTANCES_M = (0.002, 0.004, 0.006, 0.008, 0.010, 0.013, 0.016, 0.020, 0.025, 0.030,
                          0.040, 0.050, 0.065, 0.080, 0.100, 0.130, 0.170, 0.220, 0.300, 0.400)
 ALONG_STEPS = 25
+GRID_STEPS = 24
 CHUNK = 32
 UNIFORM_STEP_M = 5e-4
 """The curves' resampling step: half a millimetre."""
@@ -259,10 +261,18 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
     u_vals = [u for u in u_vals if u <= (post.model.width_m or math.inf)]
     ss, uu = np.meshgrid(s_vals, np.array(u_vals), indexing="ij")
     pts = (offset_b * normal)[None, :] + ss.ravel()[:, None] * along + uu.ravel()[:, None] * normal
+    # and a grid over the whole region: where the located edge may be the wrong one (few
+    # positions, a mirror image), points that tell the likely edges apart
+    gx, gy = np.meshgrid(np.linspace(x0, x1, GRID_STEPS + 2)[1:-1],
+                         np.linspace(y0, y1, GRID_STEPS + 2)[1:-1], indexing="ij")
+    pts = np.concatenate([pts, np.column_stack([gx.ravel(), gy.ravel()])])
     inside = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
     pts = pts[inside]
+    if pts.size:  # where the plate most likely is: not on a likely clamp
+        on = post.model.on_plate(_signed(post, parts, pts[:, 0], pts[:, 1])).mean(axis=1)
+        pts = pts[on >= 0.5]
     if not pts.size:
-        out["reason"] = "no point of the region lies on the plate under the located edge"
+        out["reason"] = "no point of the region lies on the plate under most likely edges"
         return out
     d_c = _signed(post, parts, pts[:, 0], pts[:, 1])
     # where a likely edge puts a candidate off the plate, the chain would stand on the clamp:
@@ -331,7 +341,6 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
     return out
 
 
-@functools.lru_cache(maxsize=1)
 def describe(objective: str) -> str:
     """What ``expected_gain`` measures, in words."""
     if objective == "edge":

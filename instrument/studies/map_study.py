@@ -140,9 +140,20 @@ class Scan:
         raise RuntimeError("no position inside the rectangle")  # not reached for sane sizes
 
     def edge_error(self, theta: float, offset: float) -> float:
-        """Largest distance of the true edge's span from the line at (theta, offset)."""
+        """Largest distance of the true edge's span from the line at (theta, offset). The two
+        clamped edges are alike: a line reported from the opposite side (its normal pointing
+        the other way) is compared with the opposite edge."""
         n = np.array([math.cos(theta), math.sin(theta)])
+        if n @ self.normal < 0:
+            return float(np.max(np.abs((self.ends + self.a * self.normal) @ n - offset)))
         return float(np.max(np.abs(self.ends @ n - offset)))
+
+    def true_offset(self, theta: float) -> float:
+        """The true offset of the clamped edge a line at angle ``theta`` stands for (the near
+        one, or the opposite one seen from the other side)."""
+        if math.cos(theta - self.theta) < 0:
+            return -(self.offset_m + self.a)
+        return self.offset_m
 
 
 class Measurer:
@@ -211,7 +222,7 @@ def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition]
         post = joint_map.posterior(table, positions)
     except joint_map.JointMapError:
         return None, math.nan, math.nan
-    theta, offset = joint_map.mean_edge(post)
+    theta, offset = joint_map.median_edge(post)
     return post, theta, offset
 
 
@@ -274,11 +285,10 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
 
 
 def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
-    """Whether the 95 % offset interval holds the true edge's offset (the offsets compared
-    along the located normal's side, i.e. with the truth's angle taken as the normal)."""
+    """Whether the 95 % offset interval holds the true edge's offset (of the clamped edge the
+    located one stands for)."""
     lo, hi = support["ci95_offset_m"]
-    # the reported edge is the nearer one with an inward normal: the truth's, within the tilt
-    return bool(lo <= scan.offset_m <= hi)
+    return bool(lo <= scan.true_offset(math.radians(support["normal_angle_deg"])) <= hi)
 
 
 def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
