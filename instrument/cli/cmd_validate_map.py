@@ -79,7 +79,7 @@ def report_lines(m: dict[str, Any]) -> list[str]:
                      f"{t['near_edge_positions']} positions); edge offset coverage "
                      f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located), median "
                      f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm")
-    for strategy in ("suggested", "random"):
+    for strategy in ("suggested", "random_near_edge", "random_on_plate"):
         s = m.get(f"sequence_{strategy}")
         if not s:
             continue
@@ -88,10 +88,11 @@ def report_lines(m: dict[str, Any]) -> list[str]:
         lines.append(f"  {strategy}: median edge error (mm) by positions {curve}; 5 mm reached "
                      f"in {s['reached_target']} of {s['scans']} scans, median positions "
                      f"{num(s['positions_to_target_median'], '.1f')}")
-    if "suggested_fewer_than_random" in m:
-        lines.append(f"  suggested needed fewer positions than random in "
-                     f"{m['suggested_fewer_than_random']} scans, more in "
-                     f"{m['suggested_more_than_random']}")
+    for other in ("random_near_edge", "random_on_plate"):
+        if f"suggested_fewer_than_{other}" in m:
+            lines.append(f"  suggested needed fewer positions than {other} in "
+                         f"{m[f'suggested_fewer_than_{other}']} scans, more in "
+                         f"{m[f'suggested_more_than_{other}']}")
     return lines
 
 

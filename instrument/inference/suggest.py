@@ -27,12 +27,14 @@ Expected variance reduction, by simulating the measurement from the table under 
    earlier ones (each truth's weights multiply), and its gain is what it adds to them.
 
 Candidates lie on lines parallel to the located edge (along its extent inside the region, at
-distances from 2 mm to the middle of the plate from either support) and on a 24 x 24 grid over
+distances from 10 mm to the middle of the plate from either support) and on a 24 x 24 grid over
 the region (where the located edge may be the wrong one, points that tell the likely edges
 apart), inside the region (the
-plate's rectangle in the scan's frame where the family states its size) and on the plate under
-at least half the likely edges. Where a likely edge puts a candidate off the plate, the chain
-would stand on the clamp, which reads as the clamped edge itself (L = 0).
+plate's rectangle in the scan's frame where the family states its size), at least 10 mm from
+the edges under at least half the likely edges (:data:`MIN_DISTANCE_M`: the table is least
+trustworthy there) and 15 mm from the positions already measured. Where a likely edge puts a
+candidate off the plate, the chain would stand on the clamp, which reads as the clamped edge
+itself (L = 0).
 """
 
 from __future__ import annotations
@@ -61,8 +63,16 @@ MAX_SUGGEST = 20
 OBJECTIVES = ("edge", "thickness")
 Z95 = 3.919927969080108
 """A 95 % interval's width over its standard deviation (2 x 1.96)."""
-CANDIDATE_DISTANCES_M = (0.002, 0.004, 0.006, 0.008, 0.010, 0.013, 0.016, 0.020, 0.025, 0.030,
+CANDIDATE_DISTANCES_M = (0.010, 0.012, 0.014, 0.016, 0.018, 0.020, 0.023, 0.026, 0.030, 0.035,
                          0.040, 0.050, 0.065, 0.080, 0.100, 0.130, 0.170, 0.220, 0.300, 0.400)
+MIN_DISTANCE_M = 0.010
+"""No suggestion closer to a likely edge than this: the table's first distance node beyond the
+clamp. Closer in, its features are interpolated over the span where they change fastest, and a
+few millimetres of the edge's uncertainty put the chain on the clamp; the simulated measurement
+(the table itself) would promise more than a real one there gives."""
+MIN_SPACING_M = 0.015
+"""Nor within this of a position already measured: a repeat averages that position's shot
+noise, not the table's error at its distance."""
 ALONG_STEPS = 25
 GRID_STEPS = 24
 CHUNK = 32
@@ -268,9 +278,16 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
     pts = np.concatenate([pts, np.column_stack([gx.ravel(), gy.ravel()])])
     inside = (pts[:, 0] >= x0) & (pts[:, 0] <= x1) & (pts[:, 1] >= y0) & (pts[:, 1] <= y1)
     pts = pts[inside]
-    if pts.size:  # where the plate most likely is: not on a likely clamp
-        on = post.model.on_plate(_signed(post, parts, pts[:, 0], pts[:, 1])).mean(axis=1)
-        pts = pts[on >= 0.5]
+    if pts.size:  # where the plate most likely is, not next to a likely clamp
+        d_p = _signed(post, parts, pts[:, 0], pts[:, 1])
+        clear = post.model.on_plate(d_p - MIN_DISTANCE_M)
+        if post.model.kind == "opposite_edges":
+            clear &= post.model.on_plate(d_p + MIN_DISTANCE_M)
+        pts = pts[clear.mean(axis=1) >= 0.5]
+    if pts.size:
+        xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in post.likes])
+        gap = np.hypot(pts[:, None, 0] - xy[None, :, 0], pts[:, None, 1] - xy[None, :, 1])
+        pts = pts[gap.min(axis=1) >= MIN_SPACING_M]
     if not pts.size:
         out["reason"] = "no point of the region lies on the plate under most likely edges"
         return out

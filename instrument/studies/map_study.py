@@ -24,8 +24,10 @@ Scored per scan with 3-10 positions (:data:`POSITIONS`):
 * the width of the thickness interval at positions within :data:`NEAR_EDGE_M` of the edge (an
   open side reaches the table's end, so a bound or no answer is as wide as the table allows);
 * the edge's error against the number of positions: starting from the scan's first three, one
-  position added at a time, either the suggestion of the joint posterior (objective ``edge``)
-  or the next random one, up to :data:`MAX_POSITIONS`. The error is the largest distance between
+  position added at a time, up to :data:`MAX_POSITIONS`: the suggestion of the joint posterior
+  (objective ``edge``), or a random one drawn as the first three were (near the true edge: an
+  operator who already knows roughly where the support is), or a random one anywhere on the
+  plate. The error is the largest distance between
   the located edge (the joint posterior's best) and the true one along the true edge's span
   inside the rectangle; the count is the number of positions at which it first falls below
   :data:`TARGET_ERROR_M`.
@@ -59,6 +61,10 @@ MAX_POSITIONS = 10
 START_POSITIONS = 3
 NEAR_EDGE_M = 0.03
 TARGET_ERROR_M = 0.005
+STRATEGIES = ("suggested", "random_near_edge", "random_on_plate")
+"""How the positions after the first three are chosen: the joint posterior's suggestion;
+at random as the first ones were (near the true edge: an operator who already knows roughly
+where the support is); at random anywhere on the plate."""
 COMMON_SPREAD = 0.05
 
 
@@ -112,6 +118,9 @@ class Scan:
         self.ends = self._span()
         self.n_positions = int(self.rng.integers(POSITIONS[0], POSITIONS[1] + 1))
         self.random_positions = [self.draw() for _ in range(MAX_POSITIONS)]
+        self.plate_positions = [(float(self.rng.uniform(0.0, self.a)),
+                                 float(self.rng.uniform(0.0, self.b)))
+                                for _ in range(MAX_POSITIONS)]
         self.seed = seed
 
     def _span(self) -> np.ndarray:
@@ -294,8 +303,10 @@ def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
 def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
               ) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    for strategy in ("suggested", "random"):
+    for strategy in STRATEGIES:
         xy = list(scan.random_positions[:START_POSITIONS])
+        fallback = (scan.plate_positions if strategy == "random_on_plate"
+                    else scan.random_positions)
         errors = []
         while True:
             positions = _scan_positions(scan, xy, measure, cal)
@@ -303,8 +314,8 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
             errors.append(math.inf if post is None else scan.edge_error(theta, offset))
             if len(xy) >= MAX_POSITIONS:
                 break
-            if strategy == "random" or post is None:
-                xy.append(scan.random_positions[len(xy)])
+            if strategy != "suggested" or post is None:
+                xy.append(fallback[len(xy)])
                 continue
             nxt = suggest.suggest(post, 1, objective="edge", region=(0.0, scan.a, 0.0, scan.b))
             if not nxt["suggestions"]:
@@ -383,7 +394,7 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
     seqs = [r["sequence"] for r in rows if "sequence" in r]
     if seqs:
-        for strategy in ("suggested", "random"):
+        for strategy in STRATEGIES:
             errors = np.array([s[strategy]["errors_m"] for s in seqs])
             counts = [s[strategy]["positions_to_target"] for s in seqs]
             reached = [c for c in counts if c is not None]
@@ -397,11 +408,12 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                     [c if c is not None else MAX_POSITIONS + 1 for c in counts])),
                 "positions_to_target_mean_reached": float(np.mean(reached)) if reached else None,
                 "target_m": TARGET_ERROR_M}
-        pairs = [(s["suggested"]["positions_to_target"], s["random"]["positions_to_target"])
-                 for s in seqs]
         big = MAX_POSITIONS + 1
-        out["suggested_fewer_than_random"] = sum((a or big) < (b or big) for a, b in pairs)
-        out["suggested_more_than_random"] = sum((a or big) > (b or big) for a, b in pairs)
+        for other in STRATEGIES[1:]:
+            pairs = [(s["suggested"]["positions_to_target"], s[other]["positions_to_target"])
+                     for s in seqs]
+            out[f"suggested_fewer_than_{other}"] = sum((a or big) < (b or big) for a, b in pairs)
+            out[f"suggested_more_than_{other}"] = sum((a or big) > (b or big) for a, b in pairs)
     return out
 
 
