@@ -196,7 +196,8 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
     Each position is a marker coloured by its median (mm, colour bar beside each panel): filled
     when the answer is constrained; a hollow triangle pointing up ("at least") or down ("at most")
     at its 95 % bound when it is one-sided; a grey cross when there is no answer. The located
-    support is drawn as a dashed line, the plate's outline when its size is known.
+    support is drawn as a dashed line (with a joint map's opposite edge), the plate's outline
+    when its size is known, the suggested next positions as numbered stars.
     """
     from matplotlib.lines import Line2D
 
@@ -204,6 +205,7 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
                  if p.get("x_m") is not None and p.get("y_m") is not None]
     size = plate_map.get("plate_size_m")
     support = plate_map.get("support")
+    suggestions = plate_map.get("suggestions") or []
     fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, 2)
@@ -264,6 +266,14 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
             ax.add_patch(_outline(size))
         if support:
             _draw_support(ax, support, xlim, ylim)
+            if support.get("second_offset_m") is not None:  # the opposite clamped edge
+                _draw_support(ax, {**support, "offset_m": support["second_offset_m"]}, xlim,
+                              ylim)
+        for k, s in enumerate(suggestions, start=1):
+            ax.scatter([s["x_m"] * 1e3], [s["y_m"] * 1e3], marker="*", s=320, color="gold",
+                       edgecolors="black", linewidths=1.2, zorder=5)
+            ax.annotate(f"next {k}", (s["x_m"] * 1e3, s["y_m"] * 1e3), textcoords="offset points",
+                        xytext=(8, -12), fontsize=7, color="black", zorder=6)
         labels = [ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
                               xytext=(7, 7), fontsize=7, color="0.25")
                   for p, x, y in zip(positions, xs, ys, strict=True) if p.get("position")]
@@ -282,9 +292,14 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
                Line2D([], [], marker="x", ls="", color="0.5", label="no answer")]
     if support:
         handles.append(Line2D([], [], ls="--", color="crimson", label="located support"))
+    if suggestions:
+        handles.append(Line2D([], [], marker="*", ls="", color="gold", mec="black", ms=12,
+                              label="measure next"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False,
                fontsize=8)
     title = f"plate {plate_map.get('plate_id')}: {len(positions)} positions"
+    if plate_map.get("joint"):
+        title += ", inverted jointly"
     if support:
         lo, hi = support["ci95_offset_m"]
         title += (f"; support at {support['normal_angle_deg']:.1f} deg, offset "

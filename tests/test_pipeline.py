@@ -27,7 +27,12 @@ from solitonde.signal.waveform import Waveform
 ROOT = Path(__file__).resolve().parents[1]
 TABLE = ROOT / "data_samples" / "default_table.h5"
 CSV = ROOT / "data_samples" / "waveforms" / "synthetic_D9.53_t4.83_snr40.csv"
-STUDIES = {"studies/validate.py"}  # inverts its synthetic plates itself, with a profile study
+STUDIES = {"studies/validate.py",  # inverts its synthetic plates itself, with a profile study
+           "studies/map_study.py"}  # inverts its scans' positions one by one beside the joint
+JOINT = {"inference/joint_map.py"}
+"""A scan's joint posterior inverts each position against the one table the scan's family
+chose (its per-position answer and likelihood, instrument.inference.joint_map), not a table
+per measurement."""
 
 
 def _cli(*args: str) -> dict:
@@ -100,7 +105,7 @@ def test_no_module_but_the_pipeline_calls_the_inversion() -> None:
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
                     and node.func.id == "invert":
                 callers.add(str(path.relative_to(root)))
-    assert callers == {"inference/pipeline.py", *STUDIES}, callers
+    assert callers == {"inference/pipeline.py", *STUDIES, *JOINT}, callers
 
 
 def test_the_service_inverts_a_silent_size_as_its_bound_and_exports_the_sizes_it_used(

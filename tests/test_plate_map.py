@@ -225,3 +225,117 @@ def test_a_freshly_simulated_scan_locates_the_edge_within_10_mm(tmp_path):
     assert plate_map["support"] is not None, plate_map["support_reason"]
     for p in plate_map["positions"]:
         assert abs(p["distance_to_located_support_m"] - truth[p["position"]]["x_m"]) < TOLERANCE_M
+
+
+# --- the scan as one unknown: --joint, ?joint=true, suggestions -------------------------------
+
+
+def _joint_checks(plate_map: dict) -> None:
+    """The joint map of the bundled scan: today's shape plus the joint answer."""
+    assert plate_map["joint"] is True
+    support = plate_map["support"]
+    assert support["model"] == "opposite_edges" and support["status"] == "located"
+    assert support["second_offset_m"] == pytest.approx(support["offset_m"] + 0.914)
+    assert {"chi2", "dof", "p_value"} <= set(plate_map["fit"])
+    assert plate_map["fit"]["p_value"] > 1e-3
+    assert isinstance(plate_map["warnings"], list)
+    assert plate_map["thickness_prior"]["kind"] == "free"
+    truth = _truth()
+    narrower = 0
+    for p in plate_map["positions"]:
+        assert {"thickness_m", "distance_m", "per_position"} <= set(p)
+        error = abs(p["distance_to_located_support_m"] - float(truth[p["position"]]["x_m"]))
+        assert error < TOLERANCE_M, (p["position"], error)
+        t, alone = p["thickness_m"], p["per_position"]["thickness_m"]
+        if t["status"] == "constrained":
+            assert t["ci95"][0] <= 3.0e-3 <= t["ci95"][1], p
+            if alone["status"] == "constrained":
+                narrower += (t["ci95"][1] - t["ci95"][0]) < (alone["ci95"][1] - alone["ci95"][0])
+    assert narrower >= 4  # P02..P06 near the edge, P07 and P08 as sharp as alone
+
+
+def test_map_joint_from_the_estimates_file_and_its_errors(tmp_path):
+    """analyze --estimates-out keeps each position's per-size summaries: map --joint works from
+    the file; bad flags exit 1 naming the flag and what is allowed."""
+    est = tmp_path / "est.csv"
+    run = CliRunner().invoke
+    res = run(build_cli(), ["analyze", "--manifest", str(SCAN / "campaign.csv"),
+                            "--estimates-out", str(est)])
+    assert res.exit_code == 0, res.output
+    with est.open() as fh:
+        rows = list(csv.DictReader(fh))
+    sizes = json.loads(rows[0]["size_summaries"])
+    assert sizes[0]["diameter_m"] == pytest.approx(9.53e-3) and sizes[0]["n_shots"] == 3
+    assert {"tof_s", "tof_std_s", "arr", "arr_std"} <= set(sizes[0])
+    assert rows[0]["table"] == "default_table"
+    png = tmp_path / "joint.png"
+    res = run(build_cli(), ["map", str(est), "--plate-id", "SCAN-A", "--joint", "--suggest", "2",
+                            "--json", "--out", str(png)])
+    assert res.exit_code == 0, res.output
+    plate_map = json.loads(res.stdout)
+    _joint_checks(plate_map)
+    assert len(plate_map["suggestions"]) == 2
+    assert plate_map["suggestions_basis"]["objective"] == "edge"
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    res = run(build_cli(), ["map", str(est), "--plate-id", "SCAN-A", "--joint"])
+    assert res.exit_code == 0 and "joint: thickness free" in res.stdout
+    assert "P02: thickness" in res.stdout and "(alone: thickness" in res.stdout
+    for args, words in ((["--suggest", "21"], "--suggest: 21 (allowed: an integer 0..20)"),
+                        (["--suggest", "two"], "--suggest: 'two' is not a whole number"),
+                        (["--suggest-for", "corners"], "--suggest-for: 'corners' (allowed: "
+                                                       "edge, thickness)"),
+                        (["--thickness-prior", "smooth"], "--thickness-prior: 'smooth' "
+                                                          "(allowed: free, common)"),
+                        (["--thickness-prior", "common", "--thickness-spread", "0"],
+                         "--thickness-spread: 0.0 (allowed: 0.001 to 1"),
+                        (["--thickness-spread", "0.05"], "--thickness-spread: only with "
+                                                         "--thickness-prior common")):
+        res = run(build_cli(), ["map", str(est), "--plate-id", "SCAN-A", "--joint", *args])
+        assert res.exit_code == 1, (args, res.output)
+        assert words in res.stderr, (args, res.stderr)
+    old = tmp_path / "old.csv"  # an estimates file from before the summaries were kept
+    with est.open() as fh, old.open("w") as out:
+        lines = list(csv.reader(fh))
+        keep = [i for i, name in enumerate(lines[0]) if name != "size_summaries"]
+        csv.writer(out).writerows([[line[i] for i in keep] for line in lines])
+    res = run(build_cli(), ["map", str(old), "--plate-id", "SCAN-A", "--joint"])
+    assert res.exit_code == 1 and "ESTIMATES_FILE_OR_STORE: position 'P01' has no per-size" \
+        in res.stderr, res.stderr
+
+
+def test_the_services_map_jointly_with_suggestions(scanned):
+    client, store = scanned
+    r = client.get("/v1/plates/SCAN-A/map", params={"joint": "true", "suggest": 2})
+    assert r.status_code == 200, r.text
+    plate_map = r.json()
+    _joint_checks(plate_map)
+    assert len(plate_map["suggestions"]) == 2
+    for s in plate_map["suggestions"]:
+        assert set(s) >= {"x_m", "y_m", "expected_gain"}
+        assert 0 <= s["x_m"] <= 0.914 and 0 <= s["y_m"] <= 0.914 and s["expected_gain"] >= 0
+    # suggestions without the joint answer: the positions keep their own answers
+    plain = client.get("/v1/plates/SCAN-A/map", params={"suggest": 1}).json()
+    assert plain["joint"] is False and len(plain["suggestions"]) == 1
+    assert "per_position" not in plain["positions"][0]
+    png = client.get("/v1/plates/SCAN-A/map.png", params={"joint": "true", "suggest": 2})
+    assert png.status_code == 200 and png.content[:8] == b"\x89PNG\r\n\x1a\n"
+    tied = client.get("/v1/plates/SCAN-A/map", params={"joint": "true",
+                                                       "thickness_prior": "common",
+                                                       "thickness_spread": 0.05}).json()
+    assert tied["thickness_prior"]["kind"] == "common"
+    assert tied["thickness_prior"]["spread_rel"] == 0.05
+    for params, field in (({"suggest": 21}, "suggest"), ({"suggest": -1}, "suggest"),
+                          ({"suggest": "x"}, "suggest"), ({"suggest_for": "corners"},
+                                                          "suggest_for"),
+                          ({"thickness_prior": "smooth"}, "thickness_prior"),
+                          ({"thickness_spread": 0.05}, "thickness_spread"),
+                          ({"thickness_prior": "common", "thickness_spread": 0},
+                           "thickness_spread")):
+        r = client.get("/v1/plates/SCAN-A/map", params={"joint": "true", **params})
+        assert r.status_code == 422, (params, r.text)
+        assert r.headers["content-type"].startswith("application/problem+json")
+        assert r.json()["field"] == field, (params, r.json())
+    res = CliRunner().invoke(build_cli(), ["map", str(store), "--plate-id", "SCAN-A", "--joint",
+                                           "--json"])
+    assert res.exit_code == 0, res.output
+    _joint_checks(json.loads(res.stdout))

@@ -2,7 +2,9 @@
 
 Skipped, with the reason printed, where no Chromium is installed (`apt-get install chromium`).
 The page must list a plate posted through the API, show its map and measurements, and log no
-console error; with an API key set it asks for the key instead of failing.
+console error; with an API key set it asks for the key instead of failing. The joint map and its
+suggested next positions are driven by Playwright for Python (through the same Chromium; skipped
+with the reason printed where Playwright is missing).
 """
 
 from __future__ import annotations
@@ -105,3 +107,55 @@ def test_with_an_api_key_the_page_asks_for_it(tmp_path):
         stop_group(proc)
     form = dom.split('id="key-form"')[1].split(">")[0]
     assert "hidden" not in form and "needs its API key" in dom
+
+
+def test_the_joint_map_marks_the_next_positions(server, tmp_path):
+    """Ticking "invert jointly" and asking for two next positions: the map is redrawn from
+    map.png?joint=true&suggest=2, the two suggestions are listed with their gain, the joint fit
+    is shown, and the browser logs no error. SOLITONDE_FIGURES keeps the screenshot."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        print("SKIP: playwright is not installed (pip install -e '.[dev]')")
+        pytest.skip("playwright not installed (pip install -e '.[dev]')")
+    errors: list[str] = []
+    pictures: list[str] = []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM,
+                                    args=["--no-sandbox", "--disable-gpu"])
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 1400})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.on("response", lambda r: (errors.append(f"{r.status} {r.url}")
+                                           if r.status >= 400 else
+                                           pictures.append(r.url) if "map.png" in r.url
+                                           else None))
+            page.goto(f"{server}/#plate=SCAN-A")
+            page.locator("#support", has_text="Located support").wait_for(timeout=60_000)
+            assert page.locator("#suggestions-panel").is_hidden()
+            page.check("#joint")
+            page.fill("#suggest", "2")
+            page.dispatch_event("#suggest", "change")
+            rows = page.locator("#suggestions tbody tr")
+            rows.nth(1).wait_for(timeout=120_000)
+            assert rows.count() == 2
+            first = rows.first.inner_text()
+            assert first.startswith("next 1") and "," in first, first
+            page.locator("#support", has_text="(joint)").wait_for(timeout=60_000)
+            assert "Joint fit: chi2" in page.locator("#joint-notes").inner_text()
+            assert "joint=1" in page.url and "suggest=2" in page.url
+            for _ in range(300):  # the redrawn map decoded
+                if any("joint=true" in u and "suggest=2" in u for u in pictures) and \
+                        page.locator("#map").evaluate("e => e.complete && e.naturalWidth > 0"):
+                    break
+                page.wait_for_timeout(100)
+            else:
+                raise AssertionError(f"the joint map was not drawn: {pictures}")
+            figures = os.environ.get("SOLITONDE_FIGURES")
+            if figures:
+                Path(figures).mkdir(parents=True, exist_ok=True)
+                page.screenshot(path=str(Path(figures) / "web_joint_map.png"), full_page=True)
+        finally:
+            browser.close()
+    assert not errors, errors

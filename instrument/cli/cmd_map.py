@@ -2,7 +2,10 @@
 
 From the estimates file `analyze --estimates-out` writes (one row per position) or from the
 service's store (its measurements pooled per position and inverted with the model table), the
-same map the service draws at ``/v1/plates/{plate_id}/map.png``.
+same map the service draws at ``/v1/plates/{plate_id}/map.png``. With ``--joint`` the scan is
+inverted as one unknown (the plate's edges and every position's thickness, from the positions'
+per-size summaries: the estimates file's ``size_summaries`` or the store's shots); with
+``--suggest N`` the N positions to measure next are added (instrument.inference.plate_map).
 """
 
 from __future__ import annotations
@@ -23,10 +26,10 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
-def _from_estimates(path: Path, plate_id: str) -> list[dict[str, Any]]:
+def _from_estimates(path: Path, plate_id: str) -> tuple[list[dict[str, Any]], Any]:
     import pandas as pd
 
-    from solitonde.instrument.inference.plate_map import from_estimate_rows
+    from solitonde.instrument.inference.plate_map import from_estimate_rows, scan_from_rows
 
     try:
         frame = (pd.read_parquet(path) if path.suffix.lower() == ".parquet"
@@ -42,11 +45,11 @@ def _from_estimates(path: Path, plate_id: str) -> list[dict[str, Any]]:
         plates = sorted({str(p) for p in frame["plate_id"].dropna()})
         _fail(f"--plate-id: no plate {plate_id!r} in {path.name} (plates: "
               f"{', '.join(plates) or 'none'})")
-    return from_estimate_rows(rows)
+    return from_estimate_rows(rows), lambda: scan_from_rows(rows)
 
 
-def _from_store(path: Path, plate_id: str, estimator: Any) -> list[dict[str, Any]]:
-    from solitonde.instrument.inference.plate_map import from_records
+def _from_store(path: Path, plate_id: str, estimator: Any) -> tuple[list[dict[str, Any]], Any]:
+    from solitonde.instrument.inference.plate_map import from_records, scan_from_records
     from solitonde.instrument.service.store import Store, StoreError
 
     try:
@@ -61,7 +64,44 @@ def _from_store(path: Path, plate_id: str, estimator: Any) -> list[dict[str, Any
     if not records:
         _fail(f"--plate-id: no plate {plate_id!r} in {path.name} (plates: "
               f"{', '.join(plates) or 'none'})")
-    return from_records(records, estimator)
+    return from_records(records, estimator), lambda: scan_from_records(records)
+
+
+FLAG_OF = {"suggest": "--suggest", "suggest_for": "--suggest-for",
+           "thickness_prior": "--thickness-prior", "thickness_spread": "--thickness-spread",
+           "table": "--table", "size_summaries": "ESTIMATES_FILE_OR_STORE",
+           "positions": "--joint", "joint": "--joint", "x_m": "ESTIMATES_FILE_OR_STORE",
+           "y_m": "ESTIMATES_FILE_OR_STORE"}
+"""The flag each field of a joint-map error stands for on the command line."""
+
+
+def _options(joint: bool, suggest: str | None, suggest_for: str, thickness_prior: str,
+             thickness_spread: str | None) -> Any:
+    """The joint map's options from the flags, each checked (exit 1 naming the flag)."""
+    from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
+    from solitonde.instrument.inference.plate_map import JointOptions
+    from solitonde.instrument.inference.suggest import MAX_SUGGEST
+
+    n: Any = 0
+    if suggest is not None:
+        try:
+            n = int(suggest)
+        except ValueError:
+            _fail(f"--suggest: {suggest!r} is not a whole number (allowed: 0..{MAX_SUGGEST})", 1)
+    spread: Any = DEFAULT_SPREAD
+    if thickness_spread is not None:
+        try:
+            spread = float(thickness_spread)
+        except ValueError:
+            _fail(f"--thickness-spread: {thickness_spread!r} is not a number (allowed: a "
+                  "relative standard deviation, e.g. 0.05)", 1)
+        if thickness_prior != "common":
+            _fail("--thickness-spread: only with --thickness-prior common (the positions' "
+                  "spread around their common mean)", 1)
+    try:
+        return JointOptions(joint, n, suggest_for, thickness_prior, spread)
+    except JointMapError as exc:
+        _fail(f"{FLAG_OF.get(exc.field, exc.field)}: {exc.message}", 1)
 
 
 def map_command(
@@ -73,13 +113,32 @@ def map_command(
     as_json: bool = typer.Option(False, "--json", help="Print the map JSON (positions, "
                                  "support)."),
     table: list[Path] = typer.Option([], "--table", help="Model table(s): the plate's size "
-                                     "for the outline and, for a store, the inversion "
-                                     "(default: $SOLITONDE_TABLE, else the bundled table)."),
+                                     "for the outline and, for a store or --joint, the "
+                                     "inversion (default: $SOLITONDE_TABLE, else the bundled "
+                                     "table)."),
+    joint: bool = typer.Option(False, "--joint", help="Invert the scan as one unknown: the "
+                               "plate's edges and every position's thickness, with the joint "
+                               "fit and warnings."),
+    suggest: str | None = typer.Option(None, "--suggest", metavar="N", help="Add the N "
+                                       "positions where a measurement would shrink the edge's "
+                                       "interval most (0..20)."),
+    suggest_for: str = typer.Option("edge", "--suggest-for", help="What the suggestions "
+                                    "shrink: edge (the located edge's interval) or thickness "
+                                    "(the thickness map's)."),
+    thickness_prior: str = typer.Option("free", "--thickness-prior", help="free (each "
+                                        "position's thickness its own, the default) or common "
+                                        "(tied to the plate's mean with --thickness-spread)."),
+    thickness_spread: str | None = typer.Option(None, "--thickness-spread", metavar="REL",
+                                                help="With --thickness-prior common: each "
+                                                "position's relative spread around the mean "
+                                                "(1 sd; default 0.05)."),
 ) -> None:
     """Map a plate: thickness and distance to support at each position, the support located."""
     from solitonde.instrument.cli.cmd_invert import table_path
     from solitonde.instrument.inference.plate_map import build
     from solitonde.instrument.inference.table_set import TableSet
+
+    options = _options(joint, suggest, suggest_for, thickness_prior, thickness_spread)
 
     suffix = source.suffix.lower()
     if not source.is_file():
@@ -94,9 +153,11 @@ def map_command(
     estimator = TableSet(table or [table_path(None)], warm_up=False)
     if suffix in STORE_SUFFIXES and not estimator.loaded:
         _fail(f"--table: {estimator.reason}")
-    positions = (_from_store(source, plate_id, estimator) if suffix in STORE_SUFFIXES
-                 else _from_estimates(source, plate_id))
+    positions, scan = (_from_store(source, plate_id, estimator) if suffix in STORE_SUFFIXES
+                       else _from_estimates(source, plate_id))
     plate_map = build(plate_id, positions, estimator.plate_size())
+    if options.wanted:
+        plate_map = _joint(plate_map, scan, estimator, options)
     if out is not None:
         from solitonde.instrument.plotting import map_png
         from solitonde.instrument.studies.figures import write_bytes
@@ -120,8 +181,66 @@ def map_command(
                    f"{support['residual_m'] * 1e3:.2f} mm")
     else:
         typer.echo(f"support: not located ({plate_map['support_reason']})")
+    if plate_map.get("joint"):
+        _print_joint(plate_map)
+    for s in plate_map.get("suggestions", []):
+        typer.echo(f"next: x {s['x_m'] * 1e3:.1f} mm, y {s['y_m'] * 1e3:.1f} mm "
+                   f"({s['distance_m'] * 1e3:.1f} mm from the support): expected gain "
+                   f"{s['expected_gain'] * 1e3:.2f} mm")
     if out is not None:
         typer.echo(f"wrote {out}")
+
+
+def _joint(plate_map: dict[str, Any], scan: Any, estimator: Any, options: Any) -> dict[str, Any]:
+    from solitonde.instrument.inference.joint_map import JointMapError
+    from solitonde.instrument.inference.plate_map import with_joint
+    from solitonde.instrument.inference.table_set import TableChoiceError
+
+    if not estimator.loaded:
+        _fail(f"--table: {estimator.reason}", 1)
+    try:
+        positions, tables = scan()
+        return with_joint(plate_map, positions, tables, estimator, options)
+    except JointMapError as exc:
+        _fail(f"{FLAG_OF.get(exc.field, exc.field)}: {exc.message}", 1)
+    except TableChoiceError as exc:
+        _fail(f"--table: {exc.message}", 1)
+    return plate_map  # not reached
+
+
+def _print_joint(plate_map: dict[str, Any]) -> None:
+    """The joint answer, a line per position, then its fit and warnings."""
+    def mm(p: dict[str, Any] | None) -> str:
+        if not p:
+            return "-"
+        lo, hi = p.get("ci95") or (None, None)
+        if p.get("status") in ("constrained", "inconsistent") and p.get("median") is not None:
+            return f"{p['median'] * 1e3:.2f} ({lo * 1e3:.2f}..{hi * 1e3:.2f})"
+        if p.get("status") == "lower_bound_only":
+            return f">= {lo * 1e3:.2f}"
+        if p.get("status") == "upper_bound_only":
+            return f"<= {hi * 1e3:.2f}"
+        return str(p.get("status"))
+
+    prior = plate_map.get("thickness_prior") or {}
+    typer.echo(f"joint: thickness {prior.get('kind')}"
+               + (f" (spread {100 * prior['spread_rel']:.3g} %)" if prior.get("spread_rel")
+                  else "") + "; mm, 95 % in brackets:")
+    for p in plate_map["positions"]:
+        own = p.get("per_position") or {}
+        line = (f"  {p['position']}: thickness {mm(p.get('thickness_m'))}, distance "
+                f"{mm(p.get('distance_m'))}")
+        if own:
+            line += f"  (alone: thickness {mm(own.get('thickness_m'))})"
+        if p.get("joint_reason"):
+            line += f"  (not in the joint answer: {p['joint_reason']})"
+        typer.echo(line)
+    fit = plate_map.get("fit") or {}
+    if fit.get("chi2") is not None:
+        typer.echo(f"fit: chi2 {fit['chi2']:.3g} for {fit['dof']:.3g} dof, p = "
+                   f"{fit['p_value']:.3g}")
+    for w in plate_map.get("warnings", []):
+        typer.echo(f"warning: {w}")
 
 
 def register(app: typer.Typer) -> None:

@@ -42,6 +42,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                                    "plate; write them as JSON."),
     "validate": ("cmd_validate", "Simulate random plates with noise and dissipation, invert, and "
                                  "score the answers."),
+    "validate-map": ("cmd_validate_map", "Simulate scans of random plates, invert them jointly "
+                                         "and one by one, and score both."),
     "reproduce": ("cmd_reproduce", "Regenerate the paper's figures 3-10 (PNG + CSV each) and "
                                    "summary.json with the checks."),
     "table": ("cmd_table", "Build and inspect model tables."),

@@ -4,22 +4,30 @@
 same columns, so a script reads either. Every interval bound is its own column
 (``thickness_m_ci95_low``); a side the data leave open is empty, and ``*_status`` says why.
 ``fit_chi2``, ``fit_dof``, ``fit_p_value`` are the estimate's fit; ``warnings`` its warnings,
-joined by "; ".
+joined by "; ". What the estimate was made from follows, so that a plate's scan can be inverted
+jointly from the file (`solitonde map --joint`): ``table`` (the model table's id),
+``size_summaries`` (JSON: per sphere size ``diameter_m``, ``tof_s``, ``tof_std_s``, ``arr``,
+``arr_std``, ``n_shots``, ``arr_upper_bound``, as the inversion read them), ``calibration`` and
+``material_spread`` (JSON, empty when none).
 """
 
 from __future__ import annotations
 
 import io
+import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
 from typing import Any
 
+from solitonde.signal.json_ready import json_ready
+
 PARAMETERS = ("thickness_m", "distance_m")
 STATS = ("map", "median", "ci68_low", "ci68_high", "ci95_low", "ci95_high", "status")
 LOCATION_COLUMNS = ("plate_id", "position", "x_m", "y_m", "sphere_diameters_m", "n_shots")
 ESTIMATE_COLUMNS = (*LOCATION_COLUMNS, *(f"{p}_{s}" for p in PARAMETERS for s in STATS),
-                    "reason", "fit_chi2", "fit_dof", "fit_p_value", "warnings")
+                    "reason", "fit_chi2", "fit_dof", "fit_p_value", "warnings", "table",
+                    "size_summaries", "calibration", "material_spread")
 """The columns of an estimates file, in order."""
 
 
@@ -71,6 +79,11 @@ def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shot
     for key in ("chi2", "dof", "p_value"):
         row[f"fit_{key}"] = _finite(fit.get(key))
     row["warnings"] = "; ".join((estimate or {}).get("warnings") or []) or None
+    row["table"] = (estimate or {}).get("table")
+    for key, value in (("size_summaries", (estimate or {}).get("inputs")),
+                       ("calibration", (estimate or {}).get("calibration")),
+                       ("material_spread", (estimate or {}).get("material_spread"))):
+        row[key] = json.dumps(json_ready(value), allow_nan=False) if value else None
     return row
 
 
@@ -103,6 +116,7 @@ def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
         if col in frame:
             frame[col] = frame[col].astype("Int64")
     for col in ("plate_id", "position", "sphere_diameters_m", "reason", "warnings", "created_at",
+                "table", "size_summaries", "calibration", "material_spread",
                 *(f"{p}_status" for p in PARAMETERS)):
         if col in frame:
             frame[col] = frame[col].astype("string")

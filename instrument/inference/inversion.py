@@ -650,7 +650,8 @@ def invert(
 
 
 def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibration | None,
-                  return_posterior: bool, spread: Mapping[str, float] | None = None) -> Estimate:
+                  return_posterior: bool, spread: Mapping[str, float] | None = None,
+                  keep: dict[str, Any] | None = None) -> Estimate:
     """The grid posterior of :func:`invert` for exactly these sphere sizes.
 
     Per cell, -2 log likelihood = chi^2 + log det C (+ the hidden sizes' bound terms), with C the
@@ -741,6 +742,9 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         logdet[ok] += logdet_m[ok]
     n_terms = 2 * len(seen) + len(hidden)
     chi2 = misfit + logdet + penalty + bound_terms
+    if keep is not None:  # the cells' likelihood itself, for a plate's joint map
+        keep.update(deviance=chi2.copy(), n_terms=n_terms, grid=g0, misfit=misfit + sum(
+            (np.maximum(b - 2.0 * math.log(2.0), 0.0) for b in bound_list), np.zeros(shape)))
     best = float(chi2.min())
     i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
     if not math.isfinite(best):
@@ -827,5 +831,25 @@ def _normal_cdf(z: np.ndarray) -> np.ndarray:
     return ndtr(z)
 
 
+def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary],
+                    calibration: Calibration | None = None, *,
+                    material_spread: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """The likelihood :func:`invert` puts on every fine (t, L) cell for exactly these sphere
+    sizes (no size left out), for a plate's joint map (instrument.inference.joint_map): one
+    likelihood, not a second one. ``deviance`` is -2 log L (inf where the model has no
+    reflection), ``misfit`` the chi^2 that ``fit`` reports, ``grid`` the first size's
+    :class:`FineGrid` (axes and prior weights), ``n_terms`` the terms counted."""
+    from solitonde.instrument.inference.material_spread import spread_of
+
+    keep: dict[str, Any] = {}
+    spread = dict(spread_of(table) if material_spread is None else material_spread)
+    _invert_items(table, [FeatureSummary.from_any(i) for i in inputs], calibration, False,
+                  spread, keep)
+    return keep
+
+
+summarise_marginal = _summarise
+"""A marginal posterior's MAP, median, intervals and status, by the rules of :func:`invert`."""
+
 __all__ = ["Estimate", "FeatureSummary", "InversionError", "ParameterEstimate", "TableError",
-           "fine_grid", "invert", "predict"]
+           "cell_likelihood", "fine_grid", "invert", "predict", "summarise_marginal"]

@@ -5,18 +5,36 @@ share a position name and coordinates) the coordinates, shot count and estimate,
 the positions' distance answers imply (instrument.support) or null with the reason. In the
 service the shots of every measurement at a position are pooled per sphere size and inverted
 once; from an estimates file each row is already one position.
+
+Asked for (:class:`JointOptions`), the scan is also inverted as one unknown
+(instrument.inference.joint_map: the plate's edges and every position's thickness from each
+position's per-size summaries) and the next positions to measure are chosen
+(instrument.inference.suggest); :func:`with_joint` adds both to the same JSON.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.inversion import FeatureSummary
+from solitonde.instrument.inference.joint_map import (
+    DEFAULT_SPREAD,
+    JointMapError,
+    ScanPosition,
+    ThicknessPrior,
+)
+from solitonde.instrument.inference.joint_map import posterior as joint_posterior
+from solitonde.instrument.inference.joint_map import summary as joint_summary
 from solitonde.instrument.inference.pipeline import MISSING_SIZE, no_reflection
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
+from solitonde.instrument.inference.suggest import check_request
+from solitonde.instrument.inference.suggest import describe as describe_gain
+from solitonde.instrument.inference.suggest import suggest as suggest_positions
 from solitonde.instrument.inference.support import locate
 from solitonde.instrument.inference.table_set import TableSet
 
@@ -170,3 +188,142 @@ def _open_sides_filled(position: Mapping[str, Any]) -> dict[str, Any]:
                              "ci95": [lo95 if lo95 is not None else -math.inf,
                                       hi95 if hi95 is not None else math.inf]}
     return out
+
+
+# --- the scan as one unknown (instrument.inference.joint_map) ---------------------------------
+
+
+@dataclass(frozen=True)
+class JointOptions:
+    """What a map request asks beyond the per-position map: the joint answer, its thickness
+    prior, and the next positions to measure."""
+
+    joint: bool = False
+    suggest: int = 0
+    suggest_for: str = "edge"
+    thickness_prior: str = "free"
+    thickness_spread: float = DEFAULT_SPREAD
+
+    def __post_init__(self) -> None:
+        check_request(self.suggest, self.suggest_for)
+        ThicknessPrior(self.thickness_prior, self.thickness_spread)
+
+    @property
+    def wanted(self) -> bool:
+        return self.joint or self.suggest > 0
+
+
+def scan_from_records(records: Sequence[Any]) -> tuple[list[ScanPosition], list[str | None]]:
+    """A plate's stored measurements as scan positions (grouped as :func:`from_records` groups
+    them, their aggregates pooled per sphere size), with the table each was estimated with."""
+    groups: dict[tuple[Any, Any, Any], list[Any]] = {}
+    for r in records:
+        loc = r.result.get("location") or {}
+        groups.setdefault(position_key(r.position, loc.get("x_m"), loc.get("y_m")),
+                          []).append(r)
+    out, tables = [], []
+    for (name, x, y), members in groups.items():
+        if x is None or y is None:
+            continue
+        inputs, _ = pool([a for m in members for a in m.result.get("aggregates", [])])
+        if not inputs:  # only sizes without a reflection: their bounds, as the inversion takes
+            inputs = _bounds_only(members)
+        out.append(ScanPosition(name, x, y, inputs))
+        tables.append(next((m.result["table"] for m in reversed(members)
+                            if m.result.get("table")), None))
+    return out, tables
+
+
+def _bounds_only(members: Sequence[Any]) -> list[FeatureSummary]:
+    """The estimate's own inputs of a position whose sizes show no reflection."""
+    for m in reversed(members):
+        inputs = ((m.result.get("estimate") or {}).get("inputs")) or []
+        if inputs:
+            return [FeatureSummary.from_any(i) for i in inputs]
+    return []
+
+
+def scan_from_rows(rows: Sequence[Mapping[str, Any]]
+                   ) -> tuple[list[ScanPosition], list[str | None]]:
+    """Scan positions from an estimates file's rows (its ``size_summaries``, ``calibration``,
+    ``material_spread`` and ``table`` columns, instrument.inference.estimate_rows).
+
+    Raises JointMapError (``size_summaries``) for a row that lacks them."""
+    from solitonde.instrument.inference.calibration import Calibration
+
+    out, tables = [], []
+    for row in rows:
+        x, y = _num(row.get("x_m")), _num(row.get("y_m"))
+        if x is None or y is None:
+            continue
+        name = _text(row.get("position"))
+        text = _text(row.get("size_summaries"))
+        if text is None:
+            if _text(row.get("reason")) is not None and _text(row.get("thickness_m_status")) \
+                    is None:
+                continue  # no estimate was possible: nothing to invert
+            raise JointMapError("size_summaries", f"position {name!r} has no per-size summaries "
+                                "(an estimates file written before they were kept: run "
+                                "`solitonde analyze --estimates-out` again)")
+        try:
+            inputs = [FeatureSummary.from_any(i) for i in json.loads(text)]
+            cal_text = _text(row.get("calibration"))
+            cal = Calibration.from_any(json.loads(cal_text)) if cal_text else None
+            spread_text = _text(row.get("material_spread"))
+            spread = json.loads(spread_text) if spread_text else None
+        except (ValueError, TypeError) as exc:
+            raise JointMapError("size_summaries", f"position {name!r}: {exc}") from None
+        out.append(ScanPosition(name, x, y, inputs, cal, spread))
+        tables.append(_text(row.get("table")))
+    return out, tables
+
+
+def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
+               table_ids: Sequence[str | None], tables: TableSet,
+               options: JointOptions) -> dict[str, Any]:
+    """``plate_map`` with the joint answer (``options.joint``: positions' thickness and
+    distance, ``support``, ``fit``, ``warnings``, ``thickness_prior``, each position's own answer
+    kept under ``per_position``) and ``suggestions`` (``options.suggest``).
+
+    Raises JointMapError, TableChoiceError."""
+    if not options.wanted:
+        return plate_map
+    named = {t for t in table_ids if t}
+    if len(named) > 1:
+        raise JointMapError("table", f"the plate's positions were estimated with different "
+                            f"tables ({', '.join(sorted(named))}); a joint map needs one family")
+    if not tables.loaded:
+        raise JointMapError("table", tables.reason or "no model table loaded")
+    diameters = sorted({i.diameter_m for p in scan for i in p.inputs})
+    chosen = tables.choose(diameters, next(iter(named), None))
+    prior = ThicknessPrior(options.thickness_prior, options.thickness_spread)
+    post = joint_posterior(chosen.table, scan, prior)
+    plate_map = dict(plate_map)
+    plate_map["joint"] = options.joint
+    if options.joint:
+        answer = joint_summary(post)
+        by_key = {(p["position"], p["x_m"], p["y_m"]): p for p in answer["positions"]}
+        left_out = {(e["position"]): e["reason"] for e in answer["excluded"]}
+        positions = []
+        for entry in plate_map["positions"]:
+            entry = dict(entry)
+            joint = by_key.get((entry["position"], entry["x_m"], entry["y_m"]))
+            if joint is not None:
+                entry["per_position"] = {p: entry.get(p) for p in PARAMETERS}
+                entry.update({k: joint[k] for k in ("thickness_m", "distance_m",
+                                                    "distance_to_located_support_m")})
+            elif entry["x_m"] is not None and entry["y_m"] is not None:
+                entry["joint_reason"] = left_out.get(entry["position"],
+                                                     "no inversion input at this position")
+            positions.append(entry)
+        plate_map.update(positions=positions, support=answer["support"], support_reason=None,
+                         fit=answer["fit"], warnings=answer["warnings"],
+                         thickness_prior=answer["thickness_prior"], edges=answer["edges"],
+                         table=chosen.table.table_id)
+    if options.suggest:
+        found = suggest_positions(post, options.suggest, objective=options.suggest_for,
+                                  plate_size_m=plate_map.get("plate_size_m"))
+        plate_map["suggestions"] = found.pop("suggestions")
+        plate_map["suggestions_basis"] = {**found, "expected_gain": describe_gain(
+            options.suggest_for)}
+    return plate_map

@@ -2,14 +2,20 @@
 
 A plate is the measurements that share a ``plate_id``; those whose metadata carry ``x_m`` and
 ``y_m`` are its scan. The map pools the shots of each position and inverts them once, then
-locates the clamped edge from the positions' distance answers (instrument.plate_map).
+locates the clamped edge from the positions' distance answers (instrument.plate_map). With
+``joint=true`` the scan is inverted as one unknown (the plate's edges and every position's
+thickness) and with ``suggest=N`` the N positions to measure next are added; the same query
+draws ``map.png``. The last few maps are kept (a plate's map changes only when its measurements
+do), so the page's JSON and picture of one map cost one inversion.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import threading
+from collections import OrderedDict
+from typing import Any, Literal
 
-from fastapi import APIRouter, Path, Request
+from fastapi import APIRouter, Depends, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
@@ -39,8 +45,48 @@ async def list_plates(request: Request) -> dict[str, Any]:
     return {"items": plates}
 
 
-def _map(svc: Any, plate_id: str) -> dict[str, Any]:
+MAPS_KEPT = 8
+_kept: OrderedDict[tuple[Any, ...], dict[str, Any]] = OrderedDict()
+_kept_lock = threading.Lock()
+
+
+class MapQuery:
+    """The map's query: the joint answer, its thickness prior, the next positions."""
+
+    def __init__(
+        self,
+        joint: bool = Query(False, description="invert the scan as one unknown: the plate's "
+                            "edges and every position's thickness, with the joint fit and "
+                            "warnings"),
+        suggest: int = Query(0, ge=0, le=20, description="the N positions where a measurement "
+                             "would shrink the edge's (or the thickness map's) interval most"),
+        suggest_for: Literal["edge", "thickness"] = Query(
+            "edge", description="what the suggestions shrink"),
+        thickness_prior: Literal["free", "common"] = Query(
+            "free", description="each position's thickness free, or tied to the plate's "
+            "common mean with thickness_spread"),
+        thickness_spread: float | None = Query(
+            None, ge=1e-3, le=1.0, description="with thickness_prior=common: each position's "
+            "relative spread around the mean (1 sd; default 0.05)"),
+    ) -> None:
+        from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
+        from solitonde.instrument.inference.plate_map import JointOptions
+
+        if thickness_spread is not None and thickness_prior != "common":
+            raise Problem(422, "thickness_spread: only with thickness_prior=common (the "
+                          "positions' spread around their common mean)", field="thickness_spread")
+        try:
+            self.options = JointOptions(joint, suggest, suggest_for, thickness_prior,
+                                        DEFAULT_SPREAD if thickness_spread is None
+                                        else thickness_spread)
+        except JointMapError as exc:
+            raise Problem(422, str(exc), field=exc.field) from None
+
+
+def _map(svc: Any, plate_id: str, options: Any = None) -> dict[str, Any]:
     from solitonde.instrument.inference import plate_map
+    from solitonde.instrument.inference.joint_map import JointMapError
+    from solitonde.instrument.inference.table_set import TableChoiceError
 
     records = svc.store.all_of_plate(plate_id, MAP_POSITIONS_MAX + 1)
     if not records:
@@ -50,29 +96,59 @@ def _map(svc: Any, plate_id: str) -> dict[str, Any]:
         raise Problem(422, f"plate_id: more than {MAP_POSITIONS_MAX:,} measurements of plate "
                       f"{plate_id!r}; a map reads at most {MAP_POSITIONS_MAX:,}", kind="limit",
                       field="plate_id")
+    key = (id(svc), plate_id, tuple((r.id, r.created_at) for r in records), options)
+    with _kept_lock:
+        if key in _kept:
+            _kept.move_to_end(key)
+            return _kept[key]
     positions = plate_map.from_records(records, svc.estimator)
-    return plate_map.build(plate_id, positions, svc.estimator.plate_size())
+    result = plate_map.build(plate_id, positions, svc.estimator.plate_size())
+    if options is not None and options.wanted:
+        scan, tables = plate_map.scan_from_records(records)
+        try:
+            result = plate_map.with_joint(result, scan, tables, svc.estimator, options)
+        except JointMapError as exc:
+            raise Problem(422, str(exc), field=exc.field) from None
+        except TableChoiceError as exc:
+            raise Problem(422, str(exc), field=exc.field) from None
+    with _kept_lock:
+        _kept[key] = result
+        while len(_kept) > MAPS_KEPT:
+            _kept.popitem(last=False)
+    return result
 
 
 @router.get("/plates/{plate_id}/map", responses={**ERRORS, 404: _PROBLEM},
             operation_id="plate_map",
             summary="A plate's map: positions, estimates, the located support")
-async def get_map(request: Request, plate_id: str = PlateId) -> dict[str, Any]:
+async def get_map(request: Request, plate_id: str = PlateId,
+                  query: MapQuery = Depends()) -> dict[str, Any]:
     """Per position: coordinates, shot count, thickness and distance (median, intervals,
     status); then ``support`` (``normal_angle_deg``, ``offset_m``, ``ci95_offset_m``,
-    ``n_positions``, ``residual_m``) or null with ``support_reason``."""
+    ``n_positions``, ``residual_m``) or null with ``support_reason``.
 
-    return await run_in_threadpool(_map, service(request), plate_id)
+    ``joint=true``: the positions' thickness and distance from one posterior over the plate's
+    edges (each position's own answer under ``per_position``), ``support`` from it (with
+    ``ci95_normal_angle_deg``, ``model``, ``second_offset_m``, ``status``), ``fit``
+    (``chi2``, ``dof``, ``p_value``: do the positions agree with one straight edge?),
+    ``warnings`` and ``thickness_prior``. ``suggest=N``: ``suggestions``, N positions
+    ``{x_m, y_m, expected_gain, distance_m}`` and ``suggestions_basis`` (what the gain
+    measures)."""
+
+    return await run_in_threadpool(_map, service(request), plate_id, query.options)
 
 
 @router.get("/plates/{plate_id}/map.png", response_class=Response,
             responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
             operation_id="plate_map_png",
             summary="PNG of a plate's thickness and distance-to-support maps")
-async def get_map_png(request: Request, plate_id: str = PlateId) -> Response:
+async def get_map_png(request: Request, plate_id: str = PlateId,
+                      query: MapQuery = Depends()) -> Response:
+    """The map's picture; with ``joint`` and ``suggest`` as for the map's JSON (the suggested
+    positions marked as stars)."""
     from solitonde.instrument.plotting import map_png
 
     svc = service(request)
-    data = await run_in_threadpool(_map, svc, plate_id)
+    data = await run_in_threadpool(_map, svc, plate_id, query.options)
     png = await run_for_client(request, svc.plot_lane, map_png, data)
     return Response(png, media_type="image/png")

@@ -1,4 +1,5 @@
-// The solitonde page: upload a recording, plates, a plate's map, one estimate per position, its
+// The solitonde page: upload a recording, plates, a plate's map (inverted position by position or
+// as one unknown, with the next positions to measure marked), one estimate per position, its
 // measurements, and every shot's trace with the picks marked. Everything comes from the REST API
 // under /v1; the API key, when the server asks for one, is kept for this browser tab only
 // (sessionStorage) and sent as X-API-Key. The page looks for new measurements every few seconds
@@ -84,14 +85,36 @@ function here() {
   const params = new URLSearchParams(location.hash.slice(1));
   const m = params.get("m");
   return { plate: params.get("plate"), m: m === null ? null : Number(m),
-           shot: Number(params.get("shot") || 0) };
+           shot: Number(params.get("shot") || 0), joint: params.get("joint") === "1",
+           suggest: Math.max(0, Math.min(20, Number(params.get("suggest") || 0) || 0)) };
 }
 
 function go(plate, m = null, shot = 0) {
   const params = new URLSearchParams();
+  const { joint, suggest } = here();
   if (plate !== null && plate !== undefined) params.set("plate", plate);
   if (m !== null) params.set("m", String(m));
   if (m !== null && shot) params.set("shot", String(shot));
+  if (joint) params.set("joint", "1");
+  if (suggest) params.set("suggest", String(suggest));
+  location.hash = params.toString();
+}
+
+// the map's options (#joint=1&suggest=N): the scan inverted as one unknown, the next positions
+function mapQuery() {
+  const { joint, suggest } = here();
+  const params = new URLSearchParams();
+  if (joint) params.set("joint", "true");
+  if (suggest) params.set("suggest", String(suggest));
+  const text = params.toString();
+  return text ? `?${text}` : "";
+}
+
+function setMapOptions() {
+  const params = new URLSearchParams(location.hash.slice(1));
+  if ($("joint").checked) params.set("joint", "1"); else params.delete("joint");
+  const n = Math.max(0, Math.min(20, Number($("suggest").value) || 0));
+  if (n) params.set("suggest", String(n)); else params.delete("suggest");
   location.hash = params.toString();
 }
 
@@ -151,14 +174,36 @@ async function showPlate(plateId) {
   $("plate-title").textContent = `Plate ${plateId}`;
   downloads(plateId);
   const id = encodeURIComponent(plateId);
-  const map = await (await api(`/v1/plates/${id}/map`)).json();
+  const { joint, suggest } = here();
+  $("joint").checked = joint;
+  $("suggest").value = String(suggest);
+  const query = mapQuery();
+  const map = await (await api(`/v1/plates/${id}/map${query}`)).json();
   const s = map.support;
   $("support").textContent = s
-    ? `Located support: normal ${s.normal_angle_deg.toFixed(1)} deg, offset ${mm(s.offset_m)} mm ` +
-      `(95 % ${mm(s.ci95_offset_m[0])}..${mm(s.ci95_offset_m[1])} mm) from ${s.n_positions} positions, ` +
-      `rms residual ${mm(s.residual_m)} mm`
+    ? `Located support${map.joint ? " (joint)" : ""}: normal ${s.normal_angle_deg.toFixed(1)} deg, ` +
+      `offset ${mm(s.offset_m)} mm (95 % ${mm(s.ci95_offset_m[0])}..${mm(s.ci95_offset_m[1])} mm) ` +
+      `from ${s.n_positions} positions, rms residual ${mm(s.residual_m)} mm`
     : `Support not located: ${map.support_reason || "-"}`;
-  await image($("map"), `/v1/plates/${id}/map.png`);
+  const notes = [];
+  if (map.joint && map.fit) {
+    notes.push(`Joint fit: chi2 ${num(map.fit.chi2, 2)} for ${num(map.fit.dof, 1)} degrees of ` +
+               `freedom, p = ${num(map.fit.p_value, 3)}; thickness ${(map.thickness_prior || {}).kind}`);
+  }
+  for (const w of map.warnings || []) notes.push(`Warning: ${w}`);
+  $("joint-notes").textContent = notes.join("\n");
+  const next = $("suggestions").querySelector("tbody");
+  next.textContent = "";
+  (map.suggestions || []).forEach((p, k) => {
+    const row = document.createElement("tr");
+    cell(row, `next ${k + 1}`);
+    cell(row, `${mm(p.x_m)}, ${mm(p.y_m)}`);
+    cell(row, mm(p.distance_m));
+    cell(row, mm(p.expected_gain));
+    next.appendChild(row);
+  });
+  $("suggestions-panel").hidden = !(map.suggestions || []).length;
+  await image($("map"), `/v1/plates/${id}/map.png${query}`);
   const positions = $("positions").querySelector("tbody");
   positions.textContent = "";
   for (const p of map.positions || []) {
@@ -358,6 +403,9 @@ $("key-form").addEventListener("submit", (event) => {
   refresh(true);
 });
 $("upload-form").addEventListener("submit", upload);
+$("map-options").addEventListener("submit", (event) => { event.preventDefault(); setMapOptions(); });
+$("joint").addEventListener("change", setMapOptions);
+$("suggest").addEventListener("change", setMapOptions);
 for (const a of document.querySelectorAll(".downloads a")) a.addEventListener("click", download);
 dropZone();
 window.addEventListener("hashchange", () => refresh(true));

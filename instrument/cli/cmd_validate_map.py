@@ -1,0 +1,101 @@
+"""`solitonde validate-map`: simulated scans inverted jointly against position by position,
+and the next position suggested against chosen at random (see
+:mod:`solitonde.instrument.studies.map_study` for what is simulated and scored)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any, NoReturn
+
+import typer
+
+from solitonde.instrument.cli.cmd_invert import table_path
+
+
+def _fail(message: str, code: int = 1) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def validate_map_command(
+    scans: int = typer.Option(30, "--scans", help="number of random scans (3-10 positions "
+                              "each)"),
+    seed: int = typer.Option(0, "--seed", help="random seed"),
+    table: Path | None = typer.Option(None, "--table", help="model table"),
+    diameter: float | None = typer.Option(None, "--diameter", help="the sphere size, m "
+                                          "(default: the table's nearest to 9.53 mm)"),
+    sequential: bool = typer.Option(True, "--sequential/--no-sequential", help="also the "
+                                    "edge's error as positions are added, suggested or random "
+                                    "(most of the study's time)"),
+    measurements: Path | None = typer.Option(None, "--measurements", help="JSON file keeping "
+                                             "the simulated positions; reused when present"),
+    out: Path | None = typer.Option(None, "--out", help="also write every scan's rows as JSON"),
+    as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
+) -> None:
+    """Simulate scans of random plates, invert them jointly and one by one, and score both."""
+    from solitonde.instrument.studies.map_study import StudyInputError, run
+    from solitonde.instrument.tables.table import ModelTable, TableError
+
+    for flag, path in (("--out", out), ("--measurements", measurements)):
+        if path is not None and (path.is_dir() or not path.parent.is_dir()):
+            _fail(f"{flag}: {str(path)!r} is not a file in an existing folder")
+    try:
+        model = ModelTable.load(table_path(table))
+        result = run(model, scans, seed, diameter_m=diameter, measurements=measurements,
+                     sequential=sequential,
+                     progress=lambda k, n: print(f"scan {k}/{n}", file=sys.stderr, flush=True))
+    except StudyInputError as exc:
+        _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
+    except TableError as exc:
+        _fail(f"--{'diameter' if exc.field == 'diameter_m' else 'table'}: {exc}")
+    m = result["metrics"]
+    if out is not None:
+        out.write_text(json.dumps(result, indent=1, default=str) + "\n")
+    if as_json:
+        typer.echo(json.dumps(m, indent=2, default=str))
+        return
+    for line in report_lines(m):
+        typer.echo(line)
+
+
+def report_lines(m: dict[str, Any]) -> list[str]:
+    """The study's figures as the docs print them."""
+    def num(v: float | None, fmt: str = ".3f") -> str:
+        return "-" if v is None else format(v, fmt)
+
+    lines = [f"map study on {m['table']}: {m['n_scans']} scans, seed {m['seed']}, D "
+             f"{m['diameter_m'] * 1e3:.2f} mm, {m['simulated_positions']} positions simulated "
+             f"({m['simulation_wall_s']:.0f} s), {m['wall_s']:.0f} s in all"]
+    names = {"alone": "position by position", "free": "joint, thickness free",
+             "common": "joint, common mean (5 %)"}
+    for key, name in names.items():
+        t, e = m[f"thickness_{key}"], m[f"edge_{key}"]
+        lines.append(f"  {name}: thickness coverage {num(t['coverage_95'])} ({t['answers']} "
+                     f"answers of {t['positions']}); within {30} mm of the edge median 95 % "
+                     f"width {num(t['near_edge_width_median_m'] * 1e3, '.2f')} mm "
+                     f"({num(t['near_edge_width_median_rel'], '.3f')} of t, "
+                     f"{t['near_edge_positions']} positions); edge offset coverage "
+                     f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located), median "
+                     f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm")
+    for strategy in ("suggested", "random_near_edge", "random_on_plate"):
+        s = m.get(f"sequence_{strategy}")
+        if not s:
+            continue
+        curve = ", ".join(f"{k}: {v * 1e3:.1f}" for k, v in
+                          s["edge_error_median_m_by_positions"].items())
+        lines.append(f"  {strategy}: median edge error (mm) by positions {curve}; 5 mm reached "
+                     f"in {s['reached_target']} of {s['scans']} scans, median positions "
+                     f"{num(s['positions_to_target_median'], '.1f')}")
+    for other in ("random_near_edge", "random_on_plate"):
+        if f"suggested_fewer_than_{other}" in m:
+            lines.append(f"  suggested needed fewer positions than {other} in "
+                         f"{m[f'suggested_fewer_than_{other}']} scans, more in "
+                         f"{m[f'suggested_more_than_{other}']}")
+    return lines
+
+
+def register(app: typer.Typer) -> None:
+    """Add `validate-map` to the CLI."""
+    app.command("validate-map")(validate_map_command)

@@ -1,0 +1,772 @@
+"""A plate's scan inverted as one unknown: its clamped edges and every position's thickness.
+
+A map inverts each position alone and then fits an edge to the positions' distance answers
+(:mod:`.support`). Near a clamped edge, thickness and distance trade off in a single position's
+TOF and ARR, so its thickness comes back loose or as a bound; yet the positions together locate
+the edge, and once the edge is known each position's distance is known too. Here the scan is one
+unknown:
+
+* **The supports as the family declares them.** The paper's plate has two opposite clamped
+  edges a plate length ``a`` apart (the table family's ``plate_size_m[0]``, the length along
+  which ``distance_to_support`` runs); in the scan's own frame they are the lines
+  ``x cos(theta) + y sin(theta) = offset`` and ``... = offset + a``, angle and offset unknown (a
+  prior uniform in both). The reported edge is the one nearer the scan's centroid, so each pair
+  of lines is counted once. A position at signed distance ``d`` from it stands ``min(d, a - d)``
+  from the nearer support, and on the plate only for ``0 <= d <= a``. A family whose plate size
+  is not recorded has one edge (``line``): ``d >= 0``, distance ``d``.
+* **Each position's own likelihood.** Every position's per-size TOF/ARR summaries are inverted
+  as :func:`~.inversion.invert` does and its likelihood over the fine (t, L) grid is kept
+  (:func:`~.inversion.cell_likelihood`: the same terms, not a second likelihood). Positions the
+  table's family does not explain (``inconsistent``, ``out_of_range``) are left out, named.
+* **One posterior.** ``p(edge, t_1..t_n | data) ~ p(edge) prod_i L_i(t_i, L_i(edge)) p(t_i)``.
+  With thickness free per position (the default; ``p(t_i)`` uniform in log t as in a single
+  inversion) each position enters the edge's posterior through its marginal over t. With
+  ``common`` the positions share a mean ``mu`` (uniform in log) around which each ``log t_i``
+  scatters with a stated relative spread (``N(log mu, s^2)``); ``mu`` is integrated on a grid.
+  The edge's posterior lives on cells in (angle, the centroid's distance from the edge), refined
+  where it carries weight until it is smooth across each cell; each position's distance follows
+  from its coordinates on every cell, and its thickness is the mixture over the cells of its
+  own conditional posterior at that distance, summarised by the rules of a single inversion
+  (status, intervals, one-sided bounds).
+* **Do the positions agree with one straight edge?** ``fit = {chi2, dof, p_value}``: the misfit
+  of every position at the joint best answer, against ``n_terms - p_D`` degrees of freedom (p_D
+  the joint posterior's effective number of parameters, as in :mod:`.adequacy`). A single
+  position near a support fits any edge and leaves no degree of freedom; together they test the
+  edge. Below ``p = 0.001`` the joint answers are marked ``inconsistent`` and the warning names
+  the positions that disagree most.
+
+The plate material's spread enters every position's likelihood as in a single inversion, i.e.
+independently per position, although one plate has one material: with thickness free per
+position a material error is absorbed by each thickness anyway; with ``common`` this slightly
+understates how far the positions may move together.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.special import logsumexp
+from scipy.stats import chi2 as chi2_dist
+
+from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.inversion import (
+    Estimate,
+    FeatureSummary,
+    InversionError,
+    ParameterEstimate,
+    cell_likelihood,
+    invert,
+    summarise_marginal,
+)
+from solitonde.instrument.tables.table import ModelTable, TableError
+
+EDGE_MODELS = ("opposite_edges", "line")
+THICKNESS_PRIORS = ("free", "common")
+DEFAULT_SPREAD = 0.05
+"""Relative spread of a position's thickness around the plate's common mean (1 sd in log t)."""
+SPREAD_RANGE = (1e-3, 1.0)
+ANGLE_STEP_DEG = 1.0
+"""First cells of the edge's posterior: 1 degree by :data:`OFFSET_STEP_M`, refined where it
+matters."""
+OFFSET_STEP_M = 2e-3
+SIGNIFICANT = 25.0
+"""Cells whose log posterior lies within this of the best are refined (e^-25: nothing lost)."""
+FLAT = 0.5
+"""A cell whose four children differ by less than this (in log posterior) is fine enough."""
+MIN_ANGLE_STEP_DEG = 0.02
+MIN_OFFSET_STEP_M = 1e-4
+MAX_ROUNDS = 12
+LOG_FLOOR = -1e4
+"""log of a likelihood that is zero (no reflection in the model where one was measured)."""
+HYPER_STRIDE = 8
+"""The common mean's grid: every 8th fine thickness (4 per table interval, ~5 % apart)."""
+P_INCONSISTENT = 1e-3
+DISAGREE_CHI2 = 9.0
+"""A position whose misfit at the joint answer exceeds its own best by this disagrees."""
+WIDE_ANGLE_DEG = 20.0
+PROFILE_SUPPORT = 1e-4
+"""A position's thickness profile ranges over the distances whose joint posterior density is
+at least this fraction of its peak."""
+POSITION_SD_M = 1.0e-3
+"""How well a position's distance from the edge follows from its recorded coordinates (1 sd):
+the coordinates' own error (the chain's contact point against the mark, read off a rule) and the
+table's coarse distance axis next to the clamp (nodes 10 mm apart, where TOF and ARR turn fast),
+so a joint edge is not sharper than the positions can place it. Each position's likelihood is
+averaged over it along L."""
+
+
+class JointMapError(ValueError):
+    """Bad joint-map input; ``field`` names it."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+        self.message = message
+
+
+@dataclass
+class ScanPosition:
+    """One position of a scan: where, and its per-size summaries with what they need."""
+
+    name: str | None
+    x_m: float
+    y_m: float
+    inputs: list[FeatureSummary]
+    calibration: Calibration | None = None
+    material_spread: dict[str, float] | None = None
+
+
+@dataclass(frozen=True)
+class EdgeModel:
+    """The clamped supports as the family declares them, in the scan's frame."""
+
+    kind: str
+    width_m: float | None = None
+    """The separation of the two opposite edges (``opposite_edges``)."""
+    table_max_m: float = math.inf
+
+    def distance(self, d: np.ndarray) -> np.ndarray:
+        """Distance to the nearer support of positions at signed distance ``d`` from the edge."""
+        if self.kind == "opposite_edges":
+            return np.minimum(d, self.width_m - d)
+        return d
+
+    def on_plate(self, d: np.ndarray) -> np.ndarray:
+        if self.kind == "opposite_edges":
+            return (d >= 0.0) & (d <= self.width_m)
+        return d >= 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "width_m": self.width_m}
+
+
+def edge_model(table: ModelTable) -> EdgeModel:
+    """The supports of the table's family (two opposite edges a plate length apart, or one
+    line where the plate's size is not recorded).
+
+    Raises JointMapError (``joint``) for a family without a clamped support or with all four
+    edges clamped (not a line's angle and offset)."""
+    family = table.family or {}
+    supports = family.get("supports")
+    size = family.get("plate_size_m")
+    l_max = float(table.axes["distance_m"][-1])
+    if supports in (None, "opposite_edges") and size:
+        return EdgeModel("opposite_edges", float(size[0]), l_max)
+    if supports == "none":
+        raise JointMapError("joint", "the table's family has no clamped support: there is no "
+                            "edge to locate (allowed: a family with opposite clamped edges)")
+    if supports == "all_edges":
+        raise JointMapError("joint", "the table's family clamps all four edges; a joint map "
+                            "locates two opposite edges or one line (allowed: opposite_edges)")
+    return EdgeModel("line", None, l_max)
+
+
+# --- each position's own likelihood -----------------------------------------------------------
+
+
+@dataclass
+class PositionLikelihood:
+    """One position's likelihood over the fine (t, L) grid, with its own answer."""
+
+    position: ScanPosition
+    estimate: Estimate
+    log_t: np.ndarray
+    distance_m: np.ndarray
+    weight_t: np.ndarray
+    like: np.ndarray
+    """exp(-(deviance - its minimum) / 2): 1 at the position's best cell, 0 where impossible."""
+    deviance: np.ndarray
+    misfit: np.ndarray
+    n_terms: int
+
+
+def position_likelihood(table: ModelTable, position: ScanPosition
+                        ) -> tuple[PositionLikelihood | None, str | None]:
+    """The position's likelihood, or None and why it is left out of the joint posterior."""
+    inputs = list(position.inputs)
+    if not inputs:
+        return None, "no sphere size with an inversion input"
+    try:
+        est = invert(table, inputs, position.calibration,
+                     material_spread=position.material_spread)
+    except (InversionError, TableError) as exc:  # e.g. a sphere size the table lacks
+        return None, f"not inverted: {exc}"
+    if est.inconsistent:
+        return None, ("its own answer is " + est.thickness_m.status + " (the table's family "
+                      "does not explain it): " + (est.warnings[0] if est.warnings else
+                                                   str(est.reason)))
+    excluded = set(est.extra.get("excluded_diameters_m", []))
+    used = [i for i in inputs if i.diameter_m not in excluded]
+    keep = cell_likelihood(table, used, position.calibration,
+                           material_spread=est.material_spread)
+    dev = keep["deviance"]
+    finite = np.isfinite(dev)
+    if not finite.any():
+        return None, "the model detects no reflection anywhere for its sphere sizes"
+    best = float(dev[finite].min())
+    like = np.where(finite, np.exp(-0.5 * (np.where(finite, dev, best) - best)), 0.0)
+    g = keep["grid"]
+    misfit = keep["misfit"]
+    if POSITION_SD_M > 0:  # where the chain stood is known to its recorded coordinates' error
+        blurred = like @ _blur(g.distance_m, POSITION_SD_M).T
+        with np.errstate(divide="ignore"):
+            dev_b = np.where(blurred > 0, best - 2.0 * np.log(blurred), np.inf)
+        # the terms beside the misfit (log det of the covariance) vary slowly: kept per row
+        rest = np.where(finite, dev - misfit, np.nan)
+        row_mean = np.nanmean(np.where(finite.any(axis=1, keepdims=True), rest, 0.0), axis=1)
+        rest = np.where(finite, rest, row_mean[:, None])
+        misfit = np.where(np.isfinite(dev_b), np.maximum(dev_b - rest, 0.0), np.inf)
+        dev = dev_b
+        best = float(dev[np.isfinite(dev)].min())
+        like = np.where(np.isfinite(dev), np.exp(-0.5 * (np.where(np.isfinite(dev), dev, best)
+                                                        - best)), 0.0)
+    return PositionLikelihood(position, est, np.log(g.thickness_m), g.distance_m, g.weight_t,
+                              like, dev, misfit, int(keep["n_terms"])), None
+
+
+@functools.lru_cache(maxsize=8)
+def _blur_cached(grid: tuple[float, ...], sd: float) -> np.ndarray:
+    x = np.asarray(grid)
+    step = sd / 8.0
+    fine = np.arange(x[0], x[-1] + 0.5 * step, step)
+    interp = _Interp.on(x, fine)  # linear interpolation of the grid onto the fine points
+    to_fine = np.zeros((fine.size, x.size))
+    rows = np.arange(fine.size)
+    to_fine[rows, interp.idx] += 1.0 - interp.frac
+    to_fine[rows, interp.idx + 1] += interp.frac
+    kernel = np.exp(-0.5 * ((x[:, None] - fine[None, :]) / sd) ** 2)
+    kernel /= kernel.sum(axis=1, keepdims=True)  # truncated at the grid's ends (L >= 0)
+    return kernel @ to_fine
+
+
+def _blur(grid: np.ndarray, sd: float) -> np.ndarray:
+    """The matrix that averages a function given by its values on ``grid`` (linear between
+    them) over a Gaussian of ``sd`` around each grid point."""
+    return _blur_cached(tuple(float(v) for v in grid), float(sd))
+
+
+# --- the thickness prior -------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ThicknessPrior:
+    """Free per position (uniform in log t, as a single inversion), or tied to a common mean
+    ``mu`` with a relative spread (``log t_i ~ N(log mu, spread^2)``, mu uniform in log)."""
+
+    kind: str = "free"
+    spread_rel: float = DEFAULT_SPREAD
+
+    def __post_init__(self) -> None:
+        if self.kind not in THICKNESS_PRIORS:
+            raise JointMapError("thickness_prior", f"{self.kind!r} (allowed: "
+                                f"{', '.join(THICKNESS_PRIORS)})")
+        s = self.spread_rel
+        if (isinstance(s, bool) or not isinstance(s, int | float) or not math.isfinite(s)
+                or not SPREAD_RANGE[0] <= s <= SPREAD_RANGE[1]):
+            raise JointMapError("thickness_spread", f"{s!r} (allowed: {SPREAD_RANGE[0]:g} to "
+                                f"{SPREAD_RANGE[1]:g}, a relative standard deviation)")
+
+    def matrix(self, log_t: np.ndarray, weight_t: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(P, log_mu, prior_mu)``: ``P[h, k]`` the prior mass of thickness cell k given the
+        hyper value h (each row sums to 1); one row for ``free``."""
+        if self.kind == "free":
+            p = weight_t / weight_t.sum()
+            return p[None, :], np.array([np.nan]), np.ones(1)
+        log_mu = log_t[::HYPER_STRIDE]
+        if log_mu[-1] != log_t[-1]:
+            log_mu = np.append(log_mu, log_t[-1])
+        dens = np.exp(-0.5 * ((log_t[None, :] - log_mu[:, None]) / self.spread_rel) ** 2)
+        p = dens * weight_t[None, :]
+        p /= p.sum(axis=1, keepdims=True)
+        widths = np.diff(np.concatenate([log_mu[:1], 0.5 * (log_mu[1:] + log_mu[:-1]),
+                                         log_mu[-1:]]))
+        return p, log_mu, widths / widths.sum()
+
+    def to_dict(self) -> dict[str, Any]:
+        if self.kind == "free":
+            return {"kind": "free", "description": "each position's thickness free (uniform in "
+                    "log t), as in a single inversion"}
+        return {"kind": "common", "spread_rel": self.spread_rel,
+                "description": f"each position's thickness scatters around the plate's common "
+                f"mean (uniform in log) with a relative spread of {100 * self.spread_rel:.3g} % "
+                "(1 sd, log-normal)"}
+
+
+# --- the edge's posterior on refined cells --------------------------------------------------
+
+
+@dataclass
+class EdgeCells:
+    """Cells of the edge's posterior: angle theta (rad) of the normal, and c, the scan
+    centroid's distance from the edge; each with its size and log posterior (per hyper value
+    and summed)."""
+
+    theta: np.ndarray
+    c: np.ndarray
+    h_theta: np.ndarray
+    h_c: np.ndarray
+    lp_hyper: np.ndarray
+    lp: np.ndarray
+
+    def take(self, keep: np.ndarray) -> EdgeCells:
+        return EdgeCells(self.theta[keep], self.c[keep], self.h_theta[keep], self.h_c[keep],
+                         self.lp_hyper[:, keep], self.lp[keep])
+
+
+@dataclass
+class _Interp:
+    """Linear interpolation weights of values on the fine distance grid."""
+
+    idx: np.ndarray
+    frac: np.ndarray
+
+    @classmethod
+    def on(cls, grid: np.ndarray, x: np.ndarray) -> _Interp:
+        j = np.clip(np.searchsorted(grid, x, side="right") - 1, 0, grid.size - 2)
+        frac = np.clip((x - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0)
+        return cls(j, frac)
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        """``values[..., L]`` at the points (last axis interpolated)."""
+        return values[..., self.idx] * (1.0 - self.frac) + values[..., self.idx + 1] * self.frac
+
+
+@dataclass
+class JointPosterior:
+    """Everything the joint answer and the next position's choice read."""
+
+    table: ModelTable
+    model: EdgeModel
+    prior: ThicknessPrior
+    likes: list[PositionLikelihood]
+    anchor: np.ndarray
+    cells: EdgeCells
+    mass: np.ndarray
+    """Each cell's posterior probability (sums to 1)."""
+    mass_hyper: np.ndarray
+    """(hyper value, cell) probabilities."""
+    p_matrix: np.ndarray
+    log_mu: np.ndarray
+    log_marginal: list[np.ndarray]
+    """Per position, log of its likelihood marginalised over t given (hyper value, L)."""
+    distance_grid: np.ndarray
+    excluded: list[tuple[ScanPosition, str]] = field(default_factory=list)
+
+    def signed_distances(self, x: np.ndarray, y: np.ndarray,
+                         cells: EdgeCells | None = None) -> np.ndarray:
+        """Signed distance from the edge of points (x, y) on every cell: (points, cells)."""
+        cells = self.cells if cells is None else cells
+        dx = np.atleast_1d(x) - self.anchor[0]
+        dy = np.atleast_1d(y) - self.anchor[1]
+        return (np.outer(dx, np.cos(cells.theta)) + np.outer(dy, np.sin(cells.theta))
+                + cells.c[None, :])
+
+    def offsets(self, cells: EdgeCells | None = None) -> np.ndarray:
+        """Each cell's line offset ``x cos(theta) + y sin(theta) = offset`` in the scan's
+        frame."""
+        cells = self.cells if cells is None else cells
+        return (self.anchor[0] * np.cos(cells.theta) + self.anchor[1] * np.sin(cells.theta)
+                - cells.c)
+
+    @property
+    def best(self) -> int:
+        return int(np.argmax(self.cells.lp))
+
+
+def _log_marginals(likes: Sequence[PositionLikelihood], p: np.ndarray) -> list[np.ndarray]:
+    out = []
+    for lk in likes:
+        m = p @ lk.like  # (hyper, L): the likelihood marginalised over t
+        out.append(np.log(m, out=np.full_like(m, LOG_FLOOR), where=m > 0).clip(min=LOG_FLOOR))
+    return out
+
+
+def _evaluate(theta: np.ndarray, c: np.ndarray, xy: np.ndarray, anchor: np.ndarray,
+              model: EdgeModel, grid: np.ndarray, log_m: Sequence[np.ndarray],
+              log_prior_hyper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Log posterior (per hyper value, and summed over them) of edge cells."""
+    cos, sin = np.cos(theta), np.sin(theta)
+    total = np.tile(log_prior_hyper[:, None], (1, theta.size))
+    feasible = np.ones(theta.size, dtype=bool)
+    for (x, y), lm in zip(xy, log_m, strict=True):
+        d = (x - anchor[0]) * cos + (y - anchor[1]) * sin + c
+        feasible &= model.on_plate(d)
+        dist = np.clip(model.distance(d), grid[0], grid[-1])
+        total += _Interp.on(grid, dist)(lm)
+    total[:, ~feasible] = -np.inf
+    return total, logsumexp(total, axis=0) if total.shape[0] > 1 else total[0]
+
+
+def _c_range(model: EdgeModel, xy: np.ndarray, anchor: np.ndarray) -> tuple[float, float]:
+    if model.kind == "opposite_edges":
+        return 0.0, 0.5 * model.width_m
+    spread = float(np.max(np.hypot(*(xy - anchor).T))) if len(xy) else 0.0
+    return 0.0, float(min(model.table_max_m, 10.0)) + spread
+
+
+def edge_posterior(likes: Sequence[PositionLikelihood], model: EdgeModel,
+                   prior: ThicknessPrior) -> tuple[EdgeCells, np.ndarray, np.ndarray,
+                                                    np.ndarray, list[np.ndarray], np.ndarray]:
+    """The edge's posterior on cells refined where it carries weight: ``(cells, anchor,
+    P, log_mu, log_marginals, hyper prior)``."""
+    lk0 = likes[0]
+    grid = lk0.distance_m
+    p, log_mu, prior_mu = prior.matrix(lk0.log_t, lk0.weight_t)
+    log_m = _log_marginals(likes, p)
+    log_prior_hyper = np.log(prior_mu)
+    xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in likes], dtype=float)
+    anchor = xy.mean(axis=0)
+    lo, hi = _c_range(model, xy, anchor)
+    n_t = round(360.0 / ANGLE_STEP_DEG)
+    n_c = max(1, math.ceil((hi - lo) / OFFSET_STEP_M))
+    h_t, h_c = 2 * math.pi / n_t, (hi - lo) / n_c
+    tt, cc = np.meshgrid((np.arange(n_t) + 0.5) * h_t, lo + (np.arange(n_c) + 0.5) * h_c,
+                         indexing="ij")
+    theta, c = tt.ravel(), cc.ravel()
+
+    def evaluate(th: np.ndarray, cv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return _evaluate(th, cv, xy, anchor, model, grid, log_m, log_prior_hyper)
+
+    lph, lp = evaluate(theta, c)
+    # a first cell is fine enough where it differs little from its neighbours (angle wraps)
+    grid_lp = lp.reshape(n_t, n_c)
+    diff = np.zeros_like(grid_lp)
+    for shifted in (np.roll(grid_lp, 1, 0), np.roll(grid_lp, -1, 0)):
+        diff = np.maximum(diff, _absdiff(grid_lp, shifted))
+    if n_c > 1:
+        diff[:, 1:] = np.maximum(diff[:, 1:], _absdiff(grid_lp[:, 1:], grid_lp[:, :-1]))
+        diff[:, :-1] = np.maximum(diff[:, :-1], _absdiff(grid_lp[:, :-1], grid_lp[:, 1:]))
+    cells = EdgeCells(theta, c, np.full(theta.size, h_t), np.full(theta.size, h_c), lph, lp)
+    final = (diff < FLAT).ravel()
+    min_t, min_c = math.radians(MIN_ANGLE_STEP_DEG), MIN_OFFSET_STEP_M
+    for _ in range(MAX_ROUNDS):
+        top = cells.lp.max()
+        if not np.isfinite(top):
+            raise JointMapError("positions", "no edge of the family's plate puts every position "
+                                "on the plate where its measurement can be explained")
+        split = ((cells.lp > top - SIGNIFICANT) & ~final
+                 & ((cells.h_theta > min_t) | (cells.h_c > min_c)))
+        # cells far below the best carry nothing: drop them
+        keep = cells.lp > top - 2.0 * SIGNIFICANT
+        if not split.any():
+            cells, final = cells.take(keep), final[keep]
+            break
+        parent = cells.take(split)
+        qt = np.array([-0.25, -0.25, 0.25, 0.25])
+        qc = np.array([-0.25, 0.25, -0.25, 0.25])
+        th = (parent.theta[:, None] + qt[None, :] * parent.h_theta[:, None]).ravel()
+        cv = (parent.c[:, None] + qc[None, :] * parent.h_c[:, None]).ravel()
+        child_lph, child_lp = evaluate(th, cv)
+        span = child_lp.reshape(-1, 4)
+        with np.errstate(invalid="ignore"):
+            rng = np.where(np.isfinite(span).all(axis=1), span.max(axis=1) - span.min(axis=1),
+                           np.where(np.isfinite(span).any(axis=1), np.inf, 0.0))
+        child_final = np.repeat(rng < FLAT, 4)
+        children = EdgeCells(th, cv, np.repeat(parent.h_theta / 2, 4),
+                             np.repeat(parent.h_c / 2, 4), child_lph, child_lp)
+        rest = keep & ~split
+        cells = EdgeCells(*(np.concatenate([getattr(cells.take(rest), k), getattr(children, k)],
+                                           axis=-1)
+                            for k in ("theta", "c", "h_theta", "h_c", "lp_hyper", "lp")))
+        final = np.concatenate([final[rest], child_final])
+    return cells, anchor, p, log_mu, log_m, log_prior_hyper
+
+
+def _absdiff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore"):
+        d = np.abs(a - b)
+    both_inf = ~np.isfinite(a) & ~np.isfinite(b)
+    return np.where(both_inf, 0.0, np.where(np.isfinite(d), d, np.inf))
+
+
+def posterior(table: ModelTable, positions: Sequence[ScanPosition],
+              prior: ThicknessPrior | None = None) -> JointPosterior:
+    """The joint posterior of a scan (see the module doc).
+
+    Raises JointMapError (``positions``) when no position can enter it, or (``joint``) for a
+    family whose supports are not a line's angle and offset."""
+    prior = prior or ThicknessPrior()
+    model = edge_model(table)
+    likes, excluded = [], []
+    for pos in positions:
+        for name, v in (("x_m", pos.x_m), ("y_m", pos.y_m)):
+            if v is None or not math.isfinite(float(v)):
+                raise JointMapError(name, f"position {pos.name!r}: {v!r} (allowed: a finite "
+                                    "coordinate in metres)")
+        lk, why = position_likelihood(table, pos)
+        if lk is None:
+            excluded.append((pos, why or "left out"))
+        else:
+            likes.append(lk)
+    if not likes:
+        raise JointMapError("positions", "no position with coordinates whose measurement the "
+                            "table's family explains: " + "; ".join(
+                                f"{p.name}: {w}" for p, w in excluded) if excluded
+                            else "no position with coordinates")
+    cells, anchor, p, log_mu, log_m, _ = edge_posterior(likes, model, prior)
+    top = cells.lp.max()
+    area = cells.h_theta * cells.h_c
+    mass = np.exp(cells.lp - top) * area
+    total = mass.sum()
+    mass_hyper = np.exp(cells.lp_hyper - top) * area[None, :] / total
+    return JointPosterior(table, model, prior, likes, anchor, cells, mass / total, mass_hyper, p,
+                          log_mu, log_m, likes[0].distance_m, excluded)
+
+
+# --- what the posterior says ------------------------------------------------------------------
+
+
+def weighted_quantiles(x: np.ndarray, w: np.ndarray, qs: Sequence[float]) -> list[float]:
+    """Quantiles of points ``x`` with weights ``w`` (linear between the points' mid-masses)."""
+    order = np.argsort(x)
+    xs, ws = x[order], w[order]
+    cdf = np.cumsum(ws) - 0.5 * ws
+    cdf /= ws.sum()
+    return [float(np.interp(q, cdf, xs)) for q in qs]
+
+
+def _bins(grid: np.ndarray, dist: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weights (hyper, cells) of points at ``dist`` spread linearly onto the grid:
+    (hyper, L)."""
+    it = _Interp.on(grid, np.clip(dist, grid[0], grid[-1]))
+    out = np.zeros((weights.shape[0], grid.size))
+    for h in range(weights.shape[0]):
+        out[h] = (np.bincount(it.idx, weights[h] * (1.0 - it.frac), grid.size)
+                  + np.bincount(it.idx + 1, weights[h] * it.frac, grid.size))
+    return out
+
+
+@dataclass
+class PositionAnswer:
+    thickness: ParameterEstimate
+    distance: ParameterEstimate
+    distance_map_m: float
+    conditional: tuple[np.ndarray, np.ndarray]
+    """E[log t | L] and Var[log t | L] on the distance grid (hyper values mixed by the
+    posterior): what the next position's choice reads for the thickness map."""
+    expected_deviance: float
+
+
+def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
+    """Position i's thickness and distance from the joint posterior."""
+    lk = post.likes[i]
+    d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]))[0]
+    dist = post.model.distance(d)
+    w_bins = _bins(post.distance_grid, dist, post.mass_hyper)  # (hyper, L)
+    m = post.p_matrix @ lk.like  # (hyper, L)
+    q = np.divide(w_bins, m, out=np.zeros_like(w_bins), where=m > 0)
+    r = lk.like @ q.T  # (t, hyper)
+    mass_t = (post.p_matrix.T * r).sum(axis=1)
+    # as in a single inversion, a side is open where the profile likelihood (the best over
+    # distance) is within the 95 % level of the best; the distances are those the joint
+    # posterior leaves possible (density at least 1e-4 of its peak), not any
+    possible = w_bins.sum(axis=0) > PROFILE_SUPPORT * w_bins.sum(axis=0).max()
+    profile = lk.like[:, possible].max(axis=1)
+    profile = profile / profile.max() if profile.max() > 0 else profile
+    thickness = summarise_marginal(lk.log_t, mass_t / mass_t.sum(), lk.weight_t,
+                                   lower_physical=False, transform=np.exp, profile=profile)
+    q2, q16, q50, q84, q98 = weighted_quantiles(dist, post.mass, (0.025, 0.16, 0.5, 0.84, 0.975))
+    d_map = float(dist[post.best])
+    distance = ParameterEstimate(d_map, q50, (q16, q84), (q2, q98), "constrained")
+    # conditional moments of log t given L (hyper values mixed by their weight at each L)
+    w_h = w_bins / np.maximum(w_bins.sum(axis=0, keepdims=True), 1e-300)
+    pt = post.p_matrix.T[:, :, None] * lk.like[:, None, :]  # (t, hyper, L)
+    norm = np.maximum(pt.sum(axis=0), 1e-300)
+    mix = np.where(w_bins.sum(axis=0) > 0, w_h, 1.0 / w_h.shape[0])
+    cond = (pt / norm[None]) * mix[None]  # p(t | L), hyper values mixed
+    cond = cond.sum(axis=1)
+    cond /= np.maximum(cond.sum(axis=0, keepdims=True), 1e-300)
+    mean = (lk.log_t[:, None] * cond).sum(axis=0)
+    var = ((lk.log_t[:, None] - mean[None, :]) ** 2 * cond).sum(axis=0)
+    dev = np.where(lk.like > 0, lk.deviance, 0.0)
+    s = post.p_matrix @ (lk.like * dev)
+    if post.prior.kind == "common":  # the tie's own term, (log t - log mu)^2 / s^2
+        s = s + (post.p_matrix * _tie_z2(post, lk.log_t)) @ lk.like
+    expected = float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
+    return PositionAnswer(thickness, distance, d_map, (mean, var), expected)
+
+
+def _tie_z2(post: JointPosterior, log_t: np.ndarray) -> np.ndarray:
+    """``((log t - log mu_h) / spread)^2`` per (hyper value, thickness cell)."""
+    return ((log_t[None, :] - post.log_mu[:, None]) / post.prior.spread_rel) ** 2
+
+
+def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
+    """At the joint best fit (the edge's cell, and there each position's thickness, with the
+    common mean's best value for ``common``, that together have the least deviance): each
+    position's misfit, the total deviance (the tie's terms included) and the number of terms
+    (the tie's included)."""
+    common = post.prior.kind == "common"
+    z2 = _tie_z2(post, post.likes[0].log_t) if common else np.zeros((1, post.likes[0].log_t.size))
+    support = np.flatnonzero(post.mass > 1e-9 * post.mass.max())
+    cand = post.cells.take(support)
+    total = np.zeros((z2.shape[0], support.size))
+    for lk in post.likes:
+        d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]),
+                                  cand)[0]
+        it = _Interp.on(lk.distance_m, np.clip(post.model.distance(d), lk.distance_m[0],
+                                               lk.distance_m[-1]))
+        dev = np.where(np.isfinite(lk.deviance), lk.deviance, 1e300)
+        best_l = (dev[None, :, :] + z2[:, :, None]).min(axis=1)  # (hyper, L)
+        total += it(best_l)
+    k = int(np.argmin(total.min(axis=0)))
+    cells = cand.take(np.array([k]))
+    columns = []
+    for lk in post.likes:
+        d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]),
+                                  cells)
+        dist = float(np.clip(post.model.distance(d)[0, 0], lk.distance_m[0], lk.distance_m[-1]))
+        it = _Interp.on(lk.distance_m, np.array([dist]))
+        j, f = int(it.idx[0]), float(it.frac[0])
+        with np.errstate(invalid="ignore"):
+            dev = (1 - f) * lk.deviance[:, j] + f * lk.deviance[:, j + 1]
+            mis = (1 - f) * lk.misfit[:, j] + f * lk.misfit[:, j + 1]
+        columns.append((np.where(np.isfinite(dev), dev, np.inf), mis))
+    n_terms = sum(lk.n_terms for lk in post.likes)
+    if post.prior.kind == "free":
+        picks = [int(np.argmin(dev)) for dev, _ in columns]
+        return ([float(mis[k]) for (_, mis), k in zip(columns, picks, strict=True)],
+                float(sum(dev[k] for (dev, _), k in zip(columns, picks, strict=True))), n_terms)
+    best: tuple[float, list[int], int] | None = None
+    for h in range(z2.shape[0]):
+        picks = [int(np.argmin(dev + z2[h])) for dev, _ in columns]
+        total = float(sum(dev[k] + z2[h, k] for (dev, _), k in zip(columns, picks,
+                                                                    strict=True)))
+        if best is None or total < best[0]:
+            best = (total, picks, h)
+    total, picks, h = best
+    # the common mean is continuous: a few rounds of (mean of the picks, picks given the mean)
+    log_t, spread = post.likes[0].log_t, post.prior.spread_rel
+    log_mu = float(post.log_mu[h])
+    for _ in range(5):
+        log_mu = float(np.mean(log_t[picks]))
+        z = ((log_t - log_mu) / spread) ** 2
+        picks = [int(np.argmin(dev + z)) for dev, _ in columns]
+    z = ((log_t - log_mu) / spread) ** 2
+    total = float(sum(dev[k] + z[k] for (dev, _), k in zip(columns, picks, strict=True)))
+    misfits = [float(mis[k] + z[k]) for (_, mis), k in zip(columns, picks, strict=True)]
+    return misfits, total, n_terms + len(post.likes)
+
+
+def median_edge(post: JointPosterior) -> tuple[float, float]:
+    """The posterior median edge: the line through the median positions of the edge at the two
+    ends of the scan's extent along it (at least 0.2 m either side of its centre), as ``(theta,
+    offset)``. The best cell of (angle, offset) is a density's mode that depends on how the edge
+    is parametrised, and a mean is pulled by a second mode (the edge's mirror image, an edge
+    labelled from the opposite side); the median of where the edge lies is neither."""
+    b = post.best
+    theta_b = float(post.cells.theta[b])
+    n = np.array([math.cos(theta_b), math.sin(theta_b)])
+    along = np.array([-n[1], n[0]])
+    offset_b = float(post.offsets()[b])
+    xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in post.likes])
+    s = xy @ along
+    centre = 0.5 * (s.min() + s.max())
+    half = max(0.5 * (s.max() - s.min()), 0.2)
+    q = np.array([offset_b * n + (centre + k * half) * along for k in (-1.0, 1.0)])
+    # the signed distance of q from each cell's edge (q lies on the best edge: its mean is
+    # where the edge lies on average, along the best normal)
+    z = (q[:, :1] * np.cos(post.cells.theta)[None, :]
+         + q[:, 1:] * np.sin(post.cells.theta)[None, :] - post.offsets()[None, :])
+    middle = np.array([weighted_quantiles(zz, post.mass, (0.5,))[0] for zz in z])
+    p = q - middle[:, None] * n[None, :]
+    d = p[1] - p[0]
+    normal = np.array([d[1], -d[0]]) / float(np.hypot(*d))
+    if normal @ n < 0:
+        normal = -normal
+    theta = math.atan2(normal[1], normal[0]) % (2 * math.pi)
+    return theta, float(p[0] @ normal)
+
+
+def summary(post: JointPosterior) -> dict[str, Any]:
+    """The joint answer: ``support``, per-position answers, ``fit``, ``warnings``,
+    ``thickness_prior``."""
+    cells, mass = post.cells, post.mass
+    b = post.best
+    offsets = post.offsets()
+    theta_map = float(cells.theta[b])
+    rel = (cells.theta - theta_map + math.pi) % (2 * math.pi) - math.pi
+    a_lo, a_hi = weighted_quantiles(np.degrees(rel), mass, (0.025, 0.975))
+    o_lo, o_hi = weighted_quantiles(offsets, mass, (0.025, 0.975))
+    answers = [position_answer(post, i) for i in range(len(post.likes))]
+    misfits, d_best, n_terms = _best_fit(post)
+    chi2 = float(sum(misfits))
+    p_d = max(sum(a.expected_deviance for a in answers) - d_best, 0.0)
+    dof = max(n_terms - min(p_d, n_terms), 1.0)
+    p_value = float(chi2_dist.sf(chi2, dof))
+    warnings: list[str] = []
+    excess = [(lk.position.name, f - float(lk.estimate.chi2_min))
+              for lk, f in zip(post.likes, misfits, strict=True)]
+    inconsistent = p_value < P_INCONSISTENT
+    if inconsistent:
+        worst = sorted((e for e in excess if e[1] > DISAGREE_CHI2), key=lambda e: -e[1])
+        named = ", ".join(f"{n} (chi^2 {e:+.3g} over its own best)" for n, e in worst[:5])
+        warnings.append(
+            "inconsistent: the positions do not agree with one straight clamped edge"
+            + (f" and the plate's length {post.model.width_m * 1e3:.0f} mm"
+               if post.model.kind == "opposite_edges" else "")
+            + f" (chi^2 {chi2:.3g} for {dof:.3g} degrees of freedom, p = {p_value:.2g} < "
+            f"{P_INCONSISTENT:g})" + (f"; disagreeing most: {named}" if named else "")
+            + "; check their coordinates, the frame, or whether the support is straight")
+    angle_width = a_hi - a_lo
+    if angle_width > WIDE_ANGLE_DEG:
+        warnings.append(f"the positions do not fix the edge's direction (95 % of its angle "
+                        f"spans {angle_width:.0f} deg): add positions near the edge, spread "
+                        "along it")
+    for pos, why in post.excluded:
+        warnings.append(f"position {pos.name} left out of the joint answer: {why}")
+    if any(lk.position.calibration is None for lk in post.likes):
+        from solitonde.instrument.inference.adequacy import NO_CALIBRATION
+
+        warnings.append(NO_CALIBRATION)
+    theta_line, offset_line = median_edge(post)
+    normal = math.degrees(theta_line) % 360.0
+    line_n = np.array([math.cos(theta_line), math.sin(theta_line)])
+    to_line = [float(post.model.distance(np.array([lk.position.x_m, lk.position.y_m]) @ line_n
+                                         - offset_line)) for lk in post.likes]
+    residuals = [d - lk.estimate.distance_m.median
+                 for lk, d in zip(post.likes, to_line, strict=True)
+                 if lk.estimate.distance_m.status == "constrained"]
+    support = {
+        "normal_angle_deg": normal,
+        "offset_m": offset_line,
+        "ci95_offset_m": [o_lo, o_hi],
+        "n_positions": len(post.likes),
+        "residual_m": float(np.sqrt(np.mean(np.square(residuals)))) if residuals else None,
+        "ci95_normal_angle_deg": [(normal + a_lo) % 360.0, (normal + a_hi) % 360.0],
+        "model": post.model.kind,
+        "second_offset_m": (offset_line + post.model.width_m
+                            if post.model.kind == "opposite_edges" else None),
+        "status": "inconsistent" if inconsistent else "located",
+    }
+    positions = []
+    for lk, ans, line_d in zip(post.likes, answers, to_line, strict=True):
+        t, d = ans.thickness, ans.distance
+        if inconsistent:
+            t = ParameterEstimate(t.map, t.median, t.ci68, t.ci95, "inconsistent")
+            d = ParameterEstimate(d.map, d.median, d.ci68, d.ci95, "inconsistent")
+        positions.append({"position": lk.position.name, "x_m": lk.position.x_m,
+                          "y_m": lk.position.y_m, "thickness_m": t.to_dict(),
+                          "distance_m": d.to_dict(),
+                          "distance_to_located_support_m": line_d})
+    prior = post.prior.to_dict()
+    if post.prior.kind == "common":
+        w = post.mass_hyper.sum(axis=1)
+        q2, q50, q98 = weighted_quantiles(post.log_mu, w, (0.025, 0.5, 0.975))
+        prior["mean_m"] = {"median": math.exp(q50), "ci95": [math.exp(q2), math.exp(q98)]}
+    return {"support": support, "positions": positions,
+            "fit": {"chi2": chi2, "dof": dof, "p_value": p_value}, "warnings": warnings,
+            "thickness_prior": prior, "edges": post.model.to_dict(),
+            "excluded": [{"position": p.name, "reason": w} for p, w in post.excluded]}
+
+
+__all__ = ["EDGE_MODELS", "THICKNESS_PRIORS", "EdgeModel", "JointMapError", "JointPosterior",
+           "ScanPosition", "ThicknessPrior", "edge_model", "median_edge", "position_likelihood",
+           "posterior",
+           "summary", "weighted_quantiles"]

@@ -1,0 +1,427 @@
+"""The scan as one unknown, validated: simulated scans of random plates inverted jointly
+(instrument.inference.joint_map) against position by position, and the next position chosen by
+the joint posterior (instrument.inference.suggest) against at random.
+
+Each scan (seeded): a plate of the table's family, its thickness drawn log-uniformly inside the
+table's range as :mod:`.validate` draws it; the plate's rectangle is the scan's frame
+``[0, a] x [0, b]`` (the family's size), and its clamped edge a line near one of the
+rectangle's sides (which side at random), tilted by up to :data:`TILT_DEG` and set in by up to
+:data:`INSET_M`: a random angle and offset; the opposite clamped edge lies the plate's length
+``a`` from it. Positions stand at distances from the edge drawn log-uniformly in
+:data:`DISTANCE_RANGE_M` (an operator looking for the support measures near it, some further
+away) and anywhere along it inside the rectangle. Every position is simulated, measured and
+calibrated exactly as :func:`.validate.measure_plate` does (the tier ``auto`` picks, a
+Kuwabara-Kono dissipation the table lacks, 5 shots at 40 dB, one sphere size, an ARR factor and
+TOF offset fitted on two reference plates).
+
+Scored per scan with 3-10 positions (:data:`POSITIONS`):
+
+* thickness coverage of every position's 95 % answer (one-sided bounds count when they hold, as
+  in :mod:`.validate`), joint (thickness free per position; and tied with a common mean, 5 %
+  spread) against position by position;
+* the edge offset's 95 % coverage: the joint posterior's against the per-position fit of
+  :mod:`~solitonde.instrument.inference.support`;
+* the width of the thickness interval at positions within :data:`NEAR_EDGE_M` of the edge (an
+  open side reaches the table's end, so a bound or no answer is as wide as the table allows);
+* the edge's error against the number of positions: starting from the scan's first three, one
+  position added at a time, up to :data:`MAX_POSITIONS`: the suggestion of the joint posterior
+  (objective ``edge``), or a random one drawn as the first three were (near the true edge: an
+  operator who already knows roughly where the support is), or a random one anywhere on the
+  plate. The error is the largest distance between
+  the located edge (the joint posterior's best) and the true one along the true edge's span
+  inside the rectangle; the count is the number of positions at which it first falls below
+  :data:`TARGET_ERROR_M`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from solitonde.instrument.inference import joint_map, suggest
+from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+from solitonde.instrument.inference.inversion import FeatureSummary, invert
+from solitonde.instrument.inference.support import locate
+from solitonde.instrument.studies import validate as single
+from solitonde.instrument.tables.table import ModelTable
+
+TILT_DEG = 5.0
+INSET_M = 0.03
+DISTANCE_RANGE_M = (0.003, 0.2)
+POSITIONS = (3, 10)
+MAX_POSITIONS = 10
+START_POSITIONS = 3
+NEAR_EDGE_M = 0.03
+TARGET_ERROR_M = 0.005
+STRATEGIES = ("suggested", "random_near_edge", "random_on_plate")
+"""How the positions after the first three are chosen: the joint posterior's suggestion;
+at random as the first ones were (near the true edge: an operator who already knows roughly
+where the support is); at random anywhere on the plate."""
+COMMON_SPREAD = 0.05
+
+
+class StudyInputError(ValueError):
+    """A study request that cannot be run; ``field`` names what is wrong."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+def _covered(ci: Sequence[float | None] | None, truth: float) -> bool:
+    lo, hi = ci or (None, None)
+    return (lo is None or lo <= truth) and (hi is None or truth <= hi)
+
+
+def _answered(p: Mapping[str, Any]) -> bool:
+    return p.get("status") in single.ANSWERS
+
+
+def _width(p: Mapping[str, Any], t_range: tuple[float, float]) -> float:
+    """The 95 % interval's width with an open side at the table's end (no answer: the table)."""
+    lo, hi = (p.get("ci95") or (None, None)) if _answered(p) else (None, None)
+    return (hi if hi is not None else t_range[1]) - (lo if lo is not None else t_range[0])
+
+
+class Scan:
+    """One random plate and the positions one may measure on it."""
+
+    def __init__(self, table: ModelTable, seed: int, diameter_m: float) -> None:
+        family = table.family or {}
+        size = family.get("plate_size_m") or [0.914, 0.914]
+        self.a, self.b = float(size[0]), float(size[1])
+        self.rng = np.random.default_rng(seed)
+        t_axis = table.axes["thickness_m"]
+        lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
+        self.thickness_m = float(math.exp(self.rng.uniform(lo, hi)))
+        self.diameter_m = diameter_m
+        side = int(self.rng.integers(4))
+        tilt = math.radians(self.rng.uniform(-TILT_DEG, TILT_DEG))
+        inset = float(self.rng.uniform(0.0, INSET_M))
+        # the side's midpoint and inward normal in the rectangle [0, a] x [0, b]
+        mids = [((0.0, self.b / 2), 0.0), ((self.a, self.b / 2), math.pi),
+                ((self.a / 2, 0.0), math.pi / 2), ((self.a / 2, self.b), -math.pi / 2)]
+        (mx, my), phi = mids[side]
+        self.theta = (phi + tilt) % (2 * math.pi)
+        self.normal = np.array([math.cos(self.theta), math.sin(self.theta)])
+        self.along = np.array([-self.normal[1], self.normal[0]])
+        self.offset_m = float(np.array([mx, my]) @ self.normal + inset)
+        # the true edge's span inside the rectangle (for the edge's error)
+        self.ends = self._span()
+        self.n_positions = int(self.rng.integers(POSITIONS[0], POSITIONS[1] + 1))
+        self.random_positions = [self.draw() for _ in range(MAX_POSITIONS)]
+        self.plate_positions = [(float(self.rng.uniform(0.0, self.a)),
+                                 float(self.rng.uniform(0.0, self.b)))
+                                for _ in range(MAX_POSITIONS)]
+        self.seed = seed
+
+    def _span(self) -> np.ndarray:
+        base = self.offset_m * self.normal
+        s = np.linspace(-2.0, 2.0, 4001)
+        pts = base[None, :] + s[:, None] * self.along
+        inside = ((pts[:, 0] >= 0) & (pts[:, 0] <= self.a) & (pts[:, 1] >= 0)
+                  & (pts[:, 1] <= self.b))
+        return pts[inside][[0, -1]]
+
+    def distance(self, x: float, y: float) -> float:
+        """Distance of (x, y) from the nearer clamped edge."""
+        d = float(np.array([x, y]) @ self.normal - self.offset_m)
+        return min(d, self.a - d)
+
+    def draw(self) -> tuple[float, float]:
+        """A random position: log-uniform distance from the edge, anywhere along it, inside
+        the rectangle."""
+        lo, hi = (math.log(v) for v in DISTANCE_RANGE_M)
+        for _ in range(1000):
+            u = math.exp(self.rng.uniform(lo, hi))
+            s = self.rng.uniform(0.0, 1.0)
+            p = self.ends[0] + s * (self.ends[1] - self.ends[0]) + u * self.normal
+            if 0 <= p[0] <= self.a and 0 <= p[1] <= self.b:
+                return float(p[0]), float(p[1])
+        raise RuntimeError("no position inside the rectangle")  # not reached for sane sizes
+
+    def edge_error(self, theta: float, offset: float) -> float:
+        """Largest distance of the true edge's span from the line at (theta, offset). The two
+        clamped edges are alike: a line reported from the opposite side (its normal pointing
+        the other way) is compared with the opposite edge."""
+        n = np.array([math.cos(theta), math.sin(theta)])
+        if n @ self.normal < 0:
+            return float(np.max(np.abs((self.ends + self.a * self.normal) @ n - offset)))
+        return float(np.max(np.abs(self.ends @ n - offset)))
+
+    def true_offset(self, theta: float) -> float:
+        """The true offset of the clamped edge a line at angle ``theta`` stands for (the near
+        one, or the opposite one seen from the other side)."""
+        if math.cos(theta - self.theta) < 0:
+            return -(self.offset_m + self.a)
+        return self.offset_m
+
+
+class Measurer:
+    """Simulated positions, measured as :func:`.validate.measure_plate` measures them; kept
+    in a file (optional) so that a study can be re-scored without simulating again."""
+
+    def __init__(self, base: Mapping[str, Any], path: str | Path | None) -> None:
+        self.base = dict(base)
+        self.path = Path(path) if path is not None else None
+        self.cache: dict[str, Any] = {}
+        if self.path is not None and self.path.is_file():
+            try:
+                self.cache = json.loads(self.path.read_text(encoding="utf-8"))["positions"]
+            except (OSError, ValueError, KeyError, TypeError) as exc:
+                raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
+                                      f"study wrote ({exc}); delete it or give another") from None
+        self.simulated = 0
+        self.wall_s = 0.0
+
+    def __call__(self, d: float, t: float, length: float, seed: int) -> list[FeatureSummary]:
+        key = f"{d:.6e}|{t:.9e}|{length:.9e}|{seed}"
+        if key not in self.cache:
+            started = time.perf_counter()
+            m = single.measure_plate(self.base, [d], t, max(length, 0.0), seed)
+            self.wall_s += time.perf_counter() - started
+            self.simulated += 1
+            self.cache[key] = {str(k): v for k, v in m["summaries"].items()}
+        return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"],
+                               s["arr_std"], int(s["n_shots"]), s.get("arr_upper_bound"))
+                for s in self.cache[key].values() if s is not None]
+
+    def save(self) -> None:
+        if self.path is None:
+            return
+        tmp = self.path.with_name(f".{self.path.name}.tmp")
+        tmp.write_text(json.dumps({"positions": self.cache}))
+        os.replace(tmp, self.path)
+
+
+def _calibration(table: ModelTable, measure: Measurer, d: float, seed: int) -> Calibration:
+    """An ARR factor and TOF offset fitted on two reference plates, as :mod:`.validate` does."""
+    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
+    l_ref = float(np.clip(single.REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
+    refs = []
+    for k, t_ref in enumerate((single.REFERENCE_THICKNESS_M, single.REFERENCE2_THICKNESS_M)):
+        t_ref = float(np.clip(t_ref, t_axis[0], t_axis[-1]))
+        refs += [Reference(t_ref, l_ref, s) for s in measure(d, t_ref, l_ref, seed + k)
+                 if not s.hidden]
+    return fit_calibration(table, refs)
+
+
+def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Measurer,
+                    cal: Calibration) -> list[joint_map.ScanPosition]:
+    out = []
+    for k, (x, y) in enumerate(xy):
+        seed = int(np.random.default_rng([scan.seed, k, int(x * 1e6), int(y * 1e6)])
+                   .integers(0, 2**31))
+        inputs = measure(scan.diameter_m, scan.thickness_m, scan.distance(x, y), seed)
+        out.append(joint_map.ScanPosition(f"P{k + 1:02d}", x, y, inputs, cal))
+    return out
+
+
+def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition]
+                ) -> tuple[joint_map.JointPosterior | None, float, float]:
+    try:
+        post = joint_map.posterior(table, positions)
+    except joint_map.JointMapError:
+        return None, math.nan, math.nan
+    theta, offset = joint_map.median_edge(post)
+    return post, theta, offset
+
+
+def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
+               sequential: bool = True) -> dict[str, Any]:
+    """One scan's rows: per position the three answers against the truth, the edge's coverage,
+    and (``sequential``) the edge's error as positions are added, suggested or random."""
+    t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
+    xy = scan.random_positions[:scan.n_positions]
+    positions = _scan_positions(scan, xy, measure, cal)
+    row: dict[str, Any] = {"seed": scan.seed, "thickness_m": scan.thickness_m,
+                           "normal_angle_deg": math.degrees(scan.theta),
+                           "offset_m": scan.offset_m, "n_positions": scan.n_positions}
+    alone = []
+    for p in positions:
+        est = invert(table, p.inputs, cal) if p.inputs else None
+        alone.append(None if est is None else est.to_dict())
+    joint: dict[str, Any] = {}
+    for kind in ("free", "common"):
+        try:
+            post = joint_map.posterior(table, positions, joint_map.ThicknessPrior(
+                kind, COMMON_SPREAD))
+            joint[kind] = joint_map.summary(post)
+        except joint_map.JointMapError as exc:
+            joint[kind] = {"error": str(exc)}
+    per_position = []
+    by_name = {k: {p["position"]: p for p in j.get("positions", [])} for k, j in joint.items()}
+    for p, est in zip(positions, alone, strict=True):
+        truth_l = scan.distance(p.x_m, p.y_m)
+        entry: dict[str, Any] = {"x_m": p.x_m, "y_m": p.y_m, "distance_m": truth_l}
+        answers = {"alone": (est or {}).get("thickness_m") or {"status": "none"}}
+        for kind in joint:
+            answers[kind] = (by_name[kind].get(p.name) or {}).get("thickness_m") or \
+                {"status": "none"}
+        for name, ans in answers.items():
+            entry[name] = {"status": ans.get("status"), "ci95": ans.get("ci95"),
+                           "covered": (_covered(ans.get("ci95"), scan.thickness_m)
+                                       if _answered(ans) else None),
+                           "width_m": _width(ans, t_range)}
+        per_position.append(entry)
+    row["positions"] = per_position
+    # the edge's offset: joint against the per-position fit
+    for kind, j in joint.items():
+        s = j.get("support")
+        row[f"edge_{kind}"] = None if not s else {
+            "ci95_offset_m": s["ci95_offset_m"], "offset_m": s["offset_m"],
+            "normal_angle_deg": s["normal_angle_deg"],
+            "covered": _offset_covered(s, scan), "fit": j.get("fit"),
+            "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"])}
+    fit, reason = locate([{"x_m": p.x_m, "y_m": p.y_m, "distance_m": (e or {}).get("distance_m")}
+                          for p, e in zip(positions, alone, strict=True)])
+    row["edge_alone"] = {"reason": reason} if fit is None else {
+        "ci95_offset_m": list(fit.ci95_offset_m), "offset_m": fit.offset_m,
+        "normal_angle_deg": fit.normal_angle_deg,
+        "covered": _offset_covered(fit.to_dict(), scan),
+        "error_m": scan.edge_error(math.radians(fit.normal_angle_deg), fit.offset_m)}
+    if sequential:
+        row["sequence"] = _sequence(table, scan, measure, cal)
+    return row
+
+
+def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
+    """Whether the 95 % offset interval holds the true edge's offset (of the clamped edge the
+    located one stands for)."""
+    lo, hi = support["ci95_offset_m"]
+    return bool(lo <= scan.true_offset(math.radians(support["normal_angle_deg"])) <= hi)
+
+
+def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
+              ) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for strategy in STRATEGIES:
+        xy = list(scan.random_positions[:START_POSITIONS])
+        fallback = (scan.plate_positions if strategy == "random_on_plate"
+                    else scan.random_positions)
+        errors = []
+        while True:
+            positions = _scan_positions(scan, xy, measure, cal)
+            post, theta, offset = _joint_edge(table, positions)
+            errors.append(math.inf if post is None else scan.edge_error(theta, offset))
+            if len(xy) >= MAX_POSITIONS:
+                break
+            if strategy != "suggested" or post is None:
+                xy.append(fallback[len(xy)])
+                continue
+            nxt = suggest.suggest(post, 1, objective="edge", region=(0.0, scan.a, 0.0, scan.b))
+            if not nxt["suggestions"]:
+                xy.append(scan.random_positions[len(xy)])
+                continue
+            s = nxt["suggestions"][0]
+            xy.append((s["x_m"], s["y_m"]))
+        reached = next((START_POSITIONS + k for k, e in enumerate(errors)
+                        if e <= TARGET_ERROR_M), None)
+        out[strategy] = {"errors_m": errors, "positions_to_target": reached,
+                         "xy": [list(p) for p in xy]}
+    return out
+
+
+def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | None = None,
+        measurements: str | Path | None = None, sequential: bool = True,
+        progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """The study (see the module doc): per-scan rows and the summary metrics."""
+    if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
+        raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise StudyInputError("seed", f"must be an integer >= 0, got {seed!r}")
+    sizes = [float(d) for d in table.axes["diameter_m"]]
+    if diameter_m is None:
+        diameter_m = min(sizes, key=lambda d: abs(d - 9.53e-3))
+    else:
+        diameter_m = float(table.axes["diameter_m"][table.diameter_index(diameter_m)])
+    measure = Measurer(table.sweep.get("scene", {}), measurements)
+    started = time.perf_counter()
+    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
+    rows = []
+    for k in range(n_scans):
+        scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
+        rows.append(score_scan(table, scan, measure, cal, sequential))
+        measure.save()
+        if progress is not None:
+            progress(k + 1, n_scans)
+    metrics = summarise(rows)
+    metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
+                   simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
+                   wall_s=time.perf_counter() - started,
+                   calibration=cal.to_dict()["per_diameter"],
+                   table=str(table.path) if table.path else None)
+    return {"metrics": metrics, "scans": rows}
+
+
+def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Coverage, widths near the edge, and the edge's error against the number of positions."""
+    out: dict[str, Any] = {}
+    for name in ("alone", "free", "common"):
+        cov = [p[name]["covered"] for r in rows for p in r["positions"]
+               if p[name]["covered"] is not None]
+        n_all = sum(len(r["positions"]) for r in rows)
+        near = [p[name]["width_m"] / r["thickness_m"] for r in rows for p in r["positions"]
+                if p["distance_m"] <= NEAR_EDGE_M]
+        near_abs = [p[name]["width_m"] for r in rows for p in r["positions"]
+                    if p["distance_m"] <= NEAR_EDGE_M]
+        out[f"thickness_{name}"] = {
+            "coverage_95": float(np.mean(cov)) if cov else None, "answers": len(cov),
+            "positions": n_all,
+            "statuses": _counts(p[name]["status"] for r in rows for p in r["positions"]),
+            "near_edge_width_median_rel": float(np.median(near)) if near else None,
+            "near_edge_width_median_m": float(np.median(near_abs)) if near_abs else None,
+            "near_edge_positions": len(near)}
+    for name in ("alone", "free", "common"):
+        edges = [r.get(f"edge_{name}") for r in rows]
+        located = [e for e in edges if e and "covered" in e]
+        out[f"edge_{name}"] = {
+            "coverage_95": float(np.mean([e["covered"] for e in located])) if located else None,
+            "located": len(located), "scans": len(rows),
+            "error_median_m": float(np.median([e["error_m"] for e in located]))
+            if located else None,
+            "ci95_width_median_m": float(np.median([e["ci95_offset_m"][1] - e["ci95_offset_m"][0]
+                                                    for e in located])) if located else None}
+    free = [r["edge_free"]["fit"]["p_value"] for r in rows if r.get("edge_free")]
+    out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
+    seqs = [r["sequence"] for r in rows if "sequence" in r]
+    if seqs:
+        for strategy in STRATEGIES:
+            errors = np.array([s[strategy]["errors_m"] for s in seqs])
+            counts = [s[strategy]["positions_to_target"] for s in seqs]
+            reached = [c for c in counts if c is not None]
+            out[f"sequence_{strategy}"] = {
+                "edge_error_median_m_by_positions": {
+                    str(START_POSITIONS + k): float(np.median(errors[:, k]))
+                    for k in range(errors.shape[1])},
+                "reached_target": len(reached), "scans": len(seqs),
+                # a scan that never reached it counts as needing more than the maximum
+                "positions_to_target_median": float(np.median(
+                    [c if c is not None else MAX_POSITIONS + 1 for c in counts])),
+                "positions_to_target_mean_reached": float(np.mean(reached)) if reached else None,
+                "target_m": TARGET_ERROR_M}
+        big = MAX_POSITIONS + 1
+        for other in STRATEGIES[1:]:
+            pairs = [(s["suggested"]["positions_to_target"], s[other]["positions_to_target"])
+                     for s in seqs]
+            out[f"suggested_fewer_than_{other}"] = sum((a or big) < (b or big) for a, b in pairs)
+            out[f"suggested_more_than_{other}"] = sum((a or big) > (b or big) for a, b in pairs)
+    return out
+
+
+def _counts(values: Any) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[str(v)] = out.get(str(v), 0) + 1
+    return out
+
+
+__all__ = ["Scan", "StudyInputError", "run", "score_scan", "summarise"]
