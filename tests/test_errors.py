@@ -40,6 +40,8 @@ EXAMPLES: dict[str, Callable[[type], BaseException]] = {
     "InversionError": lambda c: c("tof_s", "must be finite"),
     "TableChoiceError": lambda c: c("plate_material", "no table of that family"),
     "ValidationInputError": lambda c: c("seed", "must be >= 0"),
+    "JointMapError": lambda c: c("tie", "unknown prior"),
+    "StudyInputError": lambda c: c("scans", "must be >= 1"),
     "SettingsError": lambda c: c("port", "must be 1-65535"),
     "EstimateUnavailable": lambda c: c("no model table loaded"),
     "QueueLocked": lambda c: c("--state: /tmp/x is in use by another watch"),

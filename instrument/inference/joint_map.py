@@ -53,6 +53,7 @@ import numpy as np
 from scipy.special import logsumexp
 from scipy.stats import chi2 as chi2_dist
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.inversion import (
     Estimate,
@@ -100,13 +101,8 @@ so a joint edge is not sharper than the positions can place it. Each position's 
 averaged over it along L."""
 
 
-class JointMapError(ValueError):
+class JointMapError(InstrumentError, ValueError):
     """Bad joint-map input; ``field`` names it."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
-        self.message = message
 
 
 @dataclass

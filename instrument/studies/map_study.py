@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -45,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference import joint_map, suggest
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
@@ -52,6 +52,7 @@ from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.instrument.inference.support import locate
 from solitonde.instrument.studies import validate as single
 from solitonde.instrument.tables.table import ModelTable
+from solitonde.signal.atomic import write_text
 
 TILT_DEG = 5.0
 INSET_M = 0.03
@@ -68,12 +69,8 @@ where the support is); at random anywhere on the plate."""
 COMMON_SPREAD = 0.05
 
 
-class StudyInputError(ValueError):
+class StudyInputError(InstrumentError, ValueError):
     """A study request that cannot be run; ``field`` names what is wrong."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(f"{field}: {message}")
-        self.field = field
 
 
 def _covered(ci: Sequence[float | None] | None, truth: float) -> bool:
@@ -197,9 +194,7 @@ class Measurer:
     def save(self) -> None:
         if self.path is None:
             return
-        tmp = self.path.with_name(f".{self.path.name}.tmp")
-        tmp.write_text(json.dumps({"positions": self.cache}))
-        os.replace(tmp, self.path)
+        write_text(self.path, json.dumps({"positions": self.cache}))
 
 
 def _calibration(table: ModelTable, measure: Measurer, d: float, seed: int) -> Calibration:
