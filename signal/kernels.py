@@ -12,8 +12,8 @@ The kernels are written in loops over scalars and preallocated arrays, without n
 linear algebra, ``np.diff``, array arithmetic (``s - line``) or whole-array assignments
 (``a[i] = row``): for each of those numba compiles a tree of helper functions of its own (a
 quicksort, LAPACK wrappers, broadcasting checks with their error messages), and together they
-were a third of the time a fresh install spent compiling :func:`analyze`, for no run-time gain
-on records of this size.
+were about a quarter of the time a fresh install spent compiling :func:`analyze`, for no
+run-time gain on records of this size.
 
 Each function is compiled once. numba types a constant passed to a compiled function as that
 literal (``Literal[int](0)``) and compiles the callee for it apart from ``int64``, also for a
