@@ -313,7 +313,7 @@ def quiet_runs(centres: np.ndarray, reach: np.ndarray, n: int) -> np.ndarray:
             i -= 1
         order[i] = j
     free = 0  # first sample not yet covered by a window or a run
-    for j in order:
+    for j in order:  # type: ignore[assignment]
         a = max(0, starts[j])
         if a > free:
             runs[k, 0] = free
@@ -455,7 +455,7 @@ def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, 
     for i in range(spread.size):
         spread[i] = x[i * step]
     ref = median_inplace(spread)
-    csum, s1 = prefix_and_triangle(x, np.int64(2))  # int64, not a literal
+    csum, s1 = prefix_and_triangle(x, np.int64(2))  # type: ignore[arg-type]  # int64, not a literal
     sign = sign_in
     if sign == 0.0:
         sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
@@ -861,9 +861,11 @@ def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line:
     prev_end = np.int64(0)  # int64, not a literal (module docstring)
     for j in range(m):
         sk = skew if j == 0 else -skew  # the later pulses travel back up the chain
-        prev_end = _measure_pulse(y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
-                                  prev_end, thr, fit_fraction, shape_r, sk, nfree, max_iter,
-                                  sigma_top, pre, out[j])
+        # (the stubs type the compiled call's int64 as int; numba reads no comments)
+        prev_end = _measure_pulse(  # type: ignore[assignment]
+            y, s, v, line, peaks[j], bounds[j], bounds[j + 1], widths[j],
+            prev_end, thr, fit_fraction, shape_r, sk, nfree, max_iter,  # type: ignore[arg-type]
+            sigma_top, pre, out[j])
         out[j, P_MERGED] = 1.0 if (j + 1 < m and v[bounds[j + 1]] > 0.5 * thr) else 0.0
 
     if gate_1n > 0 and m >= 2:

@@ -26,6 +26,7 @@ import contextlib
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +38,7 @@ _child: subprocess.Popen[bytes] | None = None
 _done = False
 
 
-def _example_args(n: int = 64) -> tuple[tuple[object, ...], tuple[object, ...]]:
+def _example_args(n: int = 64) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
     """Arguments of the types :func:`~solitonde.signal.pulses.detect` passes to ``locate`` and
     ``measure`` (default options): numba compiles for the types, whatever the values. The
     samples (``locate``'s first argument) are also what a Waveform passes to ``first_invalid``."""
@@ -59,8 +60,8 @@ def _marker() -> Path:
 
     from . import kernels as K
 
-    cpu = numba.config.CPU_NAME or binding.get_host_cpu_name()
-    return Path(K.measure.stats.cache_path) / f"shot-kernels-{cpu}.compiled"
+    cpu = getattr(numba.config, "CPU_NAME", None) or binding.get_host_cpu_name()
+    return Path(str(K.measure.stats.cache_path)) / f"shot-kernels-{cpu}.compiled"
 
 
 def start() -> None:
