@@ -831,8 +831,8 @@ def _normal_cdf(z: np.ndarray) -> np.ndarray:
     return ndtr(z)
 
 
-def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary],
-                    calibration: Calibration | None = None, *,
+def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary | Mapping[str, Any]],
+                    calibration: Calibration | Mapping[str, Any] | None = None, *,
                     material_spread: Mapping[str, float] | None = None) -> dict[str, Any]:
     """The likelihood :func:`invert` puts on every fine (t, L) cell for exactly these sphere
     sizes (no size left out), for a plate's joint map (instrument.inference.joint_map): one
@@ -843,8 +843,8 @@ def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary],
 
     keep: dict[str, Any] = {}
     spread = dict(spread_of(table) if material_spread is None else material_spread)
-    _invert_items(table, [FeatureSummary.from_any(i) for i in inputs], calibration, False,
-                  spread, keep)
+    _invert_items(table, [FeatureSummary.from_any(i) for i in inputs],
+                  Calibration.from_any(calibration), False, spread, keep)
     return keep
 
 
