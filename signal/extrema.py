@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 from llvmlite import ir
+from numba import config as _config
 from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
@@ -32,8 +33,20 @@ def _fp_extremum(name: str) -> Any:
     return extremum
 
 
-_fmax = _fp_extremum("maxnum")
-_fmin = _fp_extremum("minnum")
+def _max(a: float, b: float) -> float:
+    return a if a >= b else b
+
+
+def _min(a: float, b: float) -> float:
+    return a if a <= b else b
+
+
+config: Any = _config  # its settings are set at run time: untyped
+if config.DISABLE_JIT:  # interpreted (:mod:`.interpreted`): an intrinsic cannot run in Python
+    _fmax, _fmin = _max, _min
+else:
+    _fmax = _fp_extremum("maxnum")
+    _fmin = _fp_extremum("minnum")
 
 
 @njit(cache=True, inline="always")

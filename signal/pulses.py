@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from . import kernel_choice
 from . import kernels as K
 from .errors import WaveformError
 from .waveform import Waveform
@@ -320,10 +321,8 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         x = x.view()
         x.setflags(write=False)
     # K.analyze in two calls: each half is compiled on its own (side by side on a fresh install,
-    # solitonde.signal.precompile) and nothing compiles the whole again for this path.
-    args = kernel_args(opts, x.size, dt)
-    located = K.locate(x, *args[: K.LOCATE_ARGS])
-    rows_array = K.measure(*located, *args[K.LOCATE_ARGS :])
+    # interpreted until then: solitonde.signal.kernel_choice) and nothing compiles the whole again.
+    located, rows_array = kernel_choice.locate_and_measure(x, kernel_args(opts, x.size, dt))
     head_array = located[0]
     head = head_array.tolist()  # Python floats: cheaper to read one by one than numpy scalars
     rows = rows_array.tolist()

@@ -13,8 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from . import kernel_choice
 from .errors import WaveformError
-from .kernels import MAX_ABS_SAMPLE, first_invalid
+from .kernels import MAX_ABS_SAMPLE
 
 UNITS = ("N", "V")
 MIN_SAMPLES = 32
@@ -56,7 +57,7 @@ def check_samples(samples: Any, name: str = "samples") -> np.ndarray:
         )
     checked = array.view()
     checked.setflags(write=False)  # whatever the caller's flag: one compiled first_invalid
-    bad = first_invalid(checked)
+    bad = kernel_choice.current().first_invalid(checked)
     if bad >= 0:
         raise WaveformError(name, f"{invalid_sample(array[bad])} at sample {bad}",
                             f"finite numbers of magnitude at most {MAX_ABS_SAMPLE:g}")

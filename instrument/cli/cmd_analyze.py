@@ -469,11 +469,10 @@ def analyze(
         jobs = _manifest_jobs(manifest, paths if files else None, fmt, usage)
     invert = invert or estimates_out is not None
     options = {"sample_rate": sample_rate, "units": units}
-    if jobs:  # a fresh install: the extractor's two halves compile side by side
-        from solitonde.signal import precompile
+    if jobs:  # a fresh install: a few shots interpreted while the extractor compiles
+        from solitonde.signal import kernel_choice
 
-        precompile.start()
-        precompile.finish()
+        kernel_choice.start()
     calibration_used = False
     rows: list[dict[str, Any]] = []
     errors: list[dict[str, Any]] = []

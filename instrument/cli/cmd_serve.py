@@ -91,14 +91,14 @@ def register(app: typer.Typer) -> None:
             if not p.exists():
                 typer.echo(f"error: --table: no such file or folder: {p}", err=True)
                 raise typer.Exit(2)
-        from solitonde.signal import precompile
+        from solitonde.signal import kernel_choice
 
-        # A fresh install compiles half of the feature extractor in a child process while this
-        # one imports the service and compiles the other half (the lifespan's warm-up, which
-        # waits for the child). Several workers would each start a child: compile here, first.
-        precompile.start()
+        # A fresh install compiles the feature extractor in the background and answers the
+        # first shots interpreted meanwhile. Several workers would each run the interpreted
+        # kernels: wait for the compile here, first.
+        kernel_choice.start()
         if workers > 1:
-            precompile.finish()
+            kernel_choice.finish()
         if not given or not given[0].exists():
             where = settings.table_path or DEFAULT_TABLE
             typer.echo(f"warning: no model table at {where}: serving without estimates "

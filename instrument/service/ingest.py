@@ -227,18 +227,16 @@ def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list
 def warm_up() -> float:
     """Run the feature extractor once on a synthetic shot; returns the seconds it took.
 
-    The signal kernels are numba-compiled (cached on disk, but loaded or compiled on first
-    use); doing it in the lifespan keeps that out of the first requests' latency. On a fresh
-    install the two halves of the extractor compile side by side
-    (:mod:`solitonde.signal.precompile`; ``solitonde serve`` starts the second early).
+    The signal kernels are numba-compiled (cached on disk, but loaded on first use); doing it in
+    the lifespan keeps that out of the first requests' latency. On a fresh install they compile
+    in the background and this runs them interpreted (:mod:`solitonde.signal.kernel_choice`), so
+    the service is ready in seconds and its first shots are answered before the compile ends.
     """
     import time
 
-    from solitonde.signal import precompile
     from solitonde.signal.synth import pulse_train
 
     started = time.perf_counter()
-    precompile.finish()
     dt = 5e-7
     samples = pulse_train(4000, dt, [(300e-6, 50.0, 40e-6), (900e-6, 30.0, 40e-6)])
     samples = samples + 0.01 * np.sin(np.arange(samples.size))  # a little "noise"
