@@ -554,7 +554,7 @@ def integrate_dopri5(
     (dense-output refined, see the module docstring).
 
     ``atol = rtol x scale`` per component, with the scales of the benchmark's RK45 run
-    (tests/bench_chain.py): the striker's dynamic Hertz overlap ``(5 E / (2 A_0))^(2/5)`` for
+    (tests/model/bench_chain.py): the striker's dynamic Hertz overlap ``(5 E / (2 A_0))^(2/5)`` for
     positions and the plate deflection, the impact velocity (the largest initial speed) for
     velocities, and the striker's kinetic energy E for the plate work and dissipated energy.
 

@@ -62,15 +62,15 @@ def choose_time_step(
     ``C (omega dt)^2`` with C about 0.02-0.03 measured on the default scene (rigid, half-space and
     infinite plate, gravity on and off), so the default 1600 steps/period, ``(omega dt)^2 =
     1.5e-5``, is the step an energy-drift target of 1e-6 asks for with a margin of two to three
-    (measured drift 3e-7 to 5e-7; tests/test_chain_physics.py); the error falls as dt^2. A plate
-    with dynamics of its own (the dashpot) also needs ``dt <= 0.0125 Z / k_b``: the Strang
+    (measured drift 3e-7 to 5e-7; tests/model/test_chain_physics.py); the error falls as dt^2. A
+    plate with dynamics of its own (the dashpot) also needs ``dt <= 0.0125 Z / k_b``: the Strang
     splitting error grows with the dashpot rate ``k_b / Z`` and this keeps the drift below 1e-6
     up to D/t = 12. Both limits are resolutions of one second-order scheme, so one knob sets them:
     ``steps_per_period`` below the default loosens the dashpot limit in proportion (80 steps per
     relaxation time at 1600 steps/period, 1.25 at 25, never coarser than half a relaxation time),
     which is how a cheaper, coarser run is asked for (e.g. the peaks within 0.1 %, 25
-    steps/period on the default scene; tests/bench_chain.py). The step is then shrunk so that a
-    whole number ``n_sub`` of steps fits in one sample interval: samples fall on steps.
+    steps/period on the default scene; tests/model/bench_chain.py). The step is then shrunk so that
+    a whole number ``n_sub`` of steps fits in one sample interval: samples fall on steps.
     """
     m = scene.sphere_mass
     g = STANDARD_GRAVITY if scene.effects.gravity else 0.0

@@ -39,7 +39,7 @@ STANDARD_GRAVITY = 9.80665  # m/s^2
 PLATE_MODELS = ("rigid", "halfspace", "infinite", "sem", "greens", "mindlin", "mindlin_greens",
                 "auto")
 """What ``effects.plate_model`` accepts (its schema's Literal spells them again, as pydantic and
-the type checker need; tests/test_tiers.py holds the two and the tier registry together)."""
+the type checker need; tests/model/test_tiers.py holds the two and the tier registry together)."""
 SUPPORTS = ("opposite_edges", "all_edges", "none")
 MAX_PLATE_SIZE = 100.0  # m, per in-plane side; beyond it no mesh or Green's function is sane
 

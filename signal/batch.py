@@ -7,7 +7,7 @@ object is made per shot (only the SNR is finished in Python, to match ``extract`
 so the cost is the kernel's. The command line does not use it yet (``solitonde analyze`` reads
 one file at a time); it is the library entry point for arrays. :meth:`FeatureTable.features`
 gives one shot's :class:`~solitonde.signal.features.Features`, equal field for field to what
-``extract`` returns for that shot (tests/test_signal_batch.py holds them together).
+``extract`` returns for that shot (tests/signal/test_signal_batch.py holds them together).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ imports from this folder, under a package name of its own, with numba's ``DISABL
 while their decorators run: ``@njit`` then returns each function as written. The compiled
 kernels (the package's own modules) are untouched. The two agree to round-off: the only
 fast-math kernel (the power sums of :func:`~solitonde.signal.kernels.quadratic_fit`) may add in
-another order compiled (``tests/test_precompile.py`` compares them shot by shot).
+another order compiled (``tests/signal/test_precompile.py`` compares them shot by shot).
 """
 
 from __future__ import annotations

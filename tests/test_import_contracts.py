@@ -1,6 +1,6 @@
 """The layers of DESIGN.md hold: import-linter's contracts in pyproject.toml (``lint-imports``).
 
-The linter runs on the folders laid out as one package (``tests/package_tree.py``) with the
+The linter runs on the folders laid out as one package (``tests/support/package_tree.py``) with the
 repository's configuration.
 """
 

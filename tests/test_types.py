@@ -1,6 +1,6 @@
 """mypy passes on model/ and signal/ with the configuration in pyproject.toml (issue 30).
 
-Run on the folders laid out as one package (``tests/package_tree.py``); about 10-30 s.
+Run on the folders laid out as one package (``tests/support/package_tree.py``); about 10-30 s.
 """
 
 from __future__ import annotations

@@ -1,0 +1,128 @@
+"""The map study (instrument.studies.map_study, `solitonde validate-map`): its random scans are
+what it says they are, its scores count what they say; the study itself runs on demand
+(`pytest -m slow`), the full one in docs/joint-map.md."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from solitonde.instrument.cli.main import build_app as build_cli
+from solitonde.instrument.studies import map_study
+from solitonde.instrument.tables.table import ModelTable
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE = ROOT / "data_samples" / "default_table.h5"
+
+
+@pytest.fixture(scope="module")
+def table() -> ModelTable:
+    return ModelTable.load(TABLE)
+
+
+def test_a_random_scan_is_a_tilted_edge_with_positions_on_the_plate_near_it(table):
+    angles = set()
+    for seed in range(12):
+        scan = map_study.Scan(table, seed, 9.53e-3)
+        # the edge: near one of the rectangle's sides, tilted by at most the stated angle
+        nominal = round(math.degrees(scan.theta) / 90.0) * 90.0
+        tilt = (math.degrees(scan.theta) - nominal + 180.0) % 360.0 - 180.0
+        assert abs(tilt) <= map_study.TILT_DEG + 1e-9
+        angles.add(nominal % 360.0)
+        assert map_study.POSITIONS[0] <= scan.n_positions <= map_study.POSITIONS[1]
+        assert scan.edge_error(scan.theta, scan.offset_m) == pytest.approx(0.0, abs=1e-12)
+        assert scan.edge_error(scan.theta, scan.offset_m + 0.004) == pytest.approx(0.004)
+        lo_t, hi_t = table.axes["thickness_m"][[0, -1]]
+        assert lo_t < scan.thickness_m < hi_t
+        for x, y in scan.plate_positions:
+            assert 0 <= x <= scan.a and 0 <= y <= scan.b
+        for x, y in scan.random_positions:
+            assert 0 <= x <= scan.a and 0 <= y <= scan.b
+            d = scan.distance(x, y)
+            assert map_study.DISTANCE_RANGE_M[0] - 1e-9 <= d <= map_study.DISTANCE_RANGE_M[1]
+        # the span's ends lie on the edge and inside the rectangle
+        for end in scan.ends:
+            assert float(end @ scan.normal) == pytest.approx(scan.offset_m)
+    assert len(angles) >= 3  # the clamped side is drawn, not always the same
+
+
+def _row(thickness: float, positions: list[tuple[float, dict, dict, dict]],
+         edges: dict, sequence: dict | None = None) -> dict:
+    row = {"thickness_m": thickness, "positions": [
+        {"distance_m": d, "alone": a, "free": f, "common": c} for d, a, f, c in positions]}
+    row.update(edges)
+    if sequence is not None:
+        row["sequence"] = sequence
+    return row
+
+
+def test_the_summary_counts_coverage_widths_and_the_positions_to_the_target():
+    ans = {"status": "constrained", "covered": True, "width_m": 1e-3}
+    miss = {"status": "constrained", "covered": False, "width_m": 0.5e-3}
+    none = {"status": "unconstrained", "covered": None, "width_m": 4.5e-3}
+    edge = {"ci95_offset_m": [0.0, 0.004], "covered": True, "error_m": 0.002,
+            "fit": {"p_value": 0.5}}
+    rows = [
+        _row(3e-3, [(0.01, none, ans, ans), (0.05, ans, miss, ans), (0.02, ans, ans, ans)],
+             {"edge_alone": edge, "edge_free": edge, "edge_common": edge},
+             {"suggested": {"errors_m": [0.02, 0.004, 0.003], "positions_to_target": 4},
+              "random_near_edge": {"errors_m": [0.02, 0.01, 0.006], "positions_to_target": None},
+              "random_on_plate": {"errors_m": [0.02, 0.02, 0.02], "positions_to_target": None}}),
+        _row(2e-3, [(0.2, ans, ans, ans)],
+             {"edge_alone": {"reason": "too few"},
+              "edge_free": {**edge, "covered": False}, "edge_common": edge},
+             {"suggested": {"errors_m": [0.01, 0.01, 0.004], "positions_to_target": 5},
+              "random_near_edge": {"errors_m": [0.004, 0.004, 0.004], "positions_to_target": 3},
+              "random_on_plate": {"errors_m": [0.004, 0.004, 0.004], "positions_to_target": 3}}),
+    ]
+    m = map_study.summarise(rows)
+    assert m["thickness_alone"]["coverage_95"] == 1.0 and m["thickness_alone"]["answers"] == 3
+    assert m["thickness_free"]["coverage_95"] == 0.75
+    # within 30 mm: the 10 and 20 mm positions of the first scan (relative to its 3 mm)
+    assert m["thickness_alone"]["near_edge_positions"] == 2
+    assert m["thickness_alone"]["near_edge_width_median_m"] == pytest.approx(2.75e-3)
+    assert m["thickness_free"]["near_edge_width_median_m"] == pytest.approx(1e-3)
+    assert m["edge_alone"]["located"] == 1 and m["edge_free"]["coverage_95"] == 0.5
+    s, r = m["sequence_suggested"], m["sequence_random_near_edge"]
+    assert s["edge_error_median_m_by_positions"]["4"] == pytest.approx(0.007)
+    assert s["reached_target"] == 2 and r["reached_target"] == 1
+    # a scan that never reached the target counts as needing more than the maximum
+    assert r["positions_to_target_median"] == pytest.approx((3 + map_study.MAX_POSITIONS + 1)
+                                                            / 2)
+    assert m["suggested_fewer_than_random_near_edge"] == 1
+    assert m["suggested_more_than_random_near_edge"] == 1
+    assert m["sequence_random_on_plate"]["reached_target"] == 1
+
+
+def test_validate_map_refuses_bad_input_naming_the_flag(tmp_path):
+    run = CliRunner().invoke
+    res = run(build_cli(), ["validate-map", "--scans", "0"])
+    assert res.exit_code == 1 and "--scans: must be an integer >= 1" in res.stderr
+    res = run(build_cli(), ["validate-map", "--scans", "1", "--diameter", "0.0127"])
+    assert res.exit_code == 1 and "--diameter" in res.stderr
+    res = run(build_cli(), ["validate-map", "--out", str(tmp_path)])
+    assert res.exit_code == 1 and "--out" in res.stderr
+
+
+@pytest.mark.slow
+def test_the_study_runs_end_to_end(tmp_path):
+    """Two scans with the three ways of adding positions (a few minutes): every figure the docs
+    print is there and every edge error is a number, not an error."""
+    out = tmp_path / "study.json"
+    res = CliRunner().invoke(build_cli(), ["validate-map", "--scans", "2", "--seed", "3",
+                                           "--out", str(out), "--measurements",
+                                           str(tmp_path / "m.json")])
+    assert res.exit_code == 0, res.output
+    assert "joint, thickness free: thickness coverage" in res.stdout
+    assert "suggested needed fewer positions than random_on_plate" in res.stdout
+    result = json.loads(out.read_text())
+    for scan in result["scans"]:
+        for strategy in map_study.STRATEGIES:
+            errors = scan["sequence"][strategy]["errors_m"]
+            assert len(errors) == map_study.MAX_POSITIONS - map_study.START_POSITIONS + 1
+            assert np.isfinite(errors).all(), (strategy, errors)

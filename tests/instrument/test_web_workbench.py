@@ -1,0 +1,159 @@
+"""The web page as a workbench, driven in Debian's headless Chromium by Playwright for Python.
+
+Playwright drives the system's chromium through its executable path (no browser is downloaded);
+where either is missing the tests are skipped with the reason printed. Against a real uvicorn
+process with the bundled table: upload a file with its fields through the page's file input, see
+its estimate, open its second shot's trace, see a measurement posted from elsewhere appear
+without a reload, and find the estimates' downloads and the table and plate material used.
+Set SOLITONDE_FIGURES to a folder to keep the screenshot (the README's is
+data_samples/figures/web_workbench.png).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+from pathlib import Path
+
+import httpx
+import pytest
+from service_support import start_uvicorn, stop_group
+
+from solitonde.signal import io as signal_io
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE = ROOT / "data_samples" / "default_table.h5"
+SAMPLE = ROOT / "data_samples" / "waveforms" / "synthetic_D9.53_t4.83_snr40.csv"
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def _playwright():
+    if CHROMIUM is None:
+        print("SKIP: no chromium on this machine (apt-get install chromium)")
+        pytest.skip("no chromium (apt-get install chromium)")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        print("SKIP: playwright is not installed (pip install -e '.[dev]')")
+        pytest.skip("playwright not installed (pip install -e '.[dev]')")
+    return sync_playwright
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    _playwright()
+    proc, url = start_uvicorn(tmp_path_factory.mktemp("workbench") / "store.sqlite",
+                              env={"SOLITONDE_TABLE": str(TABLE)})
+    try:
+        yield url
+    finally:
+        stop_group(proc)
+
+
+def _recording(folder: Path) -> Path:
+    """The bundled recording without its plate and position: what a scope saves."""
+    from solitonde.signal.waveform import Waveform
+
+    shots = [Waveform(w.t0, w.dt, w.samples, w.units, w.calibration, {})
+             for w in signal_io.read(SAMPLE)]
+    return signal_io.write(folder / "scope_0001.csv", shots)
+
+
+def test_upload_see_the_estimate_open_the_second_shot_and_see_live_updates(server, tmp_path):
+    sync_playwright = _playwright()
+    recording = _recording(tmp_path)
+    errors: list[str] = []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM,
+                                    args=["--no-sandbox", "--disable-gpu"])
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 1500})
+            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.on("response", lambda r: errors.append(f"{r.status} {r.url}")
+                    if r.status >= 400 else None)
+            page.goto(server + "/")
+            page.wait_for_selector("#upload-form")
+            # the file picker and the fields
+            assert page.locator("input[type=file]#file").count() == 1
+            page.set_input_files("#file", str(recording))
+            page.fill("#f-plate_id", "WEB-1")
+            page.fill("#f-position", "A1")
+            page.fill("#f-x_m", "0.1")
+            page.fill("#f-y_m", "0.2")
+            page.fill("#f-sphere_diameter", "0.00953")
+            page.click("#upload")
+            result = page.locator("#upload-result")
+            result.filter(has_text="thickness").wait_for(timeout=60_000)
+            text = result.inner_text()
+            m = re.match(r"scope_0001\.csv: measurement (\d+), 2 shots; thickness (\S+) \(95 %",
+                         text)
+            assert m, text
+            measurement_id = int(m.group(1))
+            assert abs(float(m.group(2)) - 4.83) < 0.1, text  # the sample's plate: 4.83 mm
+            # the page went to the plate and the measurement: one estimate per position
+            page.locator("#positions tbody tr").first.wait_for()
+            positions = page.locator("#positions tbody tr")
+            assert positions.count() == 1 and positions.first.inner_text().startswith("A1")
+            assert "constrained" not in positions.first.inner_text()  # read as mm, not a status
+            # both are filled once /v1/tables answers (after the position's row, on a busy machine)
+            page.locator("#plate-tables").filter(has_text="plate al_6061").wait_for(timeout=30_000)
+            page.locator("#measurement-table").filter(has_text="plate al_6061").wait_for(
+                timeout=30_000)
+            # every shot listed; the second one opened: its trace with the picks
+            page.locator("#shot-1").wait_for()
+            assert page.locator("#shots tbody tr").count() == 2
+            page.click("#shot-1")
+            page.locator("#trace-title", has_text="shot 1").wait_for()
+            page.locator("#shots tr.current", has_text="shot 1").wait_for()
+            trace = page.locator("#trace")
+            for _ in range(200):  # the PNG drawn and decoded
+                if trace.evaluate("e => e.src.startsWith('blob:') && e.naturalWidth > 0"):
+                    break
+                page.wait_for_timeout(100)
+            else:
+                raise AssertionError("the second shot's trace was not shown")
+            assert f"#plate=WEB-1&m={measurement_id}&shot=1" in page.url
+            # the downloads point at the estimates export of this plate, and answer
+            href = page.get_attribute("#dl-estimates-csv", "href")
+            assert href == "/v1/measurements/export?kind=estimates&format=csv&plate_id=WEB-1"
+            csv_text = page.request.get(server + href).text()
+            assert csv_text.count("\n") == 2 and "thickness_m_median" in csv_text
+            parquet = page.request.get(server + page.get_attribute("#dl-estimates-parquet",
+                                                                   "href"))
+            assert parquet.ok and parquet.body()[:4] == b"PAR1"
+            # live: a measurement posted by another client appears without a reload
+            shots = [{**w.to_dict(), "metadata": {}} for w in signal_io.read(recording)]
+            r = httpx.post(f"{server}/v1/measurements", timeout=120, json={
+                "shots": shots, "metadata": {"plate_id": "WEB-1", "position": "A2", "x_m": 0.15,
+                                             "y_m": 0.2, "sphere_diameter": 9.53e-3}})
+            assert r.status_code == 201, r.text
+            page.locator("#positions tbody tr", has_text="A2").wait_for(timeout=20_000)
+            page.locator("#measurements tbody tr", has_text="A2").wait_for(timeout=20_000)
+            assert page.locator("#measurements tbody tr").count() == 2
+            figures = os.environ.get("SOLITONDE_FIGURES")
+            shot = Path(figures) if figures else tmp_path
+            shot.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(shot / "web_workbench.png"), full_page=True)
+        finally:
+            browser.close()
+    assert not errors, errors
+
+
+def test_a_refused_upload_says_why_on_the_page(server, tmp_path):
+    sync_playwright = _playwright()
+    empty = tmp_path / "empty.csv"
+    empty.write_text("time_s,force_N\n")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        try:
+            page = browser.new_page()
+            page.goto(server + "/")
+            page.set_input_files("#file", str(empty))
+            page.click("#upload")
+            result = page.locator("#upload-result.error")
+            result.wait_for(timeout=30_000)
+            assert result.inner_text().startswith("empty.csv: 422: ")
+        finally:
+            browser.close()

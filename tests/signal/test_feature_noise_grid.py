@@ -1,0 +1,86 @@
+"""TOF and ARR under white noise over issue 17's whole grid, the support included (issue 27).
+
+``tests/signal/test_feature_noise.py`` draws its traces from an independent solve, which has Zener's
+infinite plate only. Here every scene of the grid (``tests/support/feature_grid.py``: three sphere
+sizes x D/t 0.5-4 x gravity on and off on the infinite plate, and the greens tier 10-30 mm from a
+clamped support) is simulated by the model at 20 MHz, taken through ``as_measured`` as a table build
+takes it, and sampled at its grid rate (1-10 MHz) at random sub-sample offsets with white noise of
+standard deviation ``incident peak / 10^(SNR/20)``, 200 draws at 20, 30, 40 and 60 dB. The reference
+is the clean reading averaged over the offsets, what a table holds at that point.
+
+Asserted where the reflection is found in at least 95 % of the draws (a reflection below the noise
+is an upper bound, not a reading, and the mean of the draws that cross the threshold is not the
+reading's mean): the mean TOF error within 0.1 us and the mean relative ARR error within 0.3 %, or a
+quarter of the draws' standard deviation where that is larger; the standard deviations within 1.5
+times the Cramer-Rao bound. The table is printed (``-m slow -s``): about 20 s of simulation and
+20,000 extractions on two cores.
+
+One cell-SNR pair falls short and is named in :data:`KNOWN_SHORTFALLS` (the test fails if it starts
+to pass, or if another fails): D 19.05 mm on a 4.76 mm plate, gravity off, 2 MHz, 60 dB, TOF sd
+0.087 us against a bound of 0.047 us. It is not noise: that flat-topped reflection's template
+reading moves with the sampling phase (sd 0.068 us over the ten sub-sample offsets of the clean
+trace, 0.004 us at 5 MHz, 0.0014 us with gravity on), because the fit window's ends and its block
+averages move by whole samples; at 60 dB that phase jitter outweighs the noise.
+"""
+
+from __future__ import annotations
+
+import pytest
+from feature_grid import grid_rates, grid_scenes
+from noise_draws import noise_rows
+
+from solitonde.instrument.tables.measured import as_measured
+from solitonde.model.batch import simulate_many
+from solitonde.model.simulate import SimulationResult
+from solitonde.signal.accuracy import Truth
+
+FINE_RATE = 20e6
+TOF_LIMIT_S = 0.1e-6
+ARR_LIMIT = 0.003
+SD_OVER_BOUND = 1.5
+FOUND = 0.95
+KNOWN_SHORTFALLS = {("infinite", False, 19.05, 4.0, 60.0)}
+"""(plate model, gravity, D mm, D/t, SNR dB) of the pairs outside the limits (module doc)."""
+
+
+def _truth(result: SimulationResult) -> Truth:
+    w = as_measured(result)
+    return Truth.from_peaks(w.samples, w.dt, w.t0, result.truth)
+
+
+@pytest.mark.slow
+def test_means_do_not_move_with_noise_over_the_whole_grid() -> None:
+    scenes = grid_scenes({"sample_rate": FINE_RATE})
+    results = simulate_many(scenes, workers=2)
+    assert all(isinstance(r, SimulationResult) for r in results), results
+    print("\n| plate | g | D mm | D/t | L mm | MHz | ARR | SNR dB | found | TOF mean us "
+          "| TOF sd us (bound) | ARR mean % | ARR sd % (bound) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    failures: dict[tuple[str, bool, float, float, float], str] = {}
+    skipped = 0
+    for result, rate in zip(results, grid_rates(), strict=True):
+        s = result.scene
+        for r in noise_rows(as_measured(result), _truth(result), rate):
+            distance = s.plate.distance_to_support
+            where = "-" if s.effects.plate_model == "infinite" else f"{distance * 1e3:.0f}"
+            line = (f"| {s.effects.plate_model} | {'on' if s.effects.gravity else 'off'} | "
+                    f"{s.chain.diameter * 1e3:.2f} | {s.d_over_t:.1f} | {where} | "
+                    f"{rate / 1e6:g} | {r['arr0']:.3f} | {r['snr']:.0f} | {r['found']:.2f} | "
+                    f"{r['tof_mean'] * 1e6:+.3f} | {r['tof_sd'] * 1e6:.3f} "
+                    f"({r['tof_crb'] * 1e6:.3f}) | {100 * r['arr_mean']:+.3f} | "
+                    f"{100 * r['arr_sd']:.3f} ({100 * r['arr_crb']:.3f}) |")
+            print(line)
+            if r["found"] < FOUND:
+                skipped += 1
+                continue
+            ok = (abs(r["tof_mean"]) <= max(TOF_LIMIT_S, 0.25 * r["tof_sd"])
+                  and abs(r["arr_mean"]) <= max(ARR_LIMIT, 0.25 * r["arr_sd"])
+                  and r["tof_sd"] <= SD_OVER_BOUND * r["tof_crb"]
+                  and r["arr_sd"] <= SD_OVER_BOUND * r["arr_crb"])
+            if not ok:
+                key = (s.effects.plate_model, bool(s.effects.gravity),
+                       round(s.chain.diameter * 1e3, 2), round(s.d_over_t, 1), r["snr"])
+                failures[key] = line
+    print(f"{skipped} cell-SNR pairs with the reflection in fewer than {FOUND:.0%} of the draws "
+          f"(not asserted); outside the limits: {sorted(failures)}")
+    assert set(failures) == KNOWN_SHORTFALLS, "\n".join(failures.values())
