@@ -42,6 +42,12 @@ CHILD_TIMEOUT_S = 900.0
 """The longest :func:`finish` waits for the background compile (a loaded machine compiles for
 minutes), and the age after which a lock file left by a killed compile is ignored."""
 
+COMPILE_FIRST_ENV = "SOLITONDE_COMPILE_FIRST"
+"""Set to 1, :func:`start` does nothing: the first shot compiles the kernels in this process
+before it is extracted (the first answer waits, and every shot has the compiled kernels' bits).
+The test suite sets it, so that no test's numbers depend on whether a background compile of
+another test has finished."""
+
 BRIDGE_BUDGET_S = 5.0
 """Seconds of interpreted extraction a process spends before it waits for the compiled kernels
 (a few dozen shots; a large job is faster compiled, even counting the wait)."""
@@ -98,7 +104,8 @@ def start() -> None:
 
     with _state:
         config: Any = numba.config  # its settings are set at run time: untyped
-        if config.DISABLE_JIT or _bridging or _marker().is_file():
+        if (config.DISABLE_JIT or _bridging or os.environ.get(COMPILE_FIRST_ENV) == "1"
+                or _marker().is_file()):
             return
         from . import interpreted
 

@@ -1,7 +1,16 @@
 """Test-session set-up: numba's cache folder follows the source of the kernels
 (:mod:`solitonde.model.jit_cache`), also in a run of test files that import only
-``solitonde.signal`` modules (which have no package ``__init__`` to set it)."""
+``solitonde.signal`` modules (which have no package ``__init__`` to set it); the extractor is
+compiled before a command's first shot (:mod:`solitonde.signal.kernel_choice`)."""
+
+import os
 
 from solitonde.model.jit_cache import configure
+from solitonde.signal.kernel_choice import COMPILE_FIRST_ENV
 
 configure()
+# Commands run in-process (CliRunner) or as child processes compile the extractor before their
+# first shot, as a library call does: no test's numbers depend on whether a background compile
+# started by another test has finished. tests/signal/test_precompile.py unsets it where it tests
+# the interpreted start.
+os.environ[COMPILE_FIRST_ENV] = "1"

@@ -140,6 +140,7 @@ def test_start_compiles_in_the_background_and_leaves_the_marker(tmp_path, monkey
     """start takes the lock and runs the background compile (here it loads the halves from the
     suite's cache); finish waits for it: the marker is there, the lock gone, and a second start
     runs nothing."""
+    monkeypatch.delenv(kernel_choice.COMPILE_FIRST_ENV)
     marker = tmp_path / "shot-kernels-cpu.compiled"
     monkeypatch.setattr(kernel_choice, "_marker", lambda: marker)
     monkeypatch.setattr(kernel_choice, "_bridging", False)
@@ -160,6 +161,7 @@ def test_a_compile_under_way_is_not_started_twice(tmp_path, monkeypatch):
     """Another command's live lock: this one bridges without a compile of its own, and finish
     waits for that lock. A lock older than the longest compile was left by a killed one: taken
     over."""
+    monkeypatch.delenv(kernel_choice.COMPILE_FIRST_ENV)
     marker = tmp_path / "shot-kernels-cpu.compiled"
     lock = marker.with_suffix(".compiling")
     lock.touch()
@@ -206,7 +208,8 @@ def test_from_an_empty_cache_detect_loads_the_backgrounds_kernels(tmp_path: Path
             "tof_first": first.reflected.time_s - first.incident.time_s,
             "tof": d.reflected.time_s - d.incident.time_s}))
     """
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_CACHE_DIR", kernel_choice.COMPILE_FIRST_ENV)}
     env["SOLITONDE_CACHE_DIR"] = str(tmp_path / "cache")
     out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env,
                          capture_output=True, text=True, timeout=900)
