@@ -55,6 +55,10 @@ def plate_material_value(value: Any) -> Any:
     return value
 
 
+MaterialName = Annotated[str, StringConstraints(max_length=80)]
+"""A plate material named in text (a library name, or its properties as JSON in a form field)."""
+
+
 class ShotMetadata(Strict):
     """Where and how a shot was taken."""
 
@@ -70,7 +74,7 @@ class ShotMetadata(Strict):
     y_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position, y, m")
     table: str | None = Field(None, max_length=64, description="the model table to invert "
                               "against, by id (GET /v1/tables); needed when several could serve")
-    plate_material: Annotated[str, StringConstraints(max_length=80)] | PlateMaterialIn | None = (
+    plate_material: MaterialName | PlateMaterialIn | None = (
         Field(None, description=PLATE_MATERIAL_HELP))
     extra: dict[Key, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
@@ -255,7 +259,7 @@ class InvertIn(Strict):
     inputs: list[InversionInput] = Field(min_length=1, max_length=16)
     calibration: Calibration | None = None
     table: str | None = Field(None, max_length=64, description="the model table, by id")
-    plate_material: Annotated[str, StringConstraints(max_length=80)] | PlateMaterialIn | None = (
+    plate_material: MaterialName | PlateMaterialIn | None = (
         Field(None, description=PLATE_MATERIAL_HELP))
 
 
