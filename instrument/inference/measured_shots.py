@@ -21,6 +21,7 @@ attributes or properties, the command line's flags, a campaign manifest.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import numbers
@@ -196,7 +197,7 @@ def check_metadata(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf,
     caller knows the plate (its table's). ShotInputError naming the field (``field_of``).
     """
     for i, meta in enumerate(metadata):
-        check_sizes(meta, lambda key, i=i: field_of(i, key))
+        check_sizes(meta, functools.partial(field_of, i))
         d = meta.get("sphere_diameter")
         if d is not None and not (_real(d) and 0.0 < float(d) <= SPHERE_DIAMETER_MAX):
             raise ShotInputError(field_of(i, "sphere_diameter"), f"{d!r} is not a sphere "
@@ -255,7 +256,9 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
                  ) -> tuple[list[dict[str, Any]], bool]:
     """One row per shot of ``path`` and whether ``fallback_calibration`` was used.
 
-    Each shot's location is its own metadata with what the ``stated`` sources (name, metadata:
+    The shots are the file's channels named by ``channels``/``group``, or else those that are
+    sensor traces (signal.channels: a trigger step or a flat line is left out). Each shot's
+    location is its own metadata with what the ``stated`` sources (name, metadata:
     a command line, a manifest row) add; a contradiction is a WaveformError, metadata the
     service would refuse a ShotInputError (``metadata.<key>``), either for the whole file. A shot
     the extractor cannot measure is a row with ``error``; one whose pulses do not fit a

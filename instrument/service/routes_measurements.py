@@ -71,7 +71,8 @@ def _optional(model: type[Strict], name: str) -> tuple[Any, FieldInfo]:
     """``model``'s field ``name``, with its limits and description, as an optional field."""
     info = copy.copy(model.model_fields[name])
     info.default = None
-    return info.annotation | None, info
+    annotation: Any = info.annotation
+    return annotation | None, info
 
 
 _METADATA_FORM_KEYS = ("plate_id", "position", "sphere_diameter", "x_m", "y_m", "table")
