@@ -51,6 +51,9 @@ EXAMPLES: dict[str, Callable[[type], BaseException]] = {
     "SchemaTooOld": lambda c: c("'s.sqlite' has store schema 1"),
     "KeyTaken": lambda c: c("key-123"),
     "ClientGone": lambda c: c(),
+    "ShotInputError": lambda c: c("shots.0.metadata.sphere_diameter", "'abc' is not a sphere "
+                                  "diameter", "a number of metres, 0 < D <= 1"),
+    "ShotLimitError": lambda c: c("metadata.plate_id", "201 characters; at most 200"),
     "Problem": lambda c: c(422, "shots[0].dt: must be > 0", kind="invalid-input",
                            field="shots[0].dt", headers={"Retry-After": "5"}),
 }

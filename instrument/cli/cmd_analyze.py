@@ -11,7 +11,13 @@ several channels is analysed on the channels named by ``--channel``/``--group``,
 that are sensor traces (signal.channels): a trigger step or a flat line is never a shot, and is
 reported as skipped. Where a file does not carry them, the sphere size, plate, position and its
 coordinates come from the command line (``--sphere-diameter`` ...) or a campaign manifest
-(``--manifest``, instrument.manifest); a file's own metadata must agree with them.
+(``--manifest``, instrument.manifest); a file's own metadata must agree with them, and all of it
+is held to the limits the service holds it to (a file whose metadata the service would refuse
+fails here too, naming the key; a flag's value, naming the flag).
+
+Reading, checking, grouping by position and summarising are the measured-shot road's
+(instrument.inference.measured_shots), shared with `calibrate` and the service; this module
+translates the command line into its calls and its errors into messages and exit codes.
 
 The global reader options apply where they make sense: ``--sample-rate`` gives the rate of data
 without a time axis and must agree with any file's own; ``--units`` says what data that do not
@@ -21,36 +27,33 @@ files in volts that carry no calibration (a run in which no file used it reports
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import math
 import re
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import typer
 from rich.console import Console
 
 from solitonde.instrument.cli.console_tables import Column, fitted_table
 from solitonde.instrument.cli.manifest import ManifestError, Row
-from solitonde.instrument.inference import chain_geometry
-from solitonde.signal import channels as signal_channels
+from solitonde.instrument.inference import measured_shots
+from solitonde.instrument.inference.measured_shots import (
+    LOCATION_KEYS,
+    PositionShots,
+    ShotInputError,
+)
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import FEATURES, extract_many
-from solitonde.signal.json_ready import json_ready
+from solitonde.signal.features import FEATURES
 from solitonde.signal.waveform import UNITS
 
-if TYPE_CHECKING:  # the inference (scipy) loads only when shots are summarised
-    from solitonde.instrument.inference.pipeline import SizeSummary
-
 OUT_SUFFIXES = (".csv", ".parquet")
-LOCATION_KEYS = ("plate_id", "position", "x_m", "y_m", "sphere_diameter")
-"""The metadata that say where a shot was taken and with which spheres."""
 ROW_KEYS = ("source", "shot", "channel", *FEATURES, "flags", "arr_upper_bound", *LOCATION_KEYS,
             "error")
 FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
@@ -60,40 +63,6 @@ FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m"
 """Command-line flags by the option or metadata key they set (for messages)."""
 MISSING_SIZE_FLAG = ("--sphere-diameter: --invert needs the sphere size, and these shots state "
                      "none (give --sphere-diameter M, or a manifest's sphere_diameter_m)")
-
-
-def collect(paths: Iterable[Path], fmt: str | None = None
-            ) -> tuple[list[Path], list[dict[str, Any]]]:
-    """Files to analyse, each once, and the paths that gave none (missing, or a folder with no
-    files).
-
-    Folders are searched recursively: for the known extensions, or, with ``fmt`` given, every
-    regular file whose name does not start with a dot.
-    """
-    files: list[Path] = []
-    missing: list[dict[str, Any]] = []
-    for p in paths:
-        if p.is_dir():
-            found = sorted(f for f in p.rglob("*") if f.is_file() and (
-                not f.name.startswith(".") if fmt is not None
-                else f.suffix.lower() in signal_io.EXTENSIONS))
-            if not found:
-                what = ("no files" if fmt is not None else "no files with the extensions " +
-                        ", ".join(sorted(signal_io.EXTENSIONS)) + " (use --format for others)")
-                missing.append({"source": str(p), "error": f"{p}: {what}"})
-            files.extend(found)
-        elif p.exists():
-            files.append(p)
-        else:
-            missing.append({"source": str(p), "error": f"no such file or folder: {p}"})
-    seen: set[Path] = set()
-    unique = []
-    for f in files:  # a file named twice (itself and in its folder) is one set of shots
-        key = f.resolve()
-        if key not in seen:
-            seen.add(key)
-            unique.append(f)
-    return unique, missing
 
 
 def flag_message(text: str) -> str:
@@ -116,145 +85,26 @@ class Choice:
     metadata: dict[str, Any] = field(default_factory=dict)
 
 
-def read_file(path: Path, fmt: str | None, options: dict[str, Any],
-              calibration: float | None = None) -> tuple[list[Any], bool]:
-    """The shots of ``path`` and whether ``calibration`` was used.
-
-    Only the options the file's reader accepts are passed; ``calibration`` only when the file
-    holds volts without a calibration of its own.
-    """
-    accepted = signal_io.READER_OPTIONS[signal_io.detect_format(path, fmt)]
-    opts = {k: v for k, v in options.items() if k in accepted and v is not None}
-    try:
-        return signal_io.read(path, format=fmt, **opts), False
-    except signal_io.OptionNeeded as exc:
-        if exc.option != "calibration" or calibration is None or "calibration" not in accepted:
-            raise
-    return signal_io.read(path, format=fmt, **opts, calibration=calibration), True
-
-
-def _same(a: Any, b: Any) -> bool:
-    if isinstance(a, int | float) and isinstance(b, int | float):
-        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
-    return str(a).strip() == str(b).strip()
-
-
-def located(meta: dict[str, Any], sources: list[tuple[str, dict[str, Any]]],
-            where: str) -> dict[str, Any]:
-    """``meta`` with the location keys the ``sources`` (name, metadata) state; a key two of them
-    (the file included) state differently is a WaveformError naming both."""
-    out = dict(meta)
-    for key in LOCATION_KEYS:
-        stated = [(f"the file ({where})", meta[key])] if meta.get(key) is not None else []
-        stated += [(name, m[key]) for name, m in sources if m.get(key) is not None]
-        for name, value in stated[1:]:
-            if not _same(stated[0][1], value):
-                raise WaveformError(key, f"{stated[0][0]} says {key} = {stated[0][1]!r}, "
-                                    f"{name} says {value!r}", "one value, or leave one out")
-        if stated:
-            out[key] = stated[0][1]
-    return out
-
-
 def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
                  calibration: float | None = None, choice: Choice | None = None,
                  row: Row | None = None) -> tuple[list[dict[str, Any]], bool]:
-    """One row per shot of ``path`` and whether ``calibration`` was used; raises on a file that
-    cannot be read, whose channels cannot be told apart, or whose metadata contradict the
-    command line (``choice``) or its manifest ``row``.
+    """One row per shot of ``path`` (instrument.inference.measured_shots.measure_file) and
+    whether ``calibration`` (a fallback for files in volts without their own) was used.
 
-    The channels left out are rows with ``skipped`` set (and no features)."""
+    What the command line (``choice``) and the manifest ``row`` state joins each shot's own
+    metadata; a manifest row's calibration serves its file before ``--calibration``."""
     choice = choice or Choice()
     own = row.calibration if row is not None and row.calibration is not None else None
-    waves, used = read_file(path, fmt, options, own if own is not None else calibration)
-    used = used and own is None  # `used` tells whether --calibration served
-    waves, skipped = signal_channels.select(waves, choice.channels or None, choice.group,
-                                            path.name)
     sources = [(FLAGS[k], {k: v}) for k, v in choice.metadata.items()]
     if row is not None and row.metadata:
         sources.append((row.where, row.metadata))
-    rows: list[dict[str, Any]] = [{"source": str(path), "channel": s["channel"],
-                                   "skipped": s["reason"]} for s in skipped]
-    for w in waves:
-        meta = located(w.metadata, sources, path.name)
-        row_out: dict[str, Any] = {"source": str(path), "shot": meta.get("shot"),
-                                   "channel": signal_channels.channel_name(w)
-                                   if meta.get("channel") is not None else None,
-                                   **{k: meta.get(k) for k in LOCATION_KEYS}}
-        diameter = _number(meta.get("sphere_diameter"))
-        try:
-            (feat,) = extract_many([w], **chain_geometry.shot_options(diameter))
-        except WaveformError as exc:
-            row_out["error"] = str(exc)
-            rows.append(row_out)
-            continue
-        if diameter is None and not chain_geometry.fits_some_chain(
-                feat, chain_geometry.STANDARD_DIAMETERS):
-            feat = dataclasses.replace(feat, flags=[*feat.flags, "implausible_units"])
-        d = feat.to_dict()
-        row_out.update({k: json_ready(d[k]) for k in FEATURES})
-        row_out["flags"] = d["flags"]
-        row_out["arr_upper_bound"] = json_ready(d["arr_upper_bound"])
-        if "implausible_units" in feat.flags:  # listed with its numbers, never summarised
-            row_out["error"] = chain_geometry.units_message(feat, diameter)
-            rows.append(row_out)
-            continue
-        row_out["features"] = feat
-        row_out["waveform"] = w
-        rows.append(row_out)
-    return rows, used
+    rows, used = measured_shots.measure_file(
+        path, fmt, options, fallback_calibration=own if own is not None else calibration,
+        channels=choice.channels, group=choice.group, stated=sources)
+    return rows, used and own is None  # whether --calibration served
 
 
-def _number(value: Any) -> float | None:
-    try:
-        return None if value is None else float(value)
-    except (TypeError, ValueError):
-        return None
-
-
-@dataclass(frozen=True)
-class Position:
-    """The measured shots of one sphere size at one location and their summary."""
-
-    location: dict[str, Any]  # LOCATION_KEYS and ``source`` (set for files that name nothing)
-    summary: SizeSummary
-    rows: list[dict[str, Any]]
-
-    def skip_reason(self) -> str | None:
-        """Why these shots give the inversion no input (a sphere size that is not a number, or
-        the summary's own reason), or None."""
-        stated = self.location["sphere_diameter"]
-        if stated is not None and self.summary.diameter_m is None:
-            return f"sphere_diameter {stated!r} in the metadata is not a number"
-        return self.summary.skip_reason()
-
-
-def summaries(rows: list[dict[str, Any]]) -> list[Position]:
-    """Per (plate_id, position, x_m, y_m, sphere_diameter) the summary of its measured shots
-    (instrument.inference.pipeline), in the order the groups first appear.
-
-    Shots whose file names neither plate nor position are summarised per file (``source`` is
-    then set), never pooled with other files' shots: nothing says they are one position.
-    """
-    from solitonde.instrument.inference.pipeline import summarise
-
-    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
-    for r in rows:
-        if "features" in r:
-            plate, position = r.get("plate_id"), r.get("position")
-            source = r["source"] if plate is None and position is None else None
-            key = (*(r.get(k) for k in LOCATION_KEYS), source)
-            groups.setdefault(key, []).append(r)
-    out = []
-    for key, members in groups.items():
-        location = {**dict(zip(LOCATION_KEYS, key[:-1], strict=True)), "source": key[-1]}
-        (summary,) = summarise([_number(location["sphere_diameter"])] * len(members),
-                               [m["features"] for m in members])
-        out.append(Position(location, summary, members))
-    return out
-
-
-def aggregates(groups: list[Position]) -> list[dict[str, Any]]:
+def aggregates(groups: list[PositionShots]) -> list[dict[str, Any]]:
     """The summaries as JSON: location, then the aggregate; each rejected shot names its file
     and shot number."""
     out = []
@@ -267,7 +117,7 @@ def aggregates(groups: list[Position]) -> list[dict[str, Any]]:
     return out
 
 
-def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Path] | None,
+def estimates_for_locations(groups: Sequence[PositionShots], table_files: Sequence[Path] | None,
                             calibration_file: Path | None,
                             plate_material: Any = None) -> list[dict[str, Any]]:
     """Estimates per (plate_id, position) from `analyze`'s summaries, sphere sizes combined,
@@ -285,18 +135,17 @@ def estimates_for_locations(groups: Sequence[Position], table_files: Sequence[Pa
 
     tables = table_set(table_files)
     cal = Calibration.load(calibration_file) if calibration_file else None
-    by_location: dict[tuple[Any, ...], list[Position]] = {}
-    for g in groups:
-        key = tuple(g.location.get(k) for k in ("plate_id", "position", "x_m", "y_m"))
-        by_location.setdefault(key, []).append(g)
+    by_location = measured_shots.by_position(
+        groups, lambda g: tuple(g.location.get(k) for k in measured_shots.POSITION_KEYS))
     out = []
     for (plate, position, x_m, y_m), sizes in by_location.items():
         row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
-        usable = [g.summary for g in sizes if g.skip_reason() is None]
+        usable = [g.summary for g in sizes if g.summary.skip_reason() is None]
         # the command line names its flag, not the metadata key the inversion reads
         row["skipped"] = [{"sphere_diameter": g.location["sphere_diameter"],
-                           "reason": MISSING_SIZE_FLAG if g.skip_reason() == MISSING_SIZE
-                           else g.skip_reason()} for g in sizes if g.skip_reason()]
+                           "reason": MISSING_SIZE_FLAG if g.summary.skip_reason() == MISSING_SIZE
+                           else g.summary.skip_reason()} for g in sizes
+                          if g.summary.skip_reason()]
         row["diameters_m"] = [s.diameter_m for s in usable]
         row["n_shots"] = sum(s.inputs().n_shots for s in usable)
         row["estimate"] = None
@@ -457,11 +306,15 @@ def analyze(
     given = {k: v for k, v in (("plate_id", plate_id), ("position", position), ("x_m", x),
                                ("y_m", y), ("sphere_diameter", sphere_diameter))
              if v is not None}
+    try:  # the limits the service holds metadata to, for the flags' values too
+        measured_shots.check_metadata([given], measured_shots.shot_fields(""))
+    except ShotInputError as exc:
+        usage(flag_message(str(exc)))
     choice = Choice(tuple(channel), group, given)
     files = list(files or [])
     if not files and manifest is None:
         usage("give waveform files or folders, or --manifest")
-    paths, missing = collect(files, fmt)
+    paths, missing = measured_shots.collect(files, fmt)
     if missing:
         usage("; ".join(m["error"] for m in missing))
     jobs: list[tuple[Path, Row | None]] = [(p, None) for p in paths]
@@ -485,6 +338,9 @@ def analyze(
         except WaveformError as exc:
             errors.append({"source": str(path), "error": flag_message(str(exc))})
             continue
+        except ShotInputError as exc:  # metadata the service would refuse too
+            errors.append({"source": str(path), "error": str(exc)})
+            continue
         except Exception as exc:  # any broken file is its own error; Ctrl-C still stops the run
             errors.append({"source": str(path), "error": f"{type(exc).__name__}: {exc}"})
             continue
@@ -500,7 +356,7 @@ def analyze(
         if "error" in r:
             errors.append({"source": r["source"], "shot": r["shot"],
                            "error": flag_message(r["error"])})
-    groups = summaries(rows)
+    groups = measured_shots.summarise_positions(rows)
     aggs = aggregates(groups)
     estimates = None
     if invert:

@@ -27,31 +27,31 @@ def _fail(message: str) -> None:
 
 
 def summaries_from_files(files: list[Path], diameter: float | None) -> list[FeatureSummary]:
-    """Per sphere size: the aggregate of every shot in ``files``."""
-    from solitonde.instrument.cli.cmd_analyze import analyse_file, collect, summaries
+    """Per sphere size: the aggregate of every shot in ``files`` (the measured-shot road, as
+    `analyze` walks it); ``diameter`` is the sphere size of every shot (for files without one)."""
+    from solitonde.instrument.inference import measured_shots
+    from solitonde.instrument.inference.pipeline import no_reflection
 
-    paths, missing = collect(files)
+    paths, missing = measured_shots.collect(files)
     if missing:
         raise CalibrationError("files", missing[0]["error"])
     rows = []
     for p in paths:
         try:
-            file_rows, _ = analyse_file(p, None, {})
-        except WaveformError as exc:
+            file_rows, _ = measured_shots.measure_file(p, None, {})
+        except (WaveformError, measured_shots.ShotInputError) as exc:
             raise CalibrationError("files", f"{p}: {exc}") from None
         rows.extend(file_rows)
     if diameter is not None:
         for r in rows:
             r["sphere_diameter"] = diameter
     out = []
-    for g in summaries(rows):
+    for g in measured_shots.summarise_positions(rows):
         if g.summary.diameter_m is None:
             raise CalibrationError("sphere_diameter", "the shots carry no sphere_diameter "
                                    "metadata; give --diameter")
         reason = g.summary.skip_reason()
         if reason is None and g.summary.hidden:  # a bound is no reference measurement
-            from solitonde.instrument.inference.pipeline import no_reflection
-
             reason = no_reflection(g.summary.diameter_m)
         if reason is not None:
             raise CalibrationError("files", reason)

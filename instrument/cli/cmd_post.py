@@ -142,7 +142,7 @@ def post(
     as_json: bool = AS_JSON,
 ) -> None:
     """Upload waveform files to the service; each is stored once (a repeat is a replay)."""
-    from solitonde.instrument.cli.cmd_analyze import collect
+    from solitonde.instrument.inference.measured_shots import collect
 
     def usage(message: str) -> None:
         typer.echo(f"error: {message}", err=True)

@@ -1,4 +1,5 @@
-"""From measured features to estimates: the Bayesian inversion against a table
+"""From measured shots to estimates: the measured-shot road (:mod:`.measured_shots`: read, check
+metadata, group by position, summarise), the Bayesian inversion against a table
 (:mod:`.inversion`), calibration (:mod:`.calibration`, :mod:`.calibration_fit`), choosing among
 loaded tables (:mod:`.table_set`, :mod:`.estimates`), plate maps and the located support
 (:mod:`.plate_map`, :mod:`.support`), and estimate rows for files (:mod:`.estimate_rows`).

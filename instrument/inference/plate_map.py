@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.inversion import FeatureSummary
 from solitonde.instrument.inference.joint_map import (
@@ -74,18 +75,17 @@ def _pooled(stats: Sequence[Mapping[str, Any]]) -> tuple[float, float | None, in
     return mean, (math.sqrt((within + between) / (n - 1)) if n > 1 else None), n
 
 
-def position_key(plate_position: Any, x: Any, y: Any) -> tuple[Any, Any, Any]:
-    return (plate_position, None if x is None else float(x), None if y is None else float(y))
+def by_position(records: Sequence[Any]) -> dict[tuple[Any, Any, Any], list[Any]]:
+    """A plate's stored measurements grouped by place, (position, x_m, y_m), as the
+    measured-shot road groups shots (instrument.inference.measured_shots.position_key)."""
+    return measured_shots.by_position(records, lambda r: measured_shots.position_key(
+        {"position": r.position, **(r.result.get("location") or {})})[1:])
 
 
 def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any]]:
     """One entry per position of a plate's stored measurements (oldest first), the pooled
     shots inverted against ``tables``."""
-    groups: dict[tuple[Any, Any, Any], list[Any]] = {}
-    for r in records:
-        loc = r.result.get("location") or {}
-        groups.setdefault(position_key(r.position, loc.get("x_m"), loc.get("y_m")),
-                          []).append(r)
+    groups = by_position(records)
     out = []
     for (name, x, y), members in groups.items():
         inputs, skipped = pool([a for m in members for a in m.result.get("aggregates", [])])
@@ -216,11 +216,7 @@ class JointOptions:
 def scan_from_records(records: Sequence[Any]) -> tuple[list[ScanPosition], list[str | None]]:
     """A plate's stored measurements as scan positions (grouped as :func:`from_records` groups
     them, their aggregates pooled per sphere size), with the table each was estimated with."""
-    groups: dict[tuple[Any, Any, Any], list[Any]] = {}
-    for r in records:
-        loc = r.result.get("location") or {}
-        groups.setdefault(position_key(r.position, loc.get("x_m"), loc.get("y_m")),
-                          []).append(r)
+    groups = by_position(records)
     out, tables = [], []
     for (name, x, y), members in groups.items():
         if x is None or y is None:

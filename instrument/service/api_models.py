@@ -11,13 +11,15 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model
 
+from solitonde.instrument.inference.measured_shots import (
+    COORDINATE_MAX,
+    IDENTIFIER_MAX,
+    KEY_MAX,
+    SPHERE_DIAMETER_MAX,
+    TEXT_MAX,
+)
 from solitonde.signal.waveform import MIN_SAMPLES
 
-TEXT_MAX = 1000
-IDENTIFIER_MAX = 200
-"""Longest ``plate_id`` or ``position``."""
-KEY_MAX = 100
-"""Longest text value of free-form metadata; a key is at most 100 characters."""
 SCALAR = Annotated[str, StringConstraints(max_length=TEXT_MAX)] | float | int | bool | None
 Key = Annotated[str, StringConstraints(max_length=KEY_MAX)]
 
@@ -55,22 +57,28 @@ def plate_material_value(value: Any) -> Any:
     return value
 
 
+MaterialName = Annotated[str, StringConstraints(max_length=80)]
+"""A plate material named in text (a library name, or its properties as JSON in a form field)."""
+
+
 class ShotMetadata(Strict):
     """Where and how a shot was taken."""
 
     plate_id: str | None = Field(None, max_length=IDENTIFIER_MAX, description="plate identifier")
     position: str | None = Field(None, max_length=IDENTIFIER_MAX,
                                  description="measurement position label on the plate")
-    sphere_diameter: float | None = Field(None, gt=0, le=1.0,
+    sphere_diameter: float | None = Field(None, gt=0, le=SPHERE_DIAMETER_MAX,
                                           description="chain sphere diameter D, m")
     shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
-    x_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position on the "
+    x_m: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX,
+                              description="the chain's position on the "
                               "plate, x in the plate's own frame, m (within the plate's size "
                               "when the service's table states it)")
-    y_m: float | None = Field(None, ge=-1e3, le=1e3, description="the chain's position, y, m")
+    y_m: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX,
+                              description="the chain's position, y, m")
     table: str | None = Field(None, max_length=64, description="the model table to invert "
                               "against, by id (GET /v1/tables); needed when several could serve")
-    plate_material: Annotated[str, StringConstraints(max_length=80)] | PlateMaterialIn | None = (
+    plate_material: MaterialName | PlateMaterialIn | None = (
         Field(None, description=PLATE_MATERIAL_HELP))
     extra: dict[Key, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
@@ -255,7 +263,7 @@ class InvertIn(Strict):
     inputs: list[InversionInput] = Field(min_length=1, max_length=16)
     calibration: Calibration | None = None
     table: str | None = Field(None, max_length=64, description="the model table, by id")
-    plate_material: Annotated[str, StringConstraints(max_length=80)] | PlateMaterialIn | None = (
+    plate_material: MaterialName | PlateMaterialIn | None = (
         Field(None, description=PLATE_MATERIAL_HELP))
 
 

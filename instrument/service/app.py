@@ -1,8 +1,10 @@
 """The REST service: ``build_app(settings)`` returns the FastAPI application.
 
 The lifespan opens the measurement store and loads the model table (when there is one); routes
-live in ``routes_*.py``; errors are RFC 9457 problem+json (:mod:`.problems`). uvicorn workers
-import :func:`build_app_from_env`, which reads the same settings from ``SOLITONDE_*`` variables.
+live in ``routes_*.py`` (the service's own in :mod:`.routes_service`), each taking the running
+service as a dependency (:mod:`.dependencies`) behind the API key (:mod:`.authentication`);
+errors are RFC 9457 problem+json (:mod:`.problems`). uvicorn workers import
+:func:`build_app_from_env`, which reads the same settings from ``SOLITONDE_*`` variables.
 """
 
 from __future__ import annotations
@@ -11,29 +13,24 @@ import contextlib
 import gc
 import logging
 from collections.abc import AsyncIterator
-from importlib.metadata import PackageNotFoundError, version
-from typing import Any
 
 import anyio
-from fastapi import FastAPI, Request
+from fastapi import FastAPI
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.instrument.service import openapi_doc, problems
-from solitonde.instrument.service.api_models import Health, Ready, TableOut, request_models
+from solitonde.instrument.service.api_models import request_models
 from solitonde.instrument.service.ingest import warm_up
 from solitonde.instrument.service.problems import Problem
+from solitonde.instrument.service.routes_service import __version__
 from solitonde.instrument.service.settings import Settings
-from solitonde.instrument.service.state import INGEST_THREADS, PLOT_THREADS, Service, service
+from solitonde.instrument.service.state import INGEST_THREADS, PLOT_THREADS, Service
 from solitonde.instrument.service.store import Store
 from solitonde.instrument.service.uploads import UploadDir
 
 log = logging.getLogger("solitonde.instrument")
 
-try:
-    __version__ = version("solitonde")
-except PackageNotFoundError:  # running from a source tree without an install
-    __version__ = "0+unknown"
 
 class Options:
     """ASGI middleware: ``OPTIONS`` on any route answers 204 with ``Allow`` listing the methods
@@ -120,12 +117,12 @@ def build_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         store = Store(settings.store_path, settings.store_synchronous)
         log.info("feature extractor ready in %.2f s", warm_up())
-        estimator = TableSet([settings.table_path, *settings.table_paths])
-        if not estimator.loaded:
-            log.warning("serving without estimates: %s", estimator.reason)
+        tables = TableSet([settings.table_path, *settings.table_paths])
+        if not tables.loaded:
+            log.warning("serving without estimates: %s", tables.reason)
         else:
-            log.info("model tables: %s", ", ".join(estimator.estimators))
-        svc = Service(settings, store, estimator, UploadDir(), shot_model, measurement_model,
+            log.info("model tables: %s", ", ".join(tables.estimators))
+        svc = Service(settings, store, tables, UploadDir(), shot_model, measurement_model,
                       anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS),
                       anyio.CapacityLimiter(1), anyio.CapacityLimiter(PLOT_THREADS))
         app.state.service = svc
@@ -159,48 +156,19 @@ def build_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(Options)
 
-    from solitonde.instrument.service import routes_compute, routes_measurements, routes_plates, web
+    from solitonde.instrument.service import (
+        routes_compute,
+        routes_measurements,
+        routes_plates,
+        routes_service,
+        web,
+    )
 
     app.include_router(routes_measurements.router, prefix="/v1")
     app.include_router(routes_plates.router, prefix="/v1")
     app.include_router(routes_compute.router, prefix="/v1")
     app.include_router(web.router)
-
-    @app.get("/healthz", tags=["service"], response_model=Health)
-    async def healthz() -> dict[str, Any]:
-        """Liveness: the process answers."""
-        return {"status": "ok", "version": __version__}
-
-    @app.get("/readyz", tags=["service"], response_model=Ready,
-             responses={503: {"model": problems.ProblemModel,
-                              "content": {problems.PROBLEM_MEDIA_TYPE: {}}}})
-    async def readyz(request: Request) -> dict[str, Any]:
-        """Readiness: the store answers; says whether estimates are available (a table loaded)."""
-        svc = service(request)
-        try:
-            svc.store.count()
-        except Exception as exc:
-            raise Problem(503, f"store: not usable ({exc})", field="store") from None
-        loaded = svc.estimator.loaded
-        return {"ready": True, "store": svc.settings.store_path.name, "table_loaded": loaded,
-                "estimates": loaded, "reason": None if loaded else svc.estimator.reason}
-
-    @app.get("/v1/tables", tags=["service"], dependencies=[routes_measurements.AUTH])
-    async def tables(request: Request) -> dict[str, Any]:
-        """Every loaded model table: id, plate family (materials with their properties, plate
-        size, supports, gravity, chain, striker), sphere sizes and axes' ranges."""
-        svc = service(request)
-        return {"items": svc.estimator.listing(), "problems": svc.estimator.problems}
-
-    @app.get("/v1/table", tags=["service"], response_model=TableOut,
-             dependencies=[routes_measurements.AUTH])
-    async def table(request: Request) -> dict[str, Any]:
-        """The loaded model table: axes, provenance; and the service's request limits."""
-        svc = service(request)
-        est = svc.estimator
-        return {"loaded": est.loaded, "path": str(est.path) if est.path else None,
-                "reason": est.reason, "summary": est.summary(),
-                "limits": svc.settings.limits()}
+    app.include_router(routes_service.router)
 
     from solitonde.instrument.service.api_models import InvertIn, SimulateIn
 

@@ -7,24 +7,19 @@ field) before anything is written, so a rejected request never leaves a trace in
 
 from __future__ import annotations
 
-import math
-import numbers
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.estimates import EstimateUnavailable
-from solitonde.instrument.inference.pipeline import SizeSummary, summarise
+from solitonde.instrument.inference.measured_shots import ShotInputError
+from solitonde.instrument.inference.pipeline import SizeSummary
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
-from solitonde.instrument.service.api_models import (
-    IDENTIFIER_MAX,
-    KEY_MAX,
-    TEXT_MAX,
-    ShotMetadata,
-)
+from solitonde.instrument.service.api_models import ShotMetadata
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.service.store import MeasurementRecord, ShotRecord, Store
@@ -87,14 +82,13 @@ def waveforms_from_records(shots: Sequence[ShotRecord]) -> list[Waveform]:
 
 def read_file(path: Path, fmt: str, options: Mapping[str, Any],
               client_name: str | None = None) -> list[Waveform]:
-    """Read an uploaded file with the signal readers; every failure becomes a 422 on ``file``.
+    """Read an uploaded file (instrument.inference.measured_shots); every failure becomes a 422
+    on ``file``. ``options["calibration"]`` is the reader's override.
 
     Messages name ``client_name`` (the client's file name) where the readers name ``path``, the
     server's temporary file."""
-    from solitonde.signal import io as signal_io  # the readers live in the signal package
-
     try:
-        waveforms = signal_io.read(path, format=fmt, **dict(options))
+        waveforms, _ = measured_shots.read_shots(path, fmt, options)
     except WaveformError as exc:
         name = client_name or "the upload"
         raise waveform_error(WaveformError(
@@ -108,7 +102,7 @@ def read_file(path: Path, fmt: str, options: Mapping[str, Any],
                       kind="invalid-input", field="file") from None
     if not waveforms:
         raise Problem(422, "file: holds no shots", kind="invalid-input", field="file")
-    return list(waveforms)
+    return waveforms
 
 
 def check_counts(waveforms: Sequence[Waveform], settings: Settings, prefix: str) -> None:
@@ -129,84 +123,30 @@ def check_counts(waveforms: Sequence[Waveform], settings: Settings, prefix: str)
                       field=prefix)
 
 
+def shot_problem(exc: ShotInputError) -> Problem:
+    """422 for metadata the measured-shot road refuses, naming its field."""
+    return Problem(422, str(exc), kind=exc.kind, field=exc.field)
+
+
 def check_metadata(waveforms: Sequence[Waveform], prefix: str,
                    plate_size: Sequence[float] | None = None) -> None:
-    """Check the metadata the analysis reads, whatever set it: an uploaded file's attributes,
-    comments or properties become metadata unvalidated, and ``sphere_diameter`` groups the shots
-    and sizes the inversion, so it must be a diameter in metres as in a JSON shot. ``x_m`` and
-    ``y_m`` place the position on the plate: finite metres, within ``plate_size`` when the
-    service knows the plate (its table's)."""
-    for i, wf in enumerate(waveforms):
-        def field_of(key: str, i: int = i) -> str:
-            return f"{prefix}.{i}.metadata.{key}" if prefix else key
-
-        check_sizes(wf.metadata, field_of)
-        d = wf.metadata.get("sphere_diameter")
-        if d is not None:
-            ok = isinstance(d, numbers.Real) and not isinstance(d, bool | np.bool_)
-            if not (ok and math.isfinite(float(d)) and 0.0 < float(d) <= 1.0):
-                raise Problem(422, f"{field_of('sphere_diameter')}: {d!r} is not a sphere "
-                              "diameter (allowed: a number of metres, 0 < D <= 1)",
-                              kind="invalid-input", field=field_of("sphere_diameter"))
-        for axis, key in enumerate(("x_m", "y_m")):
-            v = wf.metadata.get(key)
-            if v is None:
-                continue
-            ok = isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_) \
-                and math.isfinite(float(v))
-            high = plate_size[axis] if plate_size else None
-            if ok and (high is None or 0.0 <= float(v) <= high):
-                continue
-            allowed = (f"0..{high:g} m, within the plate (its table's size {plate_size[0]:g} x "
-                       f"{plate_size[1]:g} m)" if high is not None else "a finite number of m")
-            raise Problem(422, f"{field_of(key)}: {v!r} is not a position on the plate "
-                          f"(allowed: {allowed})", kind="invalid-input", field=field_of(key))
-
-
-METADATA_KEYS_MAX = 100
-NESTED_MAX = 16_384
-
-
-def check_sizes(meta: Mapping[str, Any], field_of: Any) -> None:
-    """The limits JSON metadata has, for metadata from any source (a file's header, comments,
-    attributes or properties): plate_id and position at most 200 characters, other text at most
-    1000, a key at most 100, at most 100 keys, a nested value at most 16 kB of JSON."""
-    import json
-
-    if len(meta) > METADATA_KEYS_MAX:
-        raise Problem(422, f"{field_of('')[:-1] or 'metadata'}: {len(meta)} keys; at most "
-                      f"{METADATA_KEYS_MAX}", kind="limit", field=field_of("")[:-1] or "metadata")
-    for key, value in meta.items():
-        key = str(key)
-        if len(key) > KEY_MAX:
-            raise Problem(422, f"{field_of(key[:40])}...: a key of {len(key)} characters; at "
-                          f"most {KEY_MAX}", kind="limit", field=field_of(key[:40]))
-        if isinstance(value, str):
-            limit = IDENTIFIER_MAX if key in ("plate_id", "position") else TEXT_MAX
-            if len(value) > limit:
-                raise Problem(422, f"{field_of(key)}: {len(value):,} characters; at most "
-                              f"{limit}", kind="limit", field=field_of(key))
-        elif isinstance(value, Mapping | list | tuple):
-            size = len(json.dumps(json_ready(value), default=str))
-            if size > NESTED_MAX:
-                raise Problem(422, f"{field_of(key)}: {size:,} bytes of JSON; at most "
-                              f"{NESTED_MAX:,}", kind="limit", field=field_of(key))
+    """The measured-shot road's metadata checks (sizes, sphere size, position within
+    ``plate_size``) on every shot, whatever set its metadata; a 422 naming the field under
+    ``prefix``."""
+    try:
+        measured_shots.check_metadata([wf.metadata for wf in waveforms],
+                                      measured_shots.shot_fields(prefix), plate_size)
+    except ShotInputError as exc:
+        raise shot_problem(exc) from None
 
 
 def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None, str | None]:
     """The plate and position every shot shares; one measurement is one position."""
-    def key(wf: Waveform) -> tuple[str | None, str | None]:
-        plate, pos = wf.metadata.get("plate_id"), wf.metadata.get("position")
-        return (None if plate is None else str(plate), None if pos is None else str(pos))
-
-    first = key(waveforms[0])
-    for i, wf in enumerate(waveforms[1:], start=1):
-        if key(wf) != first:
-            which = "plate_id" if key(wf)[0] != first[0] else "position"
-            raise Problem(422, f"{prefix}.{i}.metadata.{which}: {key(wf)} differs from shot 0's "
-                          f"{first}; one measurement holds the shots of one position",
-                          kind="invalid-input", field=f"{prefix}.{i}.metadata.{which}")
-    return first
+    try:
+        return measured_shots.one_position([wf.metadata for wf in waveforms],
+                                           measured_shots.shot_fields(prefix))
+    except ShotInputError as exc:
+        raise shot_problem(exc) from None
 
 
 def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list[SizeSummary]]:
@@ -221,7 +161,7 @@ def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list
                 wf, **chain_geometry.shot_options(wf.metadata.get("sphere_diameter"))))
         except WaveformError as exc:  # an empty prefix: a lone shot whose fields are top-level
             raise waveform_error(exc, f"{prefix}.{i}" if prefix else "") from None
-    return feats, summarise([wf.metadata.get("sphere_diameter") for wf in waveforms], feats)
+    return feats, measured_shots.summarise_shots(waveforms, feats)
 
 
 def warm_up() -> float:

@@ -40,7 +40,8 @@ MATERIAL_OBJECT = {
 def install(app: FastAPI, models: Iterable[type[BaseModel]]) -> None:
     """Give ``app`` an ``openapi()`` that adds ``models`` and, once the service has started,
     the loaded tables' sphere sizes, ids and plate materials."""
-    from solitonde.instrument.service.routes_measurements import SECURITY_SCHEMES, upload_schema
+    from solitonde.instrument.service.authentication import SECURITY_SCHEMES
+    from solitonde.instrument.service.routes_measurements import upload_schema
 
     models = tuple(models)
 
@@ -64,7 +65,7 @@ def install(app: FastAPI, models: Iterable[type[BaseModel]]) -> None:
                     op["security"] = [{"APIKeyHeader": []}, {"HTTPBearer": []}, {}]
         service = getattr(app.state, "service", None)
         if service is not None:  # the tables are known once the lifespan has loaded them
-            narrow_to_tables(components, service.estimator)
+            narrow_to_tables(components, service.tables)
             app.openapi_schema = schema
         return schema
 

@@ -110,6 +110,18 @@ class ProblemModel(BaseModel):
     errors: list[dict[str, Any]] | None = None
 
 
+PROBLEM_RESPONSE: dict[str, Any] = {"model": ProblemModel,
+                                     "content": {PROBLEM_MEDIA_TYPE: {}}}
+"""An OpenAPI response whose body is problem+json (for a route's ``responses``)."""
+ERRORS: dict[int | str, dict[str, Any]] = {
+    401: {**PROBLEM_RESPONSE, "description": "missing or wrong API key"},
+    413: {**PROBLEM_RESPONSE, "description": "body larger than the limit"},
+    415: {**PROBLEM_RESPONSE, "description": "unsupported content type"},
+    422: {**PROBLEM_RESPONSE, "description": "invalid input; 'field' names it"},
+}
+"""The problems every ``/v1`` route may answer, for the OpenAPI document."""
+
+
 def _slug(text: str) -> str:
     return "-".join(text.lower().split())
 

@@ -28,10 +28,10 @@ from solitonde.instrument.service.api_models import (
     SimulateOut,
     plate_material_value,
 )
+from solitonde.instrument.service.authentication import AUTH
+from solitonde.instrument.service.dependencies import ServiceDep, require_json
 from solitonde.instrument.service.heavy import run_for_client
-from solitonde.instrument.service.problems import Problem, from_pydantic
-from solitonde.instrument.service.routes_measurements import _PROBLEM, AUTH, ERRORS, require_json
-from solitonde.instrument.service.state import service
+from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
 from solitonde.signal.json_ready import json_ready
 
 router = APIRouter(tags=["compute"], dependencies=[AUTH])
@@ -53,22 +53,21 @@ def _json_body(model: Any) -> dict[str, Any]:
         "application/json": {"schema": {"$ref": f"#/components/schemas/{model.__name__}"}}}}}
 
 
-@router.post("/invert", response_model=InvertOut, responses={**ERRORS, 503: _PROBLEM},
+@router.post("/invert", response_model=InvertOut, responses={**ERRORS, 503: PROBLEM_RESPONSE},
              openapi_extra=_json_body(InvertIn),
              summary="Estimate thickness and distance to support from TOF and ARR")
-async def invert(request: Request) -> dict[str, Any]:
+async def invert(request: Request, svc: ServiceDep) -> dict[str, Any]:
     """Per sphere size: mean TOF and ARR with their scatter and shot count. Needs a loaded table
     (503 otherwise)."""
 
-    svc = service(request)
     payload = await _payload(request, InvertIn)
     inputs = [i.model_dump() for i in payload.inputs]
     calibration = payload.calibration.model_dump(exclude_none=True) if payload.calibration \
         else None
-    if not svc.estimator.loaded:
-        raise Problem(503, f"table: {svc.estimator.reason}", kind="no-table", field="table")
+    if not svc.tables.loaded:
+        raise Problem(503, f"table: {svc.tables.reason}", kind="no-table", field="table")
     try:
-        estimate = await run_in_threadpool(_invert, svc.estimator, inputs, calibration,
+        estimate = await run_in_threadpool(_invert, svc.tables, inputs, calibration,
                                            payload.table,
                                            plate_material_value(payload.plate_material))
     except EstimateUnavailable as exc:
@@ -111,14 +110,13 @@ def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
 @router.post("/simulate", response_model=SimulateOut, responses={**ERRORS},
              openapi_extra=_json_body(SimulateIn),
              summary="Simulate a scene; trace and measured features out (cost-limited)")
-async def simulate(request: Request) -> dict[str, Any]:
+async def simulate(request: Request, svc: ServiceDep) -> dict[str, Any]:
     """Runs the chain model on the scene and measures the sensor trace like a recorded shot.
 
     The scene has the keys of a scene file (chain, striker, plate, effects, output, ...). A scene
     whose cost (steps x degrees of freedom) exceeds the service's budget is refused with 422.
     """
 
-    svc = service(request)
     payload = await _payload(request, SimulateIn)
     return await run_for_client(request, _SIMULATIONS, _simulate, payload,
                                 svc.settings.max_simulation_cost, svc.settings.max_samples_per_shot)

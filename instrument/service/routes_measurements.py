@@ -9,33 +9,36 @@ and the metadata in the query), which skips text parsing altogether.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import errno
 import hashlib
-import hmac
 import io
 import logging
-import math
-import threading
-import time
 from functools import partial
 from typing import Annotated, Any
 
 import anyio.to_thread
 import numpy as np
-from fastapi import APIRouter, Depends, Path, Query, Request
+from fastapi import APIRouter, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
-from pydantic import ConfigDict, Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError, create_model
+from pydantic.fields import FieldInfo
 
 from solitonde.instrument.service.api_models import (
     BINARY_DTYPES,
     BINARY_MEDIA_TYPE,
     BinaryShotParams,
+    MaterialName,
     MeasurementOut,
     MeasurementPage,
+    ShotBase,
+    ShotMetadata,
     Strict,
 )
+from solitonde.instrument.service.authentication import AUTH
+from solitonde.instrument.service.dependencies import ServiceDep, media_type
 from solitonde.instrument.service.heavy import run_for_client
 from solitonde.instrument.service.ingest import (
     check_counts,
@@ -45,13 +48,8 @@ from solitonde.instrument.service.ingest import (
     waveform_error,
     waveforms_from_shots,
 )
-from solitonde.instrument.service.problems import (
-    PROBLEM_MEDIA_TYPE,
-    Problem,
-    ProblemModel,
-    from_pydantic,
-)
-from solitonde.instrument.service.state import service
+from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
+from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.store import KeyTaken, StoreFull
 from solitonde.instrument.service.uploads import (
     FORMATS,
@@ -63,139 +61,51 @@ from solitonde.signal import channels as signal_channels
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.waveform import Waveform
 
-SECURITY_SCHEMES = {
-    "APIKeyHeader": {"type": "apiKey", "in": "header", "name": "X-API-Key",
-                     "description": "the server's SOLITONDE_API_KEY (when it has one)"},
-    "HTTPBearer": {"type": "http", "scheme": "bearer",
-                   "description": "the server's SOLITONDE_API_KEY (when it has one)"},
-}
-"""Declared in the OpenAPI document by the app factory; checked by :func:`require_key`."""
-
-
-class FailedKeys:
-    """Failed API key attempts per client address, in this worker process: after
-    :attr:`LIMIT` within :attr:`WINDOW_S` seconds a client gets 429 until the window passes
-    (a key is not guessed at request speed), and a warning is logged at most once per
-    :attr:`LOG_EVERY_S` per client, with the count (a flood does not flood the log)."""
-
-    LIMIT = 10
-    WINDOW_S = 60.0
-    LOG_EVERY_S = 10.0
-    CLIENTS_MAX = 10_000
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._seen: dict[str, list[float]] = {}
-        self._logged: dict[str, float] = {}
-
-    def _recent(self, client: str, now: float) -> list[float]:
-        times = [t for t in self._seen.get(client, []) if now - t < self.WINDOW_S]
-        if times:
-            self._seen[client] = times
-        else:
-            self._seen.pop(client, None)
-        return times
-
-    def blocked_for(self, client: str) -> float:
-        """Seconds until ``client`` may try again (0: now)."""
-        now = time.monotonic()
-        with self._lock:
-            times = self._recent(client, now)
-            return self.WINDOW_S - (now - times[0]) if len(times) >= self.LIMIT else 0.0
-
-    def failed(self, client: str) -> None:
-        now = time.monotonic()
-        with self._lock:
-            if len(self._seen) >= self.CLIENTS_MAX and client not in self._seen:
-                self._seen.clear()  # bounded memory under a spray of addresses
-                self._logged.clear()
-            times = self._recent(client, now)
-            times.append(now)
-            self._seen[client] = times
-            if now - self._logged.get(client, -math.inf) >= self.LOG_EVERY_S:
-                self._logged[client] = now
-                log.warning("api key: %d failed attempt(s) from %s in the last %.0f s",
-                            len(times), client, self.WINDOW_S)
-
-
-FAILED_KEYS = FailedKeys()
-
-
-async def require_key(request: Request) -> None:
-    """With SOLITONDE_API_KEY set, the request must carry it (header or bearer token); a client
-    that failed too often is refused for a while (:class:`FailedKeys`).
-
-    Reads the two headers itself (one dependency instead of FastAPI's two security classes: this
-    runs on every request).
-    """
-
-    expected = service(request).settings.api_key
-    if expected is None:
-        return
-    client = request.client.host if request.client else "unknown"
-    wait = FAILED_KEYS.blocked_for(client)
-    if wait > 0:
-        raise Problem(429, f"api_key: too many failed attempts from {client}; try again in "
-                      f"{math.ceil(wait)} s", kind="too-many-requests", field="api_key",
-                      headers={"Retry-After": str(math.ceil(wait))})
-    given = request.headers.get("x-api-key")
-    if given is None:
-        scheme, _, token = request.headers.get("authorization", "").partition(" ")
-        given = token.strip() if scheme.lower() == "bearer" and token.strip() else None
-    if given is None:  # not counted: a client that does not know a key is needed is no guesser
-        raise Problem(401, "api_key: this server needs an API key (X-API-Key header or "
-                      "Authorization: Bearer)", kind="unauthorized", field="api_key",
-                      headers={"WWW-Authenticate": 'Bearer realm="solitonde"'})
-    if not hmac.compare_digest(given.encode(), expected.encode()):
-        FAILED_KEYS.failed(client)
-        raise Problem(401, "api_key: the key given is not this server's key",
-                      kind="unauthorized", field="api_key",
-                      headers={"WWW-Authenticate": 'Bearer realm="solitonde"'})
-
-
-AUTH = Depends(require_key)
-
-_PROBLEM = {"model": ProblemModel, "content": {PROBLEM_MEDIA_TYPE: {}}}
-ERRORS: dict[int | str, dict[str, Any]] = {
-    401: {**_PROBLEM, "description": "missing or wrong API key"},
-    413: {**_PROBLEM, "description": "body larger than the limit"},
-    415: {**_PROBLEM, "description": "unsupported content type"},
-    422: {**_PROBLEM, "description": "invalid input; 'field' names it"},
-}
-
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
 log = logging.getLogger("solitonde.instrument")
 IDEMPOTENCY_KEY_MAX = 200
 
 
 
-class UploadFields(Strict):
-    """Form fields that come with an uploaded file (all optional)."""
+def _optional(model: type[Strict], name: str) -> tuple[Any, FieldInfo]:
+    """``model``'s field ``name``, with its limits and description, as an optional field."""
+    info = copy.copy(model.model_fields[name])
+    info.default = None
+    annotation: Any = info.annotation
+    return annotation | None, info
 
+
+_METADATA_FORM_KEYS = ("plate_id", "position", "sphere_diameter", "x_m", "y_m", "table")
+
+
+class _FormFields(Strict):
     # Form values arrive as text: numbers are parsed from it (still no NaN, no unknown fields).
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
 
-    format: str | None = Field(None, description=f"one of {', '.join(FORMATS)}; "
-                               "default: from the file name's suffix")
-    plate_id: str | None = Field(None, max_length=200)
-    position: str | None = Field(None, max_length=200)
-    sphere_diameter: float | None = Field(None, gt=0, le=1.0, description="m")
-    x_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, x, m")
-    y_m: float | None = Field(None, ge=-1e3, le=1e3, description="position on the plate, y, m")
-    table: str | None = Field(None, max_length=64, description="model table id")
-    plate_material: str | None = Field(None, max_length=80, description="plate material name")
-    units: str | None = Field(None, description="N or V, for files that do not say")
-    calibration: float | None = Field(None, description="sensor sensitivity, N/V")
-    sample_rate: float | None = Field(None, gt=0, le=1e10,
-                                      description="Hz, for files without a time column")
-    dt: float | None = Field(None, gt=0, le=1.0, description="s, instead of sample_rate")
-    t0: float | None = Field(None, ge=-1e3, le=1e3, description="s, time of the first sample")
-    group: str | None = Field(None, max_length=200, description="TDMS group: only its channels")
-    channel: str | None = Field(None, max_length=200, description="the channel to analyse: a "
-                                "column name, or a TDMS channel as group/channel or channel; "
-                                "default: the file's channels that are sensor traces (a "
-                                "trigger step or a flat line is skipped, and listed)")
-    dataset: str | None = Field(None, max_length=200, description="HDF5 dataset")
+
+UploadFields = create_model(
+    "UploadFields",
+    __base__=_FormFields,
+    __doc__="Form fields that come with an uploaded file (all optional): the JSON shot's "
+            "metadata and sampling, with the same limits, and the reader's options.",
+    format=(str | None, Field(None, description=f"one of {', '.join(FORMATS)}; default: from "
+                              "the file name's suffix")),
+    **{k: _optional(ShotMetadata, k) for k in _METADATA_FORM_KEYS},
+    plate_material=(MaterialName | None, Field(None, description="plate material name")),
+    units=(str | None, Field(None, description="N or V, for files that do not say")),
+    calibration=_optional(ShotBase, "calibration"),
+    sample_rate=(float | None, Field(None, gt=0, le=1e10,
+                                     description="Hz, for files without a time column")),
+    **{k: _optional(ShotBase, k) for k in ("dt", "t0")},
+    group=(str | None, Field(None, max_length=200, description="TDMS group: only its channels")),
+    channel=(str | None, Field(None, max_length=200, description="the channel to analyse: a "
+                               "column name, or a TDMS channel as group/channel or channel; "
+                               "default: the file's channels that are sensor traces (a trigger "
+                               "step or a flat line is skipped, and listed)")),
+    dataset=(str | None, Field(None, max_length=200, description="HDF5 dataset")),
+)
+"""Form fields that come with an uploaded file; the metadata's and the sampling's limits are
+:class:`ShotMetadata`'s and :class:`ShotBase`'s own (one declaration)."""
 
 
 MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
@@ -225,27 +135,14 @@ def upload_schema() -> dict[str, Any]:
     return schema
 
 
-def _media_type(request: Request) -> str:
-    return request.headers.get("content-type", "").split(";")[0].strip().lower()
-
-
-def require_json(request: Request) -> None:
-    """415 unless the body is declared ``application/json``."""
-    media = _media_type(request)
-    if media != "application/json":
-        raise Problem(415, f"content-type: {media or 'none'} is not accepted here "
-                      "(allowed: application/json)", kind="unsupported-media-type",
-                      field="content-type")
-
-
 _POST_LINKS = {201: {"description": "the stored measurement", "links": {
     name: {"operationId": op, "parameters": {"measurement_id": "$response.body#/id", **extra}}
     for name, op, extra in (("GetMeasurement", "get_measurement", {}),
                             ("GetShot", "get_shot", {"shot_index": 0}),
                             ("PlotMeasurement", "plot_measurement", {}),
                             ("DeleteMeasurement", "delete_measurement", {}))}}}
-_FULL = {507: {**_PROBLEM, "description": "the store (or the upload's temporary folder) has "
-                "no room: nothing was written; retry later (Retry-After)"}}
+_FULL = {507: {**PROBLEM_RESPONSE, "description": "the store (or the upload's temporary "
+                "folder) has no room: nothing was written; retry later (Retry-After)"}}
 FULL_RETRY_AFTER_S = 60
 """What a 507 suggests to wait: room comes back when someone frees it, not in milliseconds."""
 _IDEMPOTENCY_HEADER = {
@@ -268,7 +165,7 @@ _IDEMPOTENCY_HEADER = {
         "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MeasurementUpload"}},
     }}, "parameters": [_IDEMPOTENCY_HEADER]},
 )
-async def post_measurement(request: Request) -> JSONResponse:
+async def post_measurement(request: Request, svc: ServiceDep) -> JSONResponse:
     """Measure TOF and ARR on every shot, aggregate per sphere size, estimate, store.
 
     JSON body: ``{"shots": [{"t0", "dt", "samples", "units", "calibration", "metadata"}]}``.
@@ -278,7 +175,7 @@ async def post_measurement(request: Request) -> JSONResponse:
     No query parameters. (A raw binary body is also taken here, as at ``/v1/measurements/raw``,
     for clients written before that route.)
     """
-    media = _media_type(request)
+    media = media_type(request)
     if media in ("application/json", "multipart/form-data") and request.query_params:
         name = next(iter(request.query_params))
         raise Problem(422, f"{name}: query parameters describe a binary ({BINARY_MEDIA_TYPE}) "
@@ -289,7 +186,7 @@ async def post_measurement(request: Request) -> JSONResponse:
                       "application/json, multipart/form-data; a raw binary shot goes to "
                       "/v1/measurements/raw)", kind="unsupported-media-type",
                       field="content-type")
-    return await _post(request, media)
+    return await _post(request, svc, media)
 
 
 @router.post(
@@ -303,23 +200,22 @@ async def post_measurement(request: Request) -> JSONResponse:
         BINARY_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}}},
         "parameters": [*binary_parameters(), _IDEMPOTENCY_HEADER]},
 )
-async def post_raw_shot(request: Request) -> JSONResponse:
+async def post_raw_shot(request: Request, svc: ServiceDep) -> JSONResponse:
     """One shot's samples as little-endian float32 or float64 without a header (the acquisition
     PC's own buffer); ``dtype`` and ``dt`` (and optionally ``t0``, ``units``, ``calibration``,
     ``plate_id``, ``position``, ``sphere_diameter``, ``shot``) in the query. Returns 201 with the
     stored measurement and its id."""
-    media = _media_type(request)
+    media = media_type(request)
     if media != BINARY_MEDIA_TYPE:
         raise Problem(415, f"content-type: {media or 'none'} is not accepted here (allowed: "
                       f"{BINARY_MEDIA_TYPE}; JSON shots and files go to /v1/measurements)",
                       kind="unsupported-media-type", field="content-type")
-    return await _post(request, media)
+    return await _post(request, svc, media)
 
 
-async def _post(request: Request, media: str) -> JSONResponse:
+async def _post(request: Request, svc: Service, media: str) -> JSONResponse:
     """Ingest a JSON, binary or multipart body (idempotent with a key) and answer 201."""
 
-    svc = service(request)
     key = idempotency_key(request)
     try:
         if media == "multipart/form-data":
@@ -379,7 +275,7 @@ def _digest(*parts: bytes) -> str:
     return h.hexdigest()
 
 
-async def _replay(svc: Any, key: str, digest: str | None) -> JSONResponse | None:
+async def _replay(svc: Service, key: str, digest: str | None) -> JSONResponse | None:
     """The measurement stored under ``key`` as the first answer gave it, or None when the key
     is new; a 422 when the key came with another request (``digest``; None skips the check)."""
     found = await run_in_threadpool(svc.store.idempotent, key)
@@ -402,7 +298,7 @@ JSON_VALUES_SLACK = 10_000
 """Commas a JSON body may hold beyond one per allowed sample (metadata, keys)."""
 
 
-def _ingest_json(svc: Any, body: bytes, idem: tuple[str, str] | None = None) -> dict[str, Any]:
+def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None) -> dict[str, Any]:
     if not body:
         raise Problem(422, "body: empty; send {\"shots\": [...]}", kind="invalid-input",
                       field="body")
@@ -418,10 +314,10 @@ def _ingest_json(svc: Any, body: bytes, idem: tuple[str, str] | None = None) -> 
         raise from_pydantic(exc, svc.measurement_model) from None
     waveforms = waveforms_from_shots(request.shots, request.metadata)
     check_counts(waveforms, svc.settings, "shots")
-    return measure_and_store(waveforms, svc.store, svc.estimator, "json", "shots", idem)
+    return measure_and_store(waveforms, svc.store, svc.tables, "json", "shots", idem)
 
 
-def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]],
+def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
                    idem: tuple[str, str] | None = None) -> dict[str, Any]:
     """One shot from its raw little-endian samples; what they are comes from the query."""
     seen: set[str] = set()
@@ -453,10 +349,10 @@ def _ingest_binary(svc: Any, body: bytes, query: list[tuple[str, str]],
                             units=params.units, calibration=params.calibration, metadata=meta)
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
-    return measure_and_store([waveform], svc.store, svc.estimator, "binary", "", idem)
+    return measure_and_store([waveform], svc.store, svc.tables, "binary", "", idem)
 
 
-async def _ingest_upload(svc: Any, request: Request, key: str | None = None) -> Any:
+async def _ingest_upload(svc: Service, request: Request, key: str | None = None) -> Any:
     try:
         form = await request.form(max_files=1, max_fields=len(UploadFields.model_fields) + 1)
     except Problem:
@@ -515,7 +411,7 @@ def _file_bytes(stream: Any) -> bytes:
     return bytes(data)
 
 
-def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
+def _ingest_file(svc: Service, stream: Any, fmt: str, opts: Any,
                  filename: str | None = None,
                  idem: tuple[str, str] | None = None) -> dict[str, Any]:
     settings = svc.settings
@@ -546,7 +442,7 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
     if meta:
         waveforms = [wf.with_metadata(**meta) for wf in waveforms]
     check_counts(waveforms, settings, "file.shots")
-    stored = measure_and_store(waveforms, svc.store, svc.estimator, f"upload:{fmt}", "file.shots",
+    stored = measure_and_store(waveforms, svc.store, svc.tables, f"upload:{fmt}", "file.shots",
                                idem)
     return {**stored, "skipped_channels": skipped}
 
@@ -554,14 +450,13 @@ def _ingest_file(svc: Any, stream: Any, fmt: str, opts: UploadFields,
 @router.get("/measurements", response_model=MeasurementPage, responses=ERRORS,
             summary="List measurements, optionally of one plate (paged)")
 async def list_measurements(
-    request: Request,
+    svc: ServiceDep,
     plate_id: str | None = Query(None, max_length=200, description="only this plate"),
     after: int = Query(0, ge=0, le=2**62, description="return ids greater than this"),
     limit: int = Query(50, ge=1, le=500, description="page size"),
 ) -> dict[str, Any]:
     """Measurements in id order; ``next`` gives the following page."""
 
-    svc = service(request)
     limit = min(limit, svc.settings.page_size_max)
     records = await run_in_threadpool(svc.store.list, plate_id, after, limit + 1)
     more = len(records) > limit
@@ -590,7 +485,7 @@ async def list_measurements(
     summary="Export measured features (one row per shot) or estimates (one row per measurement)",
 )
 async def export_measurements(
-    request: Request,
+    svc: ServiceDep,
     format: str = Query("csv", pattern="^(csv|parquet)$", description="csv or parquet"),
     plate_id: str | None = Query(None, max_length=200, description="only this plate"),
     kind: str = Query("shots", pattern="^(shots|estimates)$",
@@ -599,7 +494,6 @@ async def export_measurements(
 ) -> Response:
     """Stored measurements, oldest first; timestamps in ISO 8601 UTC."""
 
-    svc = service(request)
     exporter = _export if kind == "shots" else _export_estimates
     data, media = await run_in_threadpool(exporter, svc, format, plate_id)
     suffix = "parquet" if format == "parquet" else "csv"
@@ -611,7 +505,7 @@ async def export_measurements(
 _MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
 
 
-def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+def _export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     import pandas as pd
 
     from solitonde.instrument.inference.estimate_rows import iso_utc, neutralised
@@ -639,7 +533,7 @@ def _export(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     return neutralised(frame).to_csv(index=False).encode(), _MEDIA[fmt]
 
 
-def _export_estimates(svc: Any, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+def _export_estimates(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     """One row per stored measurement: where, from what, and its estimate's columns."""
     from solitonde.instrument.inference.estimate_rows import (
         ESTIMATE_COLUMNS,
@@ -687,37 +581,38 @@ def _missing(measurement_id: int) -> Problem:
 
 
 @router.get("/measurements/{measurement_id:int}", response_model=MeasurementOut,
-            responses={**ERRORS, 404: _PROBLEM}, summary="One stored measurement",
+            responses={**ERRORS, 404: PROBLEM_RESPONSE}, summary="One stored measurement",
             operation_id="get_measurement")
-async def get_measurement(request: Request, measurement_id: MeasurementId) -> dict[str, Any]:
+async def get_measurement(svc: ServiceDep, measurement_id: MeasurementId) -> dict[str, Any]:
     """Features per shot, aggregates and estimate as stored."""
 
-    record = await run_in_threadpool(service(request).store.get, measurement_id)
+    record = await run_in_threadpool(svc.store.get, measurement_id)
     if record is None:
         raise _missing(measurement_id)
     return measurement_dict(record)
 
 
 @router.delete("/measurements/{measurement_id:int}", status_code=204, response_class=Response,
-               responses={**ERRORS, 404: _PROBLEM}, summary="Remove a measurement and its shots",
+               responses={**ERRORS, 404: PROBLEM_RESPONSE},
+               summary="Remove a measurement and its shots",
                operation_id="delete_measurement")
-async def delete_measurement(request: Request, measurement_id: MeasurementId) -> Response:
+async def delete_measurement(svc: ServiceDep, measurement_id: MeasurementId) -> Response:
     """Removes the measurement and every shot of it in one transaction; 404 when there is none
     (also the second time). The plate's map follows."""
 
-    if not await run_in_threadpool(service(request).store.delete, measurement_id):
+    if not await run_in_threadpool(svc.store.delete, measurement_id):
         raise _missing(measurement_id)
     return Response(status_code=204)
 
 
 @router.get("/measurements/{measurement_id:int}/shots/{shot_index:int}",
-            responses={**ERRORS, 404: _PROBLEM}, operation_id="get_shot",
+            responses={**ERRORS, 404: PROBLEM_RESPONSE}, operation_id="get_shot",
             summary="One stored shot with its samples (as stored, bit for bit)")
-async def get_shot(request: Request, measurement_id: MeasurementId,
+async def get_shot(svc: ServiceDep, measurement_id: MeasurementId,
                    shot_index: ShotIndex) -> dict[str, Any]:
     """The trace of one shot: t0, dt, samples, units, calibration, metadata, features."""
 
-    shot = await run_in_threadpool(service(request).store.get_shot, measurement_id, shot_index)
+    shot = await run_in_threadpool(svc.store.get_shot, measurement_id, shot_index)
     if shot is None:
         raise Problem(404, f"shot_index: measurement {measurement_id} has no shot {shot_index}",
                       kind="not-found", field="shot_index")
@@ -728,14 +623,13 @@ async def get_shot(request: Request, measurement_id: MeasurementId,
 
 @router.get("/measurements/{measurement_id:int}/plot.png", response_class=Response,
             operation_id="plot_measurement",
-            responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
+            responses={**ERRORS, 404: PROBLEM_RESPONSE, 200: {"content": {"image/png": {}}}},
             summary="PNG of a shot's trace with the incident and reflected pulses marked")
 async def plot_measurement(
-    request: Request, measurement_id: MeasurementId,
+    request: Request, svc: ServiceDep, measurement_id: MeasurementId,
     shot: int = Query(0, ge=0, le=100_000, description="shot index within the measurement"),
 ) -> Response:
 
-    svc = service(request)
     record = await run_in_threadpool(svc.store.get_shot, measurement_id, shot)
     if record is None:
         if await run_in_threadpool(svc.store.get, measurement_id) is None:

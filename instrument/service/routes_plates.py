@@ -13,16 +13,20 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 from fastapi import APIRouter, Depends, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 
+from solitonde.instrument.service.authentication import AUTH
+from solitonde.instrument.service.dependencies import ServiceDep
 from solitonde.instrument.service.heavy import run_for_client
-from solitonde.instrument.service.problems import Problem
-from solitonde.instrument.service.routes_measurements import _PROBLEM, AUTH, ERRORS
-from solitonde.instrument.service.state import service
+from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem
+from solitonde.instrument.service.state import Service
+
+if TYPE_CHECKING:
+    from solitonde.instrument.inference.plate_map import JointOptions
 
 router = APIRouter(tags=["plates"], dependencies=[AUTH])
 MAP_POSITIONS_MAX = 5_000
@@ -32,12 +36,12 @@ PlateId = Path(..., min_length=1, max_length=200, description="the plate's plate
 
 
 @router.get("/plates", responses=ERRORS, summary="Plates in the store, with counts")
-async def list_plates(request: Request) -> dict[str, Any]:
+async def list_plates(svc: ServiceDep) -> dict[str, Any]:
     """Every plate_id with its measurement, shot and position counts and last activity (ISO
     8601 UTC)."""
     from solitonde.instrument.inference.estimate_rows import iso_utc
 
-    plates = await run_in_threadpool(service(request).store.plates)
+    plates = await run_in_threadpool(svc.store.plates)
     for p in plates:
         p["last_activity"] = iso_utc(p["last_activity"])
         p["links"] = {"map": f"/v1/plates/{p['plate_id']}/map",
@@ -83,7 +87,7 @@ class MapQuery:
             raise Problem(422, str(exc), field=exc.field) from None
 
 
-def _map(svc: Any, plate_id: str, options: Any = None) -> dict[str, Any]:
+def _map(svc: Service, plate_id: str, options: JointOptions | None = None) -> dict[str, Any]:
     from solitonde.instrument.inference import plate_map
     from solitonde.instrument.inference.joint_map import JointMapError
     from solitonde.instrument.inference.table_set import TableChoiceError
@@ -101,12 +105,12 @@ def _map(svc: Any, plate_id: str, options: Any = None) -> dict[str, Any]:
         if key in _kept:
             _kept.move_to_end(key)
             return _kept[key]
-    positions = plate_map.from_records(records, svc.estimator)
-    result = plate_map.build(plate_id, positions, svc.estimator.plate_size())
+    positions = plate_map.from_records(records, svc.tables)
+    result = plate_map.build(plate_id, positions, svc.tables.plate_size())
     if options is not None and options.wanted:
         scan, tables = plate_map.scan_from_records(records)
         try:
-            result = plate_map.with_joint(result, scan, tables, svc.estimator, options)
+            result = plate_map.with_joint(result, scan, tables, svc.tables, options)
         except JointMapError as exc:
             raise Problem(422, str(exc), field=exc.field) from None
         except TableChoiceError as exc:
@@ -118,10 +122,10 @@ def _map(svc: Any, plate_id: str, options: Any = None) -> dict[str, Any]:
     return result
 
 
-@router.get("/plates/{plate_id}/map", responses={**ERRORS, 404: _PROBLEM},
+@router.get("/plates/{plate_id}/map", responses={**ERRORS, 404: PROBLEM_RESPONSE},
             operation_id="plate_map",
             summary="A plate's map: positions, estimates, the located support")
-async def get_map(request: Request, plate_id: str = PlateId,
+async def get_map(svc: ServiceDep, plate_id: str = PlateId,
                   query: MapQuery = Depends()) -> dict[str, Any]:
     """Per position: coordinates, shot count, thickness and distance (median, intervals,
     status); then ``support`` (``normal_angle_deg``, ``offset_m``, ``ci95_offset_m``,
@@ -135,20 +139,19 @@ async def get_map(request: Request, plate_id: str = PlateId,
     ``{x_m, y_m, expected_gain, distance_m}`` and ``suggestions_basis`` (what the gain
     measures)."""
 
-    return await run_in_threadpool(_map, service(request), plate_id, query.options)
+    return await run_in_threadpool(_map, svc, plate_id, query.options)
 
 
 @router.get("/plates/{plate_id}/map.png", response_class=Response,
-            responses={**ERRORS, 404: _PROBLEM, 200: {"content": {"image/png": {}}}},
+            responses={**ERRORS, 404: PROBLEM_RESPONSE, 200: {"content": {"image/png": {}}}},
             operation_id="plate_map_png",
             summary="PNG of a plate's thickness and distance-to-support maps")
-async def get_map_png(request: Request, plate_id: str = PlateId,
+async def get_map_png(request: Request, svc: ServiceDep, plate_id: str = PlateId,
                       query: MapQuery = Depends()) -> Response:
     """The map's picture; with ``joint`` and ``suggest`` as for the map's JSON (the suggested
     positions marked as stars)."""
     from solitonde.instrument.plotting import map_png
 
-    svc = service(request)
     data = await run_in_threadpool(_map, svc, plate_id, query.options)
     png = await run_for_client(request, svc.plot_lane, map_png, data)
     return Response(png, media_type="image/png")

@@ -1,8 +1,8 @@
 """What the service's routes share while it runs: the :class:`Service` record and its lanes.
 
-The lifespan in :mod:`.app` makes one Service and puts it on the application; every route gets it
-with :func:`service`. Kept apart from :mod:`.app` so that routes never import the application
-that includes them.
+The lifespan in :mod:`.app` makes one Service and puts it on the application; every route gets
+it through :data:`.dependencies.ServiceDep`. Kept apart from :mod:`.app` so that routes never
+import the application that includes them.
 """
 
 from __future__ import annotations
@@ -10,11 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from fastapi import Request
-
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.instrument.service.api_models import Strict
-from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.service.store import Store
 from solitonde.instrument.service.uploads import UploadDir
@@ -36,11 +33,12 @@ LARGE_UPLOAD_BYTES = 4 * 1024 * 1024
 
 @dataclass
 class Service:
-    """What the routes share: settings, store, estimator, request models, upload folder."""
+    """What the routes share: settings, store, model tables, request models, upload folder."""
 
     settings: Settings
     store: Store
-    estimator: TableSet
+    tables: TableSet
+    """The model tables loaded at start (none, one or several plate families)."""
     uploads: UploadDir
     shot_model: type[Strict]
     measurement_model: type[Strict]
@@ -65,10 +63,3 @@ class Service:
         self.store.close()
         self.uploads.close()
 
-
-def service(request: Request) -> Service:
-    """The running service (the lifespan put it on the app)."""
-    svc = getattr(request.app.state, "service", None)
-    if svc is None:
-        raise Problem(503, "the service is starting or stopping; retry shortly")
-    return svc

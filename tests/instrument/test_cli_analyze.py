@@ -100,14 +100,21 @@ def test_invert_that_fails_for_a_position_is_an_error_and_exit_1(tmp_path: Path)
     assert body["estimates"][0]["estimate"] is None
 
 
-def test_a_non_numeric_diameter_skips_that_group_not_every_estimate(tmp_path: Path) -> None:
-    res = _run("analyze", str(_with_diameter(tmp_path, "abc")), str(CSV), "--invert", "--json")
+def test_a_non_numeric_diameter_fails_that_file_not_every_estimate(tmp_path: Path) -> None:
+    """A file whose sphere size is no number is metadata the service refuses (a 422 naming
+    ``file.shots.0.metadata.sphere_diameter``): `analyze` refuses that file too, naming the key,
+    and the other file's estimate stands."""
+    bad = _with_diameter(tmp_path, "abc")
+    res = _run("analyze", str(bad), str(CSV), "--invert", "--json")
+    assert res.exit_code == 1, res.output
     body = json.loads(res.stdout)
-    assert body["errors"] == [], body["errors"]
-    (row,) = body["estimates"]  # both files are plate synthetic-t4.83mm at position 0.457
+    (err,) = body["errors"]
+    assert err["source"] == str(bad)
+    assert err["error"].startswith("metadata.sphere_diameter: 'abc' is not a sphere diameter")
+    (row,) = body["estimates"]  # the other file: plate synthetic-t4.83mm at position 0.457
     assert row["estimate"]["thickness_m"]["status"] == "constrained"
-    (skip,) = row["skipped"]
-    assert skip["sphere_diameter"] == "abc" and "not a number" in skip["reason"]
+    assert row["skipped"] == []
+    assert {s["source"] for s in body["shots"]} == {str(CSV)}
 
 
 def test_an_unreadable_calibration_file_is_named_as_the_source(tmp_path: Path) -> None:

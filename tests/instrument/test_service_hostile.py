@@ -176,7 +176,7 @@ def test_a_retry_with_the_same_idempotency_key_returns_the_first_answer(client):
 
 
 def test_failed_key_attempts_are_logged_sparingly_and_then_refused(tmp_path, caplog):
-    from solitonde.instrument.service.routes_measurements import FAILED_KEYS, FailedKeys
+    from solitonde.instrument.service.authentication import FAILED_KEYS, FailedKeys
 
     key = "k" * 20
     caplog.set_level("WARNING", logger="solitonde.instrument")

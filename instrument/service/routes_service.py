@@ -1,0 +1,55 @@
+"""The service's own routes: liveness (``/healthz``), readiness (``/readyz``) and the loaded
+model tables (``/v1/tables``, ``/v1/table``, behind the API key as every ``/v1`` route)."""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+from fastapi import APIRouter
+
+from solitonde.instrument.service.api_models import Health, Ready, TableOut
+from solitonde.instrument.service.authentication import AUTH
+from solitonde.instrument.service.dependencies import ServiceDep
+from solitonde.instrument.service.problems import PROBLEM_RESPONSE, Problem
+
+try:
+    __version__ = version("solitonde")
+except PackageNotFoundError:  # running from a source tree without an install
+    __version__ = "0+unknown"
+
+router = APIRouter(tags=["service"])
+
+
+@router.get("/healthz", response_model=Health)
+async def healthz() -> dict[str, Any]:
+    """Liveness: the process answers."""
+    return {"status": "ok", "version": __version__}
+
+
+@router.get("/readyz", response_model=Ready, responses={503: PROBLEM_RESPONSE})
+async def readyz(svc: ServiceDep) -> dict[str, Any]:
+    """Readiness: the store answers; says whether estimates are available (a table loaded)."""
+    try:
+        svc.store.count()
+    except Exception as exc:
+        raise Problem(503, f"store: not usable ({exc})", field="store") from None
+    loaded = svc.tables.loaded
+    return {"ready": True, "store": svc.settings.store_path.name, "table_loaded": loaded,
+            "estimates": loaded, "reason": None if loaded else svc.tables.reason}
+
+
+@router.get("/v1/tables", dependencies=[AUTH])
+async def tables(svc: ServiceDep) -> dict[str, Any]:
+    """Every loaded model table: id, plate family (materials with their properties, plate
+    size, supports, gravity, chain, striker), sphere sizes and axes' ranges."""
+    return {"items": svc.tables.listing(), "problems": svc.tables.problems}
+
+
+@router.get("/v1/table", response_model=TableOut, dependencies=[AUTH])
+async def table(svc: ServiceDep) -> dict[str, Any]:
+    """The loaded model table: axes, provenance; and the service's request limits."""
+    tables = svc.tables
+    return {"loaded": tables.loaded, "path": str(tables.path) if tables.path else None,
+            "reason": tables.reason, "summary": tables.summary(),
+            "limits": svc.settings.limits()}
