@@ -23,7 +23,7 @@ from solitonde.instrument.inference.measured_shots import (
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 
-DATA = Path(__file__).resolve().parents[1] / "data_samples" / "waveforms"
+DATA = Path(__file__).resolve().parents[2] / "data_samples" / "waveforms"
 CSV = DATA / "synthetic_D9.53_t4.83_snr40.csv"  # two shots, plate and position in its metadata
 
 
