@@ -61,6 +61,7 @@ from solitonde.instrument.service.uploads import (
 )
 from solitonde.signal import channels as signal_channels
 from solitonde.signal.errors import WaveformError
+from solitonde.signal.formats.registry import all_reader_options
 from solitonde.signal.waveform import Waveform
 
 SECURITY_SCHEMES = {
@@ -201,7 +202,8 @@ class UploadFields(Strict):
 MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
 ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 0")]
 
-_READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "dataset")
+# the readers' options, from the format registry; group and channel select after reading
+_READER_OPTIONS = tuple(k for k in all_reader_options() if k not in ("group", "channel"))
 
 
 def binary_parameters() -> list[dict[str, Any]]:

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import WaveformError
+from ..errors import WaveformError
 
 TIME_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "us": 1e-6,
               "µs": 1e-6, "μs": 1e-6, "ns": 1e-9, "ps": 1e-12}
