@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import io
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -122,11 +123,11 @@ def parse(text: str, name: str) -> Table:
     last_number = number if pos >= len(text) else text.count("\n", 0, len(text.rstrip())) + 1
     delimiter, decimal_comma = _dialect(head, (last_number, last), name)
     cells = [(n, _split(line, delimiter)) for n, line, _ in head[:_HEADER_LINES_MAX]]
-    if _is_tek_legacy(cells):
+    beside = next((parse for _name, detect, parse in SIDE_BY_SIDE if detect(cells)), None)
+    if beside is not None:
         every = [(i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip()
                  and i + 1 >= head[0][0]]
-        table = _tek_legacy([(n, _split(line, delimiter)) for n, line in every],
-                            decimal_comma, name)
+        table = beside([(n, _split(line, delimiter)) for n, line in every], decimal_comma, name)
     else:
         start = _data_start(cells, decimal_comma, name)
         number0, _, offset = head[start]
@@ -285,43 +286,129 @@ def _read_rows(block: str, number0: int, delimiter: str | None, decimal_comma: b
     return data, [(_split(line, delimiter) or [""])[0] for line in sample if line.strip()]
 
 
-def _headed(header: list[tuple[int, list[str]]], block: str, number0: int,
-            delimiter: str | None, decimal_comma: bool, name: str) -> Table:
-    data, first_texts = _read_rows(block, number0, delimiter, decimal_comma, name)
-    width = data.shape[1]
-    first_cell = header[0][1][0].lower() if header and header[0][1] else ""
-    labels, units_row = _labels(header, width)
-    meta: dict[str, Any] = {}
-    scope = _key_values(header)
-    if first_cell.startswith("lecroy"):
-        layout = "lecroy"
-        meta["instrument"] = " ".join(header[0][1][:2])
-    elif labels and labels[0].lower() == "x-axis":
-        layout = "keysight"
-    elif labels and {"start", "increment"} <= {x.lower() for x in labels}:
-        return _rigol(labels, units_row, data, name)
-    elif units_row and all(u.startswith("(") and u.endswith(")") for u in units_row if u):
-        layout = "picoscope"
-    elif labels and labels[0].lower() == "time" and "vertical units" in {
-            k.lower() for k in scope}:
-        layout = "tektronix"
-        model = scope.get("Model") or scope.get("Model Number")
-        if model:
-            meta["instrument"] = f"Tektronix {model}"
-    elif labels is None:
-        layout = "solitonde" if not header else "generic"
-    else:
-        layout = "solitonde" if labels[0].lower() in ("time_s", "t_s") else "generic"
+@dataclass(frozen=True)
+class Header:
+    """What the lines above a table's data say: the lines (number, cells), the column names and
+    the units row above the data (None where there are none), and the ``Key,Value`` lines."""
+
+    lines: list[tuple[int, list[str]]]
+    labels: list[str] | None
+    units_row: list[str] | None
+    scope: dict[str, str]
+
+    @property
+    def first_cell(self) -> str:
+        return self.lines[0][1][0].lower() if self.lines and self.lines[0][1] else ""
+
+
+@dataclass(frozen=True)
+class Block:
+    """A table's data rows as floats, some texts of its first column (their printed precision),
+    the decimal mark and the file's name (for messages)."""
+
+    data: np.ndarray
+    first_texts: list[str]
+    decimal_comma: bool
+    name: str
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One writer's layout of a table with a header: ``detect`` tells its header from the
+    others, ``parse`` makes the :class:`Table` of the data below it."""
+
+    name: str
+    detect: Callable[[Header], bool]
+    parse: Callable[[Header, Block], Table]
+
+
+def _columns(layout: str, header: Header, block: Block, meta: dict[str, Any]) -> Table:
+    """The common case: a time column (or none) and value columns, units in the names, a units
+    row or the scope's ``Vertical Units``."""
     if layout in SCOPE_LAYOUTS:
         meta["layout"] = layout
-    if header and labels is None:
-        number, parts = header[-1]
-        raise WaveformError("file", f"{name} line {number}: {','.join(parts)[:80]!r} is not a "
-                            f"header of {width} column names", "a header row naming each column "
-                            "(time first), or a known oscilloscope layout")
-    table = _assemble(layout, labels, units_row, data, scope, meta, first_texts, decimal_comma,
-                      name)
-    table.declared_rows = _declared_rows(header, scope, name)
+    if header.lines and header.labels is None:
+        number, parts = header.lines[-1]
+        raise WaveformError("file", f"{block.name} line {number}: {','.join(parts)[:80]!r} is "
+                            f"not a header of {block.data.shape[1]} column names", "a header row "
+                            "naming each column (time first), or a known oscilloscope layout")
+    return _assemble(layout, header.labels, header.units_row, block.data, header.scope, meta,
+                     block.first_texts, block.decimal_comma, block.name)
+
+
+def _is_lecroy(header: Header) -> bool:
+    return header.first_cell.startswith("lecroy")
+
+
+def _lecroy(header: Header, block: Block) -> Table:
+    return _columns("lecroy", header, block,
+                    {"instrument": " ".join(header.lines[0][1][:2])})
+
+
+def _is_keysight(header: Header) -> bool:
+    labels = header.labels or []
+    return bool(labels) and labels[0].lower() == "x-axis"
+
+
+def _is_rigol(header: Header) -> bool:
+    return {"start", "increment"} <= {x.lower() for x in header.labels or []}
+
+
+def _is_picoscope(header: Header) -> bool:
+    units = header.units_row or []
+    return bool(units) and all(u.startswith("(") and u.endswith(")") for u in units if u)
+
+
+def _is_tektronix(header: Header) -> bool:
+    labels = header.labels or []
+    return bool(labels) and labels[0].lower() == "time" and (
+        "vertical units" in {k.lower() for k in header.scope})
+
+
+def _tektronix(header: Header, block: Block) -> Table:
+    model = header.scope.get("Model") or header.scope.get("Model Number")
+    return _columns("tektronix", header, block,
+                    {"instrument": f"Tektronix {model}"} if model else {})
+
+
+def _is_solitonde(header: Header) -> bool:
+    """This project's ``time_s`` header, or a table with no header at all."""
+    if header.labels is None:
+        return not header.lines
+    return header.labels[0].lower() in ("time_s", "t_s")
+
+
+def _plain(layout: str) -> Callable[[Header, Block], Table]:
+    def parse(header: Header, block: Block) -> Table:
+        return _columns(layout, header, block, {})
+    return parse
+
+
+LAYOUTS: tuple[Layout, ...] = (
+    Layout("lecroy", _is_lecroy, _lecroy),
+    Layout("keysight", _is_keysight, _plain("keysight")),
+    Layout("rigol", _is_rigol, lambda h, b: _rigol(h.labels or [], h.units_row, b.data, b.name)),
+    Layout("picoscope", _is_picoscope, _plain("picoscope")),
+    Layout("tektronix", _is_tektronix, _tektronix),
+    Layout("solitonde", _is_solitonde, _plain("solitonde")),
+    Layout("generic", lambda _h: True, _plain("generic")),
+)
+"""The layouts with a header row, in the order they are tried (the first whose ``detect``
+says yes parses); ``generic`` takes what the others do not. The Tektronix legacy layout, whose
+metadata sit beside the data, is told apart before any header is read
+(:data:`SIDE_BY_SIDE`)."""
+
+
+def _headed(lines: list[tuple[int, list[str]]], text: str, number0: int,
+            delimiter: str | None, decimal_comma: bool, name: str) -> Table:
+    data, first_texts = _read_rows(text, number0, delimiter, decimal_comma, name)
+    labels, units_row = _labels(lines, data.shape[1])
+    header = Header(lines, labels, units_row, _key_values(lines))
+    block = Block(data, first_texts, decimal_comma, name)
+    layout = next(x for x in LAYOUTS if x.detect(header))
+    table = layout.parse(header, block)
+    if layout.name != "rigol":
+        table.declared_rows = _declared_rows(lines, header.scope, name)
     return table
 
 
@@ -523,6 +610,14 @@ def _tek_legacy(cells: list[tuple[int, list[str]]], decimal_comma: bool, name: s
     return Table("tektronix-legacy", time, columns, info,
                  time_resolution=_resolution([r[1][0] for r in rows], decimal_comma),
                  declared_rows=None if length is None else _count(length, "Record Length", name))
+
+
+SIDE_BY_SIDE: tuple[tuple[str, Callable[[list[tuple[int, list[str]]]], bool],
+                          Callable[[list[tuple[int, list[str]]], bool, str], Table]], ...] = (
+    ("tektronix-legacy", _is_tek_legacy, _tek_legacy),
+)
+"""Layouts with the metadata beside the data, as (name, detect on the first lines' cells,
+parse every line's cells): tried before :data:`LAYOUTS`."""
 
 
 def _is_lecroy_segment(line: str) -> bool:

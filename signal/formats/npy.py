@@ -5,7 +5,7 @@ and dtype, so its size is known before it is read."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import BinaryIO
+from typing import IO
 
 import numpy as np
 
@@ -63,7 +63,7 @@ def array_values(shape: tuple[int, ...] | None, dtype: np.dtype) -> int:
     return count * max(1, -(-int(dtype.itemsize) // 8))
 
 
-def npy_header_values(fh: BinaryIO) -> int:
+def npy_header_values(fh: IO[bytes]) -> int:
     """Values an .npy header declares (``fh`` at its start); reads the header only."""
     version = np.lib.format.read_magic(fh)
     if version == (1, 0):
