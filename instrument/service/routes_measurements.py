@@ -752,9 +752,9 @@ async def plot_measurement(
         title += f" - plate {meta['plate_id']}"
     if meta.get("position") is not None:
         title += f", position {meta['position']}"
-    samples = record.samples
-    if record.units == "V" and record.calibration:  # features are in newtons: draw the force
-        samples = samples * record.calibration
+    # features are in newtons: draw the force (volts times the calibration, as Waveform does)
+    samples = Waveform(record.t0, record.dt, record.samples, record.units,
+                       record.calibration).force
     png = await run_for_client(request, svc.plot_lane, partial(
         trace_png, record.t0, record.dt, samples, record.features, units="N", title=title))
     return Response(png, media_type="image/png")
