@@ -19,7 +19,7 @@ Reader = Callable[..., list[Waveform]]
 """``reader(path, **options) -> shots``; options as :attr:`FileFormat.options` lists them."""
 Writer = Callable[..., None]
 """``writer(path, shots, **options)``: writes the file (the caller makes it atomic)."""
-Sizer = Callable[[Path, "str | None"], "int | None"]
+Sizer = Callable[[Path, str | None], int | None]
 """``sizer(path, dataset) -> values``: from the headers alone, or None when unknown."""
 Outside = Callable[[Path], list[str]]
 """``outside(path) -> problems``: what in the file reaches other files (empty: none)."""

@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import WaveformError
 from ..waveform import Waveform, _jsonable, uniform_grid
 from .base import FileFormat
-from .csv_layouts import SCOPE_LAYOUTS, parse
+from .csv_layouts import parse
+from .csv_table import SCOPE_LAYOUTS
 from .reading import (
     COMMON_OPTIONS,
     as_waveforms,
