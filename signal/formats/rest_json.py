@@ -33,7 +33,7 @@ def from_json(
 
     Metadata is the service's (``plate_id``, ``position``, ``sphere_diameter``, ``shot`` and
     free-form ``extra``, merged into one mapping as the service does) or a flat mapping. The
-    options mean what they mean for files (see the module docstring).
+    options mean what they mean for files (see :mod:`solitonde.signal.io`).
     """
     if isinstance(body, Mapping) and "shots" in body:
         shots = body["shots"]
