@@ -21,8 +21,8 @@ import numpy as np
 
 from . import kernels as K
 from .errors import WaveformError
-from .features import Features
-from .pulses import FLAGS, WIDTH_TOLERANCE, DetectOptions, kernel_args, lowpass, width_ratio
+from .features import FIELD_KINDS, Features
+from .pulses import FLAGS, DetectOptions, kernel_args, lowpass, quality_flags, width_ratio
 from .waveform import MIN_SAMPLES, UNITS, invalid_sample
 
 FLAG_BITS = {name: 1 << k for k, name in enumerate(FLAGS)}
@@ -31,74 +31,60 @@ FLAG_BITS = {name: 1 << k for k, name in enumerate(FLAGS)}
 
 @dataclass(frozen=True, eq=False)
 class FeatureTable:
-    """Per-shot features of a batch, one array per field, NaN where a shot has no such value.
+    """Per-shot features of a batch, one array per field of
+    :class:`~solitonde.signal.features.Features` (``table.tof_s``), NaN where a shot has no such
+    value.
 
     ``detected`` is false for a shot without any pulse (``extract`` raises for it); ``flags`` is a
     bit mask (:data:`FLAG_BITS`); ``secondary_times_s`` and ``secondary_ratios`` are
-    ``(shots, max_secondary)``, NaN past each shot's count.
+    ``(shots, max_secondary)``, NaN past each shot's count; ``n_pulses`` counts every pulse
+    found. The columns are exactly the fields of ``Features`` (checked when the table is made),
+    so a new feature is declared once, there.
     """
 
     detected: np.ndarray
-    tof_s: np.ndarray
-    arr: np.ndarray
-    incident_time_s: np.ndarray
-    reflected_time_s: np.ndarray
-    incident_peak_N: np.ndarray
-    reflected_peak_N: np.ndarray
-    snr_db: np.ndarray
-    flags: np.ndarray
-    arr_upper_bound: np.ndarray
-    secondary_times_s: np.ndarray
-    secondary_ratios: np.ndarray
-    baseline_N: np.ndarray
-    noise_N: np.ndarray
     n_pulses: np.ndarray
-    arr_local: np.ndarray
-    incident_rise_N: np.ndarray
-    reflected_rise_N: np.ndarray
-    tof_peak_s: np.ndarray
-    arr_peak: np.ndarray
-    incident_width_s: np.ndarray
+    columns: dict[str, np.ndarray]
+
+    def __post_init__(self) -> None:
+        if list(self.columns) != list(FIELD_KINDS):
+            missing = [k for k in FIELD_KINDS if k not in self.columns]
+            extra = [k for k in self.columns if k not in FIELD_KINDS]
+            raise ValueError(f"FeatureTable columns differ from Features' fields: missing "
+                             f"{missing}, extra {extra} (or in another order)")
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        columns = self.__dict__.get("columns")
+        if columns is not None and name in columns:
+            return columns[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def __len__(self) -> int:
         return int(self.detected.size)
 
     def flag_names(self, i: int) -> list[str]:
         """Names of the flags of shot ``i``, in :data:`~solitonde.signal.pulses.FLAGS` order."""
-        mask = int(self.flags[i])
+        mask = int(self.columns["flags"][i])
         return [name for name, bit in FLAG_BITS.items() if mask & bit]
 
     def features(self, i: int) -> Features | None:
-        """Shot ``i`` as :class:`Features` (``None`` when it holds no pulse)."""
+        """Shot ``i`` as :class:`Features` (``None`` when it holds no pulse), field by field as
+        each field's kind says (a NaN of an optional field is None)."""
         if not self.detected[i]:
             return None
-
-        def opt(value: float) -> float | None:
-            return None if math.isnan(value) else float(value)
-
-        times = self.secondary_times_s[i]
-        count = int(np.count_nonzero(~np.isnan(times)))
-        return Features(
-            tof_s=opt(self.tof_s[i]),
-            arr=opt(self.arr[i]),
-            incident_time_s=float(self.incident_time_s[i]),
-            reflected_time_s=opt(self.reflected_time_s[i]),
-            incident_peak_N=float(self.incident_peak_N[i]),
-            reflected_peak_N=opt(self.reflected_peak_N[i]),
-            snr_db=float(self.snr_db[i]),
-            flags=self.flag_names(i),
-            arr_upper_bound=opt(self.arr_upper_bound[i]),
-            secondary_times_s=[float(t) for t in times[:count]],
-            secondary_ratios=[float(r) for r in self.secondary_ratios[i, :count]],
-            baseline_N=float(self.baseline_N[i]),
-            noise_N=float(self.noise_N[i]),
-            arr_local=opt(self.arr_local[i]),
-            incident_rise_N=float(self.incident_rise_N[i]),
-            reflected_rise_N=opt(self.reflected_rise_N[i]),
-            tof_peak_s=opt(self.tof_peak_s[i]),
-            arr_peak=opt(self.arr_peak[i]),
-            incident_width_s=float(self.incident_width_s[i]),
-        )
+        count = int(np.count_nonzero(~np.isnan(self.columns["secondary_times_s"][i])))
+        values: dict[str, Any] = {}
+        for name, kind in FIELD_KINDS.items():
+            column = self.columns[name]
+            if kind == "flags":
+                values[name] = self.flag_names(i)
+            elif kind == "series":
+                values[name] = [float(v) for v in column[i, :count]]
+            elif kind == "optional":
+                values[name] = None if math.isnan(column[i]) else float(column[i])
+            else:
+                values[name] = float(column[i])
+        return Features(**values)
 
     def to_features(self) -> list[Features | None]:
         """Every shot as :class:`Features` (``None`` for a shot without any pulse)."""
@@ -216,45 +202,38 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
 
     merged = rows[:, :, K.P_MERGED] != 0
     cut = rows[:, :, K.P_TRUNC] != 0  # only the incident and the reflection count
-    train = heads[:, K.H_TRAIN] != 0
-    overlapping = has_ref & ((merged[:, 0] & ~train) | ((counts > 2) & merged[:, 1]))
-    low_snr = np.where(has_ref, ref_snr, snr) < opts.low_snr_db
-    raised = {
-        "no_reflection": detected & ~has_ref,
-        "saturated": detected & (heads[:, K.H_SATURATED] != 0),
-        "low_snr": detected & low_snr,
-        "overlapping": overlapping,
-        "truncated": (heads[:, K.H_EARLY] != 0) | (detected & cut[:, 0]) | (has_ref & cut[:, 1]),
-        "inverted_polarity": sign < 0,
-        "implausible_units": detected & ~np.array([
-            1.0 / WIDTH_TOLERANCE <= width_ratio(w, a, opts.pulse_width_1n_s) <= WIDTH_TOLERANCE
-            for w, a in zip(inc_w, inc_a, strict=True)], dtype=bool),
-    }
+    ratio = np.array([width_ratio(w, a, opts.pulse_width_1n_s)
+                      for w, a in zip(inc_w, inc_a, strict=True)], dtype=np.float64)
+    raised = quality_flags(
+        detected=detected, has_reflection=has_ref, early=heads[:, K.H_EARLY] != 0,
+        saturated=heads[:, K.H_SATURATED] != 0, sign=sign, incident_merged=merged[:, 0],
+        reflection_merged=merged[:, 1], more_than_two=counts > 2, incident_cut=cut[:, 0],
+        reflection_cut=cut[:, 1], train=heads[:, K.H_TRAIN] != 0,
+        check_snr_db=np.where(has_ref, ref_snr, snr), low_snr_db=opts.low_snr_db,
+        width_ratio=ratio)
     flags = np.zeros(sign.size, dtype=np.uint8)
     for name, where in raised.items():
         flags |= np.where(where, FLAG_BITS[name], 0).astype(np.uint8)
-    return FeatureTable(
-        detected=detected,
-        tof_s=np.where(has_ref, ref_t - inc_t, nan),
-        arr=np.where(has_ref, ref_a / np.where(detected, inc_a, 1.0), nan),
-        incident_time_s=np.where(detected, inc_t, nan),
-        reflected_time_s=ref_t,
-        incident_peak_N=np.where(detected, inc_a, nan),
-        reflected_peak_N=ref_a,
-        snr_db=np.where(detected, snr, nan),
-        flags=flags,
-        arr_upper_bound=np.where(detected & ~has_ref, heads[:, K.H_UPPER], nan),
-        secondary_times_s=sec_t,
-        secondary_ratios=sec_r,
-        baseline_N=np.where(detected, sign * rows[:, 0, K.P_BASE], nan),
-        noise_N=noise,
-        n_pulses=counts,
-        arr_local=np.where(has_ref, rise[:, 1] / np.where(detected, rise[:, 0], 1.0), nan),
-        incident_rise_N=np.where(detected, rise[:, 0], nan),
-        reflected_rise_N=np.where(has_ref, rise[:, 1], nan),
-        tof_peak_s=np.where(has_ref, (t0 + rows[:, 1, K.P_PEAK_TIME] * dt)
-                            - (t0 + rows[:, 0, K.P_PEAK_TIME] * dt), nan),
-        arr_peak=np.where(has_ref, rows[:, 1, K.P_PEAK_AMP]
-                          / np.where(detected, rows[:, 0, K.P_PEAK_AMP], 1.0), nan),
-        incident_width_s=np.where(detected, inc_w, nan),
-    )
+    return FeatureTable(detected=detected, n_pulses=counts, columns={
+        "tof_s": np.where(has_ref, ref_t - inc_t, nan),
+        "arr": np.where(has_ref, ref_a / np.where(detected, inc_a, 1.0), nan),
+        "incident_time_s": np.where(detected, inc_t, nan),
+        "reflected_time_s": ref_t,
+        "incident_peak_N": np.where(detected, inc_a, nan),
+        "reflected_peak_N": ref_a,
+        "snr_db": np.where(detected, snr, nan),
+        "flags": flags,
+        "arr_upper_bound": np.where(detected & ~has_ref, heads[:, K.H_UPPER], nan),
+        "secondary_times_s": sec_t,
+        "secondary_ratios": sec_r,
+        "baseline_N": np.where(detected, sign * rows[:, 0, K.P_BASE], nan),
+        "noise_N": noise,
+        "arr_local": np.where(has_ref, rise[:, 1] / np.where(detected, rise[:, 0], 1.0), nan),
+        "incident_rise_N": np.where(detected, rise[:, 0], nan),
+        "reflected_rise_N": np.where(has_ref, rise[:, 1], nan),
+        "tof_peak_s": np.where(has_ref, (t0 + rows[:, 1, K.P_PEAK_TIME] * dt)
+                               - (t0 + rows[:, 0, K.P_PEAK_TIME] * dt), nan),
+        "arr_peak": np.where(has_ref, rows[:, 1, K.P_PEAK_AMP]
+                             / np.where(detected, rows[:, 0, K.P_PEAK_AMP], 1.0), nan),
+        "incident_width_s": np.where(detected, inc_w, nan),
+    })

@@ -51,3 +51,14 @@ class SignalError(Exception):
 
 class WaveformError(SignalError, ValueError):
     """Bad waveform input: names the failing field and, where it helps, what is allowed."""
+
+
+class OptionNeeded(WaveformError):
+    """The data need an option the caller did not give: ``sample_rate`` (no time axis) or
+    ``calibration`` (samples in volts without one). ``option`` names it; ``field`` may carry a
+    path prefix (``shots[2].calibration``)."""
+
+    def __init__(self, option: str, message: str, allowed: str | None = None,
+                 field: str | None = None) -> None:
+        super().__init__(field or option, message, allowed)
+        self.option = option

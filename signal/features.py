@@ -21,7 +21,7 @@ is never made up from noise.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -30,20 +30,19 @@ from .errors import WaveformError
 from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
-FEATURES = (
-    "tof_s",
-    "arr",
-    "incident_time_s",
-    "reflected_time_s",
-    "incident_peak_N",
-    "reflected_peak_N",
-    "snr_db",
-)
-"""The per-shot numbers, in the order tables and files list them."""
-
 OUTLIER_Z = 3.5
 """Modified z-score (0.6745 |x - median| / MAD) above which a shot is rejected
 (Iglewicz-Hoaglin)."""
+
+
+NUMBER = {"kind": "number"}
+"""A float every shot with a pulse has."""
+OPTIONAL = {"kind": "optional"}
+"""A float, or None where the shot does not support it (no reflection: no TOF)."""
+SERIES = {"kind": "series"}
+"""A list of floats, one per secondary pulse."""
+SUMMARISED = {"summarised": True}
+"""Marks the numbers :func:`aggregate` summarises (:data:`FEATURES`)."""
 
 
 @dataclass(frozen=True)
@@ -56,51 +55,47 @@ class Features:
     ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the reflection (peak
     over the incident peak); ``incident_width_s`` is the incident's full width at half maximum
     (the fitted template's), which a solitary wave ties to its force and the sphere size.
+
+    The fields are the one declaration of a shot's features: each field's ``metadata`` says its
+    kind (:data:`NUMBER`, :data:`OPTIONAL`, :data:`SERIES`; ``flags`` is the list of flag names)
+    and whether :func:`aggregate` summarises it; :meth:`to_dict`, :data:`FEATURES` and the batch
+    path's :class:`~solitonde.signal.batch.FeatureTable` are derived from them.
     """
 
-    tof_s: float | None
-    arr: float | None
-    incident_time_s: float
-    reflected_time_s: float | None
-    incident_peak_N: float
-    reflected_peak_N: float | None
-    snr_db: float
-    flags: list[str]
-    arr_upper_bound: float | None = None
-    secondary_times_s: list[float] = field(default_factory=list)
-    secondary_ratios: list[float] = field(default_factory=list)
-    baseline_N: float = 0.0
-    noise_N: float = 0.0
-    arr_local: float | None = None
-    incident_rise_N: float | None = None
-    reflected_rise_N: float | None = None
-    tof_peak_s: float | None = None
-    arr_peak: float | None = None
-    incident_width_s: float = 0.0
+    tof_s: float | None = field(metadata={**OPTIONAL, **SUMMARISED})
+    arr: float | None = field(metadata={**OPTIONAL, **SUMMARISED})
+    incident_time_s: float = field(metadata={**NUMBER, **SUMMARISED})
+    reflected_time_s: float | None = field(metadata={**OPTIONAL, **SUMMARISED})
+    incident_peak_N: float = field(metadata={**NUMBER, **SUMMARISED})
+    reflected_peak_N: float | None = field(metadata={**OPTIONAL, **SUMMARISED})
+    snr_db: float = field(metadata={**NUMBER, **SUMMARISED})
+    flags: list[str] = field(metadata={"kind": "flags"})
+    arr_upper_bound: float | None = field(default=None, metadata=OPTIONAL)
+    secondary_times_s: list[float] = field(default_factory=list, metadata=SERIES)
+    secondary_ratios: list[float] = field(default_factory=list, metadata=SERIES)
+    baseline_N: float = field(default=0.0, metadata=NUMBER)
+    noise_N: float = field(default=0.0, metadata=NUMBER)
+    arr_local: float | None = field(default=None, metadata=OPTIONAL)
+    incident_rise_N: float | None = field(default=None, metadata=NUMBER)
+    reflected_rise_N: float | None = field(default=None, metadata=OPTIONAL)
+    tof_peak_s: float | None = field(default=None, metadata=OPTIONAL)
+    arr_peak: float | None = field(default=None, metadata=OPTIONAL)
+    incident_width_s: float = field(default=0.0, metadata=NUMBER)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-safe dict with unit-carrying keys; flags as a list of names."""
-        return {
-            "tof_s": self.tof_s,
-            "arr": self.arr,
-            "incident_time_s": self.incident_time_s,
-            "reflected_time_s": self.reflected_time_s,
-            "incident_peak_N": self.incident_peak_N,
-            "reflected_peak_N": self.reflected_peak_N,
-            "snr_db": self.snr_db,
-            "flags": list(self.flags),
-            "arr_upper_bound": self.arr_upper_bound,
-            "secondary_times_s": list(self.secondary_times_s),
-            "secondary_ratios": list(self.secondary_ratios),
-            "baseline_N": self.baseline_N,
-            "noise_N": self.noise_N,
-            "arr_local": self.arr_local,
-            "incident_rise_N": self.incident_rise_N,
-            "reflected_rise_N": self.reflected_rise_N,
-            "tof_peak_s": self.tof_peak_s,
-            "arr_peak": self.arr_peak,
-            "incident_width_s": self.incident_width_s,
-        }
+        """JSON-safe dict with unit-carrying keys, in field order; lists copied."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            out[f.name] = list(value) if f.metadata["kind"] in ("series", "flags") else value
+        return out
+
+
+FEATURES = tuple(f.name for f in fields(Features) if f.metadata.get("summarised"))
+"""The per-shot numbers, in the order tables and files list them."""
+FIELD_KINDS: dict[str, str] = {f.name: f.metadata["kind"] for f in fields(Features)}
+"""Each field of :class:`Features` and its kind (``number``, ``optional``, ``series``,
+``flags``)."""
 
 
 def from_detection(det: Detection) -> Features:

@@ -327,32 +327,31 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     head = head_array.tolist()  # Python floats: cheaper to read one by one than numpy scalars
     rows = rows_array.tolist()
     sign = head[K.H_SIGN]
-    flags: set[str] = set()
     notes: list[str] = []
-    if sign < 0:
-        flags.add("inverted_polarity")
     noise = head[K.H_SIGMA]
     common = {"noise_N": noise, "threshold_N": head[K.H_THR],
               "pretrigger_samples": int(head[K.H_NPRE]), "smooth_samples": int(head[K.H_SMOOTH])}
     if head[K.H_EARLY]:
-        flags.add("truncated")
         notes.append("the incident pulse starts before a pre-trigger segment could be taken")
     if not rows:
+        raised = quality_flags(
+            detected=False, has_reflection=False, early=bool(head[K.H_EARLY]),
+            saturated=False, sign=sign, incident_merged=False, reflection_merged=False,
+            more_than_two=False, incident_cut=False, reflection_cut=False, train=False,
+            check_snr_db=math.nan, low_snr_db=opts.low_snr_db, width_ratio=1.0)
         return Detection(
             baseline_N=sign * head[K.H_BASE], pulses=(), incident=None, reflected=None,
-            secondary=(), flags=_ordered(flags), notes=(*notes, "no pulse rises above the noise"),
+            secondary=(), flags=_ordered(raised), notes=(*notes, "no pulse rises above the noise"),
             **common,
         )
     pulses = []
     cut_secondary = False
     for k, row in enumerate(rows):
         amp = row[K.P_AMP]
-        if row[K.P_TRUNC]:
-            # The shot is truncated when a measured pulse is; a cut secondary is only noted.
-            if k == 0 or (k == 1 and not head[K.H_NOREF]):
-                flags.add("truncated")
-            else:
-                cut_secondary = True
+        # The shot is truncated when a measured pulse is (quality_flags); a cut secondary is
+        # only noted.
+        if row[K.P_TRUNC] and not (k == 0 or (k == 1 and not head[K.H_NOREF])):
+            cut_secondary = True
         pulses.append(Pulse(
             time_s=t0 + row[K.P_TIME] * dt, peak_N=amp, baseline_N=sign * row[K.P_BASE],
             width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
@@ -378,29 +377,27 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
                      "secondary")
     upper = None
     if reflected is None:
-        flags.add("no_reflection")
         upper = head[K.H_UPPER]
         if gated_out and len(pulses) > 1:
             notes.append("no pulse arrives when the chain's geometry puts the reflection")
-    elif rows[0][K.P_MERGED] and not train:
-        flags.add("overlapping")
-    if reflected is not None and len(pulses) > 2 and rows[1][K.P_MERGED]:
-        flags.add("overlapping")
     if reflected is not None and not rows[1][K.P_LEVEL]:
         notes.append("no quiet samples before the reflection: its baseline is the slow trend")
     check = reflected if reflected is not None else incident
-    if check.snr_db < opts.low_snr_db:
-        flags.add("low_snr")
-    if head[K.H_SATURATED]:
-        flags.add("saturated")
     ratio = width_ratio(incident.width_s, incident.peak_N, opts.pulse_width_1n_s)
-    if not 1.0 / WIDTH_TOLERANCE <= ratio <= WIDTH_TOLERANCE:
-        flags.add("implausible_units")
+    has_ref = reflected is not None
+    raised = quality_flags(
+        detected=True, has_reflection=has_ref, early=bool(head[K.H_EARLY]),
+        saturated=bool(head[K.H_SATURATED]), sign=sign, incident_merged=bool(rows[0][K.P_MERGED]),
+        reflection_merged=has_ref and bool(rows[1][K.P_MERGED]), more_than_two=len(pulses) > 2,
+        incident_cut=bool(rows[0][K.P_TRUNC]), reflection_cut=has_ref and bool(rows[1][K.P_TRUNC]),
+        train=bool(train), check_snr_db=check.snr_db, low_snr_db=opts.low_snr_db,
+        width_ratio=ratio)
+    if raised["implausible_units"]:
         notes.append(f"the incident pulse is {incident.width_s:.3g} s wide at {incident.peak_N:.3g}"
                      f" N, {ratio:.3g} times a solitary wave of that force in this chain")
     return Detection(
         baseline_N=incident.baseline_N, pulses=tuple(pulses), incident=incident,
-        reflected=reflected, secondary=secondary, flags=_ordered(flags), arr_upper_bound=upper,
+        reflected=reflected, secondary=secondary, flags=_ordered(raised), arr_upper_bound=upper,
         notes=tuple(notes), **common,
     )
 
@@ -415,5 +412,37 @@ def width_ratio(width_s: float, peak_N: float, width_1n_s: float | None) -> floa
     return width_s / (width_1n_s * peak_N ** (-1.0 / 6.0))
 
 
-def _ordered(flags: set[str]) -> tuple[str, ...]:
-    return tuple(f for f in FLAGS if f in flags)
+def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: Any, sign: Any,
+                  incident_merged: Any, reflection_merged: Any, more_than_two: Any,
+                  incident_cut: Any, reflection_cut: Any, train: Any, check_snr_db: Any,
+                  low_snr_db: float, width_ratio: Any) -> dict[str, Any]:
+    """Which of :data:`FLAGS` a shot raises, from what the kernels found: the one statement of
+    the flag rules, for one shot (bools and floats, :func:`detect`) or for many at once
+    (arrays, one element a shot, :mod:`solitonde.signal.batch`).
+
+    ``check_snr_db`` is the reflection's SNR where there is one, else the incident's; ``train``
+    says pulses follow the incident sooner than a reflection can arrive (its merging then is
+    the train's, not an overlap); ``width_ratio`` is the incident's width over a solitary
+    wave's of its force (:func:`width_ratio`). A flag needs a detected pulse except
+    ``inverted_polarity`` and the pre-trigger's ``truncated``.
+    """
+    in_band = (width_ratio >= 1.0 / WIDTH_TOLERANCE) & (width_ratio <= WIDTH_TOLERANCE)
+    return {
+        "no_reflection": detected & _not(has_reflection),
+        "saturated": detected & saturated,
+        "low_snr": detected & (check_snr_db < low_snr_db),
+        "overlapping": has_reflection & ((incident_merged & _not(train))
+                                         | (more_than_two & reflection_merged)),
+        "truncated": early | (detected & incident_cut) | (has_reflection & reflection_cut),
+        "inverted_polarity": sign < 0,
+        "implausible_units": detected & _not(in_band),
+    }
+
+
+def _not(value: Any) -> Any:
+    """Logical not of a bool or of a boolean array (``~True`` is -2)."""
+    return not value if isinstance(value, bool) else ~value
+
+
+def _ordered(raised: dict[str, Any]) -> tuple[str, ...]:
+    return tuple(f for f in FLAGS if raised[f])

@@ -69,6 +69,7 @@ def test_the_wheel_carries_the_tables_and_samples(wheel: Path) -> None:
     assert wanted <= names, sorted(wanted - names)
     assert not any(n.startswith("solitonde/data/figures/") for n in names)
     assert "solitonde/model/zener_table.json" in names
+    assert "solitonde/signal/formats/registry.py" in names  # the format plug-ins' sub-folder
     assert any(n.startswith("solitonde/instrument/service/webpage/") for n in names)
     assert wheel.stat().st_size < WHEEL_MAX_BYTES
 

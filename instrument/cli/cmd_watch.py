@@ -59,8 +59,6 @@ from solitonde.instrument.cli.uploader import (
 )
 from solitonde.instrument.cli.watch_queue import DONE, FAILED, Entry, Queue, QueueLocked
 
-SUFFIXES = (".csv", ".npy", ".npz", ".h5", ".hdf5", ".hdf", ".tdms", ".json")
-"""The files watched when no ``--pattern`` is given: what the service's upload reads."""
 STATE_NAME = ".solitonde-watch"
 
 
@@ -85,6 +83,8 @@ class Watcher:
 
     def candidates(self) -> list[Path]:
         """Files of the folder that match, the state folder and dot files left out."""
+        from solitonde.signal.formats.registry import EXTENSIONS  # what the upload reads
+
         found = self.folder.rglob(self.pattern) if self.pattern else self.folder.rglob("*")
         out = []
         for p in found:
@@ -93,7 +93,7 @@ class Watcher:
                 continue
             if self.queue.state in p.parents:
                 continue
-            if self.pattern is None and p.suffix.lower() not in SUFFIXES:
+            if self.pattern is None and p.suffix.lower() not in EXTENSIONS:
                 continue
             out.append(p)
         return sorted(out)

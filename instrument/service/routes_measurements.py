@@ -59,6 +59,7 @@ from solitonde.instrument.service.uploads import (
 )
 from solitonde.signal import channels as signal_channels
 from solitonde.signal.errors import WaveformError
+from solitonde.signal.formats.registry import all_reader_options
 from solitonde.signal.waveform import Waveform
 
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
@@ -111,7 +112,8 @@ UploadFields = create_model(
 MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
 ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 0")]
 
-_READER_OPTIONS = ("units", "calibration", "sample_rate", "dt", "t0", "dataset")
+# the readers' options, from the format registry; group and channel select after reading
+_READER_OPTIONS = tuple(k for k in all_reader_options() if k not in ("group", "channel"))
 
 
 def binary_parameters() -> list[dict[str, Any]]:
@@ -644,9 +646,9 @@ async def plot_measurement(
         title += f" - plate {meta['plate_id']}"
     if meta.get("position") is not None:
         title += f", position {meta['position']}"
-    samples = record.samples
-    if record.units == "V" and record.calibration:  # features are in newtons: draw the force
-        samples = samples * record.calibration
+    # features are in newtons: draw the force (volts times the calibration, as Waveform does)
+    samples = Waveform(record.t0, record.dt, record.samples, record.units,
+                       record.calibration).force
     png = await run_for_client(request, svc.plot_lane, partial(
         trace_png, record.t0, record.dt, samples, record.features, units="N", title=title))
     return Response(png, media_type="image/png")

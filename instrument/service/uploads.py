@@ -2,7 +2,9 @@
 their headers before any data is read, then handed to the signal readers.
 
 A compressed NPZ or HDF5 file of a few hundred kilobytes can declare 10^8 samples; reading the
-headers first turns that into a 413 instead of gigabytes of memory.
+headers first turns that into a 413 instead of gigabytes of memory. What each format accepts,
+how it is sized and whether it can reach outside itself are the format's own declarations
+(:mod:`solitonde.signal.formats.registry`); this module turns them into HTTP problems.
 """
 
 from __future__ import annotations
@@ -11,20 +13,15 @@ import errno
 import os
 import tempfile
 import uuid
-import zipfile
 from pathlib import Path
-from typing import Any, BinaryIO
-
-import numpy as np
+from typing import BinaryIO
 
 from solitonde.instrument.service.problems import Problem
+from solitonde.signal.formats.registry import FORMATS as REGISTRY
+from solitonde.signal.formats.registry import by_suffix, resolve
 
-FORMATS: dict[str, str] = {"csv": ".csv", "npy": ".npy", "npz": ".npz", "hdf5": ".h5",
-                           "tdms": ".tdms", "json": ".json"}
-"""Upload formats and the suffix the server gives the temporary file."""
-
-SUFFIXES: dict[str, str] = {".csv": "csv", ".npy": "npy", ".npz": "npz", ".h5": "hdf5",
-                            ".hdf5": "hdf5", ".hdf": "hdf5", ".tdms": "tdms", ".json": "json"}
+FORMATS: dict[str, str] = {name: f.extensions[0] for name, f in REGISTRY.items()}
+"""Upload formats and the suffix the server gives the temporary file (the format's first)."""
 
 _CHUNK = 1 << 20
 
@@ -61,57 +58,34 @@ class UploadDir:
 
 
 def pick_format(explicit: str | None, filename: str | None) -> str:
-    """The upload's format: the explicit ``format`` field, else the file name's suffix."""
+    """The upload's format: the explicit ``format`` field (a name or an alias such as ``h5``,
+    ``hdf``, as the readers take it), else the file name's suffix."""
     if explicit:
-        fmt = explicit.strip().lower()
-        if fmt == "h5":
-            fmt = "hdf5"
-        if fmt not in FORMATS:
+        fmt = resolve(explicit.strip())
+        if fmt is None:
             raise Problem(422, f"format: unknown format {explicit!r} (allowed: "
                           f"{', '.join(FORMATS)})", kind="invalid-input", field="format")
         return fmt
-    suffix = Path(filename or "").suffix.lower()
-    if suffix in SUFFIXES:
-        return SUFFIXES[suffix]
+    fmt = by_suffix(filename or "")
+    if fmt is not None:
+        return fmt
     raise Problem(422, f"format: cannot tell the format of {filename or 'the upload'!r} from its "
                   f"name; send a 'format' field (allowed: {', '.join(FORMATS)})",
                   kind="invalid-input", field="format")
 
 
 def check_self_contained(path: Path, fmt: str) -> None:
-    """Refuse HDF5 files that reach outside themselves.
+    """Refuse files that reach outside themselves.
 
     HDF5 can store a dataset's bytes in an external file named inside the file, link to objects
     in other files, or map virtual datasets onto other files: reading such an upload would read
     files on the server, which is exactly a client-supplied path. Only self-contained files are
-    read.
+    read (each format says what in it reaches outside).
     """
-    if fmt != "hdf5":
-        return
-    import h5py
-
-    problems: list[str] = []
-
-    def visit(name: str, link: Any) -> None:
-        if isinstance(link, h5py.ExternalLink):
-            problems.append(f"{name!r} is an external link")
-
-    def visit_obj(name: str, obj: Any) -> None:
-        if isinstance(obj, h5py.Dataset):
-            if obj.external:
-                problems.append(f"{name!r} stores its data in an external file")
-            if obj.is_virtual:
-                problems.append(f"{name!r} is a virtual dataset")
-
-    try:
-        with h5py.File(path, "r") as fh:
-            fh.visititems_links(visit)
-            if not problems:
-                fh.visititems(visit_obj)
-    except Exception:
-        return  # not readable as HDF5 at all: the reader reports it
+    problems = REGISTRY[fmt].outside_references(path)
     if problems:
-        raise Problem(422, f"file: only self-contained HDF5 files are accepted; {problems[0]}",
+        raise Problem(422, f"file: only self-contained {fmt.upper()} files are accepted; "
+                      f"{problems[0]}",
                       kind="invalid-input", field="file")
 
 
@@ -128,73 +102,6 @@ def declared_values(path: Path, fmt: str, dataset: str | None = None) -> int | N
     reports it properly.
     """
     try:
-        if fmt == "npy":
-            with open(path, "rb") as fh:
-                return _npy_values(fh)
-        if fmt == "npz":
-            return _npz_values(path)
-        if fmt == "hdf5":
-            return _hdf5_values(path, dataset)
-        if fmt == "tdms":
-            from nptdms import TdmsFile
-
-            meta = TdmsFile.read_metadata(path)  # TdmsFile.read decodes every channel
-            return sum(len(ch) for g in meta.groups() for ch in g.channels())
+        return REGISTRY[fmt].declared_values(path, dataset)
     except Exception:
         return None
-    return None
-
-
-def _npz_values(path: Path) -> int:
-    """Every member of the archive, whatever its name (numpy reads ``samples`` as well as
-    ``samples.npy``), sized by the larger of its .npy header's shape and its uncompressed size
-    in the zip directory, so that nothing is inflated before the limit is checked."""
-    total = 0
-    with zipfile.ZipFile(path) as zf:
-        for info in zf.infolist():
-            by_size = -(-int(info.file_size) // 8)
-            try:
-                with zf.open(info) as member:
-                    by_header = _npy_values(member)
-            except Exception:  # not an array header: its uncompressed size bounds it
-                by_header = 0
-            total += max(by_size, by_header)
-    return total
-
-
-def _values(shape: tuple[int, ...] | None, dtype: np.dtype) -> int:
-    """Values of an array of ``shape`` and ``dtype``, one per 8 bytes of each element."""
-    count = int(np.prod(shape, dtype=np.int64)) if shape else 1
-    return count * max(1, -(-int(dtype.itemsize) // 8))
-
-
-def _npy_values(fh: BinaryIO) -> int:
-    version = np.lib.format.read_magic(fh)
-    if version == (1, 0):
-        shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-    else:
-        shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
-    return _values(shape, np.dtype(dtype))
-
-
-def _hdf5_values(path: Path, dataset: str | None = None) -> int | None:
-    import h5py
-
-    total = 0
-
-    def visit(_name: str, obj: Any) -> None:
-        nonlocal total
-        if isinstance(obj, h5py.Dataset) and obj.shape is not None:
-            total += _values(obj.shape, obj.dtype)
-
-    with h5py.File(path, "r") as fh:
-        root = fh
-        if dataset is not None:
-            if dataset not in fh:
-                return None  # the reader names what the file holds
-            root = fh[dataset]
-        if isinstance(root, h5py.Dataset):
-            visit(root.name, root)
-        else:
-            root.visititems(visit)  # the objects the reader visits, each once
-    return total

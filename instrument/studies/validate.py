@@ -44,7 +44,7 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +54,7 @@ from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
+from solitonde.instrument.inference.pipeline import SizeSummary
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks
@@ -116,19 +117,11 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
                 feats.append(extract(recorded.with_samples(noisy), **options))
             except WaveformError:
                 continue
-        agg = aggregate(feats) if feats else None
-        if agg is None or agg["tof_s"].mean is None or agg["arr"].mean is None:
-            # no reflection: its ARR bound still bounds the thickness (None without one)
-            bound = None if agg is None else agg.arr_upper_bound
-            summaries[d] = None if bound is None else {
-                "diameter_m": d, "tof_s": None, "tof_std_s": None, "arr": None, "arr_std": None,
-                "n_shots": agg.n_shots, "arr_upper_bound": bound,
-                "plate_model": result.plate_model}
-            continue
-        summaries[d] = {"diameter_m": d, "tof_s": agg["tof_s"].mean,
-                        "tof_std_s": agg["tof_s"].std, "arr": agg["arr"].mean,
-                        "arr_std": agg["arr"].std, "n_shots": agg["tof_s"].count,
-                        "plate_model": result.plate_model}
+        # what the inversion reads of these shots (no reflection: the ARR bound alone), or
+        # None where they give nothing (SizeSummary.skip_reason says why)
+        size = SizeSummary(d, aggregate(feats)) if feats else None
+        summaries[d] = None if size is None or size.skip_reason() is not None else {
+            **asdict(size.inputs()), "plate_model": result.plate_model}
     return {"thickness_m": thickness_m, "distance_m": distance_m, "summaries": summaries,
             "wall_s": time.perf_counter() - started}
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from solitonde.signal import io
-from solitonde.signal.csv_layouts import parse
 from solitonde.signal.errors import WaveformError
+from solitonde.signal.formats.csv_layouts import parse
 
 T = -20e-6 + 0.5e-6 * np.arange(300)
 PULSE = np.exp(-(((T - 60e-6) / 12e-6) ** 2))
