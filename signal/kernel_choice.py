@@ -125,12 +125,15 @@ def current() -> types.ModuleType:
     """The kernels ``detect`` uses now: the compiled :mod:`solitonde.signal.kernels`, or the
     interpreted copy while a background compile started by :func:`start` runs and this process
     has spent less than :data:`BRIDGE_BUDGET_S` on interpreted work."""
-    global _bridging
+    global _bridging, _driver
     from . import kernels as K
 
     if not _bridging:
         return K
     if _marker().is_file():
+        if _driver is not None:  # reap it (it has left the marker, so it is ending)
+            _driver.poll()
+            _driver = None if _driver.returncode is not None else _driver
         _bridging = False
         return K
     if _spent > BRIDGE_BUDGET_S:
