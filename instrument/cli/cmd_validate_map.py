@@ -33,14 +33,40 @@ def validate_map_command(
                                              "the simulated positions; reused when present"),
     out: Path | None = typer.Option(None, "--out", help="also write every scan's rows as JSON"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
+    width_split: bool = typer.Option(False, "--width-split", help="instead: what each "
+                                     "near-edge position's thickness interval is made of "
+                                     "(its distance, the material, the calibration, the "
+                                     "table's error, the shots)"),
 ) -> None:
     """Simulate scans of random plates, invert them jointly and one by one, and score both."""
+    from solitonde.instrument.studies import map_study
     from solitonde.instrument.studies.map_study import StudyInputError, run
     from solitonde.instrument.tables.table import ModelTable, TableError
 
     for flag, path in (("--out", out), ("--measurements", measurements)):
         if path is not None and (path.is_dir() or not path.parent.is_dir()):
             _fail(f"{flag}: {str(path)!r} is not a file in an existing folder")
+    if width_split:
+        try:
+            split = map_study.width_split(ModelTable.load(table_path(table)), scans, seed,
+                                          diameter_m=diameter, measurements=measurements)
+        except StudyInputError as exc:
+            _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
+        except TableError as exc:
+            _fail(f"--{'diameter' if exc.field == 'diameter_m' else 'table'}: {exc}")
+        if as_json:
+            typer.echo(json.dumps(split, indent=2))
+            return
+        typer.echo(f"near-edge thickness interval, {split['positions']} positions within 30 mm "
+                   f"of the edge ({split['n_scans']} scans, seed {split['seed']}): median "
+                   "width, of t, median ratio to alone")
+        for step in map_study.SPLIT_STEPS:
+            v = split[step]
+            if v["median_width_m"] is None:
+                continue
+            typer.echo(f"  {step}: {v['median_width_m'] * 1e3:.2f} mm, "
+                       f"{v['median_width_rel_t']:.3f} t, {v['median_ratio_to_alone']:.3f}")
+        return
     try:
         model = ModelTable.load(table_path(table))
         result = run(model, scans, seed, diameter_m=diameter, measurements=measurements,

@@ -357,6 +357,103 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     return {"metrics": metrics, "scans": rows}
 
 
+SPLIT_STEPS = ("alone", "distance_known", "no_material_spread", "no_calibration_uncertainty",
+               "no_table_error")
+"""The near-edge width split, each step removing one more source of a position's thickness
+interval: the distance (known exactly), the material's spread, the calibration's stated
+uncertainty, the table's interpolation error; what is left is the shots' noise."""
+
+
+def _width_at_distance(table: ModelTable, inputs: Sequence[FeatureSummary],
+                       cal: Calibration | None, spread: Mapping[str, float] | None,
+                       distance_m: float, t_range: tuple[float, float]) -> float:
+    """The 95 % thickness interval's width (an open side to the table's end) of a position's
+    own likelihood at a known distance, by a single inversion's rules."""
+    from solitonde.instrument.inference.inversion import cell_likelihood, summarise_marginal
+
+    keep = cell_likelihood(table, inputs, cal, material_spread=spread)
+    dev, g = keep["deviance"], keep["grid"]
+    ok = np.isfinite(dev)
+    if not ok.any():
+        return t_range[1] - t_range[0]
+    like = np.where(ok, np.exp(-0.5 * (np.where(ok, dev, 0.0) - dev[ok].min())), 0.0)
+    grid = g.distance_m
+    j = int(np.clip(np.searchsorted(grid, distance_m) - 1, 0, grid.size - 2))
+    f = float(np.clip((distance_m - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0))
+    col = (1.0 - f) * like[:, j] + f * like[:, j + 1]
+    if col.max() <= 0:
+        return t_range[1] - t_range[0]
+    mass = col * g.weight_t
+    est = summarise_marginal(np.log(g.thickness_m), mass / mass.sum(), g.weight_t,
+                             lower_physical=False, transform=np.exp, profile=col / col.max())
+    return _width(est.to_dict(), t_range)
+
+
+def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
+                diameter_m: float | None = None, measurements: str | Path | None = None
+                ) -> dict[str, Any]:
+    """What a near-edge position's thickness interval is made of: for every position of the
+    study's scans within :data:`NEAR_EDGE_M` of the edge, the width of its own 95 % interval
+    (:data:`SPLIT_STEPS`): alone, then with its distance known exactly, then without the
+    material's spread, the calibration's stated uncertainty and the table's interpolation error
+    in turn. Medians of the widths (m, and over the plate's thickness) and of their ratio to the
+    width alone. The same scans, positions and measurements as :func:`run` (the measurements
+    file it keeps is reused)."""
+    from dataclasses import replace
+
+    from solitonde.instrument.inference.inversion import fine_grid
+
+    if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
+        raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
+    sizes = [float(d) for d in table.axes["diameter_m"]]
+    diameter_m = (min(sizes, key=lambda d: abs(d - 9.53e-3)) if diameter_m is None
+                  else float(table.axes["diameter_m"][table.diameter_index(diameter_m)]))
+    t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
+    measure = Measurer(table.sweep.get("scene", {}), measurements)
+    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
+    exact = cal.to_dict()
+    for entry in exact["per_diameter"]:
+        entry["arr_factor_std"] = entry["tof_offset_std_s"] = 0.0
+    cal_exact = Calibration.from_any(exact)
+    no_material = dict.fromkeys(("youngs_modulus_rel_sd", "poisson_ratio_sd",
+                                 "density_rel_sd"), 0.0)
+    rows = []
+    for k in range(n_scans):
+        scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
+        for p in _scan_positions(scan, scan.random_positions[:scan.n_positions], measure, cal):
+            dist = scan.distance(p.x_m, p.y_m)
+            if dist > NEAR_EDGE_M or not p.inputs:
+                continue
+            est = invert(table, p.inputs, cal).to_dict()["thickness_m"]
+            widths = [_width(est, t_range),
+                      _width_at_distance(table, p.inputs, cal, None, dist, t_range),
+                      _width_at_distance(table, p.inputs, cal, no_material, dist, t_range),
+                      _width_at_distance(table, p.inputs, cal_exact, no_material, dist,
+                                         t_range)]
+            # the table's interpolation error set to zero on the fine grid, then restored
+            key = f"fine:{table.diameter_index(diameter_m)}"
+            g = fine_grid(table, table.diameter_index(diameter_m))
+            table._cache[key] = replace(g, model_tof_var=np.zeros_like(g.model_tof_var),
+                                        model_arr_var=np.zeros_like(g.model_arr_var))
+            try:
+                widths.append(_width_at_distance(table, p.inputs, cal_exact, no_material, dist,
+                                                 t_range))
+            finally:
+                table._cache[key] = g
+            rows.append({"thickness_m": scan.thickness_m, "distance_m": dist,
+                         "widths_m": dict(zip(SPLIT_STEPS, widths, strict=True))})
+    measure.save()
+    out: dict[str, Any] = {"positions": len(rows), "n_scans": n_scans, "seed": seed}
+    for step in SPLIT_STEPS:
+        w = np.array([r["widths_m"][step] for r in rows])
+        t = np.array([r["thickness_m"] for r in rows])
+        alone = np.array([r["widths_m"]["alone"] for r in rows])
+        out[step] = {"median_width_m": float(np.median(w)) if rows else None,
+                     "median_width_rel_t": float(np.median(w / t)) if rows else None,
+                     "median_ratio_to_alone": float(np.median(w / alone)) if rows else None}
+    return out
+
+
 def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Coverage, widths near the edge, and the edge's error against the number of positions."""
     out: dict[str, Any] = {}
@@ -419,4 +516,5 @@ def _counts(values: Any) -> dict[str, int]:
     return out
 
 
-__all__ = ["Scan", "StudyInputError", "run", "score_scan", "summarise"]
+__all__ = ["SPLIT_STEPS", "Scan", "StudyInputError", "run", "score_scan", "summarise",
+           "width_split"]
