@@ -104,7 +104,16 @@ def report_lines(m: dict[str, Any]) -> list[str]:
                      f"({num(t['near_edge_width_median_rel'], '.3f')} of t, "
                      f"{t['near_edge_positions']} positions); edge offset coverage "
                      f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located), median "
-                     f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm")
+                     f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm, median 95 % "
+                     f"width {num((e['ci95_width_median_m'] or 0) * 1e3, '.1f')} mm")
+        if "angle_coverage_95" in e:
+            lines.append(f"    the edge as the scan sees it: angle coverage "
+                         f"{num(e['angle_coverage_95'])} (median 95 % width "
+                         f"{num(e['angle_ci95_width_median_deg'], '.2f')} deg); where it lies "
+                         f"at the positions' centroid: coverage {num(e['at_scan_coverage_95'])} "
+                         f"(median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm); "
+                         f"the frame's origin lies a median "
+                         f"{e['lever_median_m'] * 1e3:.0f} mm along the edge from them")
     for strategy in ("suggested", "random_near_edge", "random_on_plate"):
         s = m.get(f"sequence_{strategy}")
         if not s:

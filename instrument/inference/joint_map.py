@@ -45,7 +45,7 @@ unknown:
   (:func:`calibration_nodes`): each position's deviance is quadratic in the offset's error
   (exactly), and the joint posterior is integrated over nodes of it (a hyper value, as the
   common mean is). The ARR factor's uncertainty stays per position (the study's calibration
-  states 0.4 %, a tenth of the table's own ARR error next to a clamp), and so does the plate
+  states 0.4 %, a fifth of the table's own ARR error next to a clamp), and so does the plate
   material's spread (E +- 0.8 %: it does not change a near-edge position's thickness interval
   at two decimals, docs/joint-map.md).
 """

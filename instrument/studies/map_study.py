@@ -245,11 +245,13 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
         est = invert(table, p.inputs, cal) if p.inputs else None
         alone.append(None if est is None else est.to_dict())
     joint: dict[str, Any] = {}
+    at_scan: dict[str, Any] = {}
     for kind in ("free", "common"):
         try:
             post = joint_map.posterior(table, positions, joint_map.ThicknessPrior(
                 kind, COMMON_SPREAD))
             joint[kind] = joint_map.summary(post)
+            at_scan[kind] = _edge_at_scan(post, scan)
         except joint_map.JointMapError as exc:
             joint[kind] = {"error": str(exc)}
     per_position = []
@@ -275,7 +277,8 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
             "ci95_offset_m": s["ci95_offset_m"], "offset_m": s["offset_m"],
             "normal_angle_deg": s["normal_angle_deg"],
             "covered": _offset_covered(s, scan), "fit": j.get("fit"),
-            "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"])}
+            "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"]),
+            **at_scan.get(kind, {})}
     fit, reason = locate([{"x_m": p.x_m, "y_m": p.y_m, "distance_m": (e or {}).get("distance_m")}
                           for p, e in zip(positions, alone, strict=True)])
     row["edge_alone"] = {"reason": reason} if fit is None else {
@@ -286,6 +289,26 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
     if sequential:
         row["sequence"] = _sequence(table, scan, measure, cal)
     return row
+
+
+def _edge_at_scan(post: joint_map.JointPosterior, scan: Scan) -> dict[str, Any]:
+    """The edge's two parameters as the scan sees them: its direction (the 95 % interval of
+    the normal's angle) and where it lies at the scan (the 95 % interval of the positions'
+    centroid's distance from it), each with whether it holds the truth. The offset in the
+    frame mixes both: at the frame's origin, far along the edge from the scan, an angle's error
+    moves it by the lever arm times the angle."""
+    theta_b = float(post.cells.theta[post.best])
+    flip = math.cos(theta_b - scan.theta) < 0  # the located edge seen from the other side
+    n_true = -scan.normal if flip else scan.normal
+    truth_theta = (scan.theta + math.pi) if flip else scan.theta
+    rel = (post.cells.theta - truth_theta + math.pi) % (2 * math.pi) - math.pi
+    a_lo, a_hi = joint_map.weighted_quantiles(rel, post.mass, (0.025, 0.975))
+    c_true = float(post.anchor @ n_true) - scan.true_offset(theta_b)
+    c_lo, c_hi = joint_map.weighted_quantiles(post.cells.c, post.mass, (0.025, 0.975))
+    return {"angle_ci95_width_deg": math.degrees(a_hi - a_lo),
+            "angle_covered": bool(a_lo <= 0.0 <= a_hi),
+            "at_scan_ci95_width_m": c_hi - c_lo, "at_scan_covered": bool(c_lo <= c_true <= c_hi),
+            "lever_m": float(abs(post.anchor @ np.array([-n_true[1], n_true[0]])))}
 
 
 def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
@@ -482,6 +505,16 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             if located else None,
             "ci95_width_median_m": float(np.median([e["ci95_offset_m"][1] - e["ci95_offset_m"][0]
                                                     for e in located])) if located else None}
+        seen = [e for e in located if "angle_covered" in e]
+        if seen:
+            out[f"edge_{name}"].update(
+                angle_coverage_95=float(np.mean([e["angle_covered"] for e in seen])),
+                angle_ci95_width_median_deg=float(np.median([e["angle_ci95_width_deg"]
+                                                             for e in seen])),
+                at_scan_coverage_95=float(np.mean([e["at_scan_covered"] for e in seen])),
+                at_scan_ci95_width_median_m=float(np.median([e["at_scan_ci95_width_m"]
+                                                             for e in seen])),
+                lever_median_m=float(np.median([e["lever_m"] for e in seen])))
     free = [r["edge_free"]["fit"]["p_value"] for r in rows if r.get("edge_free")]
     out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
     seqs = [r["sequence"] for r in rows if "sequence" in r]
