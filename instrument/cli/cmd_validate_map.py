@@ -33,6 +33,9 @@ def validate_map_command(
                                              "the simulated positions; reused when present"),
     out: Path | None = typer.Option(None, "--out", help="also write every scan's rows as JSON"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
+    shared_calibration: bool = typer.Option(False, "--shared-calibration", help="the joint "
+                                            "maps draw the calibration's TOF offset error "
+                                            "once per scan, not per position"),
     width_split: bool = typer.Option(False, "--width-split", help="instead: what each "
                                      "near-edge position's thickness interval is made of "
                                      "(its distance, the material, the calibration, the "
@@ -70,7 +73,7 @@ def validate_map_command(
     try:
         model = ModelTable.load(table_path(table))
         result = run(model, scans, seed, diameter_m=diameter, measurements=measurements,
-                     sequential=sequential,
+                     sequential=sequential, shared_calibration=shared_calibration,
                      progress=lambda k, n: print(f"scan {k}/{n}", file=sys.stderr, flush=True))
     except StudyInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
@@ -92,7 +95,9 @@ def report_lines(m: dict[str, Any]) -> list[str]:
         return "-" if v is None else format(v, fmt)
 
     lines = [f"map study on {m['table']}: {m['n_scans']} scans, seed {m['seed']}, D "
-             f"{m['diameter_m'] * 1e3:.2f} mm, {m['simulated_positions']} positions simulated "
+             f"{m['diameter_m'] * 1e3:.2f} mm"
+             + (", the calibration's TOF offset shared" if m.get("shared_calibration") else "")
+             + f", {m['simulated_positions']} positions simulated "
              f"({m['simulation_wall_s']:.0f} s), {m['wall_s']:.0f} s in all"]
     names = {"alone": "position by position", "free": "joint, thickness free",
              "common": "joint, common mean (5 %)"}

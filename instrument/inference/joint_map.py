@@ -35,19 +35,22 @@ unknown:
   edge. Below ``p = 0.001`` the joint answers are marked ``inconsistent`` and the warning names
   the positions that disagree most.
 
-* **One calibration, one plate.** A scan's positions share one calibration, and the part of
-  its TOF offset that does not transfer from the reference plates (the dissipation's delay,
-  which depends on the plate's thickness) is one error for the whole plate. Counted per
-  position, as a single inversion must count it, it lets each position's TOF wander by its own
-  ~12 us (TOF changes by 0.5-4 us per mm near a clamp, thick plates least: 3-25 mm of
-  distance each), so the positions seem to
-  disagree about the edge's direction far more than they can. Here it is drawn once
+* **One calibration, one plate (optional).** A scan's positions share one calibration, and the
+  part of its TOF offset that does not transfer from the reference plates (the dissipation's
+  delay, which depends on the plate's thickness) is, to first order, one error for the whole
+  plate. Counted per position, as a single inversion must count it, it lets each position's TOF
+  wander by its own ~12 us (TOF changes by 0.5-4 us per mm near a clamp, thick plates least:
+  3-25 mm of distance each), so the positions seem to disagree about the edge's direction more
+  than they can. ``posterior(..., shared_calibration=True)`` draws it once
   (:func:`calibration_nodes`): each position's deviance is quadratic in the offset's error
   (exactly), and the joint posterior is integrated over nodes of it (a hyper value, as the
-  common mean is). The ARR factor's uncertainty stays per position (the study's calibration
-  states 0.4 %, a fifth of the table's own ARR error next to a clamp), and so does the plate
-  material's spread (E +- 0.8 %: it does not change a near-edge position's thickness interval
-  at two decimals, docs/joint-map.md).
+  common mean is). It is not the default: in the map study it narrowed the edge and the
+  near-edge thickness intervals but left the free thickness answers covering 0.90, because the
+  simulated delay is not one number for a plate (next to the clamp it differs from far away by
+  a few us); counted per position, the offset's 12 us also covers that. The ARR factor's
+  uncertainty stays per position (the study's calibration states 0.4 %, a fifth of the table's
+  own ARR error next to a clamp), and so does the plate material's spread (E +- 0.8 %: it does
+  not change a near-edge position's thickness interval at two decimals, docs/joint-map.md).
 """
 
 from __future__ import annotations
@@ -639,12 +642,14 @@ def _absdiff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def posterior(table: ModelTable, positions: Sequence[ScanPosition],
               prior: ThicknessPrior | None = None, *,
-              shared_calibration: bool = True) -> JointPosterior:
+              shared_calibration: bool = False) -> JointPosterior:
     """The joint posterior of a scan (see the module doc).
 
-    ``shared_calibration``: the calibration's errors are drawn once for the scan and
-    integrated over once (the default: one calibration, one plate); False takes them per
-    position, as each position's own inversion does (for comparison).
+    ``shared_calibration``: the calibration's TOF offset error is drawn once for the scan and
+    integrated over once (one calibration, one plate); by default it is taken per position, as
+    each position's own inversion takes it, which the map study found keeps the thickness
+    answers' coverage (sharing it narrows them too far: the offset's error is not one number
+    for a plate, docs/joint-map.md).
 
     Raises JointMapError (``positions``) when no position can enter it, or (``joint``) for a
     family whose supports are not a line's angle and offset."""

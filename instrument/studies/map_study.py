@@ -220,10 +220,11 @@ def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Meas
     return out
 
 
-def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition]
+def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition],
+                shared_calibration: bool = False
                 ) -> tuple[joint_map.JointPosterior | None, float, float]:
     try:
-        post = joint_map.posterior(table, positions)
+        post = joint_map.posterior(table, positions, shared_calibration=shared_calibration)
     except joint_map.JointMapError:
         return None, math.nan, math.nan
     theta, offset = joint_map.median_edge(post)
@@ -231,7 +232,7 @@ def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition]
 
 
 def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
-               sequential: bool = True) -> dict[str, Any]:
+               sequential: bool = True, shared_calibration: bool = False) -> dict[str, Any]:
     """One scan's rows: per position the three answers against the truth, the edge's coverage,
     and (``sequential``) the edge's error as positions are added, suggested or random."""
     t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
@@ -249,7 +250,7 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
     for kind in ("free", "common"):
         try:
             post = joint_map.posterior(table, positions, joint_map.ThicknessPrior(
-                kind, COMMON_SPREAD))
+                kind, COMMON_SPREAD), shared_calibration=shared_calibration)
             joint[kind] = joint_map.summary(post)
             at_scan[kind] = _edge_at_scan(post, scan)
         except joint_map.JointMapError as exc:
@@ -287,7 +288,7 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
         "covered": _offset_covered(fit.to_dict(), scan),
         "error_m": scan.edge_error(math.radians(fit.normal_angle_deg), fit.offset_m)}
     if sequential:
-        row["sequence"] = _sequence(table, scan, measure, cal)
+        row["sequence"] = _sequence(table, scan, measure, cal, shared_calibration)
     return row
 
 
@@ -318,8 +319,8 @@ def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
     return bool(lo <= scan.true_offset(math.radians(support["normal_angle_deg"])) <= hi)
 
 
-def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
-              ) -> dict[str, Any]:
+def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
+              shared_calibration: bool = False) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for strategy in STRATEGIES:
         xy = list(scan.random_positions[:START_POSITIONS])
@@ -328,7 +329,7 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
         errors = []
         while True:
             positions = _scan_positions(scan, xy, measure, cal)
-            post, theta, offset = _joint_edge(table, positions)
+            post, theta, offset = _joint_edge(table, positions, shared_calibration)
             errors.append(math.inf if post is None else scan.edge_error(theta, offset))
             if len(xy) >= MAX_POSITIONS:
                 break
@@ -350,8 +351,11 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
 
 def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | None = None,
         measurements: str | Path | None = None, sequential: bool = True,
-        progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """The study (see the module doc): per-scan rows and the summary metrics."""
+        progress: Callable[[int, int], None] | None = None,
+        shared_calibration: bool = False) -> dict[str, Any]:
+    """The study (see the module doc): per-scan rows and the summary metrics.
+    ``shared_calibration``: the joint maps draw the calibration's TOF offset error once per
+    scan (:func:`~solitonde.instrument.inference.joint_map.posterior`)."""
     if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
         raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -367,12 +371,13 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     rows = []
     for k in range(n_scans):
         scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
-        rows.append(score_scan(table, scan, measure, cal, sequential))
+        rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
         if progress is not None:
             progress(k + 1, n_scans)
     metrics = summarise(rows)
     metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
+                   shared_calibration=shared_calibration,
                    simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
                    wall_s=time.perf_counter() - started,
                    calibration=cal.to_dict()["per_diameter"],
