@@ -122,8 +122,12 @@ def test_the_study_runs_end_to_end(tmp_path):
     assert res.exit_code == 0, res.output
     assert "joint, thickness free: thickness coverage" in res.stdout
     assert "suggested needed fewer positions than random_on_plate" in res.stdout
+    assert "the edge as the scan sees it: angle coverage" in res.stdout
     result = json.loads(out.read_text())
     for scan in result["scans"]:
+        edge = scan["edge_free"]
+        assert isinstance(edge["angle_covered"], bool) and edge["angle_ci95_width_deg"] > 0
+        assert isinstance(edge["at_scan_covered"], bool) and edge["at_scan_ci95_width_m"] > 0
         for strategy in map_study.STRATEGIES:
             errors = scan["sequence"][strategy]["errors_m"]
             assert len(errors) == map_study.MAX_POSITIONS - map_study.START_POSITIONS + 1
