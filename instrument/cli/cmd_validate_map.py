@@ -33,18 +33,47 @@ def validate_map_command(
                                              "the simulated positions; reused when present"),
     out: Path | None = typer.Option(None, "--out", help="also write every scan's rows as JSON"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
+    shared_calibration: bool = typer.Option(False, "--shared-calibration", help="the joint "
+                                            "maps draw the calibration's TOF offset error "
+                                            "once per scan, not per position"),
+    width_split: bool = typer.Option(False, "--width-split", help="instead: what each "
+                                     "near-edge position's thickness interval is made of "
+                                     "(its distance, the material, the calibration, the "
+                                     "table's error, the shots)"),
 ) -> None:
     """Simulate scans of random plates, invert them jointly and one by one, and score both."""
+    from solitonde.instrument.studies import map_study
     from solitonde.instrument.studies.map_study import StudyInputError, run
     from solitonde.instrument.tables.table import ModelTable, TableError
 
     for flag, path in (("--out", out), ("--measurements", measurements)):
         if path is not None and (path.is_dir() or not path.parent.is_dir()):
             _fail(f"{flag}: {str(path)!r} is not a file in an existing folder")
+    if width_split:
+        try:
+            split = map_study.width_split(ModelTable.load(table_path(table)), scans, seed,
+                                          diameter_m=diameter, measurements=measurements)
+        except StudyInputError as exc:
+            _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
+        except TableError as exc:
+            _fail(f"--{'diameter' if exc.field == 'diameter_m' else 'table'}: {exc}")
+        if as_json:
+            typer.echo(json.dumps(split, indent=2))
+            return
+        typer.echo(f"near-edge thickness interval, {split['positions']} positions within 30 mm "
+                   f"of the edge ({split['n_scans']} scans, seed {split['seed']}): median "
+                   "width, of t, median ratio to alone")
+        for step in map_study.SPLIT_STEPS:
+            v = split[step]
+            if v["median_width_m"] is None:
+                continue
+            typer.echo(f"  {step}: {v['median_width_m'] * 1e3:.2f} mm, "
+                       f"{v['median_width_rel_t']:.3f} t, {v['median_ratio_to_alone']:.3f}")
+        return
     try:
         model = ModelTable.load(table_path(table))
         result = run(model, scans, seed, diameter_m=diameter, measurements=measurements,
-                     sequential=sequential,
+                     sequential=sequential, shared_calibration=shared_calibration,
                      progress=lambda k, n: print(f"scan {k}/{n}", file=sys.stderr, flush=True))
     except StudyInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
@@ -66,7 +95,9 @@ def report_lines(m: dict[str, Any]) -> list[str]:
         return "-" if v is None else format(v, fmt)
 
     lines = [f"map study on {m['table']}: {m['n_scans']} scans, seed {m['seed']}, D "
-             f"{m['diameter_m'] * 1e3:.2f} mm, {m['simulated_positions']} positions simulated "
+             f"{m['diameter_m'] * 1e3:.2f} mm"
+             + (", the calibration's TOF offset shared" if m.get("shared_calibration") else "")
+             + f", {m['simulated_positions']} positions simulated "
              f"({m['simulation_wall_s']:.0f} s), {m['wall_s']:.0f} s in all"]
     names = {"alone": "position by position", "free": "joint, thickness free",
              "common": "joint, common mean (5 %)"}
@@ -78,7 +109,16 @@ def report_lines(m: dict[str, Any]) -> list[str]:
                      f"({num(t['near_edge_width_median_rel'], '.3f')} of t, "
                      f"{t['near_edge_positions']} positions); edge offset coverage "
                      f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located), median "
-                     f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm")
+                     f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm, median 95 % "
+                     f"width {num((e['ci95_width_median_m'] or 0) * 1e3, '.1f')} mm")
+        if "angle_coverage_95" in e:
+            lines.append(f"    the edge as the scan sees it: angle coverage "
+                         f"{num(e['angle_coverage_95'])} (median 95 % width "
+                         f"{num(e['angle_ci95_width_median_deg'], '.2f')} deg); where it lies "
+                         f"at the positions' centroid: coverage {num(e['at_scan_coverage_95'])} "
+                         f"(median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm); "
+                         f"the frame's origin lies a median "
+                         f"{e['lever_median_m'] * 1e3:.0f} mm along the edge from them")
     for strategy in ("suggested", "random_near_edge", "random_on_plate"):
         s = m.get(f"sequence_{strategy}")
         if not s:

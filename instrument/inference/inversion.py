@@ -651,13 +651,21 @@ def invert(
 
 def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibration | None,
                   return_posterior: bool, spread: Mapping[str, float] | None = None,
-                  keep: dict[str, Any] | None = None) -> Estimate:
+                  keep: dict[str, Any] | None = None, shared_calibration: bool = False
+                  ) -> Estimate:
     """The grid posterior of :func:`invert` for exactly these sphere sizes.
 
     Per cell, -2 log likelihood = chi^2 + log det C (+ the hidden sizes' bound terms), with C the
     terms' covariance: diagonal (shot scatter, the table's interpolation error, the calibration)
     plus, when the plate material has a spread, the rank-2 covariance ``U U^T`` it induces
     across every term (instrument.inference.material_spread), applied with Woodbury's identity.
+
+    ``shared_calibration`` (with ``keep``): the calibration's stated TOF offset uncertainty is
+    left out of C and kept instead as the exact dependence of the deviance on the offsets'
+    errors ``eta`` (an error adds to the model TOF: the residual moves linearly),
+    ``chi^2(eta) = chi^2(0) - 2 b.eta + eta^T Q eta`` per cell, so that a plate's joint map can
+    draw one offset error for all its positions (instrument.inference.joint_map). The ARR
+    factor's uncertainty stays in C, per position.
     """
     from solitonde.instrument.inference.material_spread import sensitivity
 
@@ -679,6 +687,8 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     penalty = np.zeros(shape)
     ur_sum: np.ndarray | None = None
     m_sum: np.ndarray | None = None
+    # shared calibration errors: per error, (diameter, kind, sd, b, q, U^T D^-1 e)
+    shared: list[list[Any]] = []
     for item, g in zip(items, grids, strict=True):
         factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
         f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
@@ -695,8 +705,10 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
             continue
         s_tof, s_arr = item.sigmas()
         u_pair = sensitivity(table, g, spread) if spread else None
+        share = shared_calibration and keep is not None
         for k, (model, obs, scale, s2, model_var, rel2) in enumerate((
-            (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + o_std**2, g.model_tof_var, 0.0),
+            (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + (0.0 if share else o_std**2),
+             g.model_tof_var, 0.0),
             (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
         )):
             # the calibration's own uncertainty: offset adds, factor scales the model ARR
@@ -712,6 +724,7 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                 rel = np.multiply(model, model)
                 rel *= rel2
                 var += rel
+            u_over = None
             if u_pair is not None:
                 u = u_pair[k] * scale if scale != 1.0 else u_pair[k]
                 u_over = u / var
@@ -722,6 +735,12 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                     m_sum = np.zeros((3, *shape))
                 for n_e, (a, b) in enumerate(_UPPER):
                     m_sum[n_e] += u_over[a] * u[b]
+            if share and k == 0 and o_std > 0:
+                # the TOF residual moves by -1 per unit error of the offset
+                e = np.ones(shape)
+                shared.append([g.diameter_m, "tof_offset_s", o_std,
+                               e * r / var, e * e / var,
+                               None if u_over is None else u_over * e])
             r *= r
             r /= var
             misfit += r
@@ -733,6 +752,10 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         penalty += g.penalty
     if terms % LOG_BATCH:
         logdet += np.log(det)
+    b_sh = np.array([e[3] for e in shared]).reshape(len(shared), *shape)
+    q_sh = np.zeros((len(shared), len(shared), *shape))
+    for n_e, e in enumerate(shared):
+        q_sh[n_e, n_e] = e[4]
     if m_sum is not None and ur_sum is not None:
         # Woodbury: C = D + U U^T  ->  chi^2 -= b^T M^-1 b, log det C += log det M, with
         # M = I + U^T D^-1 U and b = U^T D^-1 r (2 x 2 per cell, solved in closed form)
@@ -740,11 +763,18 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         ok = np.isfinite(penalty)
         misfit[ok] -= quad[ok]
         logdet[ok] += logdet_m[ok]
+        # the shared errors' coefficients through the same C^-1 (D^-1 - D^-1 U M^-1 U^T D^-1)
+        for n_e, e in enumerate(shared):
+            b_sh[n_e] -= _bilinear2(m_sum, e[5], ur_sum)
+            for n_f, f in enumerate(shared):
+                q_sh[n_e, n_f] -= _bilinear2(m_sum, e[5], f[5])
     n_terms = 2 * len(seen) + len(hidden)
     chi2 = misfit + logdet + penalty + bound_terms
     if keep is not None:  # the cells' likelihood itself, for a plate's joint map
         keep.update(deviance=chi2.copy(), n_terms=n_terms, grid=g0, misfit=misfit + sum(
-            (np.maximum(b - 2.0 * math.log(2.0), 0.0) for b in bound_list), np.zeros(shape)))
+            (np.maximum(b - 2.0 * math.log(2.0), 0.0) for b in bound_list), np.zeros(shape)),
+            shared=[(float(e[0]), str(e[1]), float(e[2])) for e in shared],
+            shared_b=b_sh, shared_q=q_sh)
     best = float(chi2.min())
     i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
     if not math.isfinite(best):
@@ -824,6 +854,15 @@ def _solve2(m3: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return quad, np.log(det)
 
 
+def _bilinear2(m3: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``v^T (I + M)^-1 w`` per cell, M as in :func:`_solve2`."""
+    a00, a01, a11 = m3
+    a00 = a00 + 1.0
+    a11 = a11 + 1.0
+    det = a00 * a11 - a01 * a01
+    return (a11 * v[0] * w[0] - a01 * (v[0] * w[1] + v[1] * w[0]) + a00 * v[1] * w[1]) / det
+
+
 def _normal_cdf(z: np.ndarray) -> np.ndarray:
     """Phi(z), vectorised (scipy's ndtr)."""
     from scipy.special import ndtr
@@ -833,18 +872,25 @@ def _normal_cdf(z: np.ndarray) -> np.ndarray:
 
 def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary | Mapping[str, Any]],
                     calibration: Calibration | Mapping[str, Any] | None = None, *,
-                    material_spread: Mapping[str, float] | None = None) -> dict[str, Any]:
+                    material_spread: Mapping[str, float] | None = None,
+                    shared_calibration: bool = False) -> dict[str, Any]:
     """The likelihood :func:`invert` puts on every fine (t, L) cell for exactly these sphere
     sizes (no size left out), for a plate's joint map (instrument.inference.joint_map): one
     likelihood, not a second one. ``deviance`` is -2 log L (inf where the model has no
     reflection), ``misfit`` the chi^2 that ``fit`` reports, ``grid`` the first size's
-    :class:`FineGrid` (axes and prior weights), ``n_terms`` the terms counted."""
+    :class:`FineGrid` (axes and prior weights), ``n_terms`` the terms counted.
+
+    ``shared_calibration``: the TOF offsets' uncertainty is not in ``deviance`` and ``misfit``
+    (they hold at the stated offsets); instead ``shared`` lists the errors
+    ``(diameter_m, "tof_offset_s", sd)`` with a stated sd, and
+    ``shared_b`` (errors, t, L) and ``shared_q`` (errors, errors, t, L) give the deviance at
+    errors ``eta``: ``deviance - 2 b.eta + eta^T Q eta`` (likewise ``misfit``)."""
     from solitonde.instrument.inference.material_spread import spread_of
 
     keep: dict[str, Any] = {}
     spread = dict(spread_of(table) if material_spread is None else material_spread)
     _invert_items(table, [FeatureSummary.from_any(i) for i in inputs],
-                  Calibration.from_any(calibration), False, spread, keep)
+                  Calibration.from_any(calibration), False, spread, keep, shared_calibration)
     return keep
 
 

@@ -35,10 +35,22 @@ unknown:
   edge. Below ``p = 0.001`` the joint answers are marked ``inconsistent`` and the warning names
   the positions that disagree most.
 
-The plate material's spread enters every position's likelihood as in a single inversion, i.e.
-independently per position, although one plate has one material: with thickness free per
-position a material error is absorbed by each thickness anyway; with ``common`` this slightly
-understates how far the positions may move together.
+* **One calibration, one plate (optional).** A scan's positions share one calibration, and the
+  part of its TOF offset that does not transfer from the reference plates (the dissipation's
+  delay, which depends on the plate's thickness) is, to first order, one error for the whole
+  plate. Counted per position, as a single inversion must count it, it lets each position's TOF
+  wander by its own ~12 us (TOF changes by 0.5-4 us per mm near a clamp, thick plates least:
+  3-25 mm of distance each), so the positions seem to disagree about the edge's direction more
+  than they can. ``posterior(..., shared_calibration=True)`` draws it once
+  (:func:`calibration_nodes`): each position's deviance is quadratic in the offset's error
+  (exactly), and the joint posterior is integrated over nodes of it (a hyper value, as the
+  common mean is). It is not the default: in the map study it narrowed the edge and the
+  near-edge thickness intervals but left the free thickness answers covering 0.90, because the
+  simulated delay is not one number for a plate (next to the clamp it differs from far away by
+  a few us); counted per position, the offset's 12 us also covers that. The ARR factor's
+  uncertainty stays per position (the study's calibration states 0.4 %, a fifth of the table's
+  own ARR error next to a clamp), and so does the plate material's spread (E +- 0.8 %: it does
+  not change a near-edge position's thickness interval at two decimals, docs/joint-map.md).
 """
 
 from __future__ import annotations
@@ -167,7 +179,8 @@ def edge_model(table: ModelTable) -> EdgeModel:
 
 @dataclass
 class PositionLikelihood:
-    """One position's likelihood over the fine (t, L) grid, with its own answer."""
+    """One position's likelihood over the fine (t, L) grid at each node of the scan's shared
+    calibration error (one node when there is none), with its own answer."""
 
     position: ScanPosition
     estimate: Estimate
@@ -175,15 +188,35 @@ class PositionLikelihood:
     distance_m: np.ndarray
     weight_t: np.ndarray
     like: np.ndarray
-    """exp(-(deviance - its minimum) / 2): 1 at the position's best cell, 0 where impossible."""
+    """(node, t, L): exp(-(deviance - its minimum) / 2), 1 at the position's best cell and
+    node, 0 where impossible."""
     deviance: np.ndarray
-    misfit: np.ndarray
+    """(node, t, L)."""
+    rest: np.ndarray
+    """(t, L): the deviance's terms beside the misfit (log det of the covariance, penalties)."""
     n_terms: int
 
+    def misfit(self, node: int) -> np.ndarray:
+        """The chi^2 part of the deviance at a node of the shared calibration error."""
+        return np.where(np.isfinite(self.deviance[node]),
+                        np.maximum(self.deviance[node] - self.rest, 0.0), np.inf)
 
-def position_likelihood(table: ModelTable, position: ScanPosition
-                        ) -> tuple[PositionLikelihood | None, str | None]:
-    """The position's likelihood, or None and why it is left out of the joint posterior."""
+
+@dataclass
+class _RawLikelihood:
+    """A position's deviance at the calibration's stated values, and how it moves with the
+    calibration's errors (:func:`~.inversion.cell_likelihood` with ``shared_calibration``)."""
+
+    position: ScanPosition
+    estimate: Estimate
+    keep: dict[str, Any]
+    keys: list[tuple[Any, ...]]
+    """One key per shared error: (diameter, quantity, stated value, sd)."""
+
+
+def _raw_likelihood(table: ModelTable, position: ScanPosition, shared: bool
+                    ) -> tuple[_RawLikelihood | None, str | None]:
+    """The position's raw likelihood, or None and why it is left out of the joint posterior."""
     inputs = list(position.inputs)
     if not inputs:
         return None, "no sphere size with an inversion input"
@@ -199,30 +232,130 @@ def position_likelihood(table: ModelTable, position: ScanPosition
     excluded = set(est.extra.get("excluded_diameters_m", []))
     used = [i for i in inputs if i.diameter_m not in excluded]
     keep = cell_likelihood(table, used, position.calibration,
-                           material_spread=est.material_spread)
-    dev = keep["deviance"]
-    finite = np.isfinite(dev)
-    if not finite.any():
+                           material_spread=est.material_spread, shared_calibration=shared)
+    if not np.isfinite(keep["deviance"]).any():
         return None, "the model detects no reflection anywhere for its sphere sizes"
-    best = float(dev[finite].min())
-    like = np.where(finite, np.exp(-0.5 * (np.where(finite, dev, best) - best)), 0.0)
+    cal = position.calibration
+    keys = []
+    for d, kind, sd in keep["shared"]:
+        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(d)
+        keys.append((round(d * 1e6), kind, factor if kind == "arr_factor" else offset, sd))
+    return _RawLikelihood(position, est, keep, keys), None
+
+
+def _at_nodes(raw: _RawLikelihood, keys: Sequence[tuple[Any, ...]], eta: np.ndarray
+              ) -> PositionLikelihood:
+    """The position's likelihood at every node ``eta`` (node, shared error) of the scan's
+    shared calibration errors ``keys``, averaged along L over its coordinates' error."""
+    keep = raw.keep
+    dev0 = keep["deviance"]
+    finite = np.isfinite(dev0)
+    cols = [keys.index(k) for k in raw.keys]
+    b, q = keep["shared_b"], keep["shared_q"]
+    n_nodes = eta.shape[0]
+    dev = np.empty((n_nodes, *dev0.shape))
+    for k in range(n_nodes):
+        e = eta[k, cols] if cols else np.zeros(0)
+        dk = dev0.copy()
+        for a, ea in enumerate(e):
+            dk -= 2.0 * ea * b[a]
+            for c, ec in enumerate(e):
+                dk += ea * ec * q[a, c]
+        dev[k] = np.where(finite, dk, np.inf)
     g = keep["grid"]
-    misfit = keep["misfit"]
+    rest = np.where(finite, dev0 - keep["misfit"], np.nan)
+    best = float(dev[np.isfinite(dev)].min())
+    like = np.where(np.isfinite(dev), np.exp(-0.5 * (np.where(np.isfinite(dev), dev, best)
+                                                     - best)), 0.0)
     if POSITION_SD_M > 0:  # where the chain stood is known to its recorded coordinates' error
-        blurred = like @ _blur(g.distance_m, POSITION_SD_M).T
+        blur = _blur(g.distance_m, POSITION_SD_M)
+        blurred = like @ blur.T
         with np.errstate(divide="ignore"):
-            dev_b = np.where(blurred > 0, best - 2.0 * np.log(blurred), np.inf)
+            dev = np.where(blurred > 0, best - 2.0 * np.log(blurred), np.inf)
         # the terms beside the misfit (log det of the covariance) vary slowly: kept per row
-        rest = np.where(finite, dev - misfit, np.nan)
         row_mean = np.nanmean(np.where(finite.any(axis=1, keepdims=True), rest, 0.0), axis=1)
         rest = np.where(finite, rest, row_mean[:, None])
-        misfit = np.where(np.isfinite(dev_b), np.maximum(dev_b - rest, 0.0), np.inf)
-        dev = dev_b
         best = float(dev[np.isfinite(dev)].min())
         like = np.where(np.isfinite(dev), np.exp(-0.5 * (np.where(np.isfinite(dev), dev, best)
-                                                        - best)), 0.0)
-    return PositionLikelihood(position, est, np.log(g.thickness_m), g.distance_m, g.weight_t,
-                              like, dev, misfit, int(keep["n_terms"])), None
+                                                         - best)), 0.0)
+    return PositionLikelihood(raw.position, raw.estimate, np.log(g.thickness_m), g.distance_m,
+                              g.weight_t, like, dev, rest, int(keep["n_terms"]))
+
+
+def position_likelihood(table: ModelTable, position: ScanPosition
+                        ) -> tuple[PositionLikelihood | None, str | None]:
+    """The position's likelihood alone (its calibration's uncertainty marginalised for it
+    alone, as a single inversion does), or None and why it is left out."""
+    raw, why = _raw_likelihood(table, position, False)
+    if raw is None:
+        return None, why
+    return _at_nodes(raw, [], np.zeros((1, 0))), None
+
+
+# --- the calibration's errors, one draw for the scan --------------------------------------
+
+NODES_PER_ERROR = {1: 9, 2: 5}
+"""Nodes per shared calibration error, by how many there are (3 each beyond two)."""
+NODE_SPAN_SD = 4.0
+"""The nodes span this many sds either side of the error's posterior mean."""
+
+
+def _proxy(raws: Sequence[_RawLikelihood], key: tuple[Any, ...], x: np.ndarray) -> np.ndarray:
+    """log p(data | error = x) of the positions that carry this error, each position's (t, L)
+    marginalised over a single inversion's prior (the edge ignored), the other errors at 0."""
+    total = np.zeros(x.size)
+    for raw in raws:
+        if key not in raw.keys:
+            continue
+        a = raw.keys.index(key)
+        keep = raw.keep
+        g = keep["grid"]
+        dev0 = keep["deviance"]
+        ok = np.isfinite(dev0)
+        logw = np.log(g.weight_t)[:, None] + np.log(g.weight_l)[None, :]
+        d = (dev0[ok][None, :] - 2.0 * x[:, None] * keep["shared_b"][a][ok][None, :]
+             + x[:, None] ** 2 * keep["shared_q"][a, a][ok][None, :])
+        total += logsumexp(logw[ok][None, :] - 0.5 * (d - d.min()), axis=1) - 0.5 * d.min()
+    return total
+
+
+def calibration_nodes(raws: Sequence[_RawLikelihood]
+                      ) -> tuple[list[tuple[Any, ...]], np.ndarray, np.ndarray]:
+    """The scan's shared calibration errors and the nodes over which they are integrated:
+    ``(keys, eta (node, error), z2 (node,))`` with ``z2`` each node's ``sum (eta / sd)^2``.
+
+    One error per calibration entry with a stated sd (a sphere size's TOF offset or ARR
+    factor), shared by every position measured with it: one calibration, one plate. Each
+    error's nodes are equally spaced (the trapezoid rule, which integrates a smooth peak to
+    within e^-2pi^2 when the spacing is its sd) across +-:data:`NODE_SPAN_SD` sds of where the
+    positions together put it, found by zooming in from the prior's +-6 sd; several errors get
+    the product of their nodes."""
+    keys = sorted({k for raw in raws for k in raw.keys})
+    if not keys:
+        return [], np.zeros((1, 0)), np.zeros(1)
+    n = NODES_PER_ERROR.get(len(keys), 3)
+    axes = []
+    for key in keys:
+        sd = float(key[3])
+        lo, hi = -6.0 * sd, 6.0 * sd
+        mean, s = 0.0, sd
+        for _ in range(10):
+            x = np.linspace(lo, hi, 25)
+            lp = -0.5 * (x / sd) ** 2 + _proxy(raws, key, x)
+            w = np.exp(lp - lp.max())
+            w /= w.sum()
+            mean = float(w @ x)
+            s = float(np.sqrt(w @ (x - mean) ** 2))
+            h = x[1] - x[0]
+            if s >= 1.5 * h:
+                break
+            half = max(6.0 * s, 2.0 * h)
+            lo, hi = mean - half, mean + half
+        axes.append(mean + s * np.linspace(-NODE_SPAN_SD, NODE_SPAN_SD, n))
+    mesh = np.meshgrid(*axes, indexing="ij")
+    eta = np.stack([m.ravel() for m in mesh], axis=1)
+    sds = np.array([float(k[3]) for k in keys])
+    return keys, eta, ((eta / sds[None, :]) ** 2).sum(axis=1)
 
 
 @functools.lru_cache(maxsize=8)
@@ -353,6 +486,28 @@ class JointPosterior:
     """Per position, log of its likelihood marginalised over t given (hyper value, L)."""
     distance_grid: np.ndarray
     excluded: list[tuple[ScanPosition, str]] = field(default_factory=list)
+    keys: list[tuple[Any, ...]] = field(default_factory=list)
+    """The scan's shared calibration errors (:func:`calibration_nodes`)."""
+    eta: np.ndarray = field(default_factory=lambda: np.zeros((1, 0)))
+    """(node, error): the nodes the shared errors are integrated over."""
+    node_z2: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    """Each node's ``sum (eta / sd)^2`` (its prior is ``exp(-z2 / 2)``)."""
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.eta.shape[0])
+
+    def hyper_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior probability of each calibration node and of each common-mean value."""
+        w = self.mass_hyper.sum(axis=1).reshape(self.n_nodes, -1)
+        return w.sum(axis=1), w.sum(axis=0)
+
+    def hyper_like(self, lk: PositionLikelihood, values: np.ndarray | None = None
+                   ) -> np.ndarray:
+        """``sum_t P[h, t] values[k, t, L]`` (default: the position's likelihood) per hyper
+        value (node k, mean h), flattened as :attr:`mass_hyper`'s rows: (hyper, L)."""
+        v = lk.like if values is None else values
+        return np.einsum("ht,ktl->khl", self.p_matrix, v).reshape(-1, v.shape[-1])
 
     def signed_distances(self, x: np.ndarray, y: np.ndarray,
                          cells: EdgeCells | None = None) -> np.ndarray:
@@ -378,7 +533,8 @@ class JointPosterior:
 def _log_marginals(likes: Sequence[PositionLikelihood], p: np.ndarray) -> list[np.ndarray]:
     out = []
     for lk in likes:
-        m = p @ lk.like  # (hyper, L): the likelihood marginalised over t
+        # (node x hyper, L): the likelihood marginalised over t
+        m = np.einsum("ht,ktl->khl", p, lk.like).reshape(-1, lk.like.shape[-1])
         out.append(np.log(m, out=np.full_like(m, LOG_FLOOR), where=m > 0).clip(min=LOG_FLOOR))
     return out
 
@@ -407,15 +563,18 @@ def _c_range(model: EdgeModel, xy: np.ndarray, anchor: np.ndarray) -> tuple[floa
 
 
 def edge_posterior(likes: Sequence[PositionLikelihood], model: EdgeModel,
-                   prior: ThicknessPrior) -> tuple[EdgeCells, np.ndarray, np.ndarray,
-                                                    np.ndarray, list[np.ndarray], np.ndarray]:
+                   prior: ThicknessPrior, node_z2: np.ndarray | None = None
+                   ) -> tuple[EdgeCells, np.ndarray, np.ndarray, np.ndarray, list[np.ndarray],
+                              np.ndarray]:
     """The edge's posterior on cells refined where it carries weight: ``(cells, anchor,
-    P, log_mu, log_marginals, hyper prior)``."""
+    P, log_mu, log_marginals, hyper prior)``; the hyper values are the shared calibration's
+    nodes (prior ``exp(-z2 / 2)`` each, ``node_z2``) times the common mean's values."""
     lk0 = likes[0]
     grid = lk0.distance_m
     p, log_mu, prior_mu = prior.matrix(lk0.log_t, lk0.weight_t)
     log_m = _log_marginals(likes, p)
-    log_prior_hyper = np.log(prior_mu)
+    z2 = np.zeros(1) if node_z2 is None else node_z2
+    log_prior_hyper = (-0.5 * z2[:, None] + np.log(prior_mu)[None, :]).ravel()
     xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in likes], dtype=float)
     anchor = xy.mean(axis=0)
     lo, hi = _c_range(model, xy, anchor)
@@ -482,37 +641,46 @@ def _absdiff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def posterior(table: ModelTable, positions: Sequence[ScanPosition],
-              prior: ThicknessPrior | None = None) -> JointPosterior:
+              prior: ThicknessPrior | None = None, *,
+              shared_calibration: bool = False) -> JointPosterior:
     """The joint posterior of a scan (see the module doc).
+
+    ``shared_calibration``: the calibration's TOF offset error is drawn once for the scan and
+    integrated over once (one calibration, one plate); by default it is taken per position, as
+    each position's own inversion takes it, which the map study found keeps the thickness
+    answers' coverage (sharing it narrows them too far: the offset's error is not one number
+    for a plate, docs/joint-map.md).
 
     Raises JointMapError (``positions``) when no position can enter it, or (``joint``) for a
     family whose supports are not a line's angle and offset."""
     prior = prior or ThicknessPrior()
     model = edge_model(table)
-    likes, excluded = [], []
+    raws, excluded = [], []
     for pos in positions:
         for name, v in (("x_m", pos.x_m), ("y_m", pos.y_m)):
             if v is None or not math.isfinite(float(v)):
                 raise JointMapError(name, f"position {pos.name!r}: {v!r} (allowed: a finite "
                                     "coordinate in metres)")
-        lk, why = position_likelihood(table, pos)
-        if lk is None:
+        raw, why = _raw_likelihood(table, pos, shared_calibration)
+        if raw is None:
             excluded.append((pos, why or "left out"))
         else:
-            likes.append(lk)
+            raws.append(raw)
+    keys, eta, node_z2 = calibration_nodes(raws)
+    likes = [_at_nodes(raw, keys, eta) for raw in raws]
     if not likes:
         raise JointMapError("positions", "no position with coordinates whose measurement the "
                             "table's family explains: " + "; ".join(
                                 f"{p.name}: {w}" for p, w in excluded) if excluded
                             else "no position with coordinates")
-    cells, anchor, p, log_mu, log_m, _ = edge_posterior(likes, model, prior)
+    cells, anchor, p, log_mu, log_m, _ = edge_posterior(likes, model, prior, node_z2)
     top = cells.lp.max()
     area = cells.h_theta * cells.h_c
     mass = np.exp(cells.lp - top) * area
     total = mass.sum()
     mass_hyper = np.exp(cells.lp_hyper - top) * area[None, :] / total
     return JointPosterior(table, model, prior, likes, anchor, cells, mass / total, mass_hyper, p,
-                          log_mu, log_m, likes[0].distance_m, excluded)
+                          log_mu, log_m, likes[0].distance_m, excluded, keys, eta, node_z2)
 
 
 # --- what the posterior says ------------------------------------------------------------------
@@ -530,12 +698,14 @@ def weighted_quantiles(x: np.ndarray, w: np.ndarray, qs: Sequence[float]) -> lis
 def _bins(grid: np.ndarray, dist: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Weights (hyper, cells) of points at ``dist`` spread linearly onto the grid:
     (hyper, L)."""
+    from scipy.sparse import csr_matrix
+
     it = _Interp.on(grid, np.clip(dist, grid[0], grid[-1]))
-    out = np.zeros((weights.shape[0], grid.size))
-    for h in range(weights.shape[0]):
-        out[h] = (np.bincount(it.idx, weights[h] * (1.0 - it.frac), grid.size)
-                  + np.bincount(it.idx + 1, weights[h] * it.frac, grid.size))
-    return out
+    n = it.idx.size
+    spread = csr_matrix((np.concatenate([1.0 - it.frac, it.frac]),
+                         (np.concatenate([np.arange(n), np.arange(n)]),
+                          np.concatenate([it.idx, it.idx + 1]))), shape=(n, grid.size))
+    return np.asarray((spread.T @ weights.T).T)
 
 
 @dataclass
@@ -555,15 +725,19 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
     d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]))[0]
     dist = post.model.distance(d)
     w_bins = _bins(post.distance_grid, dist, post.mass_hyper)  # (hyper, L)
-    m = post.p_matrix @ lk.like  # (hyper, L)
+    m = post.hyper_like(lk)  # (hyper, L)
+    n_mu = post.p_matrix.shape[0]
     q = np.divide(w_bins, m, out=np.zeros_like(w_bins), where=m > 0)
-    r = lk.like @ q.T  # (t, hyper)
+    r = np.einsum("ktl,khl->th", lk.like, q.reshape(post.n_nodes, n_mu, -1))  # (t, mean)
     mass_t = (post.p_matrix.T * r).sum(axis=1)
     # as in a single inversion, a side is open where the profile likelihood (the best over
     # distance) is within the 95 % level of the best; the distances are those the joint
-    # posterior leaves possible (density at least 1e-4 of its peak), not any
+    # posterior leaves possible (density at least 1e-4 of its peak), not any; the shared
+    # calibration's nodes are mixed by their posterior weight
     possible = w_bins.sum(axis=0) > PROFILE_SUPPORT * w_bins.sum(axis=0).max()
-    profile = lk.like[:, possible].max(axis=1)
+    node_w, _ = post.hyper_weights()
+    like_post = np.einsum("k,ktl->tl", node_w / node_w.sum(), lk.like)
+    profile = like_post[:, possible].max(axis=1)
     profile = profile / profile.max() if profile.max() > 0 else profile
     thickness = summarise_marginal(lk.log_t, mass_t / mass_t.sum(), lk.weight_t,
                                    lower_physical=False, transform=np.exp, profile=profile)
@@ -571,19 +745,19 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
     d_map = float(dist[post.best])
     distance = ParameterEstimate(d_map, q50, (q16, q84), (q2, q98), "constrained")
     # conditional moments of log t given L (hyper values mixed by their weight at each L)
-    w_h = w_bins / np.maximum(w_bins.sum(axis=0, keepdims=True), 1e-300)
-    pt = post.p_matrix.T[:, :, None] * lk.like[:, None, :]  # (t, hyper, L)
-    norm = np.maximum(pt.sum(axis=0), 1e-300)
-    mix = np.where(w_bins.sum(axis=0) > 0, w_h, 1.0 / w_h.shape[0])
-    cond = (pt / norm[None]) * mix[None]  # p(t | L), hyper values mixed
-    cond = cond.sum(axis=1)
+    w_sum = w_bins.sum(axis=0, keepdims=True)
+    mix = np.where(w_sum > 0, w_bins / np.maximum(w_sum, 1e-300), 1.0 / w_bins.shape[0])
+    ratio = mix / np.maximum(m, 1e-300)
+    cond = np.einsum("ktl,ht,khl->tl", lk.like, post.p_matrix,
+                     ratio.reshape(post.n_nodes, n_mu, -1))  # p(t | L), hyper values mixed
     cond /= np.maximum(cond.sum(axis=0, keepdims=True), 1e-300)
     mean = (lk.log_t[:, None] * cond).sum(axis=0)
     var = ((lk.log_t[:, None] - mean[None, :]) ** 2 * cond).sum(axis=0)
     dev = np.where(lk.like > 0, lk.deviance, 0.0)
-    s = post.p_matrix @ (lk.like * dev)
+    s = post.hyper_like(lk, lk.like * dev)
     if post.prior.kind == "common":  # the tie's own term, (log t - log mu)^2 / s^2
-        s = s + (post.p_matrix * _tie_z2(post, lk.log_t)) @ lk.like
+        s = s + np.einsum("ht,ktl->khl", post.p_matrix * _tie_z2(post, lk.log_t),
+                          lk.like).reshape(s.shape)
     expected = float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
     return PositionAnswer(thickness, distance, d_map, (mean, var), expected)
 
@@ -593,25 +767,29 @@ def _tie_z2(post: JointPosterior, log_t: np.ndarray) -> np.ndarray:
     return ((log_t[None, :] - post.log_mu[:, None]) / post.prior.spread_rel) ** 2
 
 
-def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
-    """At the joint best fit (the edge's cell, and there each position's thickness, with the
-    common mean's best value for ``common``, that together have the least deviance): each
-    position's misfit, the total deviance (the tie's terms included) and the number of terms
-    (the tie's included)."""
+def _best_fit(post: JointPosterior) -> tuple[list[float], float, int, float]:
+    """At the joint best fit (the edge's cell, the shared calibration's node, and there each
+    position's thickness, with the common mean's best value for ``common``, that together have
+    the least deviance): each position's misfit, the total deviance (the tie's and the shared
+    calibration's prior terms included), the number of terms (theirs included) and the shared
+    calibration's own term (``sum (eta / sd)^2`` at the best node)."""
     common = post.prior.kind == "common"
     z2 = _tie_z2(post, post.likes[0].log_t) if common else np.zeros((1, post.likes[0].log_t.size))
     support = np.flatnonzero(post.mass > 1e-9 * post.mass.max())
     cand = post.cells.take(support)
-    total = np.zeros((z2.shape[0], support.size))
+    total = np.zeros((post.n_nodes, z2.shape[0], support.size))
     for lk in post.likes:
         d = post.signed_distances(np.array([lk.position.x_m]), np.array([lk.position.y_m]),
                                   cand)[0]
         it = _Interp.on(lk.distance_m, np.clip(post.model.distance(d), lk.distance_m[0],
                                                lk.distance_m[-1]))
         dev = np.where(np.isfinite(lk.deviance), lk.deviance, 1e300)
-        best_l = (dev[None, :, :] + z2[:, :, None]).min(axis=1)  # (hyper, L)
-        total += it(best_l)
-    k = int(np.argmin(total.min(axis=0)))
+        for node in range(post.n_nodes):
+            best_l = (dev[node][None, :, :] + z2[:, :, None]).min(axis=1)  # (hyper, L)
+            total[node] += it(best_l)
+    total += post.node_z2[:, None, None]
+    node, _, k = np.unravel_index(int(np.argmin(total)), total.shape)
+    z_node = float(post.node_z2[node])
     cells = cand.take(np.array([k]))
     columns = []
     for lk in post.likes:
@@ -620,23 +798,26 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
         dist = float(np.clip(post.model.distance(d)[0, 0], lk.distance_m[0], lk.distance_m[-1]))
         it = _Interp.on(lk.distance_m, np.array([dist]))
         j, f = int(it.idx[0]), float(it.frac[0])
+        mis_all = lk.misfit(node)
         with np.errstate(invalid="ignore"):
-            dev = (1 - f) * lk.deviance[:, j] + f * lk.deviance[:, j + 1]
-            mis = (1 - f) * lk.misfit[:, j] + f * lk.misfit[:, j + 1]
+            dev = (1 - f) * lk.deviance[node][:, j] + f * lk.deviance[node][:, j + 1]
+            mis = (1 - f) * mis_all[:, j] + f * mis_all[:, j + 1]
         columns.append((np.where(np.isfinite(dev), dev, np.inf), mis))
-    n_terms = sum(lk.n_terms for lk in post.likes)
+    n_terms = sum(lk.n_terms for lk in post.likes) + len(post.keys)
     if post.prior.kind == "free":
         picks = [int(np.argmin(dev)) for dev, _ in columns]
         return ([float(mis[k]) for (_, mis), k in zip(columns, picks, strict=True)],
-                float(sum(dev[k] for (dev, _), k in zip(columns, picks, strict=True))), n_terms)
+                float(sum(dev[k] for (dev, _), k in zip(columns, picks, strict=True))) + z_node,
+                n_terms, z_node)
     best: tuple[float, list[int], int] | None = None
     for h in range(z2.shape[0]):
         picks = [int(np.argmin(dev + z2[h])) for dev, _ in columns]
-        total = float(sum(dev[k] + z2[h, k] for (dev, _), k in zip(columns, picks,
-                                                                    strict=True)))
-        if best is None or total < best[0]:
-            best = (total, picks, h)
-    total, picks, h = best
+        total_h = float(sum(dev[k] + z2[h, k] for (dev, _), k in zip(columns, picks,
+                                                                      strict=True)))
+        if best is None or total_h < best[0]:
+            best = (total_h, picks, h)
+    assert best is not None
+    _, picks, h = best
     # the common mean is continuous: a few rounds of (mean of the picks, picks given the mean)
     log_t, spread = post.likes[0].log_t, post.prior.spread_rel
     log_mu = float(post.log_mu[h])
@@ -645,9 +826,9 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int]:
         z = ((log_t - log_mu) / spread) ** 2
         picks = [int(np.argmin(dev + z)) for dev, _ in columns]
     z = ((log_t - log_mu) / spread) ** 2
-    total = float(sum(dev[k] + z[k] for (dev, _), k in zip(columns, picks, strict=True)))
+    d_total = float(sum(dev[k] + z[k] for (dev, _), k in zip(columns, picks, strict=True)))
     misfits = [float(mis[k] + z[k]) for (_, mis), k in zip(columns, picks, strict=True)]
-    return misfits, total, n_terms + len(post.likes)
+    return misfits, d_total + z_node, n_terms + len(post.likes), z_node
 
 
 def median_edge(post: JointPosterior) -> tuple[float, float]:
@@ -680,6 +861,22 @@ def median_edge(post: JointPosterior) -> tuple[float, float]:
     return theta, float(p[0] @ normal)
 
 
+def shared_calibration(post: JointPosterior) -> list[dict[str, Any]]:
+    """The calibration errors the scan shares (one draw for every position measured with the
+    calibration): per error its sphere size, quantity, stated value and sd, and where the
+    positions together put it (posterior mean and sd of the error)."""
+    node_w, _ = post.hyper_weights()
+    node_w = node_w / node_w.sum()
+    out = []
+    for a, (d_um, kind, value, sd) in enumerate(post.keys):
+        e = post.eta[:, a]
+        mean = float(node_w @ e)
+        out.append({"diameter_m": d_um * 1e-6, "quantity": kind, "stated": value,
+                    "stated_sd": sd, "error_mean": mean,
+                    "error_sd": float(np.sqrt(node_w @ (e - mean) ** 2))})
+    return out
+
+
 def summary(post: JointPosterior) -> dict[str, Any]:
     """The joint answer: ``support``, per-position answers, ``fit``, ``warnings``,
     ``thickness_prior``."""
@@ -691,9 +888,11 @@ def summary(post: JointPosterior) -> dict[str, Any]:
     a_lo, a_hi = weighted_quantiles(np.degrees(rel), mass, (0.025, 0.975))
     o_lo, o_hi = weighted_quantiles(offsets, mass, (0.025, 0.975))
     answers = [position_answer(post, i) for i in range(len(post.likes))]
-    misfits, d_best, n_terms = _best_fit(post)
-    chi2 = float(sum(misfits))
-    p_d = max(sum(a.expected_deviance for a in answers) - d_best, 0.0)
+    misfits, d_best, n_terms, z_node = _best_fit(post)
+    chi2 = float(sum(misfits)) + z_node
+    node_w, mu_w = post.hyper_weights()
+    p_d = max(sum(a.expected_deviance for a in answers) + float(node_w @ post.node_z2)
+              - d_best, 0.0)
     dof = max(n_terms - min(p_d, n_terms), 1.0)
     p_value = float(chi2_dist.sf(chi2, dof))
     warnings: list[str] = []
@@ -753,16 +952,16 @@ def summary(post: JointPosterior) -> dict[str, Any]:
                           "distance_to_located_support_m": line_d})
     prior = post.prior.to_dict()
     if post.prior.kind == "common":
-        w = post.mass_hyper.sum(axis=1)
-        q2, q50, q98 = weighted_quantiles(post.log_mu, w, (0.025, 0.5, 0.975))
+        q2, q50, q98 = weighted_quantiles(post.log_mu, mu_w, (0.025, 0.5, 0.975))
         prior["mean_m"] = {"median": math.exp(q50), "ci95": [math.exp(q2), math.exp(q98)]}
     return {"support": support, "positions": positions,
             "fit": {"chi2": chi2, "dof": dof, "p_value": p_value}, "warnings": warnings,
             "thickness_prior": prior, "edges": post.model.to_dict(),
+            "shared_calibration": shared_calibration(post),
             "excluded": [{"position": p.name, "reason": w} for p, w in post.excluded]}
 
 
 __all__ = ["EDGE_MODELS", "THICKNESS_PRIORS", "EdgeModel", "JointMapError", "JointPosterior",
-           "ScanPosition", "ThicknessPrior", "edge_model", "median_edge", "position_likelihood",
-           "posterior",
+           "ScanPosition", "ThicknessPrior", "calibration_nodes", "edge_model", "median_edge",
+           "position_likelihood", "posterior", "shared_calibration",
            "summary", "weighted_quantiles"]

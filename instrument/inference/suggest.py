@@ -116,7 +116,7 @@ def _typical(post: JointPosterior, answers: Sequence[Any]) -> _Measurement:
                       float(np.median(arr_std)) if arr_std else None,
                       int(np.median([i.n_shots for i in items])), bound))
     if post.prior.kind == "common":
-        w = post.mass_hyper.sum(axis=1)
+        _, w = post.hyper_weights()
         thickness = math.exp(float(np.sum(w * post.log_mu) / w.sum()))
     else:
         medians = [a.thickness.median for a in answers if a.thickness.median is not None]

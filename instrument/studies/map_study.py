@@ -220,10 +220,11 @@ def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Meas
     return out
 
 
-def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition]
+def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition],
+                shared_calibration: bool = False
                 ) -> tuple[joint_map.JointPosterior | None, float, float]:
     try:
-        post = joint_map.posterior(table, positions)
+        post = joint_map.posterior(table, positions, shared_calibration=shared_calibration)
     except joint_map.JointMapError:
         return None, math.nan, math.nan
     theta, offset = joint_map.median_edge(post)
@@ -231,7 +232,7 @@ def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition]
 
 
 def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
-               sequential: bool = True) -> dict[str, Any]:
+               sequential: bool = True, shared_calibration: bool = False) -> dict[str, Any]:
     """One scan's rows: per position the three answers against the truth, the edge's coverage,
     and (``sequential``) the edge's error as positions are added, suggested or random."""
     t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
@@ -245,11 +246,13 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
         est = invert(table, p.inputs, cal) if p.inputs else None
         alone.append(None if est is None else est.to_dict())
     joint: dict[str, Any] = {}
+    at_scan: dict[str, Any] = {}
     for kind in ("free", "common"):
         try:
             post = joint_map.posterior(table, positions, joint_map.ThicknessPrior(
-                kind, COMMON_SPREAD))
+                kind, COMMON_SPREAD), shared_calibration=shared_calibration)
             joint[kind] = joint_map.summary(post)
+            at_scan[kind] = _edge_at_scan(post, scan)
         except joint_map.JointMapError as exc:
             joint[kind] = {"error": str(exc)}
     per_position = []
@@ -275,7 +278,8 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
             "ci95_offset_m": s["ci95_offset_m"], "offset_m": s["offset_m"],
             "normal_angle_deg": s["normal_angle_deg"],
             "covered": _offset_covered(s, scan), "fit": j.get("fit"),
-            "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"])}
+            "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"]),
+            **at_scan.get(kind, {})}
     fit, reason = locate([{"x_m": p.x_m, "y_m": p.y_m, "distance_m": (e or {}).get("distance_m")}
                           for p, e in zip(positions, alone, strict=True)])
     row["edge_alone"] = {"reason": reason} if fit is None else {
@@ -284,8 +288,28 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
         "covered": _offset_covered(fit.to_dict(), scan),
         "error_m": scan.edge_error(math.radians(fit.normal_angle_deg), fit.offset_m)}
     if sequential:
-        row["sequence"] = _sequence(table, scan, measure, cal)
+        row["sequence"] = _sequence(table, scan, measure, cal, shared_calibration)
     return row
+
+
+def _edge_at_scan(post: joint_map.JointPosterior, scan: Scan) -> dict[str, Any]:
+    """The edge's two parameters as the scan sees them: its direction (the 95 % interval of
+    the normal's angle) and where it lies at the scan (the 95 % interval of the positions'
+    centroid's distance from it), each with whether it holds the truth. The offset in the
+    frame mixes both: at the frame's origin, far along the edge from the scan, an angle's error
+    moves it by the lever arm times the angle."""
+    theta_b = float(post.cells.theta[post.best])
+    flip = math.cos(theta_b - scan.theta) < 0  # the located edge seen from the other side
+    n_true = -scan.normal if flip else scan.normal
+    truth_theta = (scan.theta + math.pi) if flip else scan.theta
+    rel = (post.cells.theta - truth_theta + math.pi) % (2 * math.pi) - math.pi
+    a_lo, a_hi = joint_map.weighted_quantiles(rel, post.mass, (0.025, 0.975))
+    c_true = float(post.anchor @ n_true) - scan.true_offset(theta_b)
+    c_lo, c_hi = joint_map.weighted_quantiles(post.cells.c, post.mass, (0.025, 0.975))
+    return {"angle_ci95_width_deg": math.degrees(a_hi - a_lo),
+            "angle_covered": bool(a_lo <= 0.0 <= a_hi),
+            "at_scan_ci95_width_m": c_hi - c_lo, "at_scan_covered": bool(c_lo <= c_true <= c_hi),
+            "lever_m": float(abs(post.anchor @ np.array([-n_true[1], n_true[0]])))}
 
 
 def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
@@ -295,8 +319,8 @@ def _offset_covered(support: Mapping[str, Any], scan: Scan) -> bool:
     return bool(lo <= scan.true_offset(math.radians(support["normal_angle_deg"])) <= hi)
 
 
-def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
-              ) -> dict[str, Any]:
+def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
+              shared_calibration: bool = False) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for strategy in STRATEGIES:
         xy = list(scan.random_positions[:START_POSITIONS])
@@ -305,7 +329,7 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
         errors = []
         while True:
             positions = _scan_positions(scan, xy, measure, cal)
-            post, theta, offset = _joint_edge(table, positions)
+            post, theta, offset = _joint_edge(table, positions, shared_calibration)
             errors.append(math.inf if post is None else scan.edge_error(theta, offset))
             if len(xy) >= MAX_POSITIONS:
                 break
@@ -327,8 +351,11 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
 
 def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | None = None,
         measurements: str | Path | None = None, sequential: bool = True,
-        progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """The study (see the module doc): per-scan rows and the summary metrics."""
+        progress: Callable[[int, int], None] | None = None,
+        shared_calibration: bool = False) -> dict[str, Any]:
+    """The study (see the module doc): per-scan rows and the summary metrics.
+    ``shared_calibration``: the joint maps draw the calibration's TOF offset error once per
+    scan (:func:`~solitonde.instrument.inference.joint_map.posterior`)."""
     if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
         raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -344,17 +371,115 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     rows = []
     for k in range(n_scans):
         scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
-        rows.append(score_scan(table, scan, measure, cal, sequential))
+        rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
         if progress is not None:
             progress(k + 1, n_scans)
     metrics = summarise(rows)
     metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
+                   shared_calibration=shared_calibration,
                    simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
                    wall_s=time.perf_counter() - started,
                    calibration=cal.to_dict()["per_diameter"],
                    table=str(table.path) if table.path else None)
     return {"metrics": metrics, "scans": rows}
+
+
+SPLIT_STEPS = ("alone", "distance_known", "no_material_spread", "no_calibration_uncertainty",
+               "no_table_error")
+"""The near-edge width split, each step removing one more source of a position's thickness
+interval: the distance (known exactly), the material's spread, the calibration's stated
+uncertainty, the table's interpolation error; what is left is the shots' noise."""
+
+
+def _width_at_distance(table: ModelTable, inputs: Sequence[FeatureSummary],
+                       cal: Calibration | None, spread: Mapping[str, float] | None,
+                       distance_m: float, t_range: tuple[float, float]) -> float:
+    """The 95 % thickness interval's width (an open side to the table's end) of a position's
+    own likelihood at a known distance, by a single inversion's rules."""
+    from solitonde.instrument.inference.inversion import cell_likelihood, summarise_marginal
+
+    keep = cell_likelihood(table, inputs, cal, material_spread=spread)
+    dev, g = keep["deviance"], keep["grid"]
+    ok = np.isfinite(dev)
+    if not ok.any():
+        return t_range[1] - t_range[0]
+    like = np.where(ok, np.exp(-0.5 * (np.where(ok, dev, 0.0) - dev[ok].min())), 0.0)
+    grid = g.distance_m
+    j = int(np.clip(np.searchsorted(grid, distance_m) - 1, 0, grid.size - 2))
+    f = float(np.clip((distance_m - grid[j]) / (grid[j + 1] - grid[j]), 0.0, 1.0))
+    col = (1.0 - f) * like[:, j] + f * like[:, j + 1]
+    if col.max() <= 0:
+        return t_range[1] - t_range[0]
+    mass = col * g.weight_t
+    est = summarise_marginal(np.log(g.thickness_m), mass / mass.sum(), g.weight_t,
+                             lower_physical=False, transform=np.exp, profile=col / col.max())
+    return _width(est.to_dict(), t_range)
+
+
+def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
+                diameter_m: float | None = None, measurements: str | Path | None = None
+                ) -> dict[str, Any]:
+    """What a near-edge position's thickness interval is made of: for every position of the
+    study's scans within :data:`NEAR_EDGE_M` of the edge, the width of its own 95 % interval
+    (:data:`SPLIT_STEPS`): alone, then with its distance known exactly, then without the
+    material's spread, the calibration's stated uncertainty and the table's interpolation error
+    in turn. Medians of the widths (m, and over the plate's thickness) and of their ratio to the
+    width alone. The same scans, positions and measurements as :func:`run` (the measurements
+    file it keeps is reused)."""
+    from dataclasses import replace
+
+    from solitonde.instrument.inference.inversion import fine_grid
+
+    if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
+        raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
+    sizes = [float(d) for d in table.axes["diameter_m"]]
+    diameter_m = (min(sizes, key=lambda d: abs(d - 9.53e-3)) if diameter_m is None
+                  else float(table.axes["diameter_m"][table.diameter_index(diameter_m)]))
+    t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
+    measure = Measurer(table.sweep.get("scene", {}), measurements)
+    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
+    exact = cal.to_dict()
+    for entry in exact["per_diameter"]:
+        entry["arr_factor_std"] = entry["tof_offset_std_s"] = 0.0
+    cal_exact = Calibration.from_any(exact)
+    no_material = dict.fromkeys(("youngs_modulus_rel_sd", "poisson_ratio_sd",
+                                 "density_rel_sd"), 0.0)
+    rows = []
+    for k in range(n_scans):
+        scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
+        for p in _scan_positions(scan, scan.random_positions[:scan.n_positions], measure, cal):
+            dist = scan.distance(p.x_m, p.y_m)
+            if dist > NEAR_EDGE_M or not p.inputs:
+                continue
+            est = invert(table, p.inputs, cal).to_dict()["thickness_m"]
+            widths = [_width(est, t_range),
+                      _width_at_distance(table, p.inputs, cal, None, dist, t_range),
+                      _width_at_distance(table, p.inputs, cal, no_material, dist, t_range),
+                      _width_at_distance(table, p.inputs, cal_exact, no_material, dist,
+                                         t_range)]
+            # the table's interpolation error set to zero on the fine grid, then restored
+            key = f"fine:{table.diameter_index(diameter_m)}"
+            g = fine_grid(table, table.diameter_index(diameter_m))
+            table._cache[key] = replace(g, model_tof_var=np.zeros_like(g.model_tof_var),
+                                        model_arr_var=np.zeros_like(g.model_arr_var))
+            try:
+                widths.append(_width_at_distance(table, p.inputs, cal_exact, no_material, dist,
+                                                 t_range))
+            finally:
+                table._cache[key] = g
+            rows.append({"thickness_m": scan.thickness_m, "distance_m": dist,
+                         "widths_m": dict(zip(SPLIT_STEPS, widths, strict=True))})
+    measure.save()
+    out: dict[str, Any] = {"positions": len(rows), "n_scans": n_scans, "seed": seed}
+    for step in SPLIT_STEPS:
+        w = np.array([r["widths_m"][step] for r in rows])
+        t = np.array([r["thickness_m"] for r in rows])
+        alone = np.array([r["widths_m"]["alone"] for r in rows])
+        out[step] = {"median_width_m": float(np.median(w)) if rows else None,
+                     "median_width_rel_t": float(np.median(w / t)) if rows else None,
+                     "median_ratio_to_alone": float(np.median(w / alone)) if rows else None}
+    return out
 
 
 def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -385,6 +510,16 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             if located else None,
             "ci95_width_median_m": float(np.median([e["ci95_offset_m"][1] - e["ci95_offset_m"][0]
                                                     for e in located])) if located else None}
+        seen = [e for e in located if "angle_covered" in e]
+        if seen:
+            out[f"edge_{name}"].update(
+                angle_coverage_95=float(np.mean([e["angle_covered"] for e in seen])),
+                angle_ci95_width_median_deg=float(np.median([e["angle_ci95_width_deg"]
+                                                             for e in seen])),
+                at_scan_coverage_95=float(np.mean([e["at_scan_covered"] for e in seen])),
+                at_scan_ci95_width_median_m=float(np.median([e["at_scan_ci95_width_m"]
+                                                             for e in seen])),
+                lever_median_m=float(np.median([e["lever_m"] for e in seen])))
     free = [r["edge_free"]["fit"]["p_value"] for r in rows if r.get("edge_free")]
     out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
     seqs = [r["sequence"] for r in rows if "sequence" in r]
@@ -419,4 +554,5 @@ def _counts(values: Any) -> dict[str, int]:
     return out
 
 
-__all__ = ["Scan", "StudyInputError", "run", "score_scan", "summarise"]
+__all__ = ["SPLIT_STEPS", "Scan", "StudyInputError", "run", "score_scan", "summarise",
+           "width_split"]

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from solitonde.instrument.inference import joint_map
+from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, invert, predict
 from solitonde.instrument.inference.suggest import check_request, suggest
 from solitonde.instrument.tables.table import ModelTable
@@ -210,3 +211,62 @@ def test_suggestions_for_the_thickness_map(table):
                     plate_size_m=[0.914, 0.914])
     assert found["objective"] == "thickness" and len(found["suggestions"]) == 1
     assert found["interval_95_m"] >= found["expected_interval_95_m"]
+
+
+def test_a_calibration_error_enters_the_deviance_as_its_stated_quadratic(table):
+    """``cell_likelihood(..., shared_calibration=True)`` leaves the calibration's uncertainty
+    out and keeps how the deviance moves with its errors: at a TOF offset error eta the
+    deviance is exactly the one with the offset moved by eta and no uncertainty stated."""
+    from solitonde.instrument.inference.inversion import cell_likelihood
+
+    rng = np.random.default_rng(3)
+    inputs = measured(table, 3.0e-3, 0.012, rng)
+    stated = {"per_diameter": [{"diameter_m": D, "arr_factor": 1.0, "tof_offset_s": 1e-6,
+                                "tof_offset_std_s": 10e-6}]}
+    keep = cell_likelihood(table, inputs, stated, shared_calibration=True)
+    assert keep["shared"] == [(D, "tof_offset_s", 10e-6)]
+    for eta in (-7e-6, 4e-6):
+        moved = cell_likelihood(table, inputs, {"per_diameter": [
+            {"diameter_m": D, "arr_factor": 1.0, "tof_offset_s": 1e-6 + eta}]})["deviance"]
+        quad = keep["deviance"] - 2 * eta * keep["shared_b"][0] + eta**2 * keep["shared_q"][0, 0]
+        ok = np.isfinite(moved)
+        assert np.array_equal(ok, np.isfinite(quad))
+        assert np.allclose(quad[ok], moved[ok], rtol=1e-9, atol=1e-6)
+
+
+def test_one_calibration_error_for_the_whole_scan(table):
+    """A scan whose calibration's TOF offset is off by 8 us at every position (one
+    calibration, one plate), with a stated uncertainty of 12 us as the study's calibration has.
+    Counted per position, each position's TOF can be off by its own 12 us and the edge's angle
+    stays loose; drawn once for the scan, the positions' TOFs agree on one offset, the scan
+    says where it lies, and the edge's angle interval is much narrower, still holding the
+    truth."""
+    edge = Edge(-20.0, 0.05)
+    placed = [(0.005, -0.30), (0.012, 0.28), (0.02, -0.05), (0.009, 0.10), (0.16, 0.0),
+              (0.3, 0.2)]
+    truth_offset = 8e-6
+    positions = scan(table, edge, placed, 3.3e-3, seed=4)
+    cal = {"per_diameter": [{"diameter_m": D, "arr_factor": 1.0, "tof_offset_s": 0.0,
+                             "tof_offset_std_s": 12e-6}]}
+    for p in positions:  # the instrument's offset is 8 us; the calibration states 0 +- 12 us
+        p.inputs = [FeatureSummary(s.diameter_m, s.tof_s + truth_offset, s.arr, s.tof_std_s,
+                                   s.arr_std, s.n_shots) for s in p.inputs]
+        p.calibration = Calibration.from_any(cal)
+    widths = {}
+    for shared in (False, True):
+        post = joint_map.posterior(table, positions, shared_calibration=shared)
+        out = joint_map.summary(post)
+        lo, hi = out["support"]["ci95_normal_angle_deg"]
+        width = (hi - lo) % 360.0
+        mid = (lo + 0.5 * width) % 360.0
+        truth = math.degrees(edge.theta) % 360.0
+        assert abs((truth - mid + 180.0) % 360.0 - 180.0) <= 0.5 * width, (shared, lo, hi)
+        widths[shared] = width
+        if shared:
+            (err,) = out["shared_calibration"]
+            assert err["quantity"] == "tof_offset_s" and err["stated_sd"] == 12e-6
+            assert abs(err["error_mean"] - truth_offset) < 2.5 * err["error_sd"]
+            assert err["error_sd"] < 0.3 * 12e-6
+        else:
+            assert out["shared_calibration"] == []
+    assert widths[True] < 0.8 * widths[False], widths

@@ -107,6 +107,8 @@ def test_validate_map_refuses_bad_input_naming_the_flag(tmp_path):
     assert res.exit_code == 1 and "--diameter" in res.stderr
     res = run(build_cli(), ["validate-map", "--out", str(tmp_path)])
     assert res.exit_code == 1 and "--out" in res.stderr
+    res = run(build_cli(), ["validate-map", "--width-split", "--scans", "0"])
+    assert res.exit_code == 1 and "--scans: must be an integer >= 1" in res.stderr
 
 
 @pytest.mark.slow
@@ -120,9 +122,21 @@ def test_the_study_runs_end_to_end(tmp_path):
     assert res.exit_code == 0, res.output
     assert "joint, thickness free: thickness coverage" in res.stdout
     assert "suggested needed fewer positions than random_on_plate" in res.stdout
+    assert "the edge as the scan sees it: angle coverage" in res.stdout
     result = json.loads(out.read_text())
     for scan in result["scans"]:
+        edge = scan["edge_free"]
+        assert isinstance(edge["angle_covered"], bool) and edge["angle_ci95_width_deg"] > 0
+        assert isinstance(edge["at_scan_covered"], bool) and edge["at_scan_ci95_width_m"] > 0
         for strategy in map_study.STRATEGIES:
             errors = scan["sequence"][strategy]["errors_m"]
             assert len(errors) == map_study.MAX_POSITIONS - map_study.START_POSITIONS + 1
             assert np.isfinite(errors).all(), (strategy, errors)
+    # what a near-edge position's interval is made of, from the same measurements: each step
+    # removes a source, so no step is wider than the one before it (a known distance only
+    # narrows what the likelihood allows)
+    split = map_study.width_split(ModelTable.load(TABLE), 2, 3,
+                                  measurements=tmp_path / "m.json")
+    if split["positions"]:
+        medians = [split[s]["median_width_m"] for s in map_study.SPLIT_STEPS]
+        assert medians[1] <= medians[0] + 1e-12 and medians[-1] <= medians[1] + 1e-12
