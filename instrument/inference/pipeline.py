@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, invert
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.signal.features import Aggregate, Features, aggregate
 from solitonde.signal.json_ready import json_ready

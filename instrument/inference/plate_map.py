@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from solitonde.instrument.inference import measured_shots
-from solitonde.instrument.inference.estimates import EstimateUnavailable
 from solitonde.instrument.inference.inversion import FeatureSummary
 from solitonde.instrument.inference.joint_map import (
     DEFAULT_SPREAD,
@@ -31,6 +30,7 @@ from solitonde.instrument.inference.joint_map import (
 )
 from solitonde.instrument.inference.joint_map import posterior as joint_posterior
 from solitonde.instrument.inference.joint_map import summary as joint_summary
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.pipeline import MISSING_SIZE, no_reflection
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.suggest import check_request

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference.estimates import Estimator
+from solitonde.instrument.inference.loaded_table import LoadedTable
 from solitonde.instrument.tables.family import describe, differences
 
 log = logging.getLogger("solitonde.instrument")
@@ -34,24 +34,24 @@ def table_files(paths: Iterable[Path]) -> list[Path]:
 
 
 class TableSet:
-    """The loaded tables by id; with one table it behaves as that table's Estimator."""
+    """The loaded tables by id; with one table it behaves as that table's LoadedTable."""
 
     def __init__(self, paths: Sequence[str | Path | None], warm_up: bool = True) -> None:
         files = table_files(Path(p) for p in paths if p is not None)
-        self.estimators: dict[str, Estimator] = {}
+        self.by_id: dict[str, LoadedTable] = {}
         self.problems: list[str] = []
         for f in files:
-            est = Estimator(f, warm_up)
+            est = LoadedTable(f, warm_up)
             if not est.loaded:
                 self.problems.append(est.reason or f"model table {str(f)!r} not loaded")
                 continue
             tid = est.table.table_id
-            if tid in self.estimators:
+            if tid in self.by_id:
                 self.problems.append(f"model table {str(f)!r} has the id {tid!r} of "
-                                     f"{str(self.estimators[tid].path)!r}; give it another "
+                                     f"{str(self.by_id[tid].path)!r}; give it another "
                                      "(table build --id) or file name")
                 continue
-            self.estimators[tid] = est
+            self.by_id[tid] = est
         for p in self.problems:
             log.warning(p)
         if not files:
@@ -60,15 +60,15 @@ class TableSet:
     # --- what the routes ask of "the estimator" ------------------------------------------------
     @property
     def loaded(self) -> bool:
-        return bool(self.estimators)
+        return bool(self.by_id)
 
     @property
     def reason(self) -> str | None:
         return None if self.loaded else "; ".join(self.problems)
 
     @property
-    def default(self) -> Estimator | None:
-        return next(iter(self.estimators.values()), None)
+    def default(self) -> LoadedTable | None:
+        return next(iter(self.by_id.values()), None)
 
     @property
     def path(self) -> Path | None:
@@ -79,13 +79,13 @@ class TableSet:
 
     def plate_size(self) -> list[float] | None:
         """The plate size the tables share, or None when they differ or there is none."""
-        sizes = {tuple(e.plate_size() or ()) for e in self.estimators.values()}
+        sizes = {tuple(e.plate_size() or ()) for e in self.by_id.values()}
         return list(sizes.pop()) if len(sizes) == 1 and () not in sizes else None
 
     def listing(self) -> list[dict[str, Any]]:
         """Every table's id, family, sphere sizes and axes' ranges (``GET /v1/tables``)."""
         out = []
-        for tid, est in self.estimators.items():
+        for tid, est in self.by_id.items():
             t = est.table
             out.append({"id": tid, "path": str(est.path), "family": t.family,
                         "diameters_m": t.axes["diameter_m"].tolist(),
@@ -98,7 +98,7 @@ class TableSet:
 
     # --- choosing -------------------------------------------------------------------------------
     def choose(self, diameters: Iterable[float], table: str | None = None,
-               plate_material: Any = None) -> Estimator:
+               plate_material: Any = None) -> LoadedTable:
         """The table for a measurement with these sphere sizes and what it says of itself.
 
         Raises TableChoiceError (field ``table`` or ``plate_material``) for an unknown id or
@@ -114,19 +114,19 @@ class TableSet:
                 stated["plate_material"] = properties_from(plate_material)
             except ValueError as exc:
                 raise TableChoiceError("plate_material", str(exc)) from None
-        ids = ", ".join(self.estimators)
+        ids = ", ".join(self.by_id)
         if table is not None:
-            est = self.estimators.get(str(table))
+            est = self.by_id.get(str(table))
             if est is None:
                 raise TableChoiceError("table", f"no table {table!r} (tables: {ids})")
             self._check_family(est, stated)
             return est
         sizes = [float(d) for d in diameters]
-        candidates = [e for e in self.estimators.values() if _covers(e, sizes)
+        candidates = [e for e in self.by_id.values() if _covers(e, sizes)
                       and not (stated and e.table.family and differences(stated, e.table.family))]
         if len(candidates) == 1:
             return candidates[0]
-        if not candidates and not stated and len(self.estimators) == 1:
+        if not candidates and not stated and len(self.by_id) == 1:
             return self.default  # type: ignore[return-value]  # its inversion names the size
         if not candidates:
             what = f"plate_material {describe(stated['plate_material'])}" if stated else \
@@ -138,7 +138,7 @@ class TableSet:
                                "in metadata.table (or give metadata.plate_material)")
 
     @staticmethod
-    def _check_family(est: Estimator, stated: Mapping[str, Any]) -> None:
+    def _check_family(est: LoadedTable, stated: Mapping[str, Any]) -> None:
         family = est.table.family
         if not stated or family is None:
             return
@@ -150,7 +150,7 @@ class TableSet:
                                    f"another plate family ({detail}); it is not inverted")
 
 
-def _covers(est: Estimator, diameters: Sequence[float]) -> bool:
+def _covers(est: LoadedTable, diameters: Sequence[float]) -> bool:
     """Whether the table has every sphere size (within 1 % of its own size, the rule of
     :meth:`ModelTable.diameter_index`), or any when none is known."""
     have = est.table.axes["diameter_m"]

@@ -121,7 +121,7 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         if not tables.loaded:
             log.warning("serving without estimates: %s", tables.reason)
         else:
-            log.info("model tables: %s", ", ".join(tables.estimators))
+            log.info("model tables: %s", ", ".join(tables.by_id))
         svc = Service(settings, store, tables, UploadDir(), shot_model, measurement_model,
                       anyio.CapacityLimiter(INGEST_THREADS), anyio.CapacityLimiter(INGEST_THREADS),
                       anyio.CapacityLimiter(1), anyio.CapacityLimiter(PLOT_THREADS))

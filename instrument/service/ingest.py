@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from solitonde.instrument.inference import measured_shots
-from solitonde.instrument.inference.estimates import EstimateUnavailable
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.measured_shots import ShotInputError
 from solitonde.instrument.inference.pipeline import SizeSummary
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
@@ -149,7 +149,8 @@ def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None,
         raise shot_problem(exc) from None
 
 
-def analyse(waveforms: Sequence[Waveform], prefix: str) -> tuple[list[Any], list[SizeSummary]]:
+def measure_shots(waveforms: Sequence[Waveform], prefix: str
+                  ) -> tuple[list[Any], list[SizeSummary]]:
     """Features per shot and a summary per sphere diameter."""
     from solitonde.instrument.inference import chain_geometry
     from solitonde.signal import features as signal_features
@@ -181,7 +182,7 @@ def warm_up() -> float:
     samples = pulse_train(4000, dt, [(300e-6, 50.0, 40e-6), (900e-6, 30.0, 40e-6)])
     samples = samples + 0.01 * np.sin(np.arange(samples.size))  # a little "noise"
     wf = Waveform(0.0, dt, samples, metadata={"sphere_diameter": 9.53e-3})
-    analyse([wf, wf], "warm_up")
+    measure_shots([wf, wf], "warm_up")
     return time.perf_counter() - started
 
 
@@ -240,7 +241,7 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet,
     estimate (or why none), the table, the location, the provenance."""
     chosen = choose_table(waveforms, tables, prefix)
     check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
-    feats, summaries = analyse(waveforms, prefix)
+    feats, summaries = measure_shots(waveforms, prefix)
     estimate, reason = None, tables.reason
     if chosen is not None:
         try:

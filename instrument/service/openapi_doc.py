@@ -104,13 +104,13 @@ def narrow_to_tables(components: dict[str, Any], tables: TableSet) -> None:
     """Sphere sizes, table ids and plate materials limited to what the loaded tables serve."""
     if not tables.loaded:
         return
-    ids = list(tables.estimators)
-    diameters = sorted({float(d) for est in tables.estimators.values()
+    ids = list(tables.by_id)
+    diameters = sorted({float(d) for est in tables.by_id.values()
                         for d in est.table.axes["diameter_m"]})
     materials = [name for name in sorted(MATERIALS) if any(
         est.table.family is None
         or not differences({"plate_material": properties_from(name)}, est.table.family)
-        for est in tables.estimators.values())]
+        for est in tables.by_id.values())]
     for model in ("InvertIn", "ShotMetadata", "MeasurementUpload"):
         props = components.get(model, {}).get("properties", {})
         if "table" in props:

@@ -215,7 +215,7 @@ def install(app: FastAPI) -> None:
     async def _problem(request: Request, exc: Problem) -> JSONResponse:
         return exc.response(request.url.path)
 
-    from solitonde.instrument.service.heavy import ClientGone, gone_response
+    from solitonde.instrument.service.work_lanes import ClientGone, gone_response
 
     @app.exception_handler(ClientGone)
     async def _gone(request: Request, exc: ClientGone) -> Response:

@@ -17,7 +17,7 @@ from fastapi.concurrency import run_in_threadpool
 from pydantic import ValidationError
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference.estimates import EstimateUnavailable
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import (
     Calibration,
@@ -30,8 +30,8 @@ from solitonde.instrument.service.api_models import (
 )
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep, require_json
-from solitonde.instrument.service.heavy import run_for_client
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
+from solitonde.instrument.service.work_lanes import run_for_client
 from solitonde.signal.json_ready import json_ready
 
 router = APIRouter(tags=["compute"], dependencies=[AUTH])

@@ -39,7 +39,6 @@ from solitonde.instrument.service.api_models import (
 )
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep, media_type
-from solitonde.instrument.service.heavy import run_for_client
 from solitonde.instrument.service.ingest import (
     check_counts,
     measure_and_store,
@@ -57,6 +56,7 @@ from solitonde.instrument.service.uploads import (
     declared_values,
     pick_format,
 )
+from solitonde.instrument.service.work_lanes import run_for_client
 from solitonde.signal import channels as signal_channels
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.formats.registry import all_reader_options

@@ -21,9 +21,9 @@ from fastapi.responses import Response
 
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep
-from solitonde.instrument.service.heavy import run_for_client
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem
 from solitonde.instrument.service.state import Service
+from solitonde.instrument.service.work_lanes import run_for_client
 
 if TYPE_CHECKING:
     from solitonde.instrument.inference.plate_map import JointOptions

@@ -51,7 +51,7 @@ class Service:
     second or two and a few hundred MB to read, and an ordinary upload does not wait for it."""
     plot_lane: Any = None
     """Plots (PNG of a trace or a map), :data:`PLOT_THREADS` at a time; a plot whose client
-    left while it waited is skipped (:func:`.heavy.run_for_client`)."""
+    left while it waited is skipped (:func:`.work_lanes.run_for_client`)."""
 
     def lane_for(self, size: int | None) -> Any:
         """The lane an upload of ``size`` bytes is parsed in."""

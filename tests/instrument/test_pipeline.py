@@ -14,7 +14,7 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
-from solitonde.instrument.inference.estimates import EstimateUnavailable
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.pipeline import estimate, summarise
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.instrument.service.app import build_app

@@ -86,7 +86,7 @@ def test_a_table_records_its_id_and_family(tables):
 
 def test_the_rule_that_picks_a_table(tables):
     both = TableSet([tables["al"], tables["steel"]])
-    assert set(both.estimators) == {"al_plates", "steel-A36"}
+    assert set(both.by_id) == {"al_plates", "steel-A36"}
     assert both.choose([D], plate_material="steel_structural").table.table_id == "steel-A36"
     assert both.choose([D], plate_material="al_6061").table.table_id == "al_plates"
     assert both.choose([D], table="al_plates").table.table_id == "al_plates"

@@ -25,13 +25,14 @@ class EstimateUnavailable(MessageError, RuntimeError):
     subject = "table"
 
 
-class Estimator:
+class LoadedTable:
     """A loaded model table with its inversion grids built, or the reason there is none.
 
     Parameters
     ----------
     table_path:
-        HDF5 model table; ``None`` or a missing file gives an estimator without a table.
+        HDF5 model table; ``None`` or a missing file gives a LoadedTable without a table (its
+        ``reason`` says why).
     """
 
     def __init__(self, table_path: str | Path | None, warm_up: bool = True) -> None:
