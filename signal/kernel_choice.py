@@ -109,7 +109,10 @@ def start() -> None:
             return
         from . import interpreted
 
-        interpreted.kernels()  # imported now, before other threads decorate numba functions
+        try:  # imported now, before other threads decorate numba functions
+            interpreted.kernels()
+        except Exception:  # only a speed-up: without it, compile first, as numba does
+            return
         taken = _take_lock()
         if taken is None:
             return
