@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit
 
 from .extrema import vargmax, vmax, vmin
+from .gap_drift import D_GAP, drift_at, gap_drift
 from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
 from .pulse_fit import (  # noqa: F401
     R_MAX,
@@ -78,10 +79,11 @@ while the pulse is still above ``fit_fraction`` of its height."""
 # H_TRAIN: pulses between the incident and a gated reflection (the incident's train); H_NOREF: 1
 # when the travel gate holds no pulse (the later pulses are then all secondary).
 # H_SIGMA_S, H_FLOOR, H_YMAX: the smoothed trace's noise, the noise floor and the largest sample of
-# the sign-corrected trace, which locate hands to measure.
+# the sign-corrected trace, which locate hands to measure. H_GAP: the gap samples the drift was
+# measured on besides the pre-trigger (gap_drift; 0: the pre-trigger's baseline).
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
- H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF, H_SIGMA_S, H_FLOOR, H_YMAX) = range(17)
-HEAD = 17
+ H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF, H_SIGMA_S, H_FLOOR, H_YMAX, H_GAP) = range(18)
+HEAD = 18
 
 GATE_LO, GATE_HI = 0.75, 3.2
 """With a travel gate, a reflection arrives between these multiples of the round trip at the
@@ -720,6 +722,7 @@ def analyze(
     free_r: bool,
     max_iter: int,
     gate_1n: float,
+    relax: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Detect and measure every pulse of one shot.
 
@@ -747,6 +750,11 @@ def analyze(
         Sensor-to-plate-and-back travel time, in samples, of a solitary wave of unit peak (the
         trace's units); the reflection is then gated (:func:`_gate_reflection`). 0: no gate,
         the pulse after the incident is the reflection.
+    relax:
+        The chain's own level after the incident, above the pre-impact reading, one value per
+        sample from the incident's peak on (a model trace of the chain, :mod:`.gap_drift`); the
+        drift is then measured on the gap before the reflection too. Empty: the pre-trigger's
+        baseline.
 
     The work is :func:`locate` then :func:`measure`, two compilations of about equal size: the
     per-shot path (:func:`solitonde.signal.pulses.detect`) calls them one after the other, so a
@@ -761,7 +769,7 @@ def analyze(
     """
     head, y, s, v, line, peaks = locate(x, sign_in, n_pre_in, h_in, thr_sigma, min_ratio)
     return head, measure(head, y, s, v, line, peaks, fit_fraction, shape_r, skew, free_r,
-                         max_iter, gate_1n)
+                         max_iter, gate_1n, relax)
 
 
 @njit(cache=True)
@@ -825,11 +833,12 @@ def locate(x: np.ndarray, sign_in: float, n_pre_in: int, h_in: int, thr_sigma: f
 @njit(cache=True)
 def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray,
             peaks: np.ndarray, fit_fraction: float, shape_r: float, skew: float, free_r: bool,
-            max_iter: int, gate_1n: float) -> np.ndarray:
+            max_iter: int, gate_1n: float, relax: np.ndarray) -> np.ndarray:
     """The second half of :func:`analyze`: every pulse :func:`locate` found, measured (its
-    template fit and refined peak, :func:`_measure_pulse`), the reflection gated, the upper bound
-    on the ARR and the saturation flag. Fills the rest of ``head``; returns ``pulses[j, P_*]``.
-    The other arguments are :func:`analyze`'s."""
+    template fit and refined peak, :func:`_measure_pulse`), the reflection gated, the drift
+    measured on the gap where the chain's relaxation is given (:mod:`.gap_drift`), the upper
+    bound on the ARR and the saturation flag. Fills the rest of ``head``; returns
+    ``pulses[j, P_*]``. The other arguments are :func:`analyze`'s."""
     n = y.size
     m = peaks.size
     out = np.zeros((m, PULSE))
@@ -846,7 +855,8 @@ def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line:
     widths = _widths(v, peaks, bounds)
     # The pre-impact baseline from the pre-trigger up to BASELINE_SPAN FWHM before the incident's
     # peak: the solitary wave's leading tail, still 0.5 % of its peak at the foot, would tilt it.
-    pre = pre_impact_baseline(y, min(n_pre, int(peaks[0] - BASELINE_SPAN * widths[0])))
+    n_base = min(n_pre, int(peaks[0] - BASELINE_SPAN * widths[0]))
+    pre = pre_impact_baseline(y, n_base)
     head[H_PRE0] = pre[0] if pre[2] > 0 else line[0]
     head[H_PRE1] = pre[1] if pre[2] > 0 else 0.0
     nfree = 4 if free_r else 3
@@ -870,12 +880,24 @@ def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line:
 
     if gate_1n > 0 and m >= 2:
         out = _gate_reflection(out, gate_1n, head)
+    drift = np.zeros(1)
+    if m >= 2 and head[H_NOREF] == 0 and relax.size > 0 and pre[2] > 0:
+        drift = gap_drift(y, max(n_base, 0), out, int(head[H_TRAIN]), relax, P_TIME, P_WIDTH)
+        if drift[D_GAP] > 0:
+            head[H_GAP] = drift[D_GAP]
+            for j in range(2):  # the template's height above the drifted baseline
+                base_j = drift_at(drift, out[j, P_TIME])
+                out[j, P_AMP] += out[j, P_BASE] - base_j
+                out[j, P_BASE] = base_j
     if m >= 2 and head[H_NOREF] == 0:  # the refined peaks of the incident and the reflection
         k = common_rung(out[:2, P_VALUES:], out[:2, P_RUNG])
         for j in range(2):
             t_j = out[j, P_PEAK_TIME]
             i_j = min(max(round(t_j), 0), n - 1)
-            base_j = pre[0] + pre[1] * t_j if pre[2] > 0 else line[i_j]
+            if head[H_GAP] > 0:
+                base_j = drift_at(drift, t_j)
+            else:
+                base_j = pre[0] + pre[1] * t_j if pre[2] > 0 else line[i_j]
             out[j, P_PEAK_AMP] = out[j, P_VALUES + k] - base_j
     # No reflection: the largest excursion after the incident's foot bounds the ARR from above.
     first = min(n, int(peaks[0] + FOOT * widths[0]) + 1)
@@ -904,6 +926,7 @@ def analyze_batch(
     free_r: bool,
     max_iter: int,
     gate_1n: float,
+    relax: np.ndarray,
     keep: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`analyze` of every row of ``x`` (one shot per row), without the GIL (callers split
@@ -918,7 +941,7 @@ def analyze_batch(
     counts = np.zeros(m, dtype=np.int64)
     for i in range(m):
         head, rows = analyze(x[i], sign_in, n_pre_in, h_in, thr_sigma, min_ratio, fit_fraction,
-                             shape_r, skew, free_r, max_iter, gate_1n)
+                             shape_r, skew, free_r, max_iter, gate_1n, relax)
         for c in range(HEAD):
             heads[i, c] = head[c]
         counts[i] = rows.shape[0]

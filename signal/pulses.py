@@ -138,6 +138,15 @@ class DetectOptions:
         times that). An incident more than :data:`WIDTH_TOLERANCE` off that law for its
         measured amplitude raises ``implausible_units``: the force or the time axis is not in
         the units the file states. Needs the trace in newtons.
+    relaxation_N:
+        The chain's own level after the incident, where known: the clean sensor reading above
+        the pre-impact one, N, one value per sample interval of the shot from the incident's
+        peak on, up to before any reflection returns (a model trace of the chain:
+        :func:`solitonde.instrument.inference.chain_geometry.relaxation`; zeros without gravity).
+        The baseline drift is then measured on the gap between the incident and the reflection,
+        less this, as well as on the pre-trigger (:mod:`solitonde.signal.gap_drift`): a drift
+        or offset leaves TOF and ARR as the paper defines them. ``None``: the pre-trigger's
+        baseline (its line where its slope stands out of the noise). Needs the trace in newtons.
     """
 
     pretrigger_s: float | None = None
@@ -153,6 +162,7 @@ class DetectOptions:
     max_secondary: int = 8
     travel_time_1n_s: float | None = None
     pulse_width_1n_s: float | None = None
+    relaxation_N: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> WaveformError:
@@ -192,6 +202,11 @@ class DetectOptions:
             math.isfinite(self.pulse_width_1n_s) and self.pulse_width_1n_s > 0
         ):
             raise bad("pulse_width_1n_s", "a positive duration in s, or None")
+        if self.relaxation_N is not None:
+            relax = tuple(float(r) for r in self.relaxation_N)
+            if len(relax) < 2 or not all(math.isfinite(r) for r in relax):
+                raise bad("relaxation_N", "at least two finite levels in N, or None")
+            object.__setattr__(self, "relaxation_N", relax)
 
     @classmethod
     def from_kwargs(cls, options: dict[str, Any]) -> DetectOptions:
@@ -292,6 +307,7 @@ def kernel_args(opts: DetectOptions, n: int, dt: float) -> tuple[Any, ...]:
         opts.threshold_sigma, opts.min_ratio, opts.fit_fraction,
         SHAPE_EXPONENT if free_r else opts.shape_exponent, opts.shape_skew, free_r, MAX_ITER,
         0.0 if opts.travel_time_1n_s is None else opts.travel_time_1n_s / dt,
+        np.zeros(0) if opts.relaxation_N is None else np.array(opts.relaxation_N, dtype=float),
     )
 
 

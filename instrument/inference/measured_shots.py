@@ -37,7 +37,7 @@ from solitonde.instrument.inference import chain_geometry
 from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import FEATURES, extract_many
+from solitonde.signal.features import FEATURES
 from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
 
@@ -280,7 +280,7 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
                                **{k: meta.get(k) for k in LOCATION_KEYS}}
         diameter = _number(meta.get("sphere_diameter"))
         try:
-            (feat,) = extract_many([w], **chain_geometry.shot_options(diameter))
+            feat = chain_geometry.measure_shot(w, diameter)
         except WaveformError as exc:
             row["error"] = str(exc)
             rows.append(row)

@@ -153,13 +153,11 @@ def measure_shots(waveforms: Sequence[Waveform], prefix: str
                   ) -> tuple[list[Any], list[SizeSummary]]:
     """Features per shot and a summary per sphere diameter."""
     from solitonde.instrument.inference import chain_geometry
-    from solitonde.signal import features as signal_features
 
     feats = []
     for i, wf in enumerate(waveforms):
         try:
-            feats.append(signal_features.extract(
-                wf, **chain_geometry.shot_options(wf.metadata.get("sphere_diameter"))))
+            feats.append(chain_geometry.measure_shot(wf, wf.metadata.get("sphere_diameter")))
         except WaveformError as exc:  # an empty prefix: a lone shot whose fields are top-level
             raise waveform_error(exc, f"{prefix}.{i}" if prefix else "") from None
     return feats, measured_shots.summarise_shots(waveforms, feats)
@@ -226,7 +224,7 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = ()) -> dict[str, Any
     if chosen is not None:
         table = {"id": chosen.table.table_id, "sha256": chosen.table.content_sha256}
     return {"software_version": version,
-            "extractor": {"function": "solitonde.signal.features.extract",
+            "extractor": {"function": "solitonde.instrument.inference.chain_geometry.measure_shot",
                           "options": json_ready(dataclasses.asdict(DetectOptions())),
                           "chain_options": {
                               f"{d}": shot_options(d) for d in

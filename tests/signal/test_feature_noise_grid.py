@@ -21,6 +21,15 @@ to pass, or if another fails): D 19.05 mm on a 4.76 mm plate, gravity off, 2 MHz
 reading moves with the sampling phase (sd 0.068 us over the ten sub-sample offsets of the clean
 trace, 0.004 us at 5 MHz, 0.0014 us with gravity on), because the fit window's ends and its block
 averages move by whole samples; at 60 dB that phase jitter outweighs the noise.
+
+The grid is measured twice: with the pre-trigger's baseline (the extractor alone, as the tables
+are built), and with the drift fitted on the gap too, as ``analyze`` measures a shot of a stated
+sphere size (``relaxation_N`` from the model's chain: :mod:`solitonde.signal.gap_drift`). The
+bound's model gives each pulse a baseline of its own, measured before its foot, so the gap's fit
+is held to the same 1.5 times. Its price is scatter where the reflection is small: the quadratic's
+value at the reflection is an extrapolation over the reflection's flank. Two more pairs fall short
+by a hair, both D/t 4 at 60 dB (ARR about 0.1): ARR sd 1.51 times the bound (D 9.53 mm, gravity
+off, 1 MHz: 0.287 % against 0.190 %; D 4.76 mm, gravity on, 10 MHz: 0.126 % against 0.084 %).
 """
 
 from __future__ import annotations
@@ -29,6 +38,7 @@ import pytest
 from feature_grid import grid_rates, grid_scenes
 from noise_draws import noise_rows
 
+from solitonde.instrument.inference.chain_geometry import relaxation
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.model.batch import simulate_many
 from solitonde.model.simulate import SimulationResult
@@ -39,8 +49,12 @@ TOF_LIMIT_S = 0.1e-6
 ARR_LIMIT = 0.003
 SD_OVER_BOUND = 1.5
 FOUND = 0.95
-KNOWN_SHORTFALLS = {("infinite", False, 19.05, 4.0, 60.0)}
-"""(plate model, gravity, D mm, D/t, SNR dB) of the pairs outside the limits (module doc)."""
+KNOWN_SHORTFALLS = {"pre-trigger": {("infinite", False, 19.05, 4.0, 60.0)},
+                    "gap": {("infinite", False, 19.05, 4.0, 60.0),
+                            ("infinite", False, 9.53, 4.0, 60.0),
+                            ("infinite", True, 4.76, 4.0, 60.0)}}
+"""Per baseline: (plate model, gravity, D mm, D/t, SNR dB) of the pairs outside the limits
+(module doc)."""
 
 
 def _truth(result: SimulationResult) -> Truth:
@@ -49,7 +63,8 @@ def _truth(result: SimulationResult) -> Truth:
 
 
 @pytest.mark.slow
-def test_means_do_not_move_with_noise_over_the_whole_grid() -> None:
+@pytest.mark.parametrize("baseline", ["pre-trigger", "gap"])
+def test_means_do_not_move_with_noise_over_the_whole_grid(baseline: str) -> None:
     scenes = grid_scenes({"sample_rate": FINE_RATE})
     results = simulate_many(scenes, workers=2)
     assert all(isinstance(r, SimulationResult) for r in results), results
@@ -60,7 +75,12 @@ def test_means_do_not_move_with_noise_over_the_whole_grid() -> None:
     skipped = 0
     for result, rate in zip(results, grid_rates(), strict=True):
         s = result.scene
-        for r in noise_rows(as_measured(result), _truth(result), rate):
+        options = {}
+        if baseline == "gap":
+            truth = result.truth
+            options["relaxation_N"] = relaxation(
+                s, truth["incident_peak_N"] - truth["static_sensor_N"], 1.0 / rate)
+        for r in noise_rows(as_measured(result), _truth(result), rate, options=options):
             distance = s.plate.distance_to_support
             where = "-" if s.effects.plate_model == "infinite" else f"{distance * 1e3:.0f}"
             line = (f"| {s.effects.plate_model} | {'on' if s.effects.gravity else 'off'} | "
@@ -83,4 +103,4 @@ def test_means_do_not_move_with_noise_over_the_whole_grid() -> None:
                 failures[key] = line
     print(f"{skipped} cell-SNR pairs with the reflection in fewer than {FOUND:.0%} of the draws "
           f"(not asserted); outside the limits: {sorted(failures)}")
-    assert set(failures) == KNOWN_SHORTFALLS, "\n".join(failures.values())
+    assert set(failures) == KNOWN_SHORTFALLS[baseline], "\n".join(failures.values())

@@ -3,6 +3,9 @@ white noise, against the clean reading and the Cramer-Rao bound (the noise tests
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
 
 from solitonde.signal.accuracy import Truth, cramer_rao
@@ -13,27 +16,30 @@ SNRS = (20.0, 30.0, 40.0, 60.0)
 DRAWS = 200
 
 
-def read(fine: Waveform, step: int, offset: int, noise: np.ndarray | None
-         ) -> tuple[float, float] | None:
-    """(tof_s, arr) of ``fine`` sampled every ``step`` samples from ``offset``, plus ``noise``;
-    None where no reflection is read."""
+def read(fine: Waveform, step: int, offset: int, noise: np.ndarray | None,
+         options: Mapping[str, Any] | None = None) -> tuple[float, float] | None:
+    """(tof_s, arr) of ``fine`` sampled every ``step`` samples from ``offset``, plus ``noise``,
+    measured with the extractor's ``options``; None where no reflection is read."""
     x = fine.samples[offset::step]
     if noise is not None:
         x = x + noise[: x.size]
-    f = extract(Waveform(fine.t0 + offset * fine.dt, fine.dt * step, x, fine.units))
+    f = extract(Waveform(fine.t0 + offset * fine.dt, fine.dt * step, x, fine.units),
+                **(options or {}))
     if f.tof_s is None or f.arr is None:
         return None
     return f.tof_s, f.arr
 
 
 def noise_rows(fine: Waveform, truth: Truth, rate: float, snrs: tuple[float, ...] = SNRS,
-               draws: int = DRAWS) -> list[dict[str, float]]:
+               draws: int = DRAWS, options: Mapping[str, Any] | None = None
+               ) -> list[dict[str, float]]:
     """One row per SNR: the fraction of draws with a reflection (``found``), the mean TOF error
     (s) and relative ARR error against the clean reading averaged over the sub-sample offsets
     (``tof0``, ``arr0``: what a table holds), their standard deviations and Cramer-Rao bounds.
-    Noise of standard deviation ``incident peak / 10^(SNR/20)``, at random offsets."""
+    Noise of standard deviation ``incident peak / 10^(SNR/20)``, at random offsets; ``options``
+    go to the extractor (a function of the sample interval: ``relaxation_N`` is per sample)."""
     step = round(1.0 / (rate * fine.dt))
-    clean = [read(fine, step, k, None) for k in range(step)]
+    clean = [read(fine, step, k, None, options) for k in range(step)]
     assert all(c is not None for c in clean), "the clean trace shows no reflection"
     tof0 = float(np.mean([c[0] for c in clean if c is not None]))
     arr0 = float(np.mean([c[1] for c in clean if c is not None]))
@@ -44,7 +50,7 @@ def noise_rows(fine: Waveform, truth: Truth, rate: float, snrs: tuple[float, ...
         tof, arr = [], []
         for _ in range(draws):
             got = read(fine, step, int(rng.integers(step)),
-                       rng.normal(0.0, sigma, fine.samples.size // step + 1))
+                       rng.normal(0.0, sigma, fine.samples.size // step + 1), options)
             if got is not None:
                 tof.append(got[0])
                 arr.append(got[1])
