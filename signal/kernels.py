@@ -339,24 +339,33 @@ def run_count(runs: np.ndarray, lo: int, hi: int) -> int:
 
 
 @njit(cache=True)
-def block_average(t: np.ndarray, y: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """Average consecutive samples in blocks so that at most ``m`` points remain."""
+def block_average(t: np.ndarray, y: np.ndarray, w: np.ndarray, m: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted means of consecutive samples in blocks so that at most ``m`` points remain, and
+    each block's total weight (the last block takes what is left)."""
     n = y.size
-    q = (n + m - 1) // m
-    if q <= 1:
-        return t.copy(), y.copy()
-    nb = n // q
+    q = max((n + m - 1) // m, 1)
+    nb = (n + q - 1) // q
     tb = np.empty(nb)
     yb = np.empty(nb)
+    wb = np.empty(nb)
     for j in range(nb):
         st = 0.0
         sy = 0.0
-        for i in range(j * q, j * q + q):
-            st += t[i]
-            sy += y[i]
-        tb[j] = st / q
-        yb[j] = sy / q
-    return tb, yb
+        sw = 0.0
+        e = min(n, j * q + q)
+        for i in range(j * q, e):
+            st += w[i] * t[i]
+            sy += w[i] * y[i]
+            sw += w[i]
+        if sw > 0.0:
+            tb[j] = st / sw
+            yb[j] = sy / sw
+        else:  # a window end that lies on a sample's edge: the block counts for nothing
+            tb[j] = 0.5 * (t[j * q] + t[e - 1])
+            yb[j] = y[j * q]
+        wb[j] = sw
+    return tb, yb, wb
 
 
 @njit(cache=True)
@@ -592,16 +601,29 @@ def _measure_pulse(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray
     fb = min(fb, ip + reach)
     if fb - fa < 8:
         fa, fb = max(0, ip - 4), min(n - 1, ip + 4)
+    # The window's ends where v crosses the level, between samples: each sample weighs the part
+    # of its own interval inside, so the fit moves continuously with the sampling phase.
+    thr_fit = level + fit_fraction * top
+    ta = float(fa) - 0.5
+    tz = float(fb) + 0.5
+    if fa > lo and fa - 1 >= 0 and v[fa] > thr_fit >= v[fa - 1]:
+        ta = fa - 1 + (thr_fit - v[fa - 1]) / (v[fa] - v[fa - 1])
+        fa -= 1
+    if fb < hi and fb + 1 < n and v[fb] > thr_fit >= v[fb + 1]:
+        tz = fb + (v[fb] - thr_fit) / (v[fb] - v[fb + 1])
+        fb += 1
     k = fb - fa + 1
     tt = np.empty(k)
     yy = np.empty(k)
+    ww = np.empty(k)
     for i in range(k):
         tt[i] = fa + i - ip
         yy[i] = (y[fa + i] - line[fa + i] - level) / top
-    tb, yb = block_average(tt, yy, MAX_FIT_POINTS)
+        ww[i] = min(max(min(fa + i + 0.5, tz) - max(fa + i - 0.5, ta), 0.0), 1.0)
+    tb, yb, wb = block_average(tt, yy, ww, MAX_FIT_POINTS)
     ha, hb = pulse_extent(v, ip, v[ip] - 0.5 * top, lo, hi + 1)
     p0 = np.array([1.0, 0.0, 0.5 * max(hb - ha, 2) / np.log(2.0) ** (1.0 / shape_r), shape_r])
-    p, ok = fit_pulse(tb, yb, p0, sk, nfree, max_iter)
+    p, ok = fit_pulse(tb, yb, wb, p0, sk, nfree, max_iter)
     method = 0.0
     if ok and 0.2 < p[0] < 5.0 and tb[0] < p[1] < tb[-1]:
         width = 2.0 * p[2] * np.log(2.0) ** (1.0 / p[3])

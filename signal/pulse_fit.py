@@ -117,9 +117,11 @@ def solve_lu(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> float:
 
 @njit(cache=True)
 def fit_pulse(
-    t: np.ndarray, y: np.ndarray, p0: np.ndarray, skew: float, nfree: int, max_iter: int
+    t: np.ndarray, y: np.ndarray, wt: np.ndarray, p0: np.ndarray, skew: float, nfree: int,
+    max_iter: int
 ) -> tuple[np.ndarray, bool]:
-    """Levenberg-Marquardt fit of the skewed super-Gaussian to (t, y): (params, converged).
+    """Levenberg-Marquardt fit of the skewed super-Gaussian to (t, y), each point weighing ``wt``
+(a block's share of the fit window): (params, converged).
 
     Parameters are amplitude, peak time, width and shape exponent r; with ``nfree = 3`` the
     exponent stays at ``p0[3]``. ``t`` should be centred and in sample units and ``y`` scaled to
@@ -133,7 +135,7 @@ def fit_pulse(
     template(t, p, skew, f, jac)
     cost = 0.0
     for i in range(n):
-        cost += (y[i] - f[i]) ** 2
+        cost += wt[i] * (y[i] - f[i]) ** 2
     lam = 1e-3
     trial = p.copy()
     ft = np.empty(n)
@@ -147,12 +149,12 @@ def fit_pulse(
         for k in range(nfree):
             acc = 0.0
             for i in range(n):
-                acc += jac[i, k] * (y[i] - f[i])
+                acc += wt[i] * jac[i, k] * (y[i] - f[i])
             g[k] = acc
             for q in range(k, nfree):
                 acc = 0.0
                 for i in range(n):
-                    acc += jac[i, k] * jac[i, q]
+                    acc += wt[i] * jac[i, k] * jac[i, q]
                 jtj[k, q] = acc
                 jtj[q, k] = acc
         improved = False
@@ -172,7 +174,7 @@ def fit_pulse(
             template(t, trial, skew, ft, jt)
             c = 0.0
             for i in range(n):
-                c += (y[i] - ft[i]) ** 2
+                c += wt[i] * (y[i] - ft[i]) ** 2
             if c <= cost:
                 rel = abs(step[1]) + abs(step[0]) / max(abs(p[0]), 1e-12)
                 for k in range(p.size):
