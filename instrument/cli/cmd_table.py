@@ -113,7 +113,7 @@ def build_command(
                                          "scene's with --scene, else the paper's "
                                          "4.76e-3,9.53e-3,19.05e-3)"),
     thicknesses: str | None = typer.Option(None, help="plate thicknesses t, m "
-                                           "(default: geom:1.5e-3:6e-3:8)"),
+                                           "(default: geom:1.5e-3:6e-3:16)"),
     distances: str | None = typer.Option(None, help="distances to the support L, m "
                                          "(default: 0..0.457, dense within 0.2)"),
     scene: Path | None = typer.Option(None, help="base scene file (YAML/JSON)"),

@@ -4,8 +4,11 @@ For each of ``n`` scenes (seeded): a thickness drawn log-uniformly and a distanc
 drawn uniformly inside the table's range (so almost surely between its grid points), simulated
 for every sphere size of the table with the plate model ``auto`` picks and with a known
 dissipation the table does not have (Kuwabara-Kono contact damping, :data:`DAMPING_S`). Each
-size's noise-free trace becomes :data:`SHOTS` shots with white noise at :data:`SNR_DB`; the signal
-package extracts and aggregates them exactly as for measured files; the sizes with a detected
+size's noise-free trace becomes :data:`SHOTS` shots with white noise at :data:`SNR_DB`, measured
+and aggregated exactly as measured files of a stated sphere size are
+(:func:`~solitonde.instrument.inference.chain_geometry.measure_shot`: the drift fitted on the gap
+against the relaxation of the table family's chain, undamped, while the truth's chain is damped:
+a model error the answers must carry like a real chain's); the sizes with a detected
 reflection are inverted together. The dissipation is compensated as an operator would: a
 calibration (ARR factor and TOF offset per size, with their uncertainty) fitted by
 :func:`~solitonde.instrument.inference.calibration_fit.fit_calibration` from shots simulated
@@ -53,16 +56,17 @@ import numpy as np
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+from solitonde.instrument.inference.chain_geometry import measure_shot
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
 from solitonde.instrument.inference.pipeline import SizeSummary
-from solitonde.instrument.tables.measured import as_measured, detect_options
+from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.atomic import write_text
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import aggregate, extract
+from solitonde.signal.features import aggregate
 from solitonde.signal.synth import degrade
 
 DAMPING_S = 1e-7
@@ -100,6 +104,7 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
     from solitonde.model import greens
 
     rng = np.random.default_rng(seed)
+    family = scene_from_dict(dict(base))
     plate_cache = greens.MemoryCache()  # one response serves every sphere size of this plate
     summaries: dict[float, dict[str, Any] | None] = {}
     started = time.perf_counter()
@@ -107,14 +112,15 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
         result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)),
                           greens_cache=plate_cache)
         recorded = as_measured(result)
-        options = detect_options(result.scene)
         reference = float(result.samples.max() - result.samples[0])
         feats = []
         for _ in range(shots):
-            # white noise over the whole record, its pre-trigger included
+            # white noise over the whole record, its pre-trigger included; measured as analyze
+            # measures a shot of a stated size: the drift on the gap against the relaxation of
+            # the family's chain, which knows nothing of the truth's dissipation
             noisy = degrade(recorded.samples, snr_db, rng, reference)
             try:
-                feats.append(extract(recorded.with_samples(noisy), **options))
+                feats.append(measure_shot(recorded.with_samples(noisy), d, family))
             except WaveformError:
                 continue
         # what the inversion reads of these shots (no reflection: the ARR bound alone), or

@@ -596,9 +596,15 @@ def default_distances_m() -> list[float]:
     return near + far
 
 
+THICKNESS_NODES = 16
+
+
 def default_thicknesses_m() -> list[float]:
-    """t for the default table: 1.5 to 6 mm, geometric (ARR is a function of D/t)."""
-    return [float(round(x, 6)) for x in np.geomspace(1.5e-3, 6e-3, 8)]
+    """t for the default table: 1.5 to 6 mm, geometric (ARR is a function of D/t), 16 nodes
+    (10 % apart): TOF bends sharply where the reflection weakens (D/t 3-4), and with 8 nodes
+    linear interpolation there erred by 13 us (a 2.5 mm plate read with 9.53 mm spheres), more
+    than every other term of the error budget; the error falls as the square of the spacing."""
+    return [float(round(x, 6)) for x in np.geomspace(1.5e-3, 6e-3, THICKNESS_NODES)]
 
 
 def default_sweep() -> Sweep:

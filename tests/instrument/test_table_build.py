@@ -208,8 +208,7 @@ CORRUPTIONS = [
     ("axes/distance_m", lambda fh: _replace(fh, "axes/distance_m", np.zeros((14, 1)))),
     ("features/arr", lambda fh: _replace(fh, "features/arr", np.zeros((3, 8)))),
     ("diagnostics/wall_s", lambda fh: _replace(fh, "diagnostics/wall_s", np.zeros(3))),
-    ("flags", lambda fh: _replace(fh, "flags", np.array(["x"] * 336, dtype="S1"
-                                                        ).reshape(3, 8, 14))),
+    ("flags", lambda fh: _replace(fh, "flags", np.full(fh["flags"].shape, b"x", dtype="S1"))),
 ]
 
 
