@@ -8,10 +8,14 @@ paper's set-up is 440C spheres on an Al 6061 plate.
 A material also states how well a user who names it knows its properties: the spread of a plate
 bought as "structural steel" or "6061-T6" (:data:`SPREAD_KEYS`: the relative standard deviation
 of E and of rho, the standard deviation of nu). The library's spreads are the handbooks' ranges
-for the grade read as uniform (a range of width w has standard deviation w / sqrt(12)); each entry
-names the range it comes from. A property mapping may state its own (``youngs_modulus_rel_sd``
-...); a material given by properties without them is taken as known exactly. The inversion
-propagates the plate's spread into its intervals (instrument.inference).
+for the grade read as uniform, measured about the entry's own value, which a table built with the
+entry assumes: the root-mean-square distance from it, ``sqrt(w^2 / 12 + (c - value)^2)`` for a
+range of width w and centre c (:func:`spread_about`). Where the value is the range's centre that
+is the uniform's standard deviation; where it is not (A36's nu: 0.26 in 0.25-0.30), a plate of
+the grade lies further from the table's value than the range's width alone says (0.021, not
+0.014). Each entry names the range it comes from. A property mapping may state its own
+(``youngs_modulus_rel_sd`` ...); a material given by properties without them is taken as known
+exactly. The inversion propagates the plate's spread into its intervals (instrument.inference).
 """
 
 from __future__ import annotations
@@ -82,55 +86,82 @@ class Material:
         return sqrt(self.shear_modulus / self.density)
 
 
+def spread_about(value: float, low: float, high: float, relative: bool = True) -> float:
+    """The root-mean-square distance of a property uniform on [``low``, ``high``] from ``value``
+    (relative to ``value`` when ``relative``): the spread a user who names the grade has about
+    the library's value."""
+    centre = 0.5 * (low + high)
+    rms = sqrt((high - low) ** 2 / 12.0 + (centre - value) ** 2)
+    return rms / value if relative else rms
+
+
+def _graded(name: str, e: float, nu: float, rho: float, e_range: tuple[float, float],
+            nu_range: tuple[float, float], rho_range: tuple[float, float] | float) -> Material:
+    """A library entry whose spreads come from its grade's ranges (:func:`spread_about`); a
+    number for ``rho_range`` is the density's relative spread where no range is stated."""
+    rho_sd = (rho_range if isinstance(rho_range, float)
+              else spread_about(rho, *rho_range))
+    return Material(name, e, nu, rho, spread_about(e, *e_range),
+                    spread_about(nu, *nu_range, relative=False), rho_sd)
+
+
 MATERIALS: dict[str, Material] = {
     m.name: m
     for m in (
         # --- spheres -------------------------------------------------------------------------
         # 440C stainless steel spheres: the paper's values (Sec. 2).
         # Spread: 440C balls, E 200-204 GPa, nu 0.28-0.30 (ASM; AISI 440C datasheets).
-        Material("steel_440c", 200e9, 0.28, 7800.0, 0.006, 0.006, 0.002),
+        _graded("steel_440c", 200e9, 0.28, 7800.0, (200e9, 204e9), (0.28, 0.30), 0.002),
         # AISI 52100 chrome steel (bearing balls): ASM Handbook Vol. 1; MatWeb "AISI 52100".
         # Spread: E 201-210 GPa, nu 0.27-0.30 (ASM; MatWeb).
-        Material("steel_52100", 210e9, 0.30, 7810.0, 0.013, 0.009, 0.002),
+        _graded("steel_52100", 210e9, 0.30, 7810.0, (201e9, 210e9), (0.27, 0.30), 0.002),
         # Tungsten carbide, WC with 6 % Co (carbide balls): MatWeb "Tungsten Carbide, 6% Co".
         # Spread: 6 % Co grades, E 600-650 GPa, nu 0.21-0.24, rho 14,800-15,000 (MatWeb).
-        Material("tungsten_carbide", 614e9, 0.22, 14900.0, 0.024, 0.009, 0.004),
+        _graded("tungsten_carbide", 614e9, 0.22, 14900.0, (600e9, 650e9), (0.21, 0.24),
+                (14800.0, 15000.0)),
         # Soda-lime glass (glass balls and plates): MatWeb "Soda-Lime Glass".
         # Spread: soda-lime, E 69-74 GPa, nu 0.21-0.25, rho 2,440-2,520 (MatWeb).
-        Material("glass", 72e9, 0.23, 2500.0, 0.02, 0.012, 0.009),
+        _graded("glass", 72e9, 0.23, 2500.0, (69e9, 74e9), (0.21, 0.25), (2440.0, 2520.0)),
         # --- plates (and brass spheres) ---------------------------------------------------------
         # Al 6061-T6 with the handbook density; the paper's own wave speeds need it (ASM
         # Aerospace Specification Metals, "Aluminum 6061-T6").
         # Spread: E 68.0-70.0 GPa (MMPDS: 68.3 tension, 69.6 compression), nu 0.32-0.35,
         # rho 2,690-2,720 (ASM; MatWeb "6061-T6").
-        Material("al_6061", 68.9e9, 0.33, 2700.0, 0.008, 0.009, 0.003),
+        _graded("al_6061", 68.9e9, 0.33, 2700.0, (68e9, 70e9), (0.32, 0.35), (2690.0, 2720.0)),
         # Al 6061 with the density the paper prints, to reproduce its printed numbers.
-        Material("al_6061_paper", 68.9e9, 0.33, 2360.0, 0.008, 0.009, 0.003),
+        # Its spreads are al_6061's (the printed density lies outside 6061's range).
+        Material("al_6061_paper", 68.9e9, 0.33, 2360.0,
+                 spread_about(68.9e9, 68e9, 70e9), spread_about(0.33, 0.32, 0.35, relative=False),
+                 spread_about(2700.0, 2690.0, 2720.0)),
         # Al 2024-T3: ASM Aerospace Specification Metals, "Aluminum 2024-T3".
         # Spread: E 72.4-73.8 GPa, nu 0.33 +- 0.015, rho 2,770-2,790 (ASM; MMPDS).
-        Material("al_2024_t3", 73.1e9, 0.33, 2780.0, 0.006, 0.009, 0.002),
+        _graded("al_2024_t3", 73.1e9, 0.33, 2780.0, (72.4e9, 73.8e9), (0.315, 0.345),
+                (2770.0, 2790.0)),
         # Al 7075-T6: ASM Aerospace Specification Metals, "Aluminum 7075-T6".
         # Spread: E 71.0-72.4 GPa, nu 0.32-0.35, rho 2,800-2,810 (ASM; MMPDS).
-        Material("al_7075_t6", 71.7e9, 0.33, 2810.0, 0.006, 0.009, 0.001),
+        _graded("al_7075_t6", 71.7e9, 0.33, 2810.0, (71.0e9, 72.4e9), (0.32, 0.35),
+                (2800.0, 2810.0)),
         # Structural carbon steel ASTM A36: MatWeb "ASTM A36 Steel, plate".
         # Spread: structural carbon steels, E 190-210 GPa (ASM; EN 1993-1-1 takes 210 GPa, AISC
         # 200 GPa), nu 0.25-0.30 (MatWeb A36 0.26; EN 1993-1-1 0.30), rho 7,800-7,870.
-        Material("steel_structural", 200e9, 0.26, 7850.0, 0.029, 0.014, 0.003),
+        _graded("steel_structural", 200e9, 0.26, 7850.0, (190e9, 210e9), (0.25, 0.30),
+                (7800.0, 7870.0)),
         # Stainless steel AISI 304: ASM Aerospace Specification Metals, "AISI Type 304".
         # Spread: E 190-203 GPa, nu 0.27-0.30, rho 7,900-8,030 (ASM; MatWeb "AISI 304").
-        Material("steel_304", 193e9, 0.29, 8000.0, 0.019, 0.009, 0.005),
+        _graded("steel_304", 193e9, 0.29, 8000.0, (190e9, 203e9), (0.27, 0.30), (7900.0, 8030.0)),
         # Titanium Ti-6Al-4V (grade 5), annealed: ASM Aerospace Specification Metals.
         # Spread: E 110-119 GPa, nu 0.31-0.37, rho 4,420-4,430 (ASM; MatWeb "Ti-6Al-4V").
-        Material("ti_6al_4v", 113.8e9, 0.342, 4430.0, 0.023, 0.017, 0.001),
+        _graded("ti_6al_4v", 113.8e9, 0.342, 4430.0, (110e9, 119e9), (0.31, 0.37),
+                (4420.0, 4430.0)),
         # Copper C11000 (electrolytic tough pitch): MatWeb "Copper, Cu; Annealed" / ASM.
         # Spread: E 110-128 GPa, nu 0.31-0.34, rho 8,890-8,940 (ASM; MatWeb "C11000").
-        Material("copper", 115e9, 0.31, 8890.0, 0.045, 0.009, 0.002),
+        _graded("copper", 115e9, 0.31, 8890.0, (110e9, 128e9), (0.31, 0.34), (8890.0, 8940.0)),
         # Cartridge brass C26000: MatWeb "Brass, UNS C26000".
         # Spread: E 100-110 GPa, nu 0.33-0.38, rho 8,470-8,550 (MatWeb "C26000").
-        Material("brass", 110e9, 0.375, 8530.0, 0.027, 0.014, 0.003),
+        _graded("brass", 110e9, 0.375, 8530.0, (100e9, 110e9), (0.33, 0.38), (8470.0, 8550.0)),
         # PMMA (cast acrylic sheet): MatWeb "Polymethyl Methacrylate (PMMA), cast".
         # Spread: cast sheet, E 2.4-3.4 GPa, nu 0.35-0.40, rho 1,170-1,200 (MatWeb).
-        Material("pmma", 3.1e9, 0.37, 1190.0, 0.093, 0.014, 0.007),
+        _graded("pmma", 3.1e9, 0.37, 1190.0, (2.4e9, 3.4e9), (0.35, 0.40), (1170.0, 1200.0)),
     )
 }
 """The bundled library: spheres (440C, 52100, tungsten carbide, glass, brass) and plates."""
