@@ -20,11 +20,17 @@ TABLE = Path(__file__).resolve().parents[2] / "data_samples" / "default_table.h5
 NO_SPREAD = dict.fromkeys(SPREAD_KEYS, 0.0)
 
 
-def test_every_library_material_states_a_grade_spread_of_a_few_percent() -> None:
+def test_every_library_material_states_a_grade_spread_about_its_own_value() -> None:
+    """Every entry has a spread, a few percent (PMMA's E, 2.4-3.4 GPa about 3.1, is 11 %), and
+    the spread is the root-mean-square distance of the grade's range from the entry's value, not
+    the range's own standard deviation where the value is off its centre."""
     for m in MATERIALS.values():
-        assert 0.0 < m.youngs_modulus_rel_sd <= 0.1, m.name
-        assert 0.0 < m.poisson_ratio_sd <= 0.02, m.name
-        assert 0.0 < m.density_rel_sd <= 0.01, m.name
+        assert 0.0 < m.youngs_modulus_rel_sd <= 0.12, m.name
+        assert 0.0 < m.poisson_ratio_sd <= 0.03, m.name
+        assert 0.0 < m.density_rel_sd <= 0.015, m.name
+    a36 = MATERIALS["steel_structural"]  # nu 0.26 in 0.25-0.30; E 200 GPa at 190-210's centre
+    assert a36.poisson_ratio_sd == pytest.approx(math.sqrt(0.05**2 / 12 + 0.015**2))
+    assert a36.youngs_modulus_rel_sd == pytest.approx(20e9 / math.sqrt(12) / 200e9)
 
 
 def test_a_spread_comes_from_the_mapping_the_library_or_nowhere() -> None:
