@@ -54,12 +54,13 @@ from solitonde.signal.features import FEATURES
 from solitonde.signal.waveform import UNITS
 
 OUT_SUFFIXES = (".csv", ".parquet")
-ROW_KEYS = ("source", "shot", "channel", *FEATURES, "flags", "arr_upper_bound", *LOCATION_KEYS,
-            "error")
+ROW_KEYS = ("source", "shot", "channel", *FEATURES, "flags", "arr_upper_bound", "baseline",
+            *LOCATION_KEYS, "error")
 FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
          "sphere_diameter": "--sphere-diameter", "sample_rate": "--sample-rate",
          "dt": "--sample-rate", "units": "--units", "calibration": "--calibration",
-         "channel": "--channel", "group": "--group", "format": "--format"}
+         "channel": "--channel", "group": "--group", "format": "--format",
+         "baseline": "--baseline"}
 """Command-line flags by the option or metadata key they set (for messages)."""
 MISSING_SIZE_FLAG = ("--sphere-diameter: --invert needs the sphere size, and these shots state "
                      "none (give --sphere-diameter M, or a manifest's sphere_diameter_m)")
@@ -238,6 +239,12 @@ def analyze(
     sphere_diameter: float | None = typer.Option(None, "--sphere-diameter", min=1e-6, max=1.0,
                                                  help="m, for every file (a file's own must "
                                                  "agree)."),
+    baseline: str | None = typer.Option(None, "--baseline", help="What a shot of a stated "
+                                        "sphere size has its baseline measured on: gap (the "
+                                        "default: the pre-trigger and the gap before the "
+                                        "reflection, less the chain's simulated relaxation; "
+                                        "drift-proof) or pre-trigger (for a chain unlike the "
+                                        "paper's: another length or sensor, horizontal)."),
     plate_id: str | None = typer.Option(None, "--plate-id", help="Plate, for every file."),
     position: str | None = typer.Option(None, "--position", help="Position name, for every "
                                         "file."),
@@ -304,7 +311,8 @@ def analyze(
         if value is not None and value <= 0:
             usage(f"{flag}: {value:g} must be > 0")
     given = {k: v for k, v in (("plate_id", plate_id), ("position", position), ("x_m", x),
-                               ("y_m", y), ("sphere_diameter", sphere_diameter))
+                               ("y_m", y), ("sphere_diameter", sphere_diameter),
+                               ("baseline", baseline))
              if v is not None}
     try:  # the limits the service holds metadata to, for the flags' values too
         measured_shots.check_metadata([given], measured_shots.shot_fields(""))

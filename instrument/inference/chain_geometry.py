@@ -155,16 +155,36 @@ def _relaxation(scene_json: str, force_key: int, dt: float) -> tuple[float, ...]
     return tuple(float(v) for v in level)
 
 
-def measure_shot(waveform: Waveform, diameter: Any, family: Scene | None = None) -> Features:
-    """The features of a measured shot, with what its chain tells where ``diameter`` is known: the
-    travel gate and the width check (:func:`shot_options`), and the drift measured on the gap
-    against the chain's own relaxation (:func:`relaxation`; a second pass once the incident's
-    force is read). Without a size (or one that is not a positive number): the extractor's
-    defaults."""
+BASELINES = ("gap", "pre-trigger")
+"""What a measured shot's baseline is measured on (metadata key ``baseline``, ``analyze
+--baseline``): ``gap``, the pre-trigger and the gap before the reflection less the chain's
+relaxation (the default where the sphere size is stated), or ``pre-trigger`` alone, for a chain
+unlike the model's (another sensor position or chain length, a horizontal chain)."""
+
+
+def measure_shot(waveform: Waveform, diameter: Any, family: Scene | None = None,
+                 baseline: str = "gap") -> Features:
+    """The features of a measured shot (:func:`measure_shot_baseline`, its first value)."""
+    return measure_shot_baseline(waveform, diameter, family, baseline)[0]
+
+
+def measure_shot_baseline(waveform: Waveform, diameter: Any, family: Scene | None = None,
+                          baseline: str = "gap") -> tuple[Features, str]:
+    """The features of a measured shot, with what its chain tells where ``diameter`` is known,
+    and the baseline they were measured on (:data:`BASELINES`).
+
+    With a size (a positive number of metres): the travel gate and the width check
+    (:func:`shot_options`), and, unless ``baseline`` is ``pre-trigger``, the drift measured on
+    the gap against the chain's own relaxation (:func:`relaxation`; a second pass once the
+    incident's force is read). Without a size, or without a reflection to bound the gap: the
+    pre-trigger's baseline."""
+    if baseline not in BASELINES:
+        raise ValueError(f"baseline must be one of {BASELINES}, got {baseline!r}")
     options = shot_options(diameter, family)
     features = extract(waveform, **options)
-    if not options or features.tof_s is None or not features.incident_peak_N > 0:
-        return features
+    if (baseline == "pre-trigger" or not options or features.tof_s is None
+            or not features.incident_peak_N > 0):
+        return features, "pre-trigger"
     scene = chain_scene(float(diameter), family)
     relax = relaxation(scene, features.incident_peak_N, waveform.dt)
-    return extract(waveform, **options, relaxation_N=relax)
+    return extract(waveform, **options, relaxation_N=relax), "gap"

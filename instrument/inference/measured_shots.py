@@ -194,7 +194,8 @@ def check_metadata(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf,
     Sizes as :func:`check_sizes`; ``sphere_diameter`` groups the shots and sizes the inversion,
     so it must be a diameter in metres (0 < D <= :data:`SPHERE_DIAMETER_MAX`); ``x_m`` and
     ``y_m`` place the position on the plate: finite metres, within ``plate_size`` when the
-    caller knows the plate (its table's). ShotInputError naming the field (``field_of``).
+    caller knows the plate (its table's); ``baseline`` is one of
+    :data:`~.chain_geometry.BASELINES`. ShotInputError naming the field (``field_of``).
     """
     for i, meta in enumerate(metadata):
         check_sizes(meta, functools.partial(field_of, i))
@@ -203,6 +204,10 @@ def check_metadata(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf,
             raise ShotInputError(field_of(i, "sphere_diameter"), f"{d!r} is not a sphere "
                                  "diameter", f"a number of metres, 0 < D <= "
                                  f"{SPHERE_DIAMETER_MAX:g}")
+        b = meta.get("baseline")
+        if b is not None and b not in chain_geometry.BASELINES:
+            raise ShotInputError(field_of(i, "baseline"), f"{b!r} is not a baseline",
+                                 " or ".join(chain_geometry.BASELINES))
         for axis, key in enumerate(("x_m", "y_m")):
             v = meta.get(key)
             if v is None:
@@ -225,10 +230,11 @@ def _same(a: Any, b: Any) -> bool:
 
 def located(meta: Mapping[str, Any], sources: Sequence[tuple[str, Mapping[str, Any]]],
             where: str) -> dict[str, Any]:
-    """``meta`` with the location keys the ``sources`` (name, metadata) state; a key two of them
-    (the file included) state differently is a WaveformError naming both."""
+    """``meta`` with the location keys and the ``baseline`` the ``sources`` (name, metadata)
+    state; a key two of them (the file included) state differently is a WaveformError naming
+    both."""
     out = dict(meta)
-    for key in LOCATION_KEYS:
+    for key in (*LOCATION_KEYS, "baseline"):
         stated = [(f"the file ({where})", meta[key])] if meta.get(key) is not None else []
         stated += [(name, m[key]) for name, m in sources if m.get(key) is not None]
         for name, value in stated[1:]:
@@ -280,7 +286,8 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
                                **{k: meta.get(k) for k in LOCATION_KEYS}}
         diameter = _number(meta.get("sphere_diameter"))
         try:
-            feat = chain_geometry.measure_shot(w, diameter)
+            feat, row["baseline"] = chain_geometry.measure_shot_baseline(
+                w, diameter, baseline=meta.get("baseline") or "gap")
         except WaveformError as exc:
             row["error"] = str(exc)
             rows.append(row)

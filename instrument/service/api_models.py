@@ -80,6 +80,11 @@ class ShotMetadata(Strict):
                               "against, by id (GET /v1/tables); needed when several could serve")
     plate_material: MaterialName | PlateMaterialIn | None = (
         Field(None, description=PLATE_MATERIAL_HELP))
+    baseline: Literal["gap", "pre-trigger"] | None = Field(
+        None, description="what the shot's baseline is measured on where its sphere size is "
+        "stated: 'gap' (the default: the pre-trigger and the gap before the reflection, less the "
+        "chain's simulated relaxation; a drift does not move TOF or ARR) or 'pre-trigger' (for a "
+        "chain unlike the paper's)")
     extra: dict[Key, SCALAR] = Field(default_factory=dict, max_length=50,
                                      description="free-form key/value pairs, kept as given; "
                                                  "not the fields above, nor 'source' (a 422)")

@@ -157,7 +157,9 @@ def measure_shots(waveforms: Sequence[Waveform], prefix: str
     feats = []
     for i, wf in enumerate(waveforms):
         try:
-            feats.append(chain_geometry.measure_shot(wf, wf.metadata.get("sphere_diameter")))
+            feats.append(chain_geometry.measure_shot(wf, wf.metadata.get("sphere_diameter"),
+                                                     baseline=wf.metadata.get("baseline")
+                                                     or "gap"))
         except WaveformError as exc:  # an empty prefix: a lone shot whose fields are top-level
             raise waveform_error(exc, f"{prefix}.{i}" if prefix else "") from None
     return feats, measured_shots.summarise_shots(waveforms, feats)
