@@ -162,7 +162,7 @@ class DetectOptions:
     max_secondary: int = 8
     travel_time_1n_s: float | None = None
     pulse_width_1n_s: float | None = None
-    relaxation_N: tuple[float, ...] | None = None
+    relaxation_N: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> WaveformError:
@@ -203,8 +203,11 @@ class DetectOptions:
         ):
             raise bad("pulse_width_1n_s", "a positive duration in s, or None")
         if self.relaxation_N is not None:
-            relax = tuple(float(r) for r in self.relaxation_N)
-            if len(relax) < 2 or not all(math.isfinite(r) for r in relax):
+            try:  # the options' own copy, in the one array type the kernels take
+                relax = np.array(self.relaxation_N, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise bad("relaxation_N", "a sequence of levels in N, or None") from None
+            if relax.ndim != 1 or relax.size < 2 or not np.isfinite(relax).all():
                 raise bad("relaxation_N", "at least two finite levels in N, or None")
             object.__setattr__(self, "relaxation_N", relax)
 
@@ -307,7 +310,7 @@ def kernel_args(opts: DetectOptions, n: int, dt: float) -> tuple[Any, ...]:
         opts.threshold_sigma, opts.min_ratio, opts.fit_fraction,
         SHAPE_EXPONENT if free_r else opts.shape_exponent, opts.shape_skew, free_r, MAX_ITER,
         0.0 if opts.travel_time_1n_s is None else opts.travel_time_1n_s / dt,
-        np.zeros(0) if opts.relaxation_N is None else np.array(opts.relaxation_N, dtype=float),
+        np.zeros(0) if opts.relaxation_N is None else opts.relaxation_N,
     )
 
 

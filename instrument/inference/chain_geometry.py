@@ -38,12 +38,23 @@ stated must fit one of them."""
 
 
 def chain_scene(diameter: float, family: Scene | None = None) -> Scene:
-    """The scene of a chain of ``diameter`` spheres: ``family``'s with that size, or the paper's."""
+    """The scene of a chain of ``diameter`` spheres: ``family``'s with that size, or the paper's
+    (validated once per size: every measured shot asks)."""
     if family is None:
-        return scene_from_dict({"chain": {"diameter": float(diameter)}})
+        return _paper_chain(float(diameter))
     data = family.model_dump(mode="json")
     data["chain"]["diameter"] = float(diameter)
     return scene_from_dict(data)
+
+
+@functools.lru_cache(maxsize=64)
+def _paper_chain(diameter: float) -> Scene:
+    return scene_from_dict({"chain": {"diameter": diameter}})
+
+
+@functools.lru_cache(maxsize=64)
+def _paper_chain_json(diameter: float) -> str:
+    return _paper_chain(diameter).model_dump_json()
 
 
 def shot_options(diameter: Any, family: Scene | None = None) -> dict[str, float]:
@@ -110,7 +121,7 @@ RELAXATION_OVERSAMPLE = 8
 the shot's sample times after the model's incident peak."""
 
 
-def relaxation(scene: Scene, incident_peak_N: float, dt: float) -> tuple[float, ...]:
+def relaxation(scene: Scene, incident_peak_N: float, dt: float) -> np.ndarray:
     """The chain's own sensor level after an incident of ``incident_peak_N``, above the pre-impact
     reading, N, every ``dt`` from the incident's peak on, far enough for the latest reflection
     the travel gate accepts (``GATE_HI`` round trips).
@@ -120,15 +131,18 @@ def relaxation(scene: Scene, incident_peak_N: float, dt: float) -> tuple[float, 
     window: until the reflection comes back the sensor cannot tell the plate, so any plate gives
     the same level. Zeros after the incident without gravity (the contacts open behind the wave).
     """
+    return _relaxation(scene.model_dump_json(), _force_key(incident_peak_N), float(dt))
+
+
+def _force_key(incident_peak_N: float) -> int:
+    """The incident force's place on the grid of :data:`RELAXATION_STEP`."""
     if not (math.isfinite(incident_peak_N) and incident_peak_N > 0):
         raise ValueError(f"incident_peak_N must be a positive force, got {incident_peak_N!r}")
-    step = math.log1p(RELAXATION_STEP)
-    key = round(math.log(incident_peak_N) / step)
-    return _relaxation(scene.model_dump_json(), key, float(dt))
+    return round(math.log(incident_peak_N) / math.log1p(RELAXATION_STEP))
 
 
 @functools.lru_cache(maxsize=256)
-def _relaxation(scene_json: str, force_key: int, dt: float) -> tuple[float, ...]:
+def _relaxation(scene_json: str, force_key: int, dt: float) -> np.ndarray:
     from solitonde.model.simulate import simulate
     from solitonde.signal.kernels import GATE_HI
 
@@ -152,7 +166,8 @@ def _relaxation(scene_json: str, force_key: int, dt: float) -> tuple[float, ...]
     t = result.t0 + result.dt * np.arange(result.samples.size)
     at = t_peak + dt * np.arange(int((t[-1] - t_peak) / dt))
     level = np.interp(at, t, result.samples) - result.truth["static_sensor_N"]
-    return tuple(float(v) for v in level)
+    level.setflags(write=False)  # shared by every caller of the cache
+    return level
 
 
 BASELINES = ("gap", "pre-trigger")
@@ -185,6 +200,8 @@ def measure_shot_baseline(waveform: Waveform, diameter: Any, family: Scene | Non
     if (baseline == "pre-trigger" or not options or features.tof_s is None
             or not features.incident_peak_N > 0):
         return features, "pre-trigger"
-    scene = chain_scene(float(diameter), family)
-    relax = relaxation(scene, features.incident_peak_N, waveform.dt)
+    d = float(diameter)
+    scene_json = (_paper_chain_json(d) if family is None
+                  else chain_scene(d, family).model_dump_json())
+    relax = _relaxation(scene_json, _force_key(features.incident_peak_N), float(waveform.dt))
     return extract(waveform, **options, relaxation_N=relax), "gap"
