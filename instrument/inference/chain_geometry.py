@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from solitonde.model import zener
+from solitonde.model.errors import ModelError
 from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.signal.features import Features, extract
 from solitonde.signal.waveform import Waveform
@@ -191,8 +192,8 @@ def measure_shot_baseline(waveform: Waveform, diameter: Any, family: Scene | Non
     With a size (a positive number of metres): the travel gate and the width check
     (:func:`shot_options`), and, unless ``baseline`` is ``pre-trigger``, the drift measured on
     the gap against the chain's own relaxation (:func:`relaxation`; a second pass once the
-    incident's force is read). Without a size, or without a reflection to bound the gap: the
-    pre-trigger's baseline."""
+    incident's force is read). Without a size, without a reflection to bound the gap, or for a
+    chain the model cannot run: the pre-trigger's baseline."""
     if baseline not in BASELINES:
         raise ValueError(f"baseline must be one of {BASELINES}, got {baseline!r}")
     options = shot_options(diameter, family)
@@ -203,5 +204,8 @@ def measure_shot_baseline(waveform: Waveform, diameter: Any, family: Scene | Non
     d = float(diameter)
     scene_json = (_paper_chain_json(d) if family is None
                   else chain_scene(d, family).model_dump_json())
-    relax = _relaxation(scene_json, _force_key(features.incident_peak_N), float(waveform.dt))
+    try:
+        relax = _relaxation(scene_json, _force_key(features.incident_peak_N), float(waveform.dt))
+    except ModelError:  # a chain the model cannot run: the row says which baseline it got
+        return features, "pre-trigger"
     return extract(waveform, **options, relaxation_N=relax), "gap"
