@@ -58,16 +58,20 @@ def _paper_chain_json(diameter: float) -> str:
     return _paper_chain(diameter).model_dump_json()
 
 
-def shot_options(diameter: Any, family: Scene | None = None) -> dict[str, float]:
-    """:func:`detect_options` for a measured shot whose sphere size is ``diameter`` (m); none
-    where the size is not a positive number (the shot is then measured without them)."""
+def _size(diameter: Any) -> float | None:
+    """``diameter`` as a sphere size in metres, or None where it is not one."""
     try:
         d = float(diameter)
     except (TypeError, ValueError):
-        return {}
-    if not 1e-4 <= d <= 1.0:
-        return {}
-    return detect_options(chain_scene(d, family))
+        return None
+    return d if 1e-4 <= d <= 1.0 else None
+
+
+def shot_options(diameter: Any, family: Scene | None = None) -> dict[str, float]:
+    """:func:`detect_options` for a measured shot whose sphere size is ``diameter`` (m); none
+    where the size is not a positive number (the shot is then measured without them)."""
+    d = _size(diameter)
+    return {} if d is None else detect_options(chain_scene(d, family))
 
 
 def units_message(features: Features, diameter: float | None,
@@ -196,14 +200,14 @@ def measure_shot_baseline(waveform: Waveform, diameter: Any, family: Scene | Non
     chain the model cannot run: the pre-trigger's baseline."""
     if baseline not in BASELINES:
         raise ValueError(f"baseline must be one of {BASELINES}, got {baseline!r}")
-    options = shot_options(diameter, family)
+    d = _size(diameter)
+    scene = None if d is None else chain_scene(d, family)  # built once for both uses
+    options = {} if scene is None else detect_options(scene)
     features = extract(waveform, **options)
-    if (baseline == "pre-trigger" or not options or features.tof_s is None
+    if (d is None or scene is None or baseline == "pre-trigger" or features.tof_s is None
             or not features.incident_peak_N > 0):
         return features, "pre-trigger"
-    d = float(diameter)
-    scene_json = (_paper_chain_json(d) if family is None
-                  else chain_scene(d, family).model_dump_json())
+    scene_json = _paper_chain_json(d) if family is None else scene.model_dump_json()
     try:
         relax = _relaxation(scene_json, _force_key(features.incident_peak_N), float(waveform.dt))
     except ModelError:  # a chain the model cannot run: the row says which baseline it got

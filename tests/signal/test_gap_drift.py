@@ -14,7 +14,12 @@ import numpy as np
 import pytest
 from scipy_chain import solve
 
-from solitonde.instrument.inference.chain_geometry import chain_scene, measure_shot, relaxation
+from solitonde.instrument.inference.chain_geometry import (
+    chain_scene,
+    measure_shot,
+    relaxation,
+    shot_options,
+)
 from solitonde.model.scene import scene_from_dict
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import extract
@@ -57,8 +62,6 @@ def test_a_clean_trace_reads_as_the_tables_read_it(gravity_trace) -> None:
     is the extractor's alone (with the chain's gate, as the tables are built) within a tenth of
     the 0.3 % that issue 27 allows a reading's bias (1.3e-4 here: the relaxation is simulated at
     forces 1 % apart, and the reflection's leading tail starts within the gap's margin)."""
-    from solitonde.instrument.inference.chain_geometry import shot_options
-
     tables = extract(gravity_trace, **shot_options(D))
     shot = measure_shot(gravity_trace, D)
     assert shot.arr == pytest.approx(tables.arr, rel=3e-4)
