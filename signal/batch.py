@@ -21,7 +21,7 @@ import numpy as np
 
 from . import kernels as K
 from .errors import WaveformError
-from .features import FIELD_KINDS, Features
+from .features import FIELD_KINDS, Features, window_of
 from .pulses import FLAGS, DetectOptions, kernel_args, lowpass, quality_flags, width_ratio
 from .waveform import MIN_SAMPLES, UNITS, invalid_sample
 
@@ -167,11 +167,11 @@ def extract_batch(
         with ThreadPoolExecutor(len(blocks)) as pool:
             parts = list(pool.map(lambda block: K.analyze_batch(block, *args), blocks))
     heads, rows, counts = (np.concatenate(arrays) for arrays in zip(*parts, strict=True))
-    return _table(heads, rows, counts, t0, dt, opts)
+    return _table(heads, rows, counts, t0, dt, opts, x.shape[1])
 
 
 def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, dt: float,
-           opts: DetectOptions) -> FeatureTable:
+           opts: DetectOptions, n_samples: int) -> FeatureTable:
     """The arrays of :func:`analyze_batch` as features, with the flag logic of
     :func:`solitonde.signal.pulses.detect` done on whole columns."""
     nan = np.nan
@@ -236,4 +236,6 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
         "arr_peak": np.where(has_ref, rows[:, 1, K.P_PEAK_AMP]
                              / np.where(detected, rows[:, 0, K.P_PEAK_AMP], 1.0), nan),
         "incident_width_s": np.where(detected, inc_w, nan),
+        "reflection_window_s": np.where(
+            detected, window_of(t0 + (n_samples - 1) * dt, inc_t, inc_w), nan),
     })

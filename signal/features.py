@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from .errors import WaveformError
+from .kernels import TRUNC_SPAN
 from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
@@ -55,6 +56,9 @@ class Features:
     ``secondary_times_s`` and ``secondary_ratios`` list the pulses after the reflection (peak
     over the incident peak); ``incident_width_s`` is the incident's full width at half maximum
     (the fitted template's), which a solitary wave ties to its force and the sphere size.
+    ``reflection_window_s`` is the longest TOF the record could measure: from the incident's
+    peak to the record's end, less the reach a pulse needs to be whole (:func:`window_of`); a
+    shot without a reflection says nothing about one arriving later (None: not known).
 
     The fields are the one declaration of a shot's features: each field's ``metadata`` says its
     kind (:data:`NUMBER`, :data:`OPTIONAL`, :data:`SERIES`; ``flags`` is the list of flag names)
@@ -81,6 +85,7 @@ class Features:
     tof_peak_s: float | None = field(default=None, metadata=OPTIONAL)
     arr_peak: float | None = field(default=None, metadata=OPTIONAL)
     incident_width_s: float = field(default=0.0, metadata=NUMBER)
+    reflection_window_s: float | None = field(default=None, metadata=OPTIONAL)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict with unit-carrying keys, in field order; lists copied."""
@@ -96,6 +101,13 @@ FEATURES = tuple(f.name for f in fields(Features) if f.metadata.get("summarised"
 FIELD_KINDS: dict[str, str] = {f.name: f.metadata["kind"] for f in fields(Features)}
 """Each field of :class:`Features` and its kind (``number``, ``optional``, ``series``,
 ``flags``)."""
+
+
+def window_of(record_end_s: float, incident_time_s: float, incident_width_s: float) -> float:
+    """The longest TOF a record ending at ``record_end_s`` measures whole: a pulse whose peak
+    lies within ``TRUNC_SPAN`` FWHM of the record's end is truncated (the reflection's width
+    taken as the incident's)."""
+    return record_end_s - incident_time_s - TRUNC_SPAN * incident_width_s
 
 
 def from_detection(det: Detection) -> Features:
@@ -129,6 +141,8 @@ def from_detection(det: Detection) -> Features:
         tof_peak_s=None if ref is None else ref.peak_time_s - inc.peak_time_s,
         arr_peak=None if ref is None else ref.peak_height_N / inc.peak_height_N,
         incident_width_s=inc.width_s,
+        reflection_window_s=(None if det.record_end_s is None
+                             else window_of(det.record_end_s, inc.time_s, inc.width_s)),
     )
 
 
@@ -161,7 +175,9 @@ class Aggregate:
 
     ``rejected`` lists every shot index dropped as an outlier with the feature, value and
     modified z-score that condemned it; ``no_reflection`` the shots without a reflection (they
-    count for ``arr_upper_bound`` only).
+    count for ``arr_upper_bound`` only, which holds for a reflection arriving within
+    ``reflection_window_s`` of the incident: the shortest record's window, None when a shot's is
+    not known).
     """
 
     n_shots: int
@@ -170,6 +186,7 @@ class Aggregate:
     no_reflection: list[int]
     arr_upper_bound: float | None
     flag_counts: dict[str, int]
+    reflection_window_s: float | None = None
 
     def __getitem__(self, name: str) -> Stat:
         return self.stats[name]
@@ -182,7 +199,14 @@ class Aggregate:
         out["no_reflection"] = list(self.no_reflection)
         out["arr_upper_bound"] = self.arr_upper_bound
         out["flag_counts"] = dict(self.flag_counts)
+        out["reflection_window_s"] = self.reflection_window_s
         return out
+
+
+TRUNCATED_REASON = ("truncated: a pulse it measures runs past the record's start or end (the "
+                    "reflection cut by the end of the record, or the incident by its start); "
+                    "record longer after the trigger, or start it earlier")
+"""Why :func:`aggregate` rejects a truncated shot (the pipeline names it when every shot is)."""
 
 
 def _modified_z(values: np.ndarray) -> np.ndarray:
@@ -215,9 +239,12 @@ def aggregate(
     """Mean, standard deviation and count per feature over repeated shots, with outliers reported.
 
     A shot flagged ``implausible_units`` is rejected first (its numbers are in units nobody
-    stated). A shot is rejected when its TOF or ARR has a modified z-score above ``outlier_z``
-    among the shots with a reflection (only with at least ``min_for_rejection`` of them; ``None``
-    turns rejection off). Rejected shots are listed, never dropped silently.
+    stated), and so is one flagged ``truncated``: a pulse it measures runs past the record's
+    start or end, so its peak (or the reflection's very presence) is not whole, and neither its
+    TOF and ARR nor the absence of a reflection says anything. A shot is rejected when its TOF
+    or ARR has a modified z-score above ``outlier_z`` among the shots with a reflection (only
+    with at least ``min_for_rejection`` of them; ``None`` turns rejection off). Rejected shots
+    are listed, never dropped silently.
     """
     if not features:
         raise WaveformError("features", "nothing to aggregate", "at least one shot's features")
@@ -232,6 +259,13 @@ def aggregate(
                 "modified_z": None,
                 "reason": "implausible_units: the incident's width and amplitude disagree with "
                           "the chain's solitary wave (the units or the calibration)",
+            })
+        elif "truncated" in f.flags:
+            dropped.add(i)
+            rejected.append({
+                "index": i, "feature": "reflection_window_s", "value": f.reflection_window_s,
+                "modified_z": None,
+                "reason": TRUNCATED_REASON,
             })
     with_ref = [i for i, f in enumerate(features)
                 if f.tof_s is not None and f.arr is not None and i not in dropped]
@@ -262,6 +296,7 @@ def aggregate(
             std = float(np.std(vals, ddof=1)) if vals.size > 1 else None
             stats[name] = Stat(float(np.mean(vals)), std, int(vals.size))
     bounds = [b for i in no_ref if (b := features[i].arr_upper_bound) is not None]
+    windows = [w for i in no_ref if (w := features[i].reflection_window_s) is not None]
     counts: dict[str, int] = {}
     for f in features:
         for flag in f.flags:
@@ -273,4 +308,6 @@ def aggregate(
         no_reflection=no_ref,
         arr_upper_bound=max(bounds) if bounds and not with_ref else None,
         flag_counts=counts,
+        reflection_window_s=(min(windows) if windows and len(windows) == len(no_ref)
+                             and not with_ref else None),
     )

@@ -270,6 +270,8 @@ class Detection:
     flags: tuple[str, ...]
     arr_upper_bound: float | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    record_end_s: float | None = None
+    """Time of the record's last sample (how late a pulse could still be seen)."""
 
 
 def lowpass(x: np.ndarray, dt: float, cutoff: float) -> np.ndarray:
@@ -349,7 +351,8 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
     notes: list[str] = []
     noise = head[K.H_SIGMA]
     common = {"noise_N": noise, "threshold_N": head[K.H_THR],
-              "pretrigger_samples": int(head[K.H_NPRE]), "smooth_samples": int(head[K.H_SMOOTH])}
+              "pretrigger_samples": int(head[K.H_NPRE]), "smooth_samples": int(head[K.H_SMOOTH]),
+              "record_end_s": t0 + (x.size - 1) * dt}
     if head[K.H_EARLY]:
         notes.append("the incident pulse starts before a pre-trigger segment could be taken")
     if not rows:

@@ -101,8 +101,13 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
         est.reason = (est.reason + "; " if est.reason else "") + f"inconsistent: {why}"
     hidden = [i for i in est.inputs if i.hidden]
     for i in hidden:
-        warnings.append(f"no reflection with D = {i.diameter_m * 1e3:.3g} mm: its ARR bound "
-                        f"{i.arr_upper_bound:.3g} enters as an upper bound on the reflection")
+        within = ("" if i.tof_window_s is None else
+                  f" within {i.tof_window_s * 1e6:.4g} us of the incident (the records' end)")
+        later = ("" if i.tof_window_s is None else
+                 "; a later one, which the records could not show, is not excluded")
+        warnings.append(f"no reflection with D = {i.diameter_m * 1e3:.3g} mm{within}: its ARR "
+                        f"bound {i.arr_upper_bound:.3g} enters as an upper bound on the "
+                        f"reflection{later}")
     if est.calibration is None:
         warnings.append(NO_CALIBRATION)
     est.warnings = warnings + [w for w in est.warnings if w not in warnings]

@@ -7,8 +7,8 @@ same columns, so a script reads either. Every interval bound is its own column
 joined by "; ". What the estimate was made from follows, so that a plate's scan can be inverted
 jointly from the file (`solitonde map --joint`): ``table`` (the model table's id),
 ``size_summaries`` (JSON: per sphere size ``diameter_m``, ``tof_s``, ``tof_std_s``, ``arr``,
-``arr_std``, ``n_shots``, ``arr_upper_bound``, as the inversion read them), ``calibration`` and
-``material_spread`` (JSON, empty when none).
+``arr_std``, ``n_shots``, ``arr_upper_bound``, ``tof_window_s``, as the inversion read them),
+``calibration`` and ``material_spread`` (JSON, empty when none).
 """
 
 from __future__ import annotations

@@ -138,6 +138,9 @@ class FeatureSummary:
     arr_std: float | None = None
     n_shots: int = 1
     arr_upper_bound: float | None = None
+    tof_window_s: float | None = None
+    """A hidden size's: the longest TOF its records would have shown whole (the bound says
+    nothing of a reflection arriving later); None: no limit known."""
 
     def __post_init__(self) -> None:
         def check(name: str, value: Any, ok: bool, allowed: str) -> None:
@@ -169,6 +172,9 @@ class FeatureSummary:
                                          and v >= 0), ">= 0, or null for the default")
         check("n_shots", self.n_shots, isinstance(self.n_shots, int) and self.n_shots >= 1,
               "an integer >= 1")
+        check("tof_window_s", self.tof_window_s, self.tof_window_s is None or (
+            hidden and number(self.tof_window_s)), "a finite number of seconds, for a size "
+              "without TOF and ARR only, or null")
 
     @property
     def hidden(self) -> bool:
@@ -182,7 +188,7 @@ class FeatureSummary:
         if not isinstance(item, Mapping):
             raise InversionError("inputs", f"expected a mapping, got {type(item).__name__}")
         known = {"diameter_m", "tof_s", "arr", "tof_std_s", "arr_std", "n_shots",
-                 "arr_upper_bound"}
+                 "arr_upper_bound", "tof_window_s"}
         extra = set(item) - known
         if extra:
             raise InversionError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
@@ -199,7 +205,8 @@ class FeatureSummary:
             return None if item.get(key) is None else float(item[key])
 
         return cls(float(item["diameter_m"]), opt("tof_s"), opt("arr"), opt("tof_std_s"),
-                   opt("arr_std"), 1 if n is None else n, opt("arr_upper_bound"))
+                   opt("arr_std"), 1 if n is None else n, opt("arr_upper_bound"),
+                   opt("tof_window_s"))
 
     def sigmas(self) -> tuple[float, float]:
         """Standard errors of the mean TOF (s) and mean ARR, before the model error."""
@@ -698,7 +705,14 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
             sd = np.sqrt(item.bound_sigma() ** 2 + factor**2 * g.model_arr_var
                          + (f_std * g.arr_reflecting) ** 2)
             z = (item.arr_upper_bound - factor * g.arr_reflecting) / sd
-            like = (1.0 - g.reflect_weight) + g.reflect_weight * _normal_cdf(z)
+            under = _normal_cdf(z)
+            if item.tof_window_s is not None:
+                # a reflection later than the records' window would not have been seen: the
+                # bound holds only with the probability that the model's arrives within it
+                tof_sd = np.sqrt(g.model_tof_var + o_std**2 + MIN_TOF_STD_S**2)
+                p_in = _normal_cdf((item.tof_window_s - offset - np.nan_to_num(g.tof_s)) / tof_sd)
+                under = p_in * under + (1.0 - p_in)
+            like = (1.0 - g.reflect_weight) + g.reflect_weight * under
             term = -2.0 * np.log(np.maximum(like, 1e-300))
             bound_terms += term
             bound_list.append(term)

@@ -21,11 +21,15 @@ from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, invert
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableSet
-from solitonde.signal.features import Aggregate, Features, aggregate
+from solitonde.signal.features import TRUNCATED_REASON, Aggregate, Features, aggregate
 from solitonde.signal.json_ready import json_ready
 
 MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sphere size"
 """Why shots without a sphere size give no input (the command line names its flag instead)."""
+
+
+ALL_TRUNCATED = "every shot is truncated"
+"""Where a size's skip reason says its records were too short (``analyze --invert`` exits 1)."""
 
 
 def no_reflection(diameter_m: float) -> str:
@@ -52,6 +56,10 @@ class SizeSummary:
             return (f"sphere_diameter {self.diameter_m:g} m: every shot is implausible_units "
                     "(its incident's width and force disagree with this chain's solitary wave: "
                     "check the calibration, the units of the file's force and time columns)")
+        cut = [r for r in self.aggregate.rejected if r.get("reason") == TRUNCATED_REASON]
+        if self.hidden and cut and len(cut) + len(implausible) == self.aggregate.n_shots:
+            return (f"sphere_diameter {self.diameter_m:g} m: {ALL_TRUNCATED}"
+                    f"{TRUNCATED_REASON.removeprefix('truncated')}")
         if self.hidden and self.aggregate.arr_upper_bound is None:
             return no_reflection(self.diameter_m)
         return None
@@ -70,7 +78,8 @@ class SizeSummary:
         if self.hidden:
             return FeatureSummary(float(self.diameter_m), None, None,
                                   n_shots=max(int(self.aggregate.n_shots), 1),
-                                  arr_upper_bound=float(self.aggregate.arr_upper_bound))
+                                  arr_upper_bound=float(self.aggregate.arr_upper_bound),
+                                  tof_window_s=self.aggregate.reflection_window_s)
         tof, arr = self.aggregate["tof_s"], self.aggregate["arr"]
         return FeatureSummary(float(self.diameter_m), float(tof.mean), float(arr.mean),
                               tof.std, arr.std, max(int(tof.count), 1))

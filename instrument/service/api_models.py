@@ -235,6 +235,10 @@ class InversionInput(Strict):
     arr_upper_bound: float | None = Field(None, gt=0, le=1.5, description="for a size without a "
                                           "reflection (tof_s and arr null): the largest ARR that "
                                           "could hide under the noise; it bounds the thickness")
+    tof_window_s: float | None = Field(
+        None, gt=0, le=1.0, description="for a size without a reflection: the longest TOF its "
+        "records show whole (record end - incident peak - 2.5 FWHM); a reflection arriving later "
+        "is not bounded. Null: the records are taken as long enough")
 
 
 class CalibrationEntry(Strict):

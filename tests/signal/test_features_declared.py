@@ -21,7 +21,7 @@ JSON_KEYS = (
     "tof_s", "arr", "incident_time_s", "reflected_time_s", "incident_peak_N", "reflected_peak_N",
     "snr_db", "flags", "arr_upper_bound", "secondary_times_s", "secondary_ratios", "baseline_N",
     "noise_N", "arr_local", "incident_rise_N", "reflected_rise_N", "tof_peak_s", "arr_peak",
-    "incident_width_s",
+    "incident_width_s", "reflection_window_s",
 )
 """The JSON keys of a shot's features: a public contract (the service stores and serves them)."""
 
