@@ -204,10 +204,31 @@ def info_command(
                    f"solitonde {prov.get('solitonde_version')} git {prov.get('git_revision')}")
 
 
+def slopes_command(
+    file: Path = typer.Argument(DEFAULT_TABLE_PATH, help="table file"),
+) -> None:
+    """Simulate how the table's features move with the plate material (E, rho) far from the
+    supports and write it into the table (table build does; for a table built before)."""
+    import time
+
+    from solitonde.instrument.tables.material_slopes import add_to_table
+
+    started = time.perf_counter()
+    try:
+        slopes = add_to_table(file)
+    except TableError as exc:
+        _fail(str(exc))
+        return
+    n_d, n_t, _ = slopes["arr"].shape
+    typer.echo(f"wrote material_slopes into {file}: {n_d} sphere size(s) x {n_t} thicknesses "
+               f"in {time.perf_counter() - started:.1f} s")
+
+
 def register(app: typer.Typer) -> None:
     """Add the `table` command group to the CLI."""
     group = typer.Typer(help="Build and inspect model tables.", no_args_is_help=True,
                         rich_markup_mode=HELP_MARKUP)
     group.command("build")(build_command)
     group.command("info")(info_command)
+    group.command("slopes")(slopes_command)
     app.add_typer(group, name="table")

@@ -24,10 +24,20 @@ shared by every feature and sphere size of a measurement (one plate, one materia
 inversion adds to its per-term variances exactly (Woodbury), not as independent terms (that
 would count the one material error once per feature and shrink it as sizes are added). Linear
 is enough: a grade's spread is a few percent, over which the table's features are smooth in
-ln t and L. Why not a table axis or a marginal over nearby families: either needs tables the
-user does not have (a material axis multiplies a build's cost by its points; a marginal needs a
-table per neighbouring material), while the exchange rates above need only the family's
-materials, which every table records, so the bundled tables carry the spread as they are.
+ln t and L.
+
+Where the table carries its simulated slopes (:mod:`solitonde.instrument.tables.material_slopes`,
+written by ``table build`` and ``table slopes``), the contact's share far from the supports is
+taken from them instead: the chain's reflection also depends on the plate's contact stiffness
+against the chain's own, which lambda leaves out, and the exchange rates fell short of the
+slopes a second table at E = 210 GPa, nu = 0.30 shows by 10-45 % in TOF and 4-18 % in ARR on the
+bundled steel table (with the simulated slopes: within 3 %). Near a support the distance's share
+stays the exchange rates' (within 20 mm of the clamp they overstate the slopes, by up to 2.5
+times in ARR: the intervals there are wider than they need be, not narrower). Why not a
+material axis or a marginal over nearby families: a material axis multiplies a build's cost by
+its points near the supports (the meshed plate, about a second a point), and a marginal over
+the grade's box does not cover a plate at its corner either (the data do not tell the material
+from the thickness: docs/inversion.md); far from the supports the slopes cost 4 runs a node.
 """
 
 from __future__ import annotations
@@ -114,7 +124,17 @@ def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
     near[:, :-1] &= ok[:, 1:]
     out = []
     t_c = _contact_time(table, grid.diameter_m, grid.thickness_m)[:, None]
-    for values, explicit in ((grid.tof_s, True), (grid.arr, False)):
+    simulated = table.material_slopes
+    i_d = table.diameter_index(grid.diameter_m)
+    if simulated is not None:
+        from solitonde.instrument.inference.inversion import FLOOR_ARR_MAX, REFLECTION_D_OVER_T
+
+        # a floor-level "reflection" (a train the detector picks differently run to run) has no
+        # slope to speak of: there the exchange rates stand, and the inversion's floor looseness
+        t_nodes = table.axes["thickness_m"]
+        far_arr = table.features["arr"][i_d][:, -1]
+        floor = (grid.diameter_m / t_nodes > REFLECTION_D_OVER_T) & ~(far_arr >= FLOOR_ARR_MAX)
+    for name, values, explicit in (("tof_s", grid.tof_s, True), ("arr", grid.arr, False)):
         slope_t = np.gradient(values, log_t, axis=0) if log_t.size > 1 else np.zeros_like(values)
         slope_l = (np.gradient(values, grid.distance_m, axis=1) if grid.distance_m.size > 1
                    else np.zeros_like(values))
@@ -122,11 +142,32 @@ def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
                + (slope_l * grid.distance_m[None, :])[..., None] * (-d_ln_c))
         if explicit:
             jac += (-0.4 * w * t_c)[..., None] * d_ln_e_prime
+        if simulated is not None:
+            # the contact's share as simulated far from the supports, where the exchange rates
+            # leave out the chain's own contact; near a support the distance's share stays
+            jac += _far_correction(np.where(floor[:, None], np.nan, simulated[name][i_d]),
+                                   table.axes["thickness_m"], log_t, jac[:, -1, :])[:, None, :]
         jac[~near] = 0.0
         out.append(np.ascontiguousarray(np.moveaxis(jac * sd2, -1, 0)))
     result = (out[0], out[1])
     table._cache[key] = result
     return result
+
+
+def _far_correction(nodes: np.ndarray, t_nodes: np.ndarray, log_t: np.ndarray,
+                    rates_far: np.ndarray) -> np.ndarray:
+    """Per fine thickness, the simulated slopes far from the supports (``nodes``, (t, 2), NaN
+    where a run showed no reflection) less the exchange rates' there (``rates_far``): zero where
+    no simulated slope brackets the thickness."""
+    out = np.zeros_like(rates_far)
+    for k in range(nodes.shape[1]):
+        ok = np.isfinite(nodes[:, k])
+        if ok.sum() < 2:
+            continue
+        x = np.log(t_nodes[ok])
+        inside = (log_t >= x[0]) & (log_t <= x[-1]) & np.isfinite(rates_far[:, k])
+        out[inside, k] = np.interp(log_t[inside], x, nodes[ok, k]) - rates_far[inside, k]
+    return out
 
 
 def spread_of(table: ModelTable, plate_material: Any = None) -> dict[str, float]:

@@ -93,6 +93,9 @@ class ModelTable:
     flag_names: tuple[str, ...] = ()
     plate_model_names: tuple[str, ...] = PLATE_MODEL_NAMES
     path: Path | None = None
+    material_slopes: dict[str, np.ndarray] | None = None
+    """The features' slopes along ``ln E'`` and ``ln rho`` far from the supports, per sphere
+    size and thickness (:mod:`.material_slopes`); None for a table built before them."""
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @property
@@ -131,6 +134,8 @@ class ModelTable:
             dataset or attribute, has one of the wrong shape, or an axis that is not finite and
             strictly increasing (the field names the dataset, e.g. ``features/arr``).
         """
+        from solitonde.instrument.tables.material_slopes import read_slopes
+
         path = Path(path)
         if not path.is_file():
             raise TableError("table", f"no such file: {str(path)!r}")
@@ -173,6 +178,7 @@ class ModelTable:
                 plate_model_names=tuple(_json_attr(fh, "plate_model_names", "[]", list))
                 or PLATE_MODEL_NAMES,
                 path=path,
+                material_slopes=read_slopes(fh, grid),
             )
             table._cache["sha256"] = digest
             return table

@@ -33,6 +33,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from solitonde.instrument.tables.material_slopes import simulate_slopes, write_slopes
 from solitonde.instrument.tables.measured import PRETRIGGER_FRACTION, as_measured, detect_options
 from solitonde.instrument.tables.table import (
     AXES,
@@ -576,6 +577,7 @@ def build_table(
             fh.flush()
         complete = bool(fh["done"][...].all())
         if complete:
+            write_slopes(fh, simulate_slopes(sweep))
             fh.attrs["provenance"] = json.dumps(_provenance(fh, sweep, runner, command,
                                                             table_id))
             fh.attrs["complete"] = True
