@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -103,10 +103,14 @@ FIELD_KINDS: dict[str, str] = {f.name: f.metadata["kind"] for f in fields(Featur
 ``flags``)."""
 
 
-def window_of(record_end_s: float, incident_time_s: float, incident_width_s: float) -> float:
+Seconds = TypeVar("Seconds", float, np.ndarray)
+
+
+def window_of(record_end_s: float, incident_time_s: Seconds, incident_width_s: Seconds
+              ) -> Seconds:
     """The longest TOF a record ending at ``record_end_s`` measures whole: a pulse whose peak
     lies within ``TRUNC_SPAN`` FWHM of the record's end is truncated (the reflection's width
-    taken as the incident's)."""
+    taken as the incident's). Per shot (floats) or for a batch (arrays, one element a shot)."""
     return record_end_s - incident_time_s - TRUNC_SPAN * incident_width_s
 
 
@@ -207,6 +211,10 @@ TRUNCATED_REASON = ("truncated: a pulse it measures runs past the record's start
                     "reflection cut by the end of the record, or the incident by its start); "
                     "record longer after the trigger, or start it earlier")
 """Why :func:`aggregate` rejects a truncated shot (the pipeline names it when every shot is)."""
+SATURATED_REASON = ("saturated: the record's top value repeats over the incident's peak (the "
+                    "sensor, amplifier or scope clipped it), so the peak and every ratio to it "
+                    "read wrong; lower the gain or widen the scope's range")
+"""Why :func:`aggregate` rejects a saturated shot."""
 
 
 def _modified_z(values: np.ndarray) -> np.ndarray:
@@ -241,7 +249,9 @@ def aggregate(
     A shot flagged ``implausible_units`` is rejected first (its numbers are in units nobody
     stated), and so is one flagged ``truncated``: a pulse it measures runs past the record's
     start or end, so its peak (or the reflection's very presence) is not whole, and neither its
-    TOF and ARR nor the absence of a reflection says anything. A shot is rejected when its TOF
+    TOF and ARR nor the absence of a reflection says anything; and one flagged ``saturated``: its
+    incident's peak was clipped, so its ARR reads high (a 4.0 mm steel plate cut at 25 N of its
+    33.7 N read ARR 0.84 for 0.67). A shot is rejected when its TOF
     or ARR has a modified z-score above ``outlier_z`` among the shots with a reflection (only
     with at least ``min_for_rejection`` of them; ``None`` turns rejection off). Rejected shots
     are listed, never dropped silently.
@@ -266,6 +276,13 @@ def aggregate(
                 "index": i, "feature": "reflection_window_s", "value": f.reflection_window_s,
                 "modified_z": None,
                 "reason": TRUNCATED_REASON,
+            })
+        elif "saturated" in f.flags:
+            dropped.add(i)
+            rejected.append({
+                "index": i, "feature": "incident_peak_N", "value": f.incident_peak_N,
+                "modified_z": None,
+                "reason": SATURATED_REASON,
             })
     with_ref = [i for i, f in enumerate(features)
                 if f.tof_s is not None and f.arr is not None and i not in dropped]

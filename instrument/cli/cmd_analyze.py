@@ -370,7 +370,7 @@ def analyze(
     if invert:
         from solitonde.instrument.cli.cmd_invert import table_path
         from solitonde.instrument.inference.calibration import CalibrationError
-        from solitonde.instrument.inference.pipeline import ALL_TRUNCATED
+        from solitonde.instrument.inference.pipeline import ALL_SATURATED, ALL_TRUNCATED
         from solitonde.instrument.tables.table import TableError
 
         try:
@@ -389,9 +389,11 @@ def analyze(
             elif est.get("estimate") is None and any(
                     s.get("reason") == MISSING_SIZE_FLAG for s in est.get("skipped", [])):
                 errors.append({"source": where, "error": MISSING_SIZE_FLAG})
-            elif est.get("estimate") is None and (cut := [
-                    s["reason"] for s in est.get("skipped", []) if ALL_TRUNCATED in s["reason"]]):
-                errors.append({"source": where, "error": cut[0]})  # records too short to answer
+            elif est.get("estimate") is None and (unreadable := [
+                    s["reason"] for s in est.get("skipped", [])
+                    if ALL_TRUNCATED in s["reason"] or ALL_SATURATED in s["reason"]]):
+                # records too short, or clipped: no answer can be read from them
+                errors.append({"source": where, "error": unreadable[0]})
             elif (est.get("estimate") or {}).get("thickness_m", {}).get("status") in (
                     "inconsistent", "out_of_range"):
                 # an answer the table's family does not explain is no answer to act on

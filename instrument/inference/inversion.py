@@ -718,7 +718,8 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
             bound_list.append(term)
             continue
         s_tof, s_arr = item.sigmas()
-        u_pair = sensitivity(table, g, spread) if spread else None
+        u_pair = (sensitivity(table, g, spread, (REFLECTION_D_OVER_T, FLOOR_ARR_MAX)) if spread
+                  else None)
         share = shared_calibration and keep is not None
         for k, (model, obs, scale, s2, model_var, rel2) in enumerate((
             (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + (0.0 if share else o_std**2),

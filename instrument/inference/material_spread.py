@@ -84,7 +84,8 @@ def exchange_rates(plate: Mapping[str, Any], sphere: Mapping[str, Any]) -> dict[
     return {"contact_share": w, "d_ln_lambda": (0.4 * w - 0.5, -0.5), "d_ln_c": (0.5, -0.5)}
 
 
-def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
+def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float],
+                floor_rule: tuple[float, float] | None = None
                 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The material's covariance factors for one sphere size (``grid``, its
     :class:`~.inversion.FineGrid`; not imported, as the inversion imports this module):
@@ -94,13 +95,16 @@ def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
     covariance between two terms is ``U_a . U_b``. None when the spread is zero or the table
     records no family.
 
-    Cached on the table per sphere size and spread.
+    ``floor_rule`` (the inversion's ``(REFLECTION_D_OVER_T, FLOOR_ARR_MAX)``): thickness nodes
+    beyond that D/t whose far reflection is weaker than that ARR keep the exchange rates.
+
+    Cached on the table per sphere size, spread and floor rule.
     """
     sd = np.array([float(spread.get(k) or 0.0) for k in SPREAD_ORDER])
     family = table.family
     if not sd.any() or not family:
         return None
-    key = f"material:{grid.diameter_m}:{tuple(sd)}"
+    key = f"material:{grid.diameter_m}:{tuple(sd)}:{floor_rule}"
     cached = table._cache.get(key)
     if cached is not None:
         return cached
@@ -126,14 +130,13 @@ def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float]
     t_c = _contact_time(table, grid.diameter_m, grid.thickness_m)[:, None]
     simulated = table.material_slopes
     i_d = table.diameter_index(grid.diameter_m)
-    if simulated is not None:
-        from solitonde.instrument.inference.inversion import FLOOR_ARR_MAX, REFLECTION_D_OVER_T
-
+    floor = np.zeros(table.axes["thickness_m"].size, dtype=bool)
+    if simulated is not None and floor_rule is not None:
         # a floor-level "reflection" (a train the detector picks differently run to run) has no
         # slope to speak of: there the exchange rates stand, and the inversion's floor looseness
-        t_nodes = table.axes["thickness_m"]
+        d_over_t, arr_max = floor_rule
         far_arr = table.features["arr"][i_d][:, -1]
-        floor = (grid.diameter_m / t_nodes > REFLECTION_D_OVER_T) & ~(far_arr >= FLOOR_ARR_MAX)
+        floor = (grid.diameter_m / table.axes["thickness_m"] > d_over_t) & ~(far_arr >= arr_max)
     for name, values, explicit in (("tof_s", grid.tof_s, True), ("arr", grid.arr, False)):
         slope_t = np.gradient(values, log_t, axis=0) if log_t.size > 1 else np.zeros_like(values)
         slope_l = (np.gradient(values, grid.distance_m, axis=1) if grid.distance_m.size > 1

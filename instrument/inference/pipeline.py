@@ -21,7 +21,13 @@ from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, invert
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableSet
-from solitonde.signal.features import TRUNCATED_REASON, Aggregate, Features, aggregate
+from solitonde.signal.features import (
+    SATURATED_REASON,
+    TRUNCATED_REASON,
+    Aggregate,
+    Features,
+    aggregate,
+)
 from solitonde.signal.json_ready import json_ready
 
 MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sphere size"
@@ -29,7 +35,9 @@ MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sph
 
 
 ALL_TRUNCATED = "every shot is truncated"
-"""Where a size's skip reason says its records were too short (``analyze --invert`` exits 1)."""
+ALL_SATURATED = "every shot is saturated"
+"""Where a size's skip reason says its records cannot be read (too short, or clipped):
+``analyze --invert`` then exits 1."""
 
 
 def no_reflection(diameter_m: float) -> str:
@@ -56,10 +64,12 @@ class SizeSummary:
             return (f"sphere_diameter {self.diameter_m:g} m: every shot is implausible_units "
                     "(its incident's width and force disagree with this chain's solitary wave: "
                     "check the calibration, the units of the file's force and time columns)")
-        cut = [r for r in self.aggregate.rejected if r.get("reason") == TRUNCATED_REASON]
-        if self.hidden and cut and len(cut) + len(implausible) == self.aggregate.n_shots:
-            return (f"sphere_diameter {self.diameter_m:g} m: {ALL_TRUNCATED}"
-                    f"{TRUNCATED_REASON.removeprefix('truncated')}")
+        for reason, every in ((TRUNCATED_REASON, ALL_TRUNCATED),
+                              (SATURATED_REASON, ALL_SATURATED)):
+            these = [r for r in self.aggregate.rejected if r.get("reason") == reason]
+            if self.hidden and these and len(these) == self.aggregate.n_shots:
+                return (f"sphere_diameter {self.diameter_m:g} m: {every}"
+                        f"{reason[reason.index(':'):]}")
         if self.hidden and self.aggregate.arr_upper_bound is None:
             return no_reflection(self.diameter_m)
         return None

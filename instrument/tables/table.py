@@ -134,8 +134,6 @@ class ModelTable:
             dataset or attribute, has one of the wrong shape, or an axis that is not finite and
             strictly increasing (the field names the dataset, e.g. ``features/arr``).
         """
-        from solitonde.instrument.tables.material_slopes import read_slopes
-
         path = Path(path)
         if not path.is_file():
             raise TableError("table", f"no such file: {str(path)!r}")
@@ -230,6 +228,30 @@ class ModelTable:
 
 
 # Reading and checking a table file ---------------------------------------------------------------
+
+
+MATERIAL_SLOPES = "material_slopes"
+"""The group holding how the features move with the plate material (``table build`` writes it:
+instrument.tables.material_slopes)."""
+SLOPE_COMPONENTS = ("ln_e_prime", "ln_rho")
+
+
+def read_slopes(fh: h5py.File, shape: tuple[int, ...]) -> dict[str, np.ndarray] | None:
+    """The stored slopes, or None for a table built before they were (the inversion then uses
+    the exchange rates alone). Raises TableError for a group of the wrong shape."""
+    if MATERIAL_SLOPES not in fh:
+        return None
+    want = (shape[0], shape[1], len(SLOPE_COMPONENTS))
+    out = {}
+    for name in ("tof_s", "arr"):
+        group = fh[MATERIAL_SLOPES]
+        values = np.asarray(group[name][...], dtype=float) if name in group else None
+        if values is None or values.shape != want:
+            raise TableError(f"{MATERIAL_SLOPES}/{name}", f"expected shape {want}, got "
+                             f"{None if values is None else values.shape}")
+        out[name] = values
+    return out
+
 
 
 def _read(fh: h5py.File, name: str, dtype: Any) -> np.ndarray:

@@ -16,6 +16,7 @@ their ``done`` mask, so an interrupted build resumes where it stopped. The file 
 
 from __future__ import annotations
 
+import copy
 import importlib.metadata
 import json
 import math
@@ -33,16 +34,17 @@ from typing import Any
 import h5py
 import numpy as np
 
-from solitonde.instrument.tables.material_slopes import simulate_slopes, write_slopes
 from solitonde.instrument.tables.measured import PRETRIGGER_FRACTION, as_measured, detect_options
 from solitonde.instrument.tables.table import (
     AXES,
     FORMAT,
     FORMAT_VERSION,
+    MATERIAL_SLOPES,
     MAX_SECONDARY,
     PLATE_MODEL_NAMES,
     SCALAR_FEATURES,
     SECONDARY_FEATURES,
+    SLOPE_COMPONENTS,
     STATUS_FAILED,
     STATUS_NO_REFLECTION,
     STATUS_OK,
@@ -585,6 +587,65 @@ def build_table(
         os.replace(part, out)
     return BuildReport(out if complete else part, complete, written, plates,
                        time.perf_counter() - started, runner)
+
+
+
+# The material slopes ------------------------------------------------------------------------
+
+SLOPE_STEP = 0.03
+"""Relative change of E (at fixed nu) and of rho either way for the central difference: about a
+grade's spread, so the slope is the secant over the range the inversion uses it for, and large
+against the extractor's run-to-run rounding on weak reflections."""
+
+def _material(plate: Mapping[str, Any]) -> dict[str, Any]:
+    """The plate material as a property mapping (a library name resolved)."""
+    from solitonde.model.materials import material_of
+
+    mat = plate["material"]
+    if isinstance(mat, Mapping):
+        return dict(mat)
+    m = material_of(mat, "plate.material")
+    return {"name": m.name, "youngs_modulus": m.youngs_modulus,
+            "poisson_ratio": m.poisson_ratio, "density": m.density}
+
+
+def simulate_slopes(sweep: Any) -> dict[str, np.ndarray]:
+    """``{"tof_s": (D, t, 2), "arr": (D, t, 2)}`` for a table's sweep
+    (:class:`~.table_build.Sweep`): the features' slopes along ``ln E'`` and ``ln rho`` at
+    each sphere size and thickness, far from the supports; NaN where a run shows no
+    reflection."""
+    n_d, n_t = len(sweep.diameters_m), len(sweep.thicknesses_m)
+    out = {name: np.full((n_d, n_t, 2), np.nan) for name in ("tof_s", "arr")}
+    far = len(sweep.distances_m) - 1
+    for i_d in range(n_d):
+        for i_t in range(n_t):
+            base = sweep.scene_at(i_d, i_t, far).model_dump(mode="json")
+            base["effects"]["plate_model"] = "infinite"
+            base["plate"]["material"] = _material(base["plate"])
+            for k, key in enumerate(("youngs_modulus", "density")):
+                ends = []
+                for sign in (1.0, -1.0):
+                    data = copy.deepcopy(base)
+                    data["plate"]["material"][key] *= 1.0 + sign * SLOPE_STEP
+                    data["plate"]["material"]["name"] = f"{key} {sign * SLOPE_STEP:+g}"
+                    ends.append(simulate_point(scene_from_dict(data)))
+                if all(e.get("tof_s") is not None and e.get("arr") is not None for e in ends):
+                    span = math.log((1.0 + SLOPE_STEP) / (1.0 - SLOPE_STEP))
+                    for name in out:
+                        out[name][i_d, i_t, k] = (ends[0][name] - ends[1][name]) / span
+    return out
+
+
+def write_slopes(fh: h5py.File, slopes: Mapping[str, np.ndarray]) -> None:
+    """Store ``slopes`` in an open table file (replacing any there)."""
+    if MATERIAL_SLOPES in fh:
+        del fh[MATERIAL_SLOPES]
+    group = fh.create_group(MATERIAL_SLOPES)
+    group.attrs["components"] = list(SLOPE_COMPONENTS)
+    group.attrs["step"] = SLOPE_STEP
+    group.attrs["plate_model"] = "infinite"
+    for name, values in slopes.items():
+        group.create_dataset(name, data=np.asarray(values, dtype=float))
 
 
 # The default table's sweep -----------------------------------------------------------------

@@ -20,8 +20,8 @@ from independent_chain import sensor_trace
 
 from solitonde.instrument.inference.inversion import fine_grid
 from solitonde.instrument.inference.material_spread import sensitivity
-from solitonde.instrument.tables.material_slopes import GROUP, add_to_table
-from solitonde.instrument.tables.table import ModelTable
+from solitonde.instrument.tables.material_slopes import add_to_table
+from solitonde.instrument.tables.table import MATERIAL_SLOPES, ModelTable
 from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform
 
@@ -33,7 +33,7 @@ E_STEP = 1.05
 
 
 def _features(plate: dict[str, float], thickness_m: float) -> tuple[float, float]:
-    t, force = sensor_trace(plate, thickness_m, duration_s=1.0e-3)
+    t, force = sensor_trace(plate, thickness_m, duration_s=8.0e-4)
     dt = t[1] - t[0]
     pre = np.full(400, force[0])
     f = extract(Waveform(t[0] - dt * pre.size, dt, np.concatenate([pre, force])))
@@ -89,7 +89,7 @@ def test_slopes_are_added_to_an_older_table_in_place(tmp_path: Path) -> None:
     old = tmp_path / "old.h5"
     shutil.copyfile(STEEL_TABLE, old)
     with h5py.File(old, "r+") as fh:
-        del fh[GROUP]
+        del fh[MATERIAL_SLOPES]
     before = ModelTable.load(old)
     assert before.material_slopes is None
     add_to_table(old)

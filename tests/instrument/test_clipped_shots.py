@@ -1,0 +1,86 @@
+"""A clipped incident is no reading, on recordings from an independent solve.
+
+A 4.0 mm structural-steel plate under the paper's chain (D 9.53 mm, gravity on), solved by
+scipy's DOP853 on Zener's dashpot (tests/support/independent_chain.py, no model code), five
+shots at 40 dB, then cut at the scope's rail as an ADC does (the noise first, the clip last). The
+incident peaks at 33.7 N; with the rail at 25 N its top is lost, the ARR reads 0.84 instead of
+0.67, and the inversion read "2.08 mm, 95 % 1.88-2.91, constrained" with exit 0 although every
+shot was flagged ``saturated``. Now a saturated shot is rejected from the aggregate, listed with
+the reason, and a size whose every shot is gives no input: ``analyze --invert`` exits 1 saying so.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from independent_chain import sensor_trace, write_shots
+from typer.testing import CliRunner
+
+from solitonde.instrument.cli.main import build_app
+from solitonde.signal import io as signal_io
+from solitonde.signal.features import aggregate, extract
+
+ROOT = Path(__file__).resolve().parents[2]
+STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
+STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
+
+
+def _clipped(folder: Path, rail_n: float, clip_shots: int = 5) -> Path:
+    """Five noisy shots of the independent solve, the first ``clip_shots`` cut at ``rail_n``."""
+    t, force = sensor_trace(STEEL, 4.0e-3, duration_s=1.0e-3)
+    path = write_shots(folder / f"rail_{rail_n:g}_{clip_shots}.csv", t, force, shots=5,
+                       snr_db=40.0, seed=1, metadata={"plate_id": "steel-4mm"})
+    lines = path.read_text().splitlines()
+    out = []
+    for line in lines:
+        if line.startswith("#") or line.startswith("time"):
+            out.append(line)
+            continue
+        values = line.split(",")
+        shots = [float(v) for v in values[1:]]
+        shots = [min(v, rail_n) if k < clip_shots else v for k, v in enumerate(shots)]
+        out.append(",".join([values[0], *(repr(v) for v in shots)]))
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+def _analyze(path: Path) -> tuple[int, dict]:
+    result = CliRunner().invoke(build_app(), [
+        "analyze", str(path), "--invert", "--sphere-diameter", "9.53e-3", "--table",
+        str(STEEL_TABLE), "--json"])
+    return result.exit_code, json.loads(result.stdout)
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("clipped")
+
+
+def test_every_shot_clipped_is_no_answer(folder: Path) -> None:
+    path = _clipped(folder, 25.0)
+    features = [extract(w) for w in signal_io.read(path)]
+    assert all("saturated" in f.flags for f in features)
+    assert np.mean([f.arr for f in features]) > 0.8  # what the clipped peak reads (truth 0.67)
+    agg = aggregate(features)
+    assert agg["arr"].count == 0
+    assert [r["reason"].split(":")[0] for r in agg.rejected] == ["saturated"] * 5
+    code, out = _analyze(path)
+    assert code == 1
+    assert out["estimates"][0]["estimate"] is None
+    message = out["errors"][0]["error"]
+    assert "every shot is saturated" in message and "range" in message
+
+
+def test_the_unclipped_shots_answer_alone(folder: Path) -> None:
+    """Two of five shots clipped: the three whole ones give the answer, 4.0 mm within reach."""
+    code, out = _analyze(_clipped(folder, 25.0, clip_shots=2))
+    assert code == 0, out["errors"]
+    agg = out["aggregates"][0]
+    assert [r["index"] for r in agg["rejected"]] == [0, 1]
+    est = out["estimates"][0]["estimate"]
+    assert est["inputs"][0]["n_shots"] == 3
+    assert est["thickness_m"]["status"] == "constrained"
+    assert abs(est["thickness_m"]["median"] - 4.0e-3) < 0.1e-3
