@@ -22,7 +22,16 @@ import numpy as np
 from . import kernels as K
 from .errors import WaveformError
 from .features import FIELD_KINDS, Features, window_of
-from .pulses import FLAGS, DetectOptions, kernel_args, lowpass, quality_flags, width_ratio
+from .pulses import (
+    FLAGS,
+    DetectOptions,
+    early_pulse,
+    kernel_args,
+    lowpass,
+    quality_flags,
+    trip_s,
+    width_ratio,
+)
 from .waveform import MIN_SAMPLES, UNITS, invalid_sample
 
 FLAG_BITS = {name: 1 << k for k, name in enumerate(FLAGS)}
@@ -204,13 +213,17 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
     cut = rows[:, :, K.P_TRUNC] != 0  # only the incident and the reflection count
     ratio = np.array([width_ratio(w, a, opts.pulse_width_1n_s)
                       for w, a in zip(inc_w, inc_a, strict=True)], dtype=np.float64)
+    # the rows past a shot's count are zeros: a negative delay and a zero ratio, no pulse
+    early_one = early_pulse(times[:, 1:] - inc_t[:, None],
+                            amps[:, 1:] / np.where(detected, inc_a, 1.0)[:, None],
+                            trip_s(opts.travel_time_1n_s, inc_a))
     raised = quality_flags(
         detected=detected, has_reflection=has_ref, early=heads[:, K.H_EARLY] != 0,
         saturated=heads[:, K.H_SATURATED] != 0, sign=sign, incident_merged=merged[:, 0],
         reflection_merged=merged[:, 1], more_than_two=counts > 2, incident_cut=cut[:, 0],
         reflection_cut=cut[:, 1], train=heads[:, K.H_TRAIN] != 0,
         check_snr_db=np.where(has_ref, ref_snr, snr), low_snr_db=opts.low_snr_db,
-        width_ratio=ratio)
+        width_ratio=ratio, early_pulse=early_one)
     flags = np.zeros(sign.size, dtype=np.uint8)
     for name, where in raised.items():
         flags |= np.where(where, FLAG_BITS[name], 0).astype(np.uint8)

@@ -215,6 +215,11 @@ SATURATED_REASON = ("saturated: the record's top value repeats over the incident
                     "sensor, amplifier or scope clipped it), so the peak and every ratio to it "
                     "read wrong; lower the gain or widen the scope's range")
 """Why :func:`aggregate` rejects a saturated shot."""
+EARLY_REASON = ("early_reflection: a strong pulse arrives after the incident's train and before "
+                "the stated chain's reflection can, and none where it should: the chain below the "
+                "sensor is shorter than stated (the sensor's place, the number of spheres); a "
+                "table of your chain (table build --scene) reads it")
+"""Why :func:`aggregate` rejects a shot whose reflection came too early for the stated chain."""
 
 
 def _modified_z(values: np.ndarray) -> np.ndarray:
@@ -251,10 +256,11 @@ def aggregate(
     start or end, so its peak (or the reflection's very presence) is not whole, and neither its
     TOF and ARR nor the absence of a reflection says anything; and one flagged ``saturated``: its
     incident's peak was clipped, so its ARR reads high (a 4.0 mm steel plate cut at 25 N of its
-    33.7 N read ARR 0.84 for 0.67). A shot is rejected when its TOF
-    or ARR has a modified z-score above ``outlier_z`` among the shots with a reflection (only
-    with at least ``min_for_rejection`` of them; ``None`` turns rejection off). Rejected shots
-    are listed, never dropped silently.
+    33.7 N read ARR 0.84 for 0.67); and one flagged ``early_reflection``, whose "no reflection"
+    (and its ARR bound) holds only for a chain it was not recorded on. A shot is rejected when
+    its TOF or ARR has a modified z-score above ``outlier_z`` among the shots with a reflection
+    (only with at least ``min_for_rejection`` of them; ``None`` turns rejection off). Rejected
+    shots are listed, never dropped silently.
     """
     if not features:
         raise WaveformError("features", "nothing to aggregate", "at least one shot's features")
@@ -276,6 +282,13 @@ def aggregate(
                 "index": i, "feature": "reflection_window_s", "value": f.reflection_window_s,
                 "modified_z": None,
                 "reason": TRUNCATED_REASON,
+            })
+        elif "early_reflection" in f.flags:
+            dropped.add(i)
+            rejected.append({
+                "index": i, "feature": "secondary_times_s", "value": None,
+                "modified_z": None,
+                "reason": EARLY_REASON,
             })
         elif "saturated" in f.flags:
             dropped.add(i)

@@ -68,8 +68,17 @@ FLAGS = (
     "truncated",
     "inverted_polarity",
     "implausible_units",
+    "early_reflection",
 )
 """Every quality flag detection can raise, in the order they are reported."""
+EARLY_FROM, EARLY_RATIO = 0.5, 0.3
+"""With a travel gate and no pulse inside it, a pulse of at least ``EARLY_RATIO`` of the incident
+arriving between ``EARLY_FROM`` and :data:`~.kernels.GATE_LO` round trips after it is
+``early_reflection``: not the incident's train (a train pulse that strong travels at 0.82 or more
+of the incident's speed, F^(1/6), and leaves the striker within a few pulse widths of it, so it
+follows within about a fifth of the trip) and too early for the stated chain's reflection. It is
+the reflection of a chain shorter below the sensor than the one stated (the sensor sits lower),
+and the shot's "no reflection" and its ARR bound would read a thick plate as a thin one."""
 
 METHODS = ("template", "parabola", "refined")
 """Where a pulse's peak comes from, by the kernel's ``P_METHOD`` code."""
@@ -406,6 +415,10 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         notes.append("no quiet samples before the reflection: its baseline is the slow trend")
     check = reflected if reflected is not None else incident
     ratio = width_ratio(incident.width_s, incident.peak_N, opts.pulse_width_1n_s)
+    early_one = reflected is None and early_pulse(
+        np.array([p.time_s - incident.time_s for p in pulses[1:]]),
+        np.array([p.peak_N for p in pulses[1:]]) / incident.peak_N,
+        trip_s(opts.travel_time_1n_s, incident.peak_N))
     has_ref = reflected is not None
     raised = quality_flags(
         detected=True, has_reflection=has_ref, early=bool(head[K.H_EARLY]),
@@ -413,7 +426,10 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         reflection_merged=has_ref and bool(rows[1][K.P_MERGED]), more_than_two=len(pulses) > 2,
         incident_cut=bool(rows[0][K.P_TRUNC]), reflection_cut=has_ref and bool(rows[1][K.P_TRUNC]),
         train=bool(train), check_snr_db=check.snr_db, low_snr_db=opts.low_snr_db,
-        width_ratio=ratio)
+        width_ratio=ratio, early_pulse=bool(early_one))
+    if raised["early_reflection"]:
+        notes.append("a pulse arrives between the incident's train and where the stated chain "
+                     "puts the reflection: the chain below the sensor is shorter than stated")
     if raised["implausible_units"]:
         notes.append(f"the incident pulse is {incident.width_s:.3g} s wide at {incident.peak_N:.3g}"
                      f" N, {ratio:.3g} times a solitary wave of that force in this chain")
@@ -422,6 +438,25 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         reflected=reflected, secondary=secondary, flags=_ordered(raised), arr_upper_bound=upper,
         notes=tuple(notes), **common,
     )
+
+
+def trip_s(travel_time_1n_s: float | None, peak_N: Any) -> Any:
+    """The sensor-to-plate round trip of a solitary wave of ``peak_N`` (its speed grows as
+    F^(1/6)); NaN without a travel gate."""
+    if travel_time_1n_s is None:
+        return np.nan * np.asarray(peak_N, dtype=float)
+    return travel_time_1n_s * np.maximum(np.asarray(peak_N, dtype=float), 1e-300) ** (-1.0 / 6.0)
+
+
+def early_pulse(delay_s: np.ndarray, ratio: np.ndarray, trip: Any) -> Any:
+    """Whether a pulse after the incident (``delay_s``, its peak over the incident's ``ratio``;
+    along the last axis, one row a shot for a batch) is an :data:`EARLY_RATIO`-strong one between
+    :data:`EARLY_FROM` and ``GATE_LO`` round trips ``trip``; NaN delays and trips are no pulse."""
+    trip = np.asarray(trip, dtype=float)[..., None] if np.ndim(trip) else float(trip)
+    with np.errstate(invalid="ignore"):
+        hit = ((delay_s >= EARLY_FROM * trip) & (delay_s < K.GATE_LO * trip)
+               & (ratio >= EARLY_RATIO))
+    return np.any(hit, axis=-1) if np.ndim(hit) else bool(hit)
 
 
 def width_ratio(width_s: float, peak_N: float, width_1n_s: float | None) -> float:
@@ -437,7 +472,8 @@ def width_ratio(width_s: float, peak_N: float, width_1n_s: float | None) -> floa
 def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: Any, sign: Any,
                   incident_merged: Any, reflection_merged: Any, more_than_two: Any,
                   incident_cut: Any, reflection_cut: Any, train: Any, check_snr_db: Any,
-                  low_snr_db: float, width_ratio: Any) -> dict[str, Any]:
+                  low_snr_db: float, width_ratio: Any, early_pulse: Any = False
+                  ) -> dict[str, Any]:
     """Which of :data:`FLAGS` a shot raises, from what the kernels found: the one statement of
     the flag rules, for one shot (bools and floats, :func:`detect`) or for many at once
     (arrays, one element a shot, :mod:`solitonde.signal.batch`).
@@ -445,8 +481,9 @@ def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: 
     ``check_snr_db`` is the reflection's SNR where there is one, else the incident's; ``train``
     says pulses follow the incident sooner than a reflection can arrive (its merging then is
     the train's, not an overlap); ``width_ratio`` is the incident's width over a solitary
-    wave's of its force (:func:`width_ratio`). A flag needs a detected pulse except
-    ``inverted_polarity`` and the pre-trigger's ``truncated``.
+    wave's of its force (:func:`width_ratio`); ``early_pulse`` that a strong pulse arrived
+    between the train and the travel gate (:func:`early_pulse`). A flag needs a detected pulse
+    except ``inverted_polarity`` and the pre-trigger's ``truncated``.
     """
     in_band = (width_ratio >= 1.0 / WIDTH_TOLERANCE) & (width_ratio <= WIDTH_TOLERANCE)
     return {
@@ -458,6 +495,7 @@ def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: 
         "truncated": early | (detected & incident_cut) | (has_reflection & reflection_cut),
         "inverted_polarity": sign < 0,
         "implausible_units": detected & _not(in_band),
+        "early_reflection": detected & _not(has_reflection) & early_pulse,
     }
 
 

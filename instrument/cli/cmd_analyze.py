@@ -370,7 +370,11 @@ def analyze(
     if invert:
         from solitonde.instrument.cli.cmd_invert import table_path
         from solitonde.instrument.inference.calibration import CalibrationError
-        from solitonde.instrument.inference.pipeline import ALL_SATURATED, ALL_TRUNCATED
+        from solitonde.instrument.inference.pipeline import (
+            ALL_EARLY,
+            ALL_SATURATED,
+            ALL_TRUNCATED,
+        )
         from solitonde.instrument.tables.table import TableError
 
         try:
@@ -391,7 +395,8 @@ def analyze(
                 errors.append({"source": where, "error": MISSING_SIZE_FLAG})
             elif est.get("estimate") is None and (unreadable := [
                     s["reason"] for s in est.get("skipped", [])
-                    if ALL_TRUNCATED in s["reason"] or ALL_SATURATED in s["reason"]]):
+                    if any(every in s["reason"] for every in (ALL_TRUNCATED, ALL_SATURATED,
+                                                               ALL_EARLY))]):
                 # records too short, or clipped: no answer can be read from them
                 errors.append({"source": where, "error": unreadable[0]})
             elif (est.get("estimate") or {}).get("thickness_m", {}).get("status") in (

@@ -22,6 +22,7 @@ from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, i
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.signal.features import (
+    EARLY_REASON,
     SATURATED_REASON,
     TRUNCATED_REASON,
     Aggregate,
@@ -36,6 +37,7 @@ MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sph
 
 ALL_TRUNCATED = "every shot is truncated"
 ALL_SATURATED = "every shot is saturated"
+ALL_EARLY = "every shot is early_reflection"
 """Where a size's skip reason says its records cannot be read (too short, or clipped):
 ``analyze --invert`` then exits 1."""
 
@@ -65,7 +67,7 @@ class SizeSummary:
                     "(its incident's width and force disagree with this chain's solitary wave: "
                     "check the calibration, the units of the file's force and time columns)")
         for reason, every in ((TRUNCATED_REASON, ALL_TRUNCATED),
-                              (SATURATED_REASON, ALL_SATURATED)):
+                              (SATURATED_REASON, ALL_SATURATED), (EARLY_REASON, ALL_EARLY)):
             these = [r for r in self.aggregate.rejected if r.get("reason") == reason]
             if self.hidden and these and len(these) == self.aggregate.n_shots:
                 return (f"sphere_diameter {self.diameter_m:g} m: {every}"

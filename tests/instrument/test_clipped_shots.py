@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_chain import sensor_trace, write_shots
+from independent_chain import recorded_for, write_shots
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
@@ -30,7 +30,7 @@ STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
 
 def _clipped(folder: Path, rail_n: float, clip_shots: int = 5) -> Path:
     """Five noisy shots of the independent solve, the first ``clip_shots`` cut at ``rail_n``."""
-    t, force = sensor_trace(STEEL, 4.0e-3, duration_s=1.0e-3)
+    t, force = recorded_for(STEEL, 4.0e-3, 1.0e-3)
     path = write_shots(folder / f"rail_{rail_n:g}_{clip_shots}.csv", t, force, shots=5,
                        snr_db=40.0, seed=1, metadata={"plate_id": "steel-4mm"})
     lines = path.read_text().splitlines()

@@ -15,7 +15,7 @@ import json
 from pathlib import Path
 
 import pytest
-from independent_chain import sensor_trace, write_shots
+from independent_chain import recorded_for, write_shots
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
@@ -28,7 +28,7 @@ STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
 
 
 def _recording(folder: Path, duration_s: float) -> Path:
-    t, force = sensor_trace(STEEL, 4.0e-3, duration_s=duration_s)
+    t, force = recorded_for(STEEL, 4.0e-3, duration_s)
     return write_shots(folder / f"steel_{duration_s * 1e6:.0f}us.csv", t, force, shots=3,
                        snr_db=40.0, seed=1, metadata={"plate_id": "steel-4mm"})
 

@@ -55,8 +55,9 @@ def test_batch_equals_extract_on_every_kind_of_shot(shots):
     expected = _per_shot(shots, t0=-3e-5)
     assert table.to_features() == expected
     seen = {flag for f in expected if f is not None for flag in f.flags}
-    # implausible_units needs the chain's width law (the next test)
-    assert seen == set(FLAGS) - {"implausible_units"}, "the shots must exercise every flag"
+    # implausible_units needs the chain's width law, early_reflection its gate (the next test)
+    assert seen == set(FLAGS) - {"implausible_units", "early_reflection"}, \
+        "the shots must exercise every flag"
     assert any(f is None for f in expected) and any(f and f.secondary_times_s for f in expected)
     for i, f in enumerate(expected):
         assert table.detected[i] == (f is not None)
@@ -68,13 +69,14 @@ def test_batch_equals_extract_on_every_kind_of_shot(shots):
 def test_batch_equals_extract_with_the_chains_gate_and_width_law(shots):
     """With a travel gate and a width law (a chain of known spheres) the batch still equals
     ``extract`` shot for shot: gated reflections, trains listed as secondary, gates holding no
-    pulse, and ``implausible_units`` both raised and not."""
+    pulse, and ``implausible_units`` and ``early_reflection`` both raised and not."""
     chain = {"travel_time_1n_s": 1.5e-4, "pulse_width_1n_s": 2.5e-5}
     table = extract_batch(shots, DT, t0=-3e-5, **chain)
     expected = _per_shot(shots, t0=-3e-5, **chain)
     assert table.to_features() == expected
-    flagged = [f is not None and "implausible_units" in f.flags for f in expected]
-    assert any(flagged) and not all(flagged)
+    for flag in ("implausible_units", "early_reflection"):
+        flagged = [f is not None and flag in f.flags for f in expected]
+        assert any(flagged) and not all(flagged), flag
     plain = _per_shot(shots, t0=-3e-5)
     moved = [a.reflected_time_s != b.reflected_time_s for a, b in zip(expected, plain, strict=True)
              if a is not None]

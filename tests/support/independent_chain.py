@@ -6,6 +6,7 @@ package: the contact constants are Hertz's, computed from the materials by hand.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -65,6 +66,25 @@ def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: flo
     y = sol.sol(t)
     f, _ = contacts(y[: n + 1], y[-1])
     return t, 0.5 * (f[sensor_index - 1] + f[sensor_index])
+
+
+@functools.lru_cache(maxsize=16)
+def _trace_of(plate: tuple[tuple[str, float], ...], thickness_m: float, duration_s: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+    return sensor_trace(dict(plate), thickness_m, duration_s=duration_s)
+
+
+def recorded_for(plate: Mapping[str, float], thickness_m: float, duration_s: float,
+                 solved_s: float = 1.0e-3) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's chain's trace (:func:`sensor_trace`'s defaults) as a scope recording
+    ``duration_s`` from the impact holds it: one solve to ``solved_s`` per plate and thickness,
+    kept for the session and cut (the solve's steps up to a time do not depend on where it
+    ends), so that tests of the record's length share it."""
+    if duration_s > solved_s:
+        raise ValueError(f"duration_s {duration_s} beyond the solve's {solved_s}")
+    t, force = _trace_of(tuple(sorted(plate.items())), thickness_m, solved_s)
+    keep = t < duration_s - 1e-12
+    return t[keep].copy(), force[keep].copy()
 
 
 def write_shots(path: Path, t: np.ndarray, force: np.ndarray, shots: int, snr_db: float,
