@@ -84,3 +84,24 @@ def test_the_unclipped_shots_answer_alone(folder: Path) -> None:
     assert est["inputs"][0]["n_shots"] == 3
     assert est["thickness_m"]["status"] == "constrained"
     assert abs(est["thickness_m"]["median"] - 4.0e-3) < 0.1e-3
+
+
+def test_the_service_says_why_it_has_no_answer(folder: Path, tmp_path: Path) -> None:
+    """POST /v1/measurements with every shot clipped: 201 (the shots are stored, each with its
+    flag), no estimate, and the reason names the clipping."""
+    from fastapi.testclient import TestClient
+
+    from solitonde.instrument.service.app import build_app as build_service
+    from solitonde.instrument.service.settings import Settings
+
+    shots = [w.to_dict() for w in signal_io.read(_clipped(folder, 25.0))]
+    for shot in shots:
+        shot["metadata"]["sphere_diameter"] = 9.53e-3
+    settings = Settings(store_path=tmp_path / "s.sqlite", table_path=STEEL_TABLE)
+    with TestClient(build_service(settings)) as client:
+        r = client.post("/v1/measurements", json={"shots": shots})
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert body["estimate"] is None
+    assert "every shot is saturated" in body["estimate_reason"]
+    assert all("saturated" in s["features"]["flags"] for s in body["shots"])
