@@ -29,15 +29,16 @@ ln t and L.
 Where the table carries its simulated slopes (:mod:`solitonde.instrument.tables.material_slopes`,
 written by ``table build`` and ``table slopes``), the contact's share far from the supports is
 taken from them instead: the chain's reflection also depends on the plate's contact stiffness
-against the chain's own, which lambda leaves out, and the exchange rates fell short of the
-slopes a second table at E = 210 GPa, nu = 0.30 shows by 10-45 % in TOF and 4-18 % in ARR on the
-bundled steel table (with the simulated slopes: within 3 %). Near a support the distance's share
-stays the exchange rates' (within 20 mm of the clamp they overstate the slopes, by up to 2.5
-times in ARR: the intervals there are wider than they need be, not narrower). Why not a
-material axis or a marginal over nearby families: a material axis multiplies a build's cost by
-its points near the supports (the meshed plate, about a second a point), and a marginal over
-the grade's box does not cover a plate at its corner either (the data do not tell the material
-from the thickness: docs/inversion.md); far from the supports the slopes cost 4 runs a node.
+against the chain's own, which lambda leaves out, and the exchange rates fell short by up to
+24 % in TOF and 15 % in ARR against an independent solve of the chain at 1.98-6.0 mm on steel
+(the simulated slopes: within 1.5 % and 3 %; tests/instrument/test_material_slopes.py). Near a
+support the distance's share stays the exchange rates' (within 20 mm of the clamp they overstate
+the slopes, by up to 2.5 times in ARR: the intervals there are wider than they need be, not
+narrower). Why not a material axis or a marginal over nearby families: a material axis
+multiplies a build's cost by its points near the supports (the meshed plate, about a second a
+point), and a marginal over the grade's box does not cover a plate at its corner either (the
+data do not tell the material from the thickness: docs/inversion.md); far from the supports the
+slopes cost 4 runs a node.
 """
 
 from __future__ import annotations
