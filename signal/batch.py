@@ -30,6 +30,7 @@ from .pulses import (
     lowpass,
     quality_flags,
     trip_s,
+    unsteady,
     width_ratio,
 )
 from .waveform import MIN_SAMPLES, UNITS, invalid_sample
@@ -223,10 +224,11 @@ def _table(heads: np.ndarray, rows: np.ndarray, counts: np.ndarray, t0: float, d
         reflection_merged=merged[:, 1], more_than_two=counts > 2, incident_cut=cut[:, 0],
         reflection_cut=cut[:, 1], train=heads[:, K.H_TRAIN] != 0,
         check_snr_db=np.where(has_ref, ref_snr, snr), low_snr_db=opts.low_snr_db,
-        width_ratio=ratio, early_pulse=early_one)
-    flags = np.zeros(sign.size, dtype=np.uint8)
+        width_ratio=ratio, early_pulse=early_one,
+        unsteady=unsteady(heads[:, K.H_MISFIT], heads[:, K.H_MISFIT_N], noise, rows[:, 0, K.P_AMP]))
+    flags = np.zeros(sign.size, dtype=np.uint16)
     for name, where in raised.items():
-        flags |= np.where(where, FLAG_BITS[name], 0).astype(np.uint8)
+        flags |= np.where(where, FLAG_BITS[name], 0).astype(np.uint16)
     return FeatureTable(detected=detected, n_pulses=counts, columns={
         "tof_s": np.where(has_ref, ref_t - inc_t, nan),
         "arr": np.where(has_ref, ref_a / np.where(detected, inc_a, 1.0), nan),

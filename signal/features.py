@@ -220,6 +220,10 @@ EARLY_REASON = ("early_reflection: a strong pulse arrives after the incident's t
                 "sensor is shorter than stated (the sensor's place, the number of spheres); a "
                 "table of your chain (table build --scene) reads it")
 """Why :func:`aggregate` rejects a shot whose reflection came too early for the stated chain."""
+UNSTEADY_REASON = ("unsteady_baseline: the sensor's level jumped between the pulses (the drift "
+                   "fitted on the pre-trigger and the gap misses them), so the reflection's "
+                   "baseline is not known; check the amplifier's range and the cabling")
+"""Why :func:`aggregate` rejects a shot whose baseline jumped."""
 
 
 def _modified_z(values: np.ndarray) -> np.ndarray:
@@ -256,8 +260,9 @@ def aggregate(
     start or end, so its peak (or the reflection's very presence) is not whole, and neither its
     TOF and ARR nor the absence of a reflection says anything; and one flagged ``saturated``: its
     incident's peak was clipped, so its ARR reads high (a 4.0 mm steel plate cut at 25 N of its
-    33.7 N read ARR 0.84 for 0.67); and one flagged ``early_reflection``, whose "no reflection"
-    (and its ARR bound) holds only for a chain it was not recorded on. A shot is rejected when
+    33.7 N read ARR 0.84 for 0.67); one flagged ``early_reflection``, whose "no reflection"
+    (and its ARR bound) holds only for a chain it was not recorded on; and one flagged
+    ``unsteady_baseline``, whose level jumped between the pulses. A shot is rejected when
     its TOF or ARR has a modified z-score above ``outlier_z`` among the shots with a reflection
     (only with at least ``min_for_rejection`` of them; ``None`` turns rejection off). Rejected
     shots are listed, never dropped silently.
@@ -289,6 +294,13 @@ def aggregate(
                 "index": i, "feature": "secondary_times_s", "value": None,
                 "modified_z": None,
                 "reason": EARLY_REASON,
+            })
+        elif "unsteady_baseline" in f.flags:
+            dropped.add(i)
+            rejected.append({
+                "index": i, "feature": "baseline_N", "value": f.baseline_N,
+                "modified_z": None,
+                "reason": UNSTEADY_REASON,
             })
         elif "saturated" in f.flags:
             dropped.add(i)

@@ -39,8 +39,8 @@ DEGREE = 2
 """The drift is a quadratic in time: a linear drift, and a slow curvature (a parabola of 5 % of
 the incident over the record moves the ARR by 5-20 % when only a line is taken)."""
 # Columns of the coefficient array gap_drift fills.
-(D_C0, D_C1, D_C2, D_CENTRE, D_SCALE, D_GAP) = range(6)
-DRIFT = 6
+(D_C0, D_C1, D_C2, D_CENTRE, D_SCALE, D_GAP, D_MISFIT, D_MISFIT_N) = range(8)
+DRIFT = 8
 
 
 @njit(cache=True)
@@ -69,8 +69,10 @@ def gap_drift(y: np.ndarray, n_pre: int, rows: np.ndarray, n_train: int, relax: 
     ``y[:n_pre]`` and to ``y - relax`` over the gap between ``rows[0]`` (the incident) and
     ``rows[1]`` (the reflection), the ``n_train`` pulses after row 1 (the incident's train) left
     out with their flanks. ``time_col``, ``width_col``: the rows' columns of the fitted peak time
-    and FWHM, in samples. Returns ``[c0, c1, c2, centre, scale, gap samples]``; no fit (a gap
-    under :data:`MIN_GAP` samples, no pre-trigger, a singular system) has 0 gap samples."""
+    and FWHM, in samples. Returns ``[c0, c1, c2, centre, scale, gap samples, misfit, its
+    samples]``: the misfit is the largest mean residual of the fit over the pre-trigger and either
+    half of the gap (in the trace's units), over that many samples. No fit (a gap under
+    :data:`MIN_GAP` samples, no pre-trigger, a singular system) has 0 gap samples."""
     out = np.zeros(DRIFT)
     n = y.size
     t_inc = rows[0, time_col]
@@ -109,6 +111,29 @@ def gap_drift(y: np.ndarray, n_pre: int, rows: np.ndarray, n_train: int, relax: 
     out[D_CENTRE] = centre
     out[D_SCALE] = scale
     out[D_GAP] = used
+    # How far the fitted baseline misses its own quiet samples: the largest mean residual over
+    # the pre-trigger and either half of the gap. A smooth drift leaves noise; a jump of the level
+    # (a range switch, a cable knocked) leaves a mean of its own in each stretch.
+    mid = (lo + hi) // 2
+    for a, b, in_gap in ((0, n_pre, False), (lo, mid, True), (mid, hi, True)):
+        total = 0.0
+        count = 0
+        for i in range(a, b):
+            skip = False
+            for j in range(2, 2 + n_train):
+                if abs(i - rows[j, time_col]) <= GAP_FOOT * rows[j, width_col]:
+                    skip = True
+            if skip:
+                continue
+            u = (i - centre) / scale
+            r = y[i] - (coef[0] + u * (coef[1] + u * coef[2]))
+            if in_gap:
+                r -= _relaxation_at(relax, i - t_inc)
+            total += r
+            count += 1
+        if count > 0 and abs(total / count) > out[D_MISFIT]:
+            out[D_MISFIT] = abs(total / count)
+            out[D_MISFIT_N] = count
     return out
 
 

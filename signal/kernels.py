@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from .extrema import vargmax, vmax, vmin
-from .gap_drift import D_GAP, drift_at, gap_drift
+from .gap_drift import D_GAP, D_MISFIT, D_MISFIT_N, drift_at, gap_drift
 from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
 from .pulse_fit import (  # noqa: F401
     R_MAX,
@@ -80,10 +80,12 @@ while the pulse is still above ``fit_fraction`` of its height."""
 # when the travel gate holds no pulse (the later pulses are then all secondary).
 # H_SIGMA_S, H_FLOOR, H_YMAX: the smoothed trace's noise, the noise floor and the largest sample of
 # the sign-corrected trace, which locate hands to measure. H_GAP: the gap samples the drift was
-# measured on besides the pre-trigger (gap_drift; 0: the pre-trigger's baseline).
+# measured on besides the pre-trigger (gap_drift; 0: the pre-trigger's baseline); H_MISFIT,
+# H_MISFIT_N: that fit's largest mean residual over one of its stretches and the stretch's samples.
 (H_SIGN, H_BASE, H_SIGMA, H_THR, H_NPRE, H_SMOOTH, H_NPEAKS, H_EARLY, H_SATURATED,
- H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF, H_SIGMA_S, H_FLOOR, H_YMAX, H_GAP) = range(18)
-HEAD = 18
+ H_UPPER, H_PRE0, H_PRE1, H_TRAIN, H_NOREF, H_SIGMA_S, H_FLOOR, H_YMAX, H_GAP, H_MISFIT,
+ H_MISFIT_N) = range(20)
+HEAD = 20
 
 GATE_LO, GATE_HI = 0.75, 3.2
 """With a travel gate, a reflection arrives between these multiples of the round trip at the
@@ -907,6 +909,8 @@ def measure(head: np.ndarray, y: np.ndarray, s: np.ndarray, v: np.ndarray, line:
         drift = gap_drift(y, max(n_base, 0), out, int(head[H_TRAIN]), relax, P_TIME, P_WIDTH)
         if drift[D_GAP] > 0:
             head[H_GAP] = drift[D_GAP]
+            head[H_MISFIT] = drift[D_MISFIT]
+            head[H_MISFIT_N] = drift[D_MISFIT_N]
             for j in range(2):  # the template's height above the drifted baseline
                 base_j = drift_at(drift, out[j, P_TIME])
                 out[j, P_AMP] += out[j, P_BASE] - base_j

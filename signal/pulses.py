@@ -69,6 +69,7 @@ FLAGS = (
     "inverted_polarity",
     "implausible_units",
     "early_reflection",
+    "unsteady_baseline",
 )
 """Every quality flag detection can raise, in the order they are reported."""
 EARLY_FROM, EARLY_RATIO = 0.5, 0.3
@@ -79,6 +80,15 @@ of the incident's speed, F^(1/6), and leaves the striker within a few pulse widt
 follows within about a fifth of the trip) and too early for the stated chain's reflection. It is
 the reflection of a chain shorter below the sensor than the one stated (the sensor sits lower),
 and the shot's "no reflection" and its ARR bound would read a thick plate as a thin one."""
+
+STEP_FLOOR = 0.005
+"""``unsteady_baseline``: the drift fitted on the pre-trigger and the gap (:mod:`.gap_drift`)
+misses one of its stretches by a mean residual above this fraction of the incident's height (and
+above five standard errors of that mean). A smooth drift (a 5 % parabola over the record) and
+the relaxation of any striker the model knows leave under 0.04 %; a real chain's relaxation off
+by half of the model's would leave about 0.3 %; a level that jumps by 6 % of the incident between
+the pulses (a range switch, a knocked cable) leaves 1.0 % and moves the ARR by 7 %, by 1.7 % at
+1.5 % (0.3 % left). Such a shot's baseline under the reflection is not known."""
 
 METHODS = ("template", "parabola", "refined")
 """Where a pulse's peak comes from, by the kernel's ``P_METHOD`` code."""
@@ -426,7 +436,13 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         reflection_merged=has_ref and bool(rows[1][K.P_MERGED]), more_than_two=len(pulses) > 2,
         incident_cut=bool(rows[0][K.P_TRUNC]), reflection_cut=has_ref and bool(rows[1][K.P_TRUNC]),
         train=bool(train), check_snr_db=check.snr_db, low_snr_db=opts.low_snr_db,
-        width_ratio=ratio, early_pulse=bool(early_one))
+        width_ratio=ratio, early_pulse=bool(early_one),
+        unsteady=bool(unsteady(head[K.H_MISFIT], head[K.H_MISFIT_N], noise, rows[0][K.P_AMP])))
+    if raised["unsteady_baseline"]:
+        share = head[K.H_MISFIT] / rows[0][K.P_AMP]
+        notes.append(f"the baseline fitted on the pre-trigger and the gap misses them by "
+                     f"{head[K.H_MISFIT]:.3g} on average ({share:.2%} of the incident): the "
+                     "level jumped between the pulses")
     if raised["early_reflection"]:
         notes.append("a pulse arrives between the incident's train and where the stated chain "
                      "puts the reflection: the chain below the sensor is shorter than stated")
@@ -459,6 +475,15 @@ def early_pulse(delay_s: np.ndarray, ratio: np.ndarray, trip: Any) -> Any:
     return np.any(hit, axis=-1) if np.ndim(hit) else bool(hit)
 
 
+def unsteady(misfit: Any, misfit_n: Any, noise: Any, incident_amp: Any) -> Any:
+    """Whether the drift fit's largest mean residual ``misfit`` (over ``misfit_n`` samples, the
+    kernel's ``H_MISFIT``, ``H_MISFIT_N``; 0 without a gap fit) stands above :data:`STEP_FLOOR`
+    of the incident's height and five standard errors of a mean of ``noise``."""
+    n = np.maximum(np.asarray(misfit_n, dtype=float), 1.0)
+    limit = np.maximum(STEP_FLOOR * np.abs(incident_amp), 5.0 * np.asarray(noise) / np.sqrt(n))
+    return (np.asarray(misfit_n) > 0) & (np.asarray(misfit) > limit)
+
+
 def width_ratio(width_s: float, peak_N: float, width_1n_s: float | None) -> float:
     """A pulse's width over a solitary wave's of the same peak force (``width_1n_s``
     ``F^(-1/6)``); 1.0 when the chain's wave is not known, NaN for a non-positive peak."""
@@ -472,8 +497,8 @@ def width_ratio(width_s: float, peak_N: float, width_1n_s: float | None) -> floa
 def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: Any, sign: Any,
                   incident_merged: Any, reflection_merged: Any, more_than_two: Any,
                   incident_cut: Any, reflection_cut: Any, train: Any, check_snr_db: Any,
-                  low_snr_db: float, width_ratio: Any, early_pulse: Any = False
-                  ) -> dict[str, Any]:
+                  low_snr_db: float, width_ratio: Any, early_pulse: Any = False,
+                  unsteady: Any = False) -> dict[str, Any]:
     """Which of :data:`FLAGS` a shot raises, from what the kernels found: the one statement of
     the flag rules, for one shot (bools and floats, :func:`detect`) or for many at once
     (arrays, one element a shot, :mod:`solitonde.signal.batch`).
@@ -482,8 +507,9 @@ def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: 
     says pulses follow the incident sooner than a reflection can arrive (its merging then is
     the train's, not an overlap); ``width_ratio`` is the incident's width over a solitary
     wave's of its force (:func:`width_ratio`); ``early_pulse`` that a strong pulse arrived
-    between the train and the travel gate (:func:`early_pulse`). A flag needs a detected pulse
-    except ``inverted_polarity`` and the pre-trigger's ``truncated``.
+    between the train and the travel gate (:func:`early_pulse`); ``unsteady`` that the drift's
+    fit misses its own quiet samples (:func:`unsteady`). A flag needs a detected pulse except
+    ``inverted_polarity`` and the pre-trigger's ``truncated``.
     """
     in_band = (width_ratio >= 1.0 / WIDTH_TOLERANCE) & (width_ratio <= WIDTH_TOLERANCE)
     return {
@@ -496,6 +522,7 @@ def quality_flags(*, detected: Any, has_reflection: Any, early: Any, saturated: 
         "inverted_polarity": sign < 0,
         "implausible_units": detected & _not(in_band),
         "early_reflection": detected & _not(has_reflection) & early_pulse,
+        "unsteady_baseline": detected & has_reflection & unsteady,
     }
 
 

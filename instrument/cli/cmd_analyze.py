@@ -374,6 +374,7 @@ def analyze(
             ALL_EARLY,
             ALL_SATURATED,
             ALL_TRUNCATED,
+            ALL_UNSTEADY,
         )
         from solitonde.instrument.tables.table import TableError
 
@@ -396,7 +397,7 @@ def analyze(
             elif est.get("estimate") is None and (unreadable := [
                     s["reason"] for s in est.get("skipped", [])
                     if any(every in s["reason"] for every in (ALL_TRUNCATED, ALL_SATURATED,
-                                                               ALL_EARLY))]):
+                                                               ALL_EARLY, ALL_UNSTEADY))]):
                 # records too short, or clipped: no answer can be read from them
                 errors.append({"source": where, "error": unreadable[0]})
             elif (est.get("estimate") or {}).get("thickness_m", {}).get("status") in (

@@ -25,6 +25,7 @@ from solitonde.signal.features import (
     EARLY_REASON,
     SATURATED_REASON,
     TRUNCATED_REASON,
+    UNSTEADY_REASON,
     Aggregate,
     Features,
     aggregate,
@@ -38,6 +39,7 @@ MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sph
 ALL_TRUNCATED = "every shot is truncated"
 ALL_SATURATED = "every shot is saturated"
 ALL_EARLY = "every shot is early_reflection"
+ALL_UNSTEADY = "every shot is unsteady_baseline"
 """Where a size's skip reason says its records cannot be read (too short, or clipped):
 ``analyze --invert`` then exits 1."""
 
@@ -67,7 +69,8 @@ class SizeSummary:
                     "(its incident's width and force disagree with this chain's solitary wave: "
                     "check the calibration, the units of the file's force and time columns)")
         for reason, every in ((TRUNCATED_REASON, ALL_TRUNCATED),
-                              (SATURATED_REASON, ALL_SATURATED), (EARLY_REASON, ALL_EARLY)):
+                              (SATURATED_REASON, ALL_SATURATED), (EARLY_REASON, ALL_EARLY),
+                              (UNSTEADY_REASON, ALL_UNSTEADY)):
             these = [r for r in self.aggregate.rejected if r.get("reason") == reason]
             if self.hidden and these and len(these) == self.aggregate.n_shots:
                 return (f"sphere_diameter {self.diameter_m:g} m: {every}"
