@@ -115,10 +115,10 @@ def gap_drift(y: np.ndarray, n_pre: int, rows: np.ndarray, n_train: int, relax: 
     # the pre-trigger and either half of the gap. A smooth drift leaves noise; a jump of the level
     # (a range switch, a cable knocked) leaves a mean of its own in each stretch.
     mid = (lo + hi) // 2
-    for a, b, in_gap in ((0, n_pre, False), (lo, mid, True), (mid, hi, True)):
+    for first, stop, in_gap in ((0, n_pre, False), (lo, mid, True), (mid, hi, True)):
         total = 0.0
         count = 0
-        for i in range(a, b):
+        for i in range(first, stop):
             skip = False
             for j in range(2, 2 + n_train):
                 if abs(i - rows[j, time_col]) <= GAP_FOOT * rows[j, width_col]:
