@@ -11,10 +11,10 @@ by up to 24 % in TOF and 15 % in ARR against an independent solve of the chain o
 
 So the slopes are simulated: per sphere size and thickness node, the chain on Zener's dashpot
 (the plate far from every support, where the table itself uses it) at the family's material and
-at E and rho each moved by :data:`STEP` either way, the central difference in the logarithm.
-That is 4 runs a node (about 0.01 s each), about a second per sphere size, written into the table
-file as the group ``material_slopes`` (datasets ``tof_s`` and ``arr``, shape (D, t, 2): the
-slopes along ``ln E'`` and ``ln rho``). ``table build`` writes it
+at E and rho each moved by :data:`~.table_build.SLOPE_STEP` (3 %) either way, the central
+difference in the logarithm. That is 4 runs a node (about 0.01 s each), about a second per
+sphere size, written into the table file as the group ``material_slopes`` (datasets ``tof_s``
+and ``arr``, shape (D, t, 2): the slopes along ``ln E'`` and ``ln rho``). ``table build`` writes it
 (:func:`~.table_build.simulate_slopes`, :func:`~.table_build.write_slopes`; the reader is
 :func:`~.table.read_slopes`); :func:`add_to_table` (``table slopes FILE``) adds it to a table
 built before (the features are not touched). Near a support the distance's share

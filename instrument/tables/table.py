@@ -253,7 +253,6 @@ def read_slopes(fh: h5py.File, shape: tuple[int, ...]) -> dict[str, np.ndarray] 
     return out
 
 
-
 def _read(fh: h5py.File, name: str, dtype: Any) -> np.ndarray:
     """Dataset ``name`` as an array of ``dtype`` (None: as stored); TableError naming it when it
     is absent or cannot be read so."""
