@@ -372,6 +372,7 @@ def analyze(
         from solitonde.instrument.inference.calibration import CalibrationError
         from solitonde.instrument.inference.pipeline import (
             ALL_EARLY,
+            ALL_REJECTED,
             ALL_SATURATED,
             ALL_TRUNCATED,
             ALL_UNSTEADY,
@@ -396,8 +397,8 @@ def analyze(
                 errors.append({"source": where, "error": MISSING_SIZE_FLAG})
             elif est.get("estimate") is None and (unreadable := [
                     s["reason"] for s in est.get("skipped", [])
-                    if any(every in s["reason"] for every in (ALL_TRUNCATED, ALL_SATURATED,
-                                                               ALL_EARLY, ALL_UNSTEADY))]):
+                    if any(every in s["reason"] for every in (
+                        ALL_TRUNCATED, ALL_SATURATED, ALL_EARLY, ALL_UNSTEADY, ALL_REJECTED))]):
                 # records too short, or clipped: no answer can be read from them
                 errors.append({"source": where, "error": unreadable[0]})
             elif (est.get("estimate") or {}).get("thickness_m", {}).get("status") in (

@@ -40,8 +40,9 @@ ALL_TRUNCATED = "every shot is truncated"
 ALL_SATURATED = "every shot is saturated"
 ALL_EARLY = "every shot is early_reflection"
 ALL_UNSTEADY = "every shot is unsteady_baseline"
-"""Where a size's skip reason says its records cannot be read (too short, or clipped):
-``analyze --invert`` then exits 1."""
+ALL_REJECTED = "every shot is rejected"
+"""Where a size's skip reason says its records cannot be read (too short, clipped, another chain,
+a jumping level, or a mix of these): ``analyze --invert`` then exits 1."""
 
 
 def no_reflection(diameter_m: float) -> str:
@@ -75,6 +76,12 @@ class SizeSummary:
             if self.hidden and these and len(these) == self.aggregate.n_shots:
                 return (f"sphere_diameter {self.diameter_m:g} m: {every}"
                         f"{reason[reason.index(':'):]}")
+        flagged = [str(r["reason"]).split(":")[0] for r in self.aggregate.rejected
+                   if r.get("modified_z") is None]
+        if self.hidden and flagged and len(flagged) == self.aggregate.n_shots:
+            counts = ", ".join(f"{name} {flagged.count(name)}" for name in dict.fromkeys(flagged))
+            return (f"sphere_diameter {self.diameter_m:g} m: {ALL_REJECTED} ({counts}); see the "
+                    "aggregate's rejected shots for each reason")
         if self.hidden and self.aggregate.arr_upper_bound is None:
             return no_reflection(self.diameter_m)
         return None

@@ -105,3 +105,18 @@ def test_the_service_says_why_it_has_no_answer(folder: Path, tmp_path: Path) -> 
     assert body["estimate"] is None
     assert "every shot is saturated" in body["estimate_reason"]
     assert all("saturated" in s["features"]["flags"] for s in body["shots"])
+
+
+def test_a_mix_of_unreadable_shots_is_named(folder: Path) -> None:
+    """Three clipped shots and two cut by the record's end: no input, and the reason counts
+    both (the pipeline's skip reason, which makes ``analyze --invert`` exit 1)."""
+    import dataclasses
+
+    from solitonde.instrument.inference.pipeline import ALL_REJECTED, summarise
+
+    features = [extract(w) for w in signal_io.read(_clipped(folder, 25.0))]
+    features[3:] = [dataclasses.replace(f, flags=["truncated"]) for f in features[3:]]
+    (size,) = summarise([9.53e-3] * 5, features)
+    reason = size.skip_reason()
+    assert reason is not None and ALL_REJECTED in reason
+    assert "saturated 3, truncated 2" in reason
