@@ -224,6 +224,17 @@ UNSTEADY_REASON = ("unsteady_baseline: the sensor's level jumped between the pul
                    "fitted on the pre-trigger and the gap misses them), so the reflection's "
                    "baseline is not known; check the amplifier's range and the cabling")
 """Why :func:`aggregate` rejects a shot whose baseline jumped."""
+UNITS_REASON = ("implausible_units: the incident's width and amplitude disagree with the "
+                "chain's solitary wave (the units or the calibration)")
+REJECTING = {
+    "implausible_units": ("incident_width_s", UNITS_REASON),
+    "truncated": ("reflection_window_s", TRUNCATED_REASON),
+    "early_reflection": ("secondary_times_s", EARLY_REASON),
+    "unsteady_baseline": ("baseline_N", UNSTEADY_REASON),
+    "saturated": ("incident_peak_N", SATURATED_REASON),
+}
+"""The flags that reject a shot from :func:`aggregate`, first match first: the feature its
+row names (with that feature's value, none for a series) and the reason."""
 
 
 def _modified_z(values: np.ndarray) -> np.ndarray:
@@ -273,42 +284,14 @@ def aggregate(
     rejected: list[dict[str, Any]] = []
     dropped: set[int] = set()
     for i, f in enumerate(features):
-        if "implausible_units" in f.flags:
+        # the first of the shot's flags that rejects it, in REJECTING order
+        flag = next((name for name in REJECTING if name in f.flags), None)
+        if flag is not None:
             dropped.add(i)
-            rejected.append({
-                "index": i, "feature": "incident_width_s", "value": f.incident_width_s,
-                "modified_z": None,
-                "reason": "implausible_units: the incident's width and amplitude disagree with "
-                          "the chain's solitary wave (the units or the calibration)",
-            })
-        elif "truncated" in f.flags:
-            dropped.add(i)
-            rejected.append({
-                "index": i, "feature": "reflection_window_s", "value": f.reflection_window_s,
-                "modified_z": None,
-                "reason": TRUNCATED_REASON,
-            })
-        elif "early_reflection" in f.flags:
-            dropped.add(i)
-            rejected.append({
-                "index": i, "feature": "secondary_times_s", "value": None,
-                "modified_z": None,
-                "reason": EARLY_REASON,
-            })
-        elif "unsteady_baseline" in f.flags:
-            dropped.add(i)
-            rejected.append({
-                "index": i, "feature": "baseline_N", "value": f.baseline_N,
-                "modified_z": None,
-                "reason": UNSTEADY_REASON,
-            })
-        elif "saturated" in f.flags:
-            dropped.add(i)
-            rejected.append({
-                "index": i, "feature": "incident_peak_N", "value": f.incident_peak_N,
-                "modified_z": None,
-                "reason": SATURATED_REASON,
-            })
+            feature, reason = REJECTING[flag]
+            value = None if FIELD_KINDS[feature] == "series" else getattr(f, feature)
+            rejected.append({"index": i, "feature": feature, "value": value,
+                             "modified_z": None, "reason": reason})
     with_ref = [i for i, f in enumerate(features)
                 if f.tof_s is not None and f.arr is not None and i not in dropped]
     no_ref = [i for i in range(n) if i not in set(with_ref) and i not in dropped]

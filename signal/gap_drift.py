@@ -52,6 +52,16 @@ def _relaxation_at(relax: np.ndarray, k: float) -> float:
 
 
 @njit(cache=True)
+def _in_train(i: int, rows: np.ndarray, n_train: int, time_col: int, width_col: int) -> bool:
+    """Whether sample ``i`` lies within :data:`GAP_FOOT` FWHM of a pulse of the incident's train
+    (``rows[2:2 + n_train]``), which the drift's stretches leave out."""
+    for j in range(2, 2 + n_train):
+        if abs(i - rows[j, time_col]) <= GAP_FOOT * rows[j, width_col]:
+            return True
+    return False
+
+
+@njit(cache=True)
 def _accumulate(u: float, r: float, acc: np.ndarray, rhs: np.ndarray) -> None:
     """Add the sample ``r`` at scaled time ``u`` to the quadratic's normal equations."""
     p = 1.0
@@ -89,11 +99,7 @@ def gap_drift(y: np.ndarray, n_pre: int, rows: np.ndarray, n_train: int, relax: 
         _accumulate((i - centre) / scale, y[i], acc, rhs)
     used = 0
     for i in range(lo, hi):
-        skip = False
-        for j in range(2, 2 + n_train):
-            if abs(i - rows[j, time_col]) <= GAP_FOOT * rows[j, width_col]:
-                skip = True
-        if skip:
+        if _in_train(i, rows, n_train, time_col, width_col):
             continue
         _accumulate((i - centre) / scale, y[i] - _relaxation_at(relax, i - t_inc), acc, rhs)
         used += 1
@@ -119,11 +125,7 @@ def gap_drift(y: np.ndarray, n_pre: int, rows: np.ndarray, n_train: int, relax: 
         total = 0.0
         count = 0
         for i in range(first, stop):
-            skip = False
-            for j in range(2, 2 + n_train):
-                if abs(i - rows[j, time_col]) <= GAP_FOOT * rows[j, width_col]:
-                    skip = True
-            if skip:
+            if _in_train(i, rows, n_train, time_col, width_col):
                 continue
             u = (i - centre) / scale
             r = y[i] - (coef[0] + u * (coef[1] + u * coef[2]))

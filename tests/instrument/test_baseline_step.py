@@ -12,15 +12,13 @@ drift, or any striker's relaxation, by under 0.04 %): ``unsteady_baseline``, rej
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 from independent_chain import recorded_for, write_shots
-from typer.testing import CliRunner
+from recordings import analyze_inverted, edit_shots
 
-from solitonde.instrument.cli.main import build_app
 from solitonde.instrument.inference import chain_geometry
 from solitonde.instrument.tables.measured import detect_options
 from solitonde.signal import io as signal_io
@@ -38,26 +36,13 @@ def _recording(folder: Path, step_n: float, drift: float = 0.0) -> Path:
     t, force = recorded_for(STEEL, 4.0e-3, 1.0e-3)
     path = write_shots(folder / f"step_{step_n:g}_{drift:g}.csv", t, force, shots=5, snr_db=40.0,
                        seed=1, metadata={"plate_id": "steel-4mm"})
-    lines = path.read_text().splitlines()
-    out = []
     peak = float(force.max() - force[0])
-    for line in lines:
-        if line.startswith("#") or line.startswith("time"):
-            out.append(line)
-            continue
-        values = line.split(",")
-        time = float(values[0])
-        shift = (step_n if time > 4.0e-4 else 0.0) + drift * peak * ((time + 2.5e-4) / 1.25e-3) ** 2
-        out.append(",".join([values[0], *(repr(float(v) + shift) for v in values[1:])]))
-    path.write_text("\n".join(out) + "\n")
-    return path
+    return edit_shots(path, lambda time, _, v: v + (step_n if time > 4.0e-4 else 0.0)
+                      + drift * peak * ((time + 2.5e-4) / 1.25e-3) ** 2)
 
 
 def _analyze(path: Path) -> tuple[int, dict]:
-    result = CliRunner().invoke(build_app(), [
-        "analyze", str(path), "--invert", "--sphere-diameter", "9.53e-3", "--table",
-        str(STEEL_TABLE), "--json"])
-    return result.exit_code, json.loads(result.stdout)
+    return analyze_inverted(path, STEEL_TABLE)
 
 
 @pytest.fixture(scope="module")

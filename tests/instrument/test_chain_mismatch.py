@@ -14,15 +14,13 @@ are flagged ``inconsistent``.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 from independent_chain import recorded_for, sensor_trace, write_shots
-from typer.testing import CliRunner
+from recordings import analyze_inverted
 
-from solitonde.instrument.cli.main import build_app
 from solitonde.instrument.inference import chain_geometry
 from solitonde.instrument.tables.measured import detect_options
 from solitonde.signal import io as signal_io
@@ -45,10 +43,7 @@ def _recording(folder: Path, sensor_index: int) -> Path:
 
 
 def _analyze(path: Path) -> tuple[int, dict]:
-    result = CliRunner().invoke(build_app(), [
-        "analyze", str(path), "--invert", "--sphere-diameter", "9.53e-3", "--table",
-        str(STEEL_TABLE), "--json"])
-    return result.exit_code, json.loads(result.stdout)
+    return analyze_inverted(path, STEEL_TABLE)
 
 
 @pytest.fixture(scope="module")

@@ -11,15 +11,13 @@ the reason, and a size whose every shot is gives no input: ``analyze --invert`` 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 from independent_chain import recorded_for, write_shots
-from typer.testing import CliRunner
+from recordings import analyze_inverted, edit_shots
 
-from solitonde.instrument.cli.main import build_app
 from solitonde.signal import io as signal_io
 from solitonde.signal.features import aggregate, extract
 
@@ -33,25 +31,11 @@ def _clipped(folder: Path, rail_n: float, clip_shots: int = 5) -> Path:
     t, force = recorded_for(STEEL, 4.0e-3, 1.0e-3)
     path = write_shots(folder / f"rail_{rail_n:g}_{clip_shots}.csv", t, force, shots=5,
                        snr_db=40.0, seed=1, metadata={"plate_id": "steel-4mm"})
-    lines = path.read_text().splitlines()
-    out = []
-    for line in lines:
-        if line.startswith("#") or line.startswith("time"):
-            out.append(line)
-            continue
-        values = line.split(",")
-        shots = [float(v) for v in values[1:]]
-        shots = [min(v, rail_n) if k < clip_shots else v for k, v in enumerate(shots)]
-        out.append(",".join([values[0], *(repr(v) for v in shots)]))
-    path.write_text("\n".join(out) + "\n")
-    return path
+    return edit_shots(path, lambda _, k, v: min(v, rail_n) if k < clip_shots else v)
 
 
 def _analyze(path: Path) -> tuple[int, dict]:
-    result = CliRunner().invoke(build_app(), [
-        "analyze", str(path), "--invert", "--sphere-diameter", "9.53e-3", "--table",
-        str(STEEL_TABLE), "--json"])
-    return result.exit_code, json.loads(result.stdout)
+    return analyze_inverted(path, STEEL_TABLE)
 
 
 @pytest.fixture(scope="module")

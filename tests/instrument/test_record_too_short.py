@@ -11,14 +11,12 @@ wrong answer. A hidden reflection bounds the thickness only where the record wou
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
 from independent_chain import recorded_for, write_shots
-from typer.testing import CliRunner
+from recordings import analyze_inverted
 
-from solitonde.instrument.cli.main import build_app
 from solitonde.signal import io as signal_io
 from solitonde.signal.features import aggregate, extract
 
@@ -34,10 +32,7 @@ def _recording(folder: Path, duration_s: float) -> Path:
 
 
 def _analyze(path: Path) -> tuple[int, dict]:
-    result = CliRunner().invoke(build_app(), [
-        "analyze", str(path), "--invert", "--sphere-diameter", "9.53e-3", "--table",
-        str(STEEL_TABLE), "--json"])
-    return result.exit_code, json.loads(result.stdout)
+    return analyze_inverted(path, STEEL_TABLE)
 
 
 @pytest.fixture(scope="module")
