@@ -29,8 +29,8 @@ def test_the_your_plate_walk_runs_as_written(tmp_path):
                          capture_output=True, text=True, timeout=1800)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     out = run.stdout
-    assert out.startswith("plan: 84 points = 1 sphere size x 6 thicknesses x 14 distances"), out
-    assert "estimated time: " in out and "wrote my_plate.h5: 84 scenes" in out
+    assert out.startswith("plan: 120 points = 1 sphere size x 6 thicknesses x 20 distances"), out
+    assert "estimated time: " in out and "wrote my_plate.h5: 120 scenes" in out
     rows = list(csv.DictReader((tmp_path / "my_plate" / "my_estimates.csv").open()))
     assert [r["position"] for r in rows] == ["A1", "A2", "A3", "A4"]
     far = next(r for r in rows if r["position"] == "A4")

@@ -1,8 +1,12 @@
 """Calibration of the model to an experiment: an ARR factor and a TOF offset per sphere size.
 
 Real chains lose energy the elastic model does not (contact damping, friction, plasticity): the
-measured ARR sits below the simulated one, by a factor that depends on the sphere size but hardly
-on the plate, and the reflection arrives a little late. Shots on a reference plate of known
+measured ARR sits below the simulated one, by a factor that depends on the sphere size and, less,
+on the plate, and the reflection arrives a little late. One factor and offset per size is a first
+order: the map study's dissipation lowers ARR by 7.7 % on a 5.5 mm plate and by 2-4 % where the
+reflection is weak (ARR 0.15-0.23), and moves a thin plate's TOF by tens of microseconds
+(docs/joint-map.md). Several references of a size state that spread as a transfer uncertainty,
+two only part of it. Shots on a reference plate of known
 thickness and position give both: with the model's (TOF, ARR) there from the table,
 
     arr_factor = ARR_measured / ARR_model,    tof_offset_s = TOF_measured - TOF_model
