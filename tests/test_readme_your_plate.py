@@ -1,5 +1,5 @@
 """The README's "Your plate" walk, run as written: describe, build the table, calibrate, analyze,
-map (about 4 minutes on 2 cores: marked slow, `pytest -m slow tests/test_readme_your_plate.py`)."""
+map (about 2 minutes on 2 cores: marked slow, `pytest -m slow tests/test_readme_your_plate.py`)."""
 
 from __future__ import annotations
 
