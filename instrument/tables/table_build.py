@@ -655,7 +655,7 @@ def default_distances_m() -> list[float]:
     """L for the default table: dense within 200 mm (where the support matters), then to the
     plate centre (457 mm); 2.5 mm apart next to the clamp and 5 mm to 35 mm, where ARR rises
     steeply and bends toward the clamp: with nodes 10 mm apart, linear interpolation there read
-    ARR up to 0.08 low at 3-5 mm (5-7 times the error the table stated) and TOF up to 10 us
+    ARR up to 0.08 low at 3-5 mm (up to 7 times the error the table stated) and TOF up to 10 us
     late, against the model simulated at those points; the error falls as the square of the
     spacing."""
     near = [0.0, 0.0025, 0.005, 0.0075, 0.01, 0.015, 0.02, 0.025, 0.03, 0.035, 0.05, 0.07,

@@ -197,6 +197,13 @@ def test_analyze_then_map_from_the_estimates_file(tmp_path):
     for p in plate_map["positions"]:
         assert abs(p["distance_to_located_support_m"] - float(truth[p["position"]]["x_m"])) \
             < TOLERANCE_M
+        # every position's own answer holds the plate: the scan runs on the 3-D plate, the table
+        # on the 2-D one next to the clamp, whose error the table's budget must carry (without
+        # it, on the 20-distance table, P02 read 2.82-2.97 mm and P03 3.11-3.23 mm)
+        thickness = float(truth[p["position"]]["thickness_m"])
+        lo, hi = p["thickness_m"].get("ci95") or (None, None)
+        assert p["thickness_m"]["status"] != "inconsistent", p
+        assert (lo is None or lo <= thickness) and (hi is None or thickness <= hi), p
     assert png.read_bytes()[:4] == b"\x89PNG"
     res = run(build_cli(), ["map", str(est), "--plate-id", "OTHER"])
     assert res.exit_code == 2 and "SCAN-A" in res.stderr
