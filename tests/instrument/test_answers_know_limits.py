@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
-from independent_chain import sensor_trace, write_shots
+from independent_chain import sensor_trace
+from recordings import STEEL, STEEL_TABLE, post_recording, steel_shots
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
@@ -25,12 +26,9 @@ from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.signal import io as signal_io
 
 ROOT = Path(__file__).resolve().parents[2]
 ALUMINIUM = ROOT / "data_samples" / "default_table.h5"
-STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
-STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
 TRUTH_M = 4.0e-3
 
 
@@ -38,8 +36,7 @@ TRUTH_M = 4.0e-3
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     t, force = sensor_trace(STEEL, TRUTH_M)
     folder = tmp_path_factory.mktemp("steel")
-    write_shots(folder / "steel.csv", t, force, shots=5, snr_db=40.0, seed=1,
-                metadata={"plate_id": "steel-4mm"})
+    steel_shots(folder / "steel.csv", t, force)
     return folder / "steel.csv"
 
 
@@ -99,12 +96,7 @@ def test_steel_against_the_near_miss_steel_table_covers_through_the_material_spr
 
 
 def test_the_service_answers_201_with_the_warning(recording: Path, tmp_path: Path) -> None:
-    shots = [w.to_dict() for w in signal_io.read(recording)]
-    for shot in shots:
-        shot["metadata"]["sphere_diameter"] = 9.53e-3
-    settings = Settings(store_path=tmp_path / "s.sqlite", table_path=ALUMINIUM)
-    with TestClient(build_app(settings)) as client:
-        r = client.post("/v1/measurements", json={"shots": shots})
+    r = post_recording(recording, ALUMINIUM, tmp_path / "s.sqlite")
     assert r.status_code == 201, r.text
     est = r.json()["estimate"]
     assert est["thickness_m"]["status"] == "inconsistent"

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_chain import recorded_for, write_shots
-from recordings import analyze_inverted, edit_shots
+from independent_chain import recorded_for
+from recordings import STEEL, analyze_inverted, edit_shots, steel_shots
 
 from solitonde.instrument.inference import chain_geometry
 from solitonde.instrument.tables.measured import detect_options
@@ -25,24 +25,15 @@ from solitonde.signal import io as signal_io
 from solitonde.signal.batch import extract_batch
 from solitonde.signal.features import extract
 
-ROOT = Path(__file__).resolve().parents[2]
-STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
-STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
-
 
 def _recording(folder: Path, step_n: float, drift: float = 0.0) -> Path:
     """Five noisy shots, the level stepping by ``step_n`` at 400 us and drifting by a parabola
     of ``drift`` times the incident over the record."""
     t, force = recorded_for(STEEL, 4.0e-3, 1.0e-3)
-    path = write_shots(folder / f"step_{step_n:g}_{drift:g}.csv", t, force, shots=5, snr_db=40.0,
-                       seed=1, metadata={"plate_id": "steel-4mm"})
+    path = steel_shots(folder / f"step_{step_n:g}_{drift:g}.csv", t, force)
     peak = float(force.max() - force[0])
     return edit_shots(path, lambda time, _, v: v + (step_n if time > 4.0e-4 else 0.0)
                       + drift * peak * ((time + 2.5e-4) / 1.25e-3) ** 2)
-
-
-def _analyze(path: Path) -> tuple[int, dict]:
-    return analyze_inverted(path, STEEL_TABLE)
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +45,7 @@ def test_a_step_between_the_pulses_is_refused(folder: Path) -> None:
     path = _recording(folder, 2.0)
     features = [chain_geometry.measure_shot(w, 9.53e-3) for w in signal_io.read(path)]
     assert all("unsteady_baseline" in f.flags for f in features)
-    code, out = _analyze(path)
+    code, out = analyze_inverted(path)
     assert code == 1
     assert out["estimates"][0]["estimate"] is None
     assert "every shot is unsteady_baseline" in out["errors"][0]["error"]
@@ -65,7 +56,7 @@ def test_a_smooth_drift_or_a_small_step_is_read(folder: Path, step_n: float, dri
                                                 ) -> None:
     """No step, a 5 % parabola, and a 0.5 N step (1.5 % of the incident, which moves the ARR
     by 1.7 %): not flagged, and the answer holds 4.0 mm."""
-    code, out = _analyze(_recording(folder, step_n, drift))
+    code, out = analyze_inverted(_recording(folder, step_n, drift))
     assert code == 0, out["errors"]
     assert all("unsteady_baseline" not in s["flags"] for s in out["shots"])
     low, high = out["estimates"][0]["estimate"]["thickness_m"]["ci95"]

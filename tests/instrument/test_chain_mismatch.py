@@ -18,18 +18,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_chain import recorded_for, sensor_trace, write_shots
-from recordings import analyze_inverted
+from independent_chain import recorded_for, sensor_trace
+from recordings import STEEL, analyze_inverted, steel_shots
 
 from solitonde.instrument.inference import chain_geometry
 from solitonde.instrument.tables.measured import detect_options
 from solitonde.signal import io as signal_io
 from solitonde.signal.batch import extract_batch
 from solitonde.signal.features import extract
-
-ROOT = Path(__file__).resolve().parents[2]
-STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
-STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
 
 
 def _recording(folder: Path, sensor_index: int) -> Path:
@@ -38,12 +34,7 @@ def _recording(folder: Path, sensor_index: int) -> Path:
     else:
         t, force = sensor_trace(STEEL, 4.0e-3, duration_s=8.0e-4, sensor_index=sensor_index)
     name = f"sensor{sensor_index}"
-    return write_shots(folder / f"{name}.csv", t, force, shots=5, snr_db=40.0, seed=1,
-                       metadata={"plate_id": "steel-4mm"})
-
-
-def _analyze(path: Path) -> tuple[int, dict]:
-    return analyze_inverted(path, STEEL_TABLE)
+    return steel_shots(folder / f"{name}.csv", t, force)
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +52,7 @@ def test_a_sensor_lower_than_stated_is_refused(folder: Path) -> None:
     table = extract_batch(np.stack([w.force for w in waves]), waves[0].dt, t0=waves[0].t0,
                           **options)
     assert [table.flag_names(i) for i in range(len(waves))] == [f.flags for f in features]
-    code, out = _analyze(path)
+    code, out = analyze_inverted(path)
     assert code == 1
     assert out["estimates"][0]["estimate"] is None
     assert "every shot is early_reflection" in out["errors"][0]["error"]
@@ -71,7 +62,7 @@ def test_a_sensor_lower_than_stated_is_refused(folder: Path) -> None:
 def test_the_stated_chain_is_not_flagged(folder: Path) -> None:
     """The same plate under the stated chain: the reflection where the gate puts it, no flag,
     4.0 mm within reach."""
-    code, out = _analyze(_recording(folder, sensor_index=7))
+    code, out = analyze_inverted(_recording(folder, sensor_index=7))
     assert code == 0, out["errors"]
     assert all(s["flags"] == [] for s in out["shots"])
     est = out["estimates"][0]["estimate"]

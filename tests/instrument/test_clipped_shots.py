@@ -15,27 +15,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from independent_chain import recorded_for, write_shots
-from recordings import analyze_inverted, edit_shots
+from independent_chain import recorded_for
+from recordings import (
+    STEEL,
+    STEEL_TABLE,
+    analyze_inverted,
+    edit_shots,
+    post_recording,
+    steel_shots,
+)
 
 from solitonde.signal import io as signal_io
 from solitonde.signal.features import aggregate, extract
-
-ROOT = Path(__file__).resolve().parents[2]
-STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
-STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
 
 
 def _clipped(folder: Path, rail_n: float, clip_shots: int = 5) -> Path:
     """Five noisy shots of the independent solve, the first ``clip_shots`` cut at ``rail_n``."""
     t, force = recorded_for(STEEL, 4.0e-3, 1.0e-3)
-    path = write_shots(folder / f"rail_{rail_n:g}_{clip_shots}.csv", t, force, shots=5,
-                       snr_db=40.0, seed=1, metadata={"plate_id": "steel-4mm"})
+    path = steel_shots(folder / f"rail_{rail_n:g}_{clip_shots}.csv", t, force)
     return edit_shots(path, lambda _, k, v: min(v, rail_n) if k < clip_shots else v)
-
-
-def _analyze(path: Path) -> tuple[int, dict]:
-    return analyze_inverted(path, STEEL_TABLE)
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +49,7 @@ def test_every_shot_clipped_is_no_answer(folder: Path) -> None:
     agg = aggregate(features)
     assert agg["arr"].count == 0
     assert [r["reason"].split(":")[0] for r in agg.rejected] == ["saturated"] * 5
-    code, out = _analyze(path)
+    code, out = analyze_inverted(path)
     assert code == 1
     assert out["estimates"][0]["estimate"] is None
     message = out["errors"][0]["error"]
@@ -60,7 +58,7 @@ def test_every_shot_clipped_is_no_answer(folder: Path) -> None:
 
 def test_the_unclipped_shots_answer_alone(folder: Path) -> None:
     """Two of five shots clipped: the three whole ones give the answer, 4.0 mm within reach."""
-    code, out = _analyze(_clipped(folder, 25.0, clip_shots=2))
+    code, out = analyze_inverted(_clipped(folder, 25.0, clip_shots=2))
     assert code == 0, out["errors"]
     agg = out["aggregates"][0]
     assert [r["index"] for r in agg["rejected"]] == [0, 1]
@@ -73,17 +71,7 @@ def test_the_unclipped_shots_answer_alone(folder: Path) -> None:
 def test_the_service_says_why_it_has_no_answer(folder: Path, tmp_path: Path) -> None:
     """POST /v1/measurements with every shot clipped: 201 (the shots are stored, each with its
     flag), no estimate, and the reason names the clipping."""
-    from fastapi.testclient import TestClient
-
-    from solitonde.instrument.service.app import build_app as build_service
-    from solitonde.instrument.service.settings import Settings
-
-    shots = [w.to_dict() for w in signal_io.read(_clipped(folder, 25.0))]
-    for shot in shots:
-        shot["metadata"]["sphere_diameter"] = 9.53e-3
-    settings = Settings(store_path=tmp_path / "s.sqlite", table_path=STEEL_TABLE)
-    with TestClient(build_service(settings)) as client:
-        r = client.post("/v1/measurements", json={"shots": shots})
+    r = post_recording(_clipped(folder, 25.0), STEEL_TABLE, tmp_path / "s.sqlite")
     assert r.status_code == 201, r.text
     body = r.json()
     assert body["estimate"] is None

@@ -14,25 +14,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from independent_chain import recorded_for, write_shots
-from recordings import analyze_inverted
+from independent_chain import recorded_for
+from recordings import STEEL, STEEL_TABLE, analyze_inverted, steel_shots
 
 from solitonde.signal import io as signal_io
 from solitonde.signal.features import aggregate, extract
 
-ROOT = Path(__file__).resolve().parents[2]
-STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
-STEEL = {"youngs_modulus": 210e9, "poisson_ratio": 0.30, "density": 7850.0}
-
 
 def _recording(folder: Path, duration_s: float) -> Path:
     t, force = recorded_for(STEEL, 4.0e-3, duration_s)
-    return write_shots(folder / f"steel_{duration_s * 1e6:.0f}us.csv", t, force, shots=3,
-                       snr_db=40.0, seed=1, metadata={"plate_id": "steel-4mm"})
-
-
-def _analyze(path: Path) -> tuple[int, dict]:
-    return analyze_inverted(path, STEEL_TABLE)
+    return steel_shots(folder / f"steel_{duration_s * 1e6:.0f}us.csv", t, force, shots=3)
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +33,7 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_a_record_ending_before_the_reflection_bounds_nothing(folder: Path) -> None:
     path = _recording(folder, 5.2e-4)
-    code, out = _analyze(path)
+    code, out = analyze_inverted(path)
     assert code == 0, out["errors"]
     assert all(s["flags"] == ["no_reflection"] for s in out["shots"])
     est = out["estimates"][0]["estimate"]
@@ -62,7 +53,7 @@ def test_a_reflection_cut_by_the_record_end_is_no_reading(folder: Path) -> None:
     agg = aggregate(features)
     assert agg["arr"].count == 0 and agg.arr_upper_bound is None
     assert [r["reason"].split(":")[0] for r in agg.rejected] == ["truncated"] * 3
-    code, out = _analyze(path)
+    code, out = analyze_inverted(path)
     assert code == 1
     assert out["estimates"][0]["estimate"] is None
     message = out["errors"][0]["error"]
@@ -75,7 +66,7 @@ def test_a_whole_record_still_answers(folder: Path) -> None:
     path = _recording(folder, 8.0e-4)
     features = [extract(w) for w in signal_io.read(path)]
     assert all(f.reflection_window_s > f.tof_s and "truncated" not in f.flags for f in features)
-    code, out = _analyze(path)
+    code, out = analyze_inverted(path)
     assert code == 0, out["errors"]
     est = out["estimates"][0]["estimate"]
     assert est["thickness_m"]["status"] == "constrained"
