@@ -1,4 +1,9 @@
-"""`solitonde calibrate`: fit the ARR factor and TOF offset from shots on a reference plate.
+"""`solitonde calibrate`: fit the chain's damping, ARR factor and TOF offset from shots on a
+reference plate.
+
+Against a table with a dissipation layer (the bundled ones) the chain's Kuwabara-Kono damping
+tau comes first, and the table is read at it (instrument.tables.dissipation): the loss then
+follows the plate, as a real chain's does. The factor and offset hold what damping leaves.
 
 The reference plate's thickness and the chain's distance to the support are known; the shots are
 waveform files (analysed and aggregated per sphere size, as `analyze` does) or, with ``--tof``,
@@ -76,7 +81,8 @@ def calibrate_command(
     out: Path = typer.Option(Path("calibration.json"), "--out", help="calibration JSON to write"),
     as_json: bool = typer.Option(False, "--json", help="print the calibration as JSON"),
 ) -> None:
-    """Fit ARR factor and TOF offset per sphere size on a reference plate; write them as JSON."""
+    """Fit the chain's damping (with a table's dissipation layer), ARR factor and TOF offset per
+    sphere size on a reference plate; write them as JSON."""
     if out.is_dir():  # before any work: the fit would be lost
         _fail(f"--out: {str(out)!r} is a directory; give the name of the JSON file to write")
     try:
@@ -109,7 +115,10 @@ def calibrate_command(
         typer.echo(json.dumps(cal.to_dict(), indent=2))
     else:
         for e in cal.to_dict()["per_diameter"]:
-            typer.echo(f"D = {e['diameter_m'] * 1e3:.4g} mm: arr_factor {e['arr_factor']:.4f} "
+            damping = ("" if "damping_s" not in e else
+                       f"damping tau {e['damping_s']:.3g} +- {e['damping_std_s']:.2g} s, ")
+            typer.echo(f"D = {e['diameter_m'] * 1e3:.4g} mm: {damping}"
+                       f"arr_factor {e['arr_factor']:.4f} "
                        f"+- {e['arr_factor_std']:.4f}, tof_offset {e['tof_offset_s'] * 1e6:.3f} "
                        f"+- {e['tof_offset_std_s'] * 1e6:.3f} us")
         typer.echo(f"wrote {out}")

@@ -128,6 +128,11 @@ def build_command(
                                    "(without --out: the bundled table)"),
     table_id: str | None = typer.Option(None, "--id", help="the table's id, which measurements "
                                         "and the service name it by (default: the file's stem)"),
+    dissipation_layer: list[float] = typer.Option(
+        [], "--dissipation-layer", metavar="TAU",
+        help="also simulate the sweep with Kuwabara-Kono contact damping TAU s (repeatable; the "
+             "bundled tables: 7e-8 and 2e-7) and store it in the table, so that a calibration "
+             "can fit the chain's damping"),
 ) -> None:
     """Simulate the sweep (resuming an interrupted build) and write the table atomically."""
     if table_id is not None and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", table_id):
@@ -150,10 +155,14 @@ def build_command(
             parse_axis(distances, "--distances", default_distances_m()),
             scene=base, traces=traces,
         )
+        for tau in dissipation_layer:
+            _check_damping(tau, "--dissipation-layer")
         command = "solitonde " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
                              command=command, table_id=table_id,
                              plan=lambda p: typer.echo(plan_text(p), err=as_json))
+        if report.complete and dissipation_layer:
+            _add_layer(out, dissipation_layer, [], workers, progress, as_json)
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return
@@ -197,6 +206,11 @@ def info_command(
         typer.echo(f"  {name}: {axis['n']} values, mm: {vals}")
     typer.echo(f"  status: {data['status_counts']}")
     typer.echo(f"  plate models: {data['plate_models']}")
+    layer = data["dissipation_layer"]
+    typer.echo("  dissipation layer: " + ("none (`solitonde table dissipation` adds one)"
+                                          if layer is None else
+                                          "Kuwabara-Kono tau = " + ", ".join(
+                                              f"{t:g}" for t in layer["damping_s"]) + " s"))
     prov = data["provenance"]
     if prov:
         typer.echo(f"  built {prov.get('built_at')} in {prov.get('build_wall_s', 0):.0f} s "
@@ -224,6 +238,71 @@ def slopes_command(
                f"in {time.perf_counter() - started:.1f} s")
 
 
+def _check_damping(value: float, flag: str) -> None:
+    if not (value > 0 and value <= 1e-3):
+        _fail(f"{flag}: {value!r} s is not a Kuwabara-Kono time constant (allowed: "
+              "0 < TAU <= 1e-3 s; the synthetic chain's is 1e-7)")
+
+
+def _add_layer(file: Path, dampings: list[float], sources: list[Path], workers: int | None,
+               progress: bool, quiet: bool) -> None:
+    """Simulate slices at ``dampings`` (or take them from ``sources``) and add them to the
+    dissipation layer of ``file``."""
+    import time
+
+    from solitonde.instrument.tables.dissipation import (
+        add_to_table,
+        layer_from_table,
+        simulate_layer,
+    )
+
+    started = time.perf_counter()
+    table = ModelTable.load(file)
+    built: list[Path] = []
+    layer = None
+    for source in sources:
+        one = layer_from_table(table, ModelTable.load(source))
+        layer = one if layer is None else layer.merged(one)
+    for tau in dampings:
+        one, path = simulate_layer(table, tau, file.parent, workers=workers, progress=progress)
+        built.append(path)
+        layer = one if layer is None else layer.merged(one)
+    assert layer is not None
+    full = add_to_table(file, layer)
+    for path in built:
+        path.unlink(missing_ok=True)  # its features are in the table now
+    taus = ", ".join(f"{t:g}" for t in full.damping_s)
+    typer.echo(f"wrote the dissipation layer (Kuwabara-Kono tau = {taus} s) into {file} in "
+               f"{time.perf_counter() - started:.1f} s", err=quiet)
+
+
+def dissipation_command(
+    file: Path = typer.Argument(DEFAULT_TABLE_PATH, help="table file"),
+    damping: list[float] = typer.Option([], "--damping", metavar="TAU",
+                                        help="simulate a slice at this Kuwabara-Kono time "
+                                             "constant, s (repeatable; default 7e-8 and 2e-7 "
+                                             "without --from)"),
+    source: list[Path] = typer.Option([], "--from", help="take a slice from this table: the "
+                                      "same sweep built with --set effects.dissipation=true "
+                                      "--set effects.damping=TAU (repeatable)"),
+    workers: int | None = typer.Option(None, help="local worker processes (default: one per "
+                                       "core)"),
+    progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
+) -> None:
+    """Add slices to a table's dissipation layer (table build --dissipation-layer does): the
+    sweep with contact damping, which a calibration reads the chain's damping from."""
+    from solitonde.instrument.tables.dissipation import DEFAULT_DAMPINGS_S
+
+    for tau in damping:
+        _check_damping(tau, "--damping")
+    if not damping and not source:
+        damping = list(DEFAULT_DAMPINGS_S)
+    try:
+        _add_layer(file, damping, source, workers, progress, False)
+    except (TableError, SceneError) as exc:
+        _fail(str(exc))
+
+
 def register(app: typer.Typer) -> None:
     """Add the `table` command group to the CLI."""
     group = typer.Typer(help="Build and inspect model tables.", no_args_is_help=True,
@@ -231,4 +310,5 @@ def register(app: typer.Typer) -> None:
     group.command("build")(build_command)
     group.command("info")(info_command)
     group.command("slopes")(slopes_command)
+    group.command("dissipation")(dissipation_command)
     app.add_typer(group, name="table")

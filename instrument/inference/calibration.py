@@ -1,20 +1,27 @@
-"""Calibration of the model to an experiment: an ARR factor and a TOF offset per sphere size.
+"""Calibration of the model to an experiment: the chain's damping, an ARR factor and a TOF offset
+per sphere size.
 
 Real chains lose energy the elastic model does not (contact damping, friction, plasticity): the
-measured ARR sits below the simulated one, by a factor that depends on the sphere size and, less,
-on the plate, and the reflection arrives a little late. One factor and offset per size is a first
-order: the map study's dissipation lowers ARR by 7.7 % on a 5.5 mm plate and by 2-4 % where the
-reflection is weak (ARR 0.15-0.23), and moves a thin plate's TOF by tens of microseconds
-(docs/joint-map.md). Several references of a size state that spread as a transfer uncertainty,
-two only part of it. Shots on a reference plate of known
-thickness and position give both: with the model's (TOF, ARR) there from the table,
+measured ARR sits below the simulated one, and by how much depends on the plate. With
+Kuwabara-Kono damping the loss is 7.7 % of ARR on a 5.5 mm aluminium plate far from the supports
+but 2-5 % on 2.4-3.0 mm ones, and a thin plate's reflection moves by up to tens of microseconds
+(docs/inversion.md, "Dissipation"): one factor and offset fitted on one plate do not carry to
+another. So where the table has a dissipation layer (instrument.tables.dissipation: the sweep
+simulated again with damping), a calibration first fits the chain's Kuwabara-Kono time constant
+``damping_s`` (with ``damping_std_s``) and the inversion reads the table at it
+(:func:`calibrated_table`); the ARR factor and TOF offset then hold what damping leaves (about 1
+and 0 for a chain whose losses are contact damping). Without the layer, the factor and offset are
+the whole calibration, as before.
+
+Shots on a reference plate of known thickness and position give them: with the model's (TOF,
+ARR) there from the table (read at the fitted damping),
 
     arr_factor = ARR_measured / ARR_model,    tof_offset_s = TOF_measured - TOF_model
 
 per sphere size (inverse-variance means when several references are given; the fit is in
-:mod:`.calibration_fit`). The inversion then
-compares ``arr_factor * ARR_model`` and ``TOF_model + tof_offset_s`` with new measurements. Stored
-as JSON (written to a temporary name, then renamed).
+:mod:`.calibration_fit`). Several references of a size also state the spread between them as a
+transfer uncertainty. The inversion then compares ``arr_factor * ARR_model`` and ``TOF_model +
+tof_offset_s`` with new measurements. Stored as JSON (written to a temporary name, then renamed).
 """
 
 from __future__ import annotations
@@ -27,6 +34,8 @@ from pathlib import Path
 from typing import Any
 
 from solitonde.instrument.errors import InstrumentError
+from solitonde.instrument.tables.dissipation import damped
+from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.atomic import write_text
 
 
@@ -78,6 +87,8 @@ _PER_DIAMETER_KEYS: dict[str, Any] = {
     "tof_offset_std_s": _nonnegative,
     "tof_offset_transfer_std_s": _nonnegative,
     "n_references": _count,
+    "damping_s": _nonnegative,
+    "damping_std_s": _nonnegative,
 }
 
 
@@ -108,6 +119,20 @@ class Calibration:
                 return (float(entry.get("arr_factor_std", 0.0)),
                         float(entry.get("tof_offset_std_s", 0.0)))
         return 0.0, 0.0
+
+    def damping_for(self, diameter_m: float) -> tuple[float, float] | None:
+        """(Kuwabara-Kono time constant s, its sd) fitted for a sphere size, or None where the
+        calibration has none (fitted against a table without a dissipation layer)."""
+        for d, entry in self.per_diameter.items():
+            if abs(d - diameter_m) <= 0.01 * d:
+                if "damping_s" not in entry:
+                    return None
+                return float(entry["damping_s"]), float(entry.get("damping_std_s", 0.0))
+        return None
+
+    @property
+    def has_damping(self) -> bool:
+        return any("damping_s" in e for e in self.per_diameter.values())
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -198,3 +223,29 @@ class Calibration:
         cal = cls.from_any(data)
         assert cal is not None
         return cal
+
+
+def calibrated_table(table: ModelTable, calibration: Calibration | None) -> ModelTable:
+    """The table as the calibration reads it: at the chain's fitted damping (per sphere size,
+    :func:`~solitonde.instrument.tables.dissipation.damped`) when the calibration has one, else
+    the table itself. A size the calibration does not list is read undamped.
+
+    Raises
+    ------
+    CalibrationError
+        (field ``damping_s``) When the calibration states a damping and the table has no
+        dissipation layer to read it with.
+    """
+    if calibration is None or not calibration.has_damping:
+        return table
+    if table.dissipation is None:
+        raise CalibrationError("damping_s", f"the calibration states the chain's damping, but "
+                               f"table {table.table_id!r} has no dissipation layer to read it "
+                               "with: calibrate against this table, or add the layer with "
+                               "`solitonde table dissipation FILE`")
+    taus, sds = [], []
+    for d in table.axes["diameter_m"]:
+        fitted = calibration.damping_for(float(d))
+        taus.append(0.0 if fitted is None else fitted[0])
+        sds.append(0.0 if fitted is None else fitted[1])
+    return damped(table, taus, sds)

@@ -11,8 +11,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from solitonde.instrument.inference.calibration import Calibration, CalibrationError
 from solitonde.instrument.inference.inversion import FeatureSummary, InversionError, predict
+from solitonde.instrument.tables.dissipation import damped, slice_reads
 from solitonde.instrument.tables.table import ModelTable
 
 
@@ -30,6 +33,42 @@ def _combine(values: Sequence[float], sigmas: Sequence[float]) -> tuple[float, f
     return mean, stat, math.sqrt(max(0.0, excess))
 
 
+TAU_GRID_POINTS = 1201
+"""Time constants tried by the damping fit, 0 to 1.5 times the layer's largest."""
+
+
+def _fit_damping(table: ModelTable, d: float, refs: Sequence[Reference]) -> tuple[float, float]:
+    """(tau, sd) of the chain's Kuwabara-Kono damping from the references' ARR (see
+    :func:`fit_calibration`): the chi^2 over a fine grid of tau, the model piecewise linear in
+    tau between the table's slices as the inversion reads it; sd from chi^2 = min + 1, scaled by
+    the Birge ratio when several references disagree beyond their errors."""
+    layer = table.dissipation
+    assert layer is not None
+    reads = slice_reads(table)
+    nodes = np.concatenate([[0.0], layer.damping_s])
+    taus = np.linspace(0.0, 1.5 * nodes[-1], TAU_GRID_POINTS)
+    chi2 = np.zeros_like(taus)
+    for ref in refs:
+        at = np.array([predict(r, d, ref.thickness_m, ref.distance_m)[1] for r in reads])
+        arr0_sd = predict(table, d, ref.thickness_m, ref.distance_m, with_error=True)[3]
+        model = np.interp(taus, nodes, at)
+        beyond = taus > nodes[-1]  # the last segment, extended
+        model[beyond] = at[-1] + (taus[beyond] - nodes[-1]) * (at[-1] - at[-2]) / (
+            nodes[-1] - nodes[-2])
+        chi2 += (ref.summary.arr - model) ** 2 / (ref.summary.sigmas()[1] ** 2 + arr0_sd**2)
+    if np.ptp(chi2) <= 0:
+        raise CalibrationError("references", f"the references of D = {d:g} m sit where the "
+                               "table's damping changes nothing; the chain's damping cannot "
+                               "be fitted there")
+    best = int(np.argmin(chi2))
+    inside = taus[chi2 <= chi2[best] + 1.0]
+    sd = 0.5 * (inside.max() - inside.min()) if inside.min() > 0 else inside.max() - taus[best]
+    sd = max(sd, taus[1] - taus[0])
+    if len(refs) > 1:
+        sd *= max(1.0, math.sqrt(chi2[best] / (len(refs) - 1)))
+    return float(taus[best]), float(sd)
+
+
 @dataclass(frozen=True)
 class Reference:
     """Shots of one sphere size on a reference plate of known thickness and position."""
@@ -40,7 +79,17 @@ class Reference:
 
 
 def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calibration:
-    """ARR factor and TOF offset per sphere size from reference shots; globals as their means.
+    """The chain's damping (where the table has a dissipation layer), ARR factor and TOF offset
+    per sphere size from reference shots; globals as their means.
+
+    With a dissipation layer (instrument.tables.dissipation), each size's Kuwabara-Kono time
+    constant comes first: the least-squares fit of the references' ARR to the table read at tau
+    (piecewise linear between the layer's slices, at each reference's known (t, L); tau >= 0: a
+    chain that loses nothing is elastic). Its standard error is the fit's, scaled up by the
+    residuals' scatter when several references disagree beyond their errors (Birge ratio). The
+    ARR factor and TOF offset are then fitted against the table read at that damping, so they
+    hold what damping does not explain (about 1 and 0 for a chain whose losses are contact
+    damping).
 
     Each reference gives ``factor = ARR / ARR_model`` and ``offset = TOF - TOF_model`` with the
     model interpolated from ``table`` at the known (t, L); several references of one size are
@@ -56,22 +105,34 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     """
     if not references:
         raise CalibrationError("references", "need at least one reference measurement")
+    groups: dict[float, list[Reference]] = {}
+    for ref in references:
+        d = float(table.axes["diameter_m"][table.diameter_index(ref.summary.diameter_m)])
+        groups.setdefault(d, []).append(ref)
+    dampings = ({d: _fit_damping(table, d, refs) for d, refs in groups.items()}
+                if table.dissipation is not None else {})
     by_d: dict[float, list[tuple[float, float, float, float]]] = {}
     measured: dict[float, list[float]] = {}
-    for ref in references:
-        s = ref.summary
-        d = float(table.axes["diameter_m"][table.diameter_index(s.diameter_m)])
-        tof_m, arr_m, tof_sd, arr_sd = predict(table, d, ref.thickness_m, ref.distance_m,
-                                               with_error=True)
-        if arr_m <= 0:
-            raise InversionError("arr", f"the model ARR at the reference is {arr_m:g}: no factor "
-                                 "can be fitted there; use a thicker or closer reference")
-        s_tof, s_arr = s.sigmas()
-        # the reference's own error: its shots, and the table's interpolation error there
-        f = s.arr / arr_m
-        sf = math.hypot(s_arr, f * arr_sd) / arr_m
-        by_d.setdefault(d, []).append((f, sf, s.tof_s - tof_m, math.hypot(s_tof, tof_sd)))
-        measured.setdefault(d, []).append(s.arr)
+    for d, refs in groups.items():
+        # the factor and offset against the table at the fitted damping; the damping's own
+        # error is the inversion's to add, not theirs
+        tau = dampings[d][0] if d in dampings else 0.0
+        model = table if d not in dampings else damped(table, [tau] * table.shape[0],
+                                                       [0.0] * table.shape[0])
+        for ref in refs:
+            s = ref.summary
+            tof_m, arr_m, tof_sd, arr_sd = predict(model, d, ref.thickness_m, ref.distance_m,
+                                                   with_error=True)
+            if arr_m <= 0:
+                raise InversionError("arr", f"the model ARR at the reference is {arr_m:g}: no "
+                                     "factor can be fitted there; use a thicker or closer "
+                                     "reference")
+            s_tof, s_arr = s.sigmas()
+            # the reference's own error: its shots, and the table's interpolation error there
+            f = s.arr / arr_m
+            sf = math.hypot(s_arr, f * arr_sd) / arr_m
+            by_d.setdefault(d, []).append((f, sf, s.tof_s - tof_m, math.hypot(s_tof, tof_sd)))
+            measured.setdefault(d, []).append(s.arr)
     per: dict[float, dict[str, float]] = {}
     for d, rows in by_d.items():
         f, sf, o, so = (list(c) for c in zip(*rows, strict=True))
@@ -95,6 +156,8 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
             "tof_offset_transfer_std_s": o_transfer,
             "n_references": len(rows),
         }
+        if d in dampings:
+            per[d]["damping_s"], per[d]["damping_std_s"] = dampings[d]
     n = len(per)
     reference = {
         "references": [{"thickness_m": r.thickness_m, "distance_m": r.distance_m,

@@ -13,7 +13,9 @@ sigma_model the table's own interpolation error where the cell lies (leave-one-o
 along both axes, scaled to the grid spacing, interpolated like the features): large where TOF and
 ARR oscillate with L near a support, small where they are smooth; plus, at nodes simulated on the
 2-D plate (next to a support), that plate's own error against the 3-D plate
-(:data:`PLATE_THEORY_TOF_REL_STD`, :data:`PLATE_THEORY_ARR_REL_STD`). A calibration multiplies the
+(:data:`PLATE_THEORY_TOF_REL_STD`, :data:`PLATE_THEORY_ARR_REL_STD`). A calibration fitted
+against a table with a dissipation layer first reads the table at the chain's fitted contact
+damping (instrument.tables.dissipation; its uncertainty adds to the model error); it multiplies the
 model ARR by ``arr_factor`` (experiments lose energy the model does not) and adds ``tof_offset_s``
 to the model TOF; its stated uncertainties (``arr_factor_std``, ``tof_offset_std_s``) enter the
 variances. Beyond D/t = 5, where the paper finds ARR near 0 and the model's "reflection" is a
@@ -67,7 +69,7 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.calibration import Calibration, calibrated_table
 from solitonde.instrument.tables.table import (
     STATUS_NO_REFLECTION,
     STATUS_OK,
@@ -385,6 +387,9 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
                + np.where(two_d, (PLATE_THEORY_TOF_REL_STD * tof) ** 2, 0.0))
     arr_var = (_node_variance(arr, ok, np.log(t_nodes), l_nodes)
                + np.where(two_d, (PLATE_THEORY_ARR_REL_STD * arr) ** 2, 0.0))
+    if table.model_variance is not None:  # e.g. a fitted damping's uncertainty
+        tof_var = tof_var + np.where(has, table.model_variance["tof_s"][i_d], 0.0)
+        arr_var = arr_var + np.where(has, table.model_variance["arr"][i_d], 0.0)
     # A cell whose interpolation touches a node without features has none itself.
     touched = (wt > 1e-12).astype(float) @ (~has).astype(float) @ (wl > 1e-12).astype(float).T
     valid = touched == 0
@@ -440,8 +445,12 @@ def predict(table: ModelTable, diameter_m: float, thickness_m: float,
     if not with_error:
         return tof, arr
     ct, cl = np.log(t_nodes), l_nodes
-    tof_sd = math.sqrt(float((wt @ _node_variance(tof_n, ok, ct, cl) @ wl.T)[0, 0]))
-    arr_sd = math.sqrt(float((wt @ _node_variance(arr_n, ok, ct, cl) @ wl.T)[0, 0]))
+    tof_var, arr_var = _node_variance(tof_n, ok, ct, cl), _node_variance(arr_n, ok, ct, cl)
+    if table.model_variance is not None:
+        tof_var = tof_var + np.where(ok, table.model_variance["tof_s"][i_d], 0.0)
+        arr_var = arr_var + np.where(ok, table.model_variance["arr"][i_d], 0.0)
+    tof_sd = math.sqrt(float((wt @ tof_var @ wl.T)[0, 0]))
+    arr_sd = math.sqrt(float((wt @ arr_var @ wl.T)[0, 0]))
     return tof, arr, tof_sd, arr_sd
 
 
@@ -695,6 +704,7 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     """
     from solitonde.instrument.inference.material_spread import sensitivity
 
+    table = calibrated_table(table, cal)  # at the chain's fitted damping, if it has one
     seen = [i for i in items if not i.hidden]
     hidden = [i for i in items if i.hidden]
     grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]

@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from solitonde.instrument.inference.calibration import calibrated_table
 from solitonde.instrument.inference.inversion import (
     FeatureSummary,
     InversionError,
@@ -143,6 +144,7 @@ def _curves(post: JointPosterior, meas: _Measurement) -> np.ndarray:
     if cached is not None:
         return cached
     rng = np.random.default_rng(SEED)
+    model = calibrated_table(table, cal)  # the features a calibrated chain would measure
     out = np.empty((grid.size, NOISE_DRAWS, grid.size))
     w_t = lk0.weight_t
     for j, l0 in enumerate(grid):
@@ -150,7 +152,7 @@ def _curves(post: JointPosterior, meas: _Measurement) -> np.ndarray:
             inputs = []
             for d, s_tof, s_arr, n, bound in meas.sizes:
                 try:
-                    tof, arr = predict(table, d, t, float(l0))
+                    tof, arr = predict(model, d, t, float(l0))
                 except InversionError:  # no reflection there: the size's bound, as measured
                     b = bound if bound is not None else _table_bound(table, d)
                     inputs.append(FeatureSummary(d, None, None, n_shots=n, arr_upper_bound=b))

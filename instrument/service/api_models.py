@@ -252,6 +252,10 @@ class CalibrationEntry(Strict):
     tof_offset_std_s: float | None = Field(None, ge=0, le=1e-2)
     tof_offset_transfer_std_s: float | None = Field(None, ge=0, le=1e-2)
     n_references: int | None = Field(None, ge=1, le=100_000)
+    damping_s: float | None = Field(None, ge=0, le=1e-3, description="the chain's fitted "
+                                    "Kuwabara-Kono time constant, s: the table is read at it "
+                                    "(needs a table with a dissipation layer)")
+    damping_std_s: float | None = Field(None, ge=0, le=1e-3)
 
 
 class Calibration(Strict):

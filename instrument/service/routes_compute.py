@@ -79,7 +79,8 @@ async def invert(request: Request, svc: ServiceDep) -> dict[str, Any]:
         field = getattr(exc, "field", None) or "inputs"
         if field in InversionInput.model_fields:
             field = f"inputs.{field}"
-        elif field in Calibration.model_fields or field.startswith("per_diameter["):
+        elif (field in Calibration.model_fields or field.startswith("per_diameter[")
+              or field == "damping_s"):
             field = f"calibration.{field}"
         message = exc.full_message if isinstance(exc, InstrumentError) else str(exc)
         raise Problem(422, f"{field}: {message}", kind="invalid-input", field=field) from None

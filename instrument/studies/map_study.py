@@ -11,8 +11,9 @@ rectangle's sides (which side at random), tilted by up to :data:`TILT_DEG` and s
 :data:`DISTANCE_RANGE_M` (an operator looking for the support measures near it, some further
 away) and anywhere along it inside the rectangle. Every position is simulated, measured and
 calibrated exactly as :func:`.validate.measure_plate` does (the tier ``auto`` picks, a
-Kuwabara-Kono dissipation the table lacks, 5 shots at 40 dB, one sphere size, an ARR factor and
-TOF offset fitted on two reference plates).
+Kuwabara-Kono dissipation the elastic table lacks, 5 shots at 40 dB, one sphere size, the
+chain's damping (with the table's dissipation layer), an ARR factor and TOF offset fitted on two
+reference plates).
 
 Scored per scan with 3-10 positions (:data:`POSITIONS`):
 
@@ -198,7 +199,8 @@ class Measurer:
 
 
 def _calibration(table: ModelTable, measure: Measurer, d: float, seed: int) -> Calibration:
-    """An ARR factor and TOF offset fitted on two reference plates, as :mod:`.validate` does."""
+    """The chain's damping, an ARR factor and TOF offset fitted on two reference plates, as
+    :mod:`.validate` does."""
     t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
     l_ref = float(np.clip(single.REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
     refs = []

@@ -96,6 +96,12 @@ class ModelTable:
     material_slopes: dict[str, np.ndarray] | None = None
     """The features' slopes along ``ln E'`` and ``ln rho`` far from the supports, per sphere
     size and thickness (:mod:`.material_slopes`); None for a table built before them."""
+    dissipation: Any = None
+    """The features simulated with contact damping (:class:`.dissipation.DissipationLayer`), or
+    None for a table without that layer."""
+    model_variance: dict[str, np.ndarray] | None = None
+    """Per-node variance of ``tof_s`` and ``arr`` the inversion adds to the table's
+    interpolation error (a table read at a fitted damping: :func:`.dissipation.damped`)."""
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     @property
@@ -142,6 +148,8 @@ class ModelTable:
             fh = h5py.File(path, "r")
         except OSError as exc:
             raise TableError("table", f"{str(path)!r} is not an HDF5 file ({exc})") from None
+        from solitonde.instrument.tables.dissipation import read_layer
+
         with fh:
             if fh.attrs.get("format") != FORMAT:
                 raise TableError("table", f"{str(path)!r} is not a solitonde model table")
@@ -177,6 +185,7 @@ class ModelTable:
                 or PLATE_MODEL_NAMES,
                 path=path,
                 material_slopes=read_slopes(fh, grid),
+                dissipation=read_layer(fh, grid),
             )
             table._cache["sha256"] = digest
             return table
@@ -224,6 +233,8 @@ class ModelTable:
                              else str(int(m)): int(c) for m, c in zip(models, counts, strict=True)},
             "sweep": self.sweep,
             "provenance": self.provenance,
+            "dissipation_layer": (None if self.dissipation is None
+                                  else {"damping_s": list(self.dissipation.damping_s)}),
         }
 
 

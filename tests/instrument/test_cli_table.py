@@ -106,3 +106,28 @@ def test_a_scene_builds_its_own_sphere_size_and_the_plan_comes_first(tmp_path: P
                                            "--workers", "1", "--no-progress"])
     assert res.exit_code == 0, res.output
     assert res.output.startswith("plan: 2 points = 2 sphere sizes x 1 thicknesses")
+
+
+def test_a_build_with_a_dissipation_layer_stores_the_damped_sweep(tmp_path: Path) -> None:
+    """`table build --dissipation-layer TAU`: the same sweep simulated with Kuwabara-Kono damping,
+    stored in the table; damping takes some of the reflection and nothing else is left behind."""
+    from solitonde.instrument.tables.table import ModelTable
+
+    out = tmp_path / "layered.h5"
+    res = CliRunner().invoke(build_app(), ["table", "build", *GRID, "--thicknesses", "3e-3,5e-3",
+                                           "--set", "effects.plate_model=infinite", "--out",
+                                           str(out), "--dissipation-layer", "2e-7"])
+    assert res.exit_code == 0, res.output
+    table = ModelTable.load(out)
+    layer = table.dissipation
+    assert layer is not None and layer.damping_s == (2e-7,)
+    assert (layer.status == 0).all()
+    ratio = layer.features["arr"][0] / table.features["arr"]
+    # a small sphere's contacts are short, so tau takes a quarter of the reflection or more
+    assert ((ratio > 0.6) & (ratio < 0.9)).all(), ratio
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["layered.h5"]
+    assert "tau = 2e-07 s" in CliRunner().invoke(build_app(), ["table", "info", str(out)]).output
+    bad = CliRunner().invoke(build_app(), ["table", "build", *GRID, "--out",
+                                           str(tmp_path / "x.h5"), "--dissipation-layer", "0"])
+    assert bad.exit_code == 2 and "--dissipation-layer" in bad.output
+    assert not (tmp_path / "x.h5").exists()

@@ -25,11 +25,14 @@ def _plane(m: Mapping[str, float]) -> float:
 def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: float = 9.53e-3,
                  *, sphere: Mapping[str, float] = SPHERE_440C, n_particles: int = 20,
                  sensor_index: int = 7, drop_height_m: float = 5e-3, duration_s: float = 8e-4,
-                 sample_rate: float = 2e6, gravity: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                 sample_rate: float = 2e6, gravity: bool = True, tau_s: float = 0.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Sensor force (N) sampled from the impact on: the mean of the contact forces above and
     below sphere ``sensor_index`` (1 = the top sphere) of a chain at static equilibrium under
     gravity (or without it: the spheres just touching), struck by a sphere like its own dropped
-    from ``drop_height_m``."""
+    from ``drop_height_m``. With ``tau_s`` > 0 the sphere-sphere contacts are Kuwabara and
+    Kono's viscoelastic ones, ``F = [A d^1.5 + 1.5 A tau d^0.5 d']_+`` (the contact with the plate
+    stays elastic)."""
     g = G if gravity else 0.0
     r = 0.5 * diameter_m
     m = sphere["density"] * math.pi * diameter_m**3 / 6.0
@@ -47,13 +50,18 @@ def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: flo
     v = np.zeros(n + 1)
     v[0] = math.sqrt(2.0 * G * drop_height_m)
 
-    def contacts(pos: np.ndarray, w: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-        return (a_s * np.clip(pos[:-1] - pos[1:], 0.0, None) ** 1.5,
-                a_p * np.clip(pos[-1] - w, 0.0, None) ** 1.5)
+    def contacts(pos: np.ndarray, w: np.ndarray | float, vel: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        overlap = np.clip(pos[:-1] - pos[1:], 0.0, None)
+        f = a_s * overlap**1.5
+        if tau_s > 0.0 and vel is not None:
+            f = np.clip(f + 1.5 * a_s * tau_s * np.sqrt(overlap) * (vel[:-1] - vel[1:]), 0.0,
+                        None)
+        return f, a_p * np.clip(pos[-1] - w, 0.0, None) ** 1.5
 
     def rhs(_t: float, y: np.ndarray) -> np.ndarray:
         pos, vel, w = y[: n + 1], y[n + 1: 2 * n + 2], y[-1]
-        f, fb = contacts(pos, w)
+        f, fb = contacts(pos, w, vel)
         acc = np.full(n + 1, g)
         acc[1:] += f / m
         acc[:-1] -= f / m
@@ -64,7 +72,7 @@ def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: flo
                     rtol=1e-10, atol=1e-15, dense_output=True, max_step=2e-7)
     t = np.arange(0.0, duration_s, 1.0 / sample_rate)
     y = sol.sol(t)
-    f, _ = contacts(y[: n + 1], y[-1])
+    f, _ = contacts(y[: n + 1], y[-1], y[n + 1: 2 * n + 2])
     return t, 0.5 * (f[sensor_index - 1] + f[sensor_index])
 
 
