@@ -27,13 +27,16 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.model.scene import PLATE_MODELS
+
+if TYPE_CHECKING:
+    from solitonde.instrument.tables.dissipation import DissipationLayer
 
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
@@ -96,9 +99,9 @@ class ModelTable:
     material_slopes: dict[str, np.ndarray] | None = None
     """The features' slopes along ``ln E'`` and ``ln rho`` far from the supports, per sphere
     size and thickness (:mod:`.material_slopes`); None for a table built before them."""
-    dissipation: Any = None
-    """The features simulated with contact damping (:class:`.dissipation.DissipationLayer`), or
-    None for a table without that layer."""
+    dissipation: DissipationLayer | None = None
+    """The features simulated with contact damping (instrument.tables.dissipation), or None for
+    a table without that layer."""
     model_variance: dict[str, np.ndarray] | None = None
     """Per-node variance of ``tof_s`` and ``arr`` the inversion adds to the table's
     interpolation error (a table read at a fitted damping: :func:`.dissipation.damped`)."""
