@@ -89,7 +89,8 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     residuals' scatter when several references disagree beyond their errors (Birge ratio). The
     ARR factor and TOF offset are then fitted against the table read at that damping, so they
     hold what damping does not explain (about 1 and 0 for a chain whose losses are contact
-    damping).
+    damping); the factor's stated uncertainty is then the references' disagreement alone (their
+    statistical error is the damping's).
 
     Each reference gives ``factor = ARR / ARR_model`` and ``offset = TOF - TOF_model`` with the
     model interpolated from ``table`` at the known (t, L); several references of one size are
@@ -114,15 +115,17 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     by_d: dict[float, list[tuple[float, float, float, float]]] = {}
     measured: dict[float, list[float]] = {}
     for d, refs in groups.items():
-        # the factor and offset against the table at the fitted damping; the damping's own
-        # error is the inversion's to add, not theirs
+        # the factor and offset against the table at the fitted damping; the reference's error
+        # is its shots' and the table's interpolation's (the damped read's own error is the
+        # inversion's to add)
         tau = dampings[d][0] if d in dampings else 0.0
         model = table if d not in dampings else damped(table, [tau] * table.shape[0],
                                                        [0.0] * table.shape[0])
         for ref in refs:
             s = ref.summary
-            tof_m, arr_m, tof_sd, arr_sd = predict(model, d, ref.thickness_m, ref.distance_m,
-                                                   with_error=True)
+            tof_m, arr_m = predict(model, d, ref.thickness_m, ref.distance_m)
+            _, _, tof_sd, arr_sd = predict(table, d, ref.thickness_m, ref.distance_m,
+                                           with_error=True)
             if arr_m <= 0:
                 raise InversionError("arr", f"the model ARR at the reference is {arr_m:g}: no "
                                      "factor can be fitted there; use a thicker or closer "
@@ -147,6 +150,10 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
         if not all(math.isfinite(x) for x in (f_stat, f_transfer, o_mean, o_stat, o_transfer)):
             raise CalibrationError("tof", f"the reference shots at D = {d:g} m give a "
                                    "non-finite TOF offset or uncertainty")
+        if d in dampings:
+            # the references' ARR fitted the damping, whose sd holds their statistical error:
+            # the factor keeps only their disagreement beyond it
+            f_stat = 0.0
         per[d] = {
             "arr_factor": f_mean,
             "arr_factor_std": math.hypot(f_stat, f_transfer),
