@@ -38,7 +38,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                              "TOF and ARR."),
     "map": ("cmd_map", "Map a plate: thickness and distance to support at each position, the "
                        "support located."),
-    "calibrate": ("cmd_calibrate", "Fit ARR factor and TOF offset per sphere size on a reference "
+    "calibrate": ("cmd_calibrate", "Fit the chain's damping (with a table's dissipation layer), "
+                                   "ARR factor and TOF offset per sphere size on a reference "
                                    "plate; write them as JSON."),
     "validate": ("cmd_validate", "Simulate random plates with noise and dissipation, invert, and "
                                  "score the answers."),

@@ -66,6 +66,10 @@ def _fit_damping(table: ModelTable, d: float, refs: Sequence[Reference]) -> tupl
     sd = max(sd, taus[1] - taus[0])
     if len(refs) > 1:
         sd *= max(1.0, math.sqrt(chi2[best] / (len(refs) - 1)))
+    if best == taus.size - 1:
+        # more damping than the layer reaches (or references the damping cannot explain, e.g. a
+        # large sphere's floor-level reflection): the damping is not known, only that it is large
+        sd = max(sd, float(taus[-1]))
     return float(taus[best]), float(sd)
 
 

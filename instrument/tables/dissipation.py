@@ -36,78 +36,36 @@ and ``--set effects.dissipation=true --set effects.damping=TAU``.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import json
 import math
 import os
 import shutil
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
 
-from solitonde.instrument.tables.table import FORMAT, STATUS_OK, ModelTable, TableError
+from solitonde.instrument.tables.table import (
+    FORMAT,
+    LAYER,
+    LAYER_FEATURES,
+    STATUS_OK,
+    DissipationLayer,
+    ModelTable,
+    TableError,
+    read_layer,
+)
 
-LAYER = "dissipation"
-"""The table file's group holding the layer."""
 DEFAULT_DAMPINGS_S = (7e-8, 2e-7)
 """The slices' Kuwabara-Kono time constants, s: chains losing up to about 15 % of a thick
 plate's ARR are read between slices (the synthetic studies' chain, 1e-7 s, on none of them), and
 the first slice measures how far the loss departs from a straight line in tau."""
-LAYER_FEATURES = ("tof_s", "arr", "arr_upper_bound")
 MAX_VIEWS = 4
 """Tables read at a damping kept per table (the calibrations in use), least recently used
 dropped first."""
-
-
-@dataclass(frozen=True)
-class DissipationLayer:
-    """The table's features simulated at contact dampings ``damping_s`` (increasing, one slice
-    each, on the table's grid)."""
-
-    damping_s: tuple[float, ...]
-    features: dict[str, np.ndarray]
-    """name -> array of shape ``(K,) + the table's shape``."""
-    status: np.ndarray
-
-    def merged(self, other: DissipationLayer) -> DissipationLayer:
-        """Both layers' slices, sorted; ``other``'s replaces a slice at the same damping."""
-        keep = [k for k, tau in enumerate(self.damping_s)
-                if all(abs(tau - t) > 1e-9 * t for t in other.damping_s)]
-        taus = [self.damping_s[k] for k in keep] + list(other.damping_s)
-        order = np.argsort(taus)
-        feats = {n: np.concatenate([self.features[n][keep], other.features[n]])[order]
-                 for n in LAYER_FEATURES}
-        status = np.concatenate([self.status[keep], other.status])[order]
-        return DissipationLayer(tuple(float(taus[i]) for i in order), feats, status)
-
-
-def read_layer(fh: h5py.File, shape: tuple[int, ...]) -> DissipationLayer | None:
-    """The stored layer, or None for a table without one. TableError for a malformed group."""
-    if LAYER not in fh:
-        return None
-    group = fh[LAYER]
-    try:
-        taus = tuple(float(x) for x in np.atleast_1d(group.attrs["damping_s"]))
-    except (KeyError, TypeError, ValueError):
-        raise TableError(f"{LAYER}.damping_s", "attribute missing or not numbers") from None
-    if not taus or not all(np.isfinite(t) and t > 0 for t in taus) or any(
-            b <= a for a, b in itertools.pairwise(taus)):
-        raise TableError(f"{LAYER}.damping_s", f"must be increasing and > 0, got {list(taus)}")
-    want = (len(taus), *shape)
-    arrays: dict[str, np.ndarray] = {}
-    for name, dtype in (*((f, float) for f in LAYER_FEATURES), ("status", np.int8)):
-        values = np.asarray(group[name][...], dtype=dtype) if name in group else None
-        if values is None or values.shape != want:
-            raise TableError(f"{LAYER}/{name}", f"expected shape {want}, got "
-                             f"{None if values is None else values.shape}")
-        arrays[name] = values
-    status = arrays.pop("status")
-    return DissipationLayer(taus, arrays, status)
 
 
 def write_layer(fh: h5py.File, layer: DissipationLayer) -> None:

@@ -24,19 +24,17 @@ Missing values are NaN, never a number made up.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import h5py
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.model.scene import PLATE_MODELS
-
-if TYPE_CHECKING:
-    from solitonde.instrument.tables.dissipation import DissipationLayer
 
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
@@ -65,6 +63,58 @@ PLATE_MODEL_NAMES = (*(m for m in PLATE_MODELS if m != "auto"), "unknown")
 class TableError(InstrumentError, ValueError):
     """A table file that cannot be used; ``field`` names what is wrong."""
 
+
+
+LAYER = "dissipation"
+"""The group holding the table's features simulated with contact damping (``table build
+--dissipation-layer`` and ``table dissipation`` write it: instrument.tables.dissipation)."""
+LAYER_FEATURES = ("tof_s", "arr", "arr_upper_bound")
+
+
+@dataclass(frozen=True)
+class DissipationLayer:
+    """The table's features simulated at contact dampings ``damping_s`` (increasing, one slice
+    each, on the table's grid)."""
+
+    damping_s: tuple[float, ...]
+    features: dict[str, np.ndarray]
+    """name -> array of shape ``(K,) + the table's shape``."""
+    status: np.ndarray
+
+    def merged(self, other: DissipationLayer) -> DissipationLayer:
+        """Both layers' slices, sorted; ``other``'s replaces a slice at the same damping."""
+        keep = [k for k, tau in enumerate(self.damping_s)
+                if all(abs(tau - t) > 1e-9 * t for t in other.damping_s)]
+        taus = [self.damping_s[k] for k in keep] + list(other.damping_s)
+        order = np.argsort(taus)
+        feats = {n: np.concatenate([self.features[n][keep], other.features[n]])[order]
+                 for n in LAYER_FEATURES}
+        status = np.concatenate([self.status[keep], other.status])[order]
+        return DissipationLayer(tuple(float(taus[i]) for i in order), feats, status)
+
+
+def read_layer(fh: h5py.File, shape: tuple[int, ...]) -> DissipationLayer | None:
+    """The stored layer, or None for a table without one. TableError for a malformed group."""
+    if LAYER not in fh:
+        return None
+    group = fh[LAYER]
+    try:
+        taus = tuple(float(x) for x in np.atleast_1d(group.attrs["damping_s"]))
+    except (KeyError, TypeError, ValueError):
+        raise TableError(f"{LAYER}.damping_s", "attribute missing or not numbers") from None
+    if not taus or not all(np.isfinite(t) and t > 0 for t in taus) or any(
+            b <= a for a, b in itertools.pairwise(taus)):
+        raise TableError(f"{LAYER}.damping_s", f"must be increasing and > 0, got {list(taus)}")
+    want = (len(taus), *shape)
+    arrays: dict[str, np.ndarray] = {}
+    for name, dtype in (*((f, float) for f in LAYER_FEATURES), ("status", np.int8)):
+        values = np.asarray(group[name][...], dtype=dtype) if name in group else None
+        if values is None or values.shape != want:
+            raise TableError(f"{LAYER}/{name}", f"expected shape {want}, got "
+                             f"{None if values is None else values.shape}")
+        arrays[name] = values
+    status = arrays.pop("status")
+    return DissipationLayer(taus, arrays, status)
 
 
 @dataclass
@@ -100,8 +150,8 @@ class ModelTable:
     """The features' slopes along ``ln E'`` and ``ln rho`` far from the supports, per sphere
     size and thickness (:mod:`.material_slopes`); None for a table built before them."""
     dissipation: DissipationLayer | None = None
-    """The features simulated with contact damping (instrument.tables.dissipation), or None for
-    a table without that layer."""
+    """The features simulated with contact damping (:mod:`.dissipation`), or None for a table
+    without that layer."""
     model_variance: dict[str, np.ndarray] | None = None
     """Per-node variance of ``tof_s`` and ``arr`` the inversion adds to the table's
     interpolation error (a table read at a fitted damping: :func:`.dissipation.damped`)."""
@@ -151,8 +201,6 @@ class ModelTable:
             fh = h5py.File(path, "r")
         except OSError as exc:
             raise TableError("table", f"{str(path)!r} is not an HDF5 file ({exc})") from None
-        from solitonde.instrument.tables.dissipation import read_layer
-
         with fh:
             if fh.attrs.get("format") != FORMAT:
                 raise TableError("table", f"{str(path)!r} is not a solitonde model table")

@@ -264,3 +264,13 @@ def test_a_read_between_slices_holds_the_model_run_there(thickness_m, distance_m
     # three stated sd, as for the table's interpolation (test_table_near_clamp.py)
     assert abs(point["arr"] - arr) <= 3 * arr_sd, (where, point["arr"], arr, arr_sd)
     assert abs(point["tof_s"] - tof) <= 3 * tof_sd, (where, point["tof_s"], tof, tof_sd)
+
+
+def test_more_damping_than_the_layer_reaches_is_not_a_known_damping(table):
+    # references losing half their reflection ask for far more damping than the slices span:
+    # the fit stops at its end (1.5 times the largest slice) and says the damping is unknown
+    tof, arr = predict(table, D, 5.5e-3, FAR_M)
+    ref = Reference(5.5e-3, FAR_M, FeatureSummary(D, tof, 0.5 * arr, TOF_STD_S, ARR_STD, SHOTS))
+    entry = fit_calibration(table, [ref]).per_diameter[D]
+    assert entry["damping_s"] == pytest.approx(3e-7)
+    assert entry["damping_std_s"] >= 3e-7
