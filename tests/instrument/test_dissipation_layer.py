@@ -143,8 +143,8 @@ def test_read_at_zero_at_each_slice_and_between(table):
             assert not read.model_variance[name][both].any()
         # halfway between the slices: their mean, with as error the larger of the first
         # slice's departure from the straight line through its neighbours (0 and the second
-        # slice) and a uniform spread between the two slices, and the damping's sd times the
-        # segment's slope
+        # slice) and a uniform spread between the two slices as far as the reflection is weak,
+        # and the damping's sd times the segment's slope
         tau0, tau1 = layer.damping_s
         mid = at(0.5 * (tau0 + tau1), 0.1 * tau1)
         lo, hi = layer.features[name][0], layer.features[name][1]
@@ -153,7 +153,9 @@ def test_read_at_zero_at_each_slice_and_between(table):
         w = tau0 / tau1
         dev = lo - ((1 - w) * table.features[name] + w * hi)
         slope = (hi - lo) / (tau1 - tau0)
-        want = (0.1 * tau1 * slope) ** 2 + np.maximum(np.abs(dev), np.abs(hi - lo) / 12**0.5) ** 2
+        weak = np.sqrt(np.clip(1 - table.features["arr"], 0, 1))
+        spread = np.abs(hi - lo) / 12**0.5 * weak
+        want = (0.1 * tau1 * slope) ** 2 + np.maximum(np.abs(dev), spread) ** 2
         np.testing.assert_allclose(mid.model_variance[name][both], want[both], rtol=1e-9)
     # kept on the table: one view per damping
     assert at(0.0) is at0
