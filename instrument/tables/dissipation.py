@@ -42,8 +42,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
-import shutil
 from collections import OrderedDict
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -53,14 +51,15 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.tables.table import (
-    FORMAT,
     LAYER,
     LAYER_FEATURES,
     STATUS_OK,
     DissipationLayer,
     ModelTable,
     TableError,
+    add_to_file,
     read_layer,
+    require_complete,
 )
 
 DEFAULT_DAMPINGS_S = (7e-8, 2e-7)
@@ -145,22 +144,11 @@ def add_to_table(path: str | Path, layer: DissipationLayer) -> DissipationLayer:
     """Add ``layer``'s slices to the table at ``path`` (merged with any it has): on a copy,
     renamed onto the file only once written and read back, so an interrupted run leaves the
     table as it was. Returns the table's layer as written."""
-    path = Path(path)
-    with h5py.File(path, "r") as fh:
-        if fh.attrs.get("format") != FORMAT or not fh.attrs.get("complete", False):
-            raise TableError("table", f"{str(path)!r} is not a complete solitonde model table")
+    require_complete(path)
     table = ModelTable.load(path)
     full = layer if table.dissipation is None else table.dissipation.merged(layer)
-    part = path.with_name(path.name + ".dissipation")
-    shutil.copyfile(path, part)
-    try:
-        with h5py.File(part, "r+") as fh:
-            write_layer(fh, full)
-        with h5py.File(part, "r") as fh:
-            read_layer(fh, table.shape)
-        os.replace(part, path)
-    finally:
-        part.unlink(missing_ok=True)
+    add_to_file(path, ".dissipation", lambda fh: write_layer(fh, full),
+                lambda fh: read_layer(fh, table.shape))
     return full
 
 

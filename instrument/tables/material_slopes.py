@@ -24,38 +24,27 @@ the table's reflection is a train at the detection floor (the inversion's floor 
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
 from pathlib import Path
 
-import h5py
 import numpy as np
 
-from solitonde.instrument.tables.table import AXES, FORMAT, TableError, read_slopes
+from solitonde.instrument.tables.table import (
+    ModelTable,
+    add_to_file,
+    read_slopes,
+    require_complete,
+)
 from solitonde.instrument.tables.table_build import Sweep, simulate_slopes, write_slopes
 
 
 def add_to_table(path: str | Path) -> dict[str, np.ndarray]:
     """Simulate the slopes of the table at ``path`` and write them into it: on a copy, renamed
     onto the file only once written, so an interrupted run leaves the table as it was."""
-    path = Path(path)
-    with h5py.File(path, "r") as fh:
-        if fh.attrs.get("format") != FORMAT or not fh.attrs.get("complete", False):
-            raise TableError("table", f"{str(path)!r} is not a complete solitonde model table")
-        sweep = Sweep.from_dict(json.loads(fh.attrs["sweep"]))
-        sizes = tuple(fh[f"axes/{a}"].size for a in AXES)
-    slopes = simulate_slopes(sweep)
-    part = path.with_name(path.name + ".slopes")
-    shutil.copyfile(path, part)
-    try:
-        with h5py.File(part, "r+") as fh:
-            write_slopes(fh, slopes)
-        with h5py.File(part, "r") as fh:
-            read_slopes(fh, sizes)
-        os.replace(part, path)
-    finally:
-        part.unlink(missing_ok=True)
+    require_complete(path)
+    table = ModelTable.load(path)
+    slopes = simulate_slopes(Sweep.from_dict(table.sweep))
+    add_to_file(path, ".slopes", lambda fh: write_slopes(fh, slopes),
+                lambda fh: read_slopes(fh, table.shape))
     return slopes
 
 

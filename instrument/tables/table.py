@@ -26,6 +26,9 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import os
+import shutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -296,6 +299,32 @@ MATERIAL_SLOPES = "material_slopes"
 """The group holding how the features move with the plate material (``table build`` writes it:
 instrument.tables.material_slopes)."""
 SLOPE_COMPONENTS = ("ln_e_prime", "ln_rho")
+
+
+def require_complete(path: str | Path) -> None:
+    """TableError unless ``path`` is a complete table file (before work that would be lost)."""
+    with h5py.File(path, "r") as fh:
+        if fh.attrs.get("format") != FORMAT or not fh.attrs.get("complete", False):
+            raise TableError("table", f"{str(path)!r} is not a complete solitonde model table")
+
+
+def add_to_file(path: str | Path, suffix: str, write: Callable[[h5py.File], None],
+                check: Callable[[h5py.File], object]) -> None:
+    """Add a group to the complete table file at ``path``: ``write`` on a copy (``<name><suffix>``),
+    ``check`` reading it back, then the copy renamed onto the file, so an interrupted or failed
+    run leaves the table as it was. TableError when ``path`` is not a complete table."""
+    path = Path(path)
+    require_complete(path)
+    part = path.with_name(path.name + suffix)
+    shutil.copyfile(path, part)
+    try:
+        with h5py.File(part, "r+") as fh:
+            write(fh)
+        with h5py.File(part, "r") as fh:
+            check(fh)
+        os.replace(part, path)
+    finally:
+        part.unlink(missing_ok=True)
 
 
 def read_slopes(fh: h5py.File, shape: tuple[int, ...]) -> dict[str, np.ndarray] | None:
