@@ -19,7 +19,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from independent_chain import sensor_trace
+from independent_chain import features_of
+from table_points import simulated_at
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
@@ -30,10 +31,9 @@ from solitonde.instrument.inference.calibration import (
 )
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, predict
+from solitonde.instrument.tables import bundled
 from solitonde.instrument.tables.dissipation import LAYER, damped, layer_from_table
 from solitonde.instrument.tables.table import STATUS_OK, ModelTable, TableError
-from solitonde.signal.features import extract
-from solitonde.signal.waveform import Waveform
 
 ROOT = Path(__file__).resolve().parents[2]
 STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
@@ -51,19 +51,10 @@ def table() -> ModelTable:
     return ModelTable.load(STEEL_TABLE)
 
 
-def _features(thickness_m: float, tau_s: float) -> tuple[float, float]:
-    t, force = sensor_trace(A36, thickness_m, duration_s=8.0e-4, tau_s=tau_s)
-    dt = t[1] - t[0]
-    pre = np.full(400, force[0])
-    f = extract(Waveform(t[0] - dt * pre.size, dt, np.concatenate([pre, force])))
-    assert f.tof_s is not None and f.arr is not None
-    return f.tof_s, f.arr
-
-
 @pytest.fixture(scope="module")
 def damped_chain() -> dict[float, tuple[float, float]]:
     """The damped chain's (TOF, ARR) far from the supports: two references, two plates."""
-    return {t: _features(t, TAU_S) for t in (5.5e-3, 2.5e-3, 3.3e-3, 2.0e-3)}
+    return {t: features_of(A36, t, TAU_S) for t in (5.5e-3, 2.5e-3, 3.3e-3, 2.0e-3)}
 
 
 def _references(chain: dict[float, tuple[float, float]]) -> list[Reference]:
@@ -244,23 +235,20 @@ def test_cli_adds_the_layer_from_a_damped_build_and_refuses_another_sweep(table,
 # The bundled aluminium table read between its slices, against the model run at that damping --
 
 
+@pytest.fixture(scope="module")
+def aluminium() -> ModelTable:
+    return ModelTable.load(bundled.default_table())
+
+
 @pytest.mark.parametrize(("thickness_m", "distance_m"), [
     (2.45e-3, 0.457), (2.64e-3, 0.457), (4.5e-3, 0.457), (2.8e-3, 0.008), (3.3e-3, 0.1)])
-def test_a_read_between_slices_holds_the_model_run_there(thickness_m, distance_m):
+def test_a_read_between_slices_holds_the_model_run_there(aluminium, thickness_m, distance_m):
     # weak reflections far out are where ARR departs most from a straight line in tau (2.64 mm:
     # 1.5, 3.4, 10.7, 13.2 % lost at 0.5, 1, 1.5, 2e-7 s); the read must state that as error
-    from solitonde.instrument.tables import bundled, table_build
-    from solitonde.model.scene import apply_overrides, scene_from_dict
-
-    table = ModelTable.load(bundled.default_table())
-    n_d = table.shape[0]
-    read = damped(table, [TAU_S] * n_d, [0.0] * n_d)
-    scene = scene_from_dict(apply_overrides(dict(table.sweep["scene"]), {
-        "chain.diameter": D, "plate.thickness": thickness_m,
-        "plate.distance_to_support": distance_m, "effects.dissipation": True,
-        "effects.damping": TAU_S}))
-    point = table_build.simulate_point(scene, table.sweep.get("detect"))
-    assert point["status"] == table_build.STATUS_OK, point["error"]
+    n_d = aluminium.shape[0]
+    read = damped(aluminium, [TAU_S] * n_d, [0.0] * n_d)
+    point = simulated_at(aluminium, D, thickness_m, distance_m,
+                         **{"effects.dissipation": True, "effects.damping": TAU_S})
     tof, arr, tof_sd, arr_sd = predict(read, D, thickness_m, distance_m, with_error=True)
     where = f"t {thickness_m * 1e3:.2f} mm, L {distance_m * 1e3:.0f} mm"
     # three stated sd, as for the table's interpolation (test_table_near_clamp.py)

@@ -16,29 +16,18 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from independent_chain import sensor_trace
+from independent_chain import features_of
 
 from solitonde.instrument.inference.inversion import fine_grid
 from solitonde.instrument.inference.material_spread import sensitivity
 from solitonde.instrument.tables.material_slopes import add_to_table
 from solitonde.instrument.tables.table import MATERIAL_SLOPES, ModelTable
-from solitonde.signal.features import extract
-from solitonde.signal.waveform import Waveform
 
 ROOT = Path(__file__).resolve().parents[2]
 STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
 A36 = {"youngs_modulus": 200e9, "poisson_ratio": 0.26, "density": 7850.0}
 E_STEP = 1.05
 """The independent solve's second modulus: 5 %, about the grade's range (190-210 GPa)."""
-
-
-def _features(plate: dict[str, float], thickness_m: float) -> tuple[float, float]:
-    t, force = sensor_trace(plate, thickness_m, duration_s=8.0e-4)
-    dt = t[1] - t[0]
-    pre = np.full(400, force[0])
-    f = extract(Waveform(t[0] - dt * pre.size, dt, np.concatenate([pre, force])))
-    assert f.tof_s is not None and f.arr is not None
-    return f.tof_s, f.arr
 
 
 @pytest.fixture(scope="module")
@@ -62,8 +51,8 @@ def test_the_slopes_match_an_independent_solve_at_two_moduli(steel: ModelTable) 
     i_t = 11
     t_node = float(steel.axes["thickness_m"][i_t])
     assert abs(t_node - 4.146e-3) < 1e-5
-    tof0, arr0 = _features(A36, t_node)
-    tof1, arr1 = _features({**A36, "youngs_modulus": A36["youngs_modulus"] * E_STEP}, t_node)
+    tof0, arr0 = features_of(A36, t_node)
+    tof1, arr1 = features_of({**A36, "youngs_modulus": A36["youngs_modulus"] * E_STEP}, t_node)
     step = math.log(E_STEP)
     slope_tof, slope_arr = (steel.material_slopes[k][0, i_t, 0] for k in ("tof_s", "arr"))
     assert slope_arr * step == pytest.approx(arr1 - arr0, rel=0.05)

@@ -10,11 +10,11 @@ its interpolation misses, and the miss itself must be small enough to locate a c
 from __future__ import annotations
 
 import pytest
+from table_points import simulated_at
 
 from solitonde.instrument.inference.inversion import predict
-from solitonde.instrument.tables import bundled, table_build
+from solitonde.instrument.tables import bundled
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.model.scene import apply_overrides, scene_from_dict
 
 DIAMETER_M = 9.53e-3
 # Three times the stated standard deviation: the leave-one-out estimate is itself an estimate
@@ -34,11 +34,7 @@ def table() -> ModelTable:
 def test_interpolation_next_to_the_clamp_is_within_its_stated_error(table, t_index, distance_m):
     # on a thickness node, so the error is the distance axis's alone
     t = float(table.axes["thickness_m"][t_index])
-    scene = scene_from_dict(apply_overrides(dict(table.sweep["scene"]), {
-        "chain.diameter": DIAMETER_M, "plate.thickness": t,
-        "plate.distance_to_support": distance_m}))
-    point = table_build.simulate_point(scene, table.sweep.get("detect"))
-    assert point["status"] == table_build.STATUS_OK, point["error"]
+    point = simulated_at(table, DIAMETER_M, t, distance_m)
     tof, arr, tof_sd, arr_sd = predict(table, DIAMETER_M, t, distance_m, with_error=True)
     where = f"t {t * 1e3:.2f} mm, L {distance_m * 1e3:.2f} mm"
     assert abs(point["arr"] - arr) <= Z_MAX * arr_sd, (where, point["arr"], arr, arr_sd)

@@ -2,7 +2,8 @@
 chain (striker, N spheres) standing under gravity on Zener's dashpot (an infinite thin plate of
 point impedance Z = 8 sqrt(rho t D_p), the paper's Sec. 4.1), and the sensor traces a scope would
 record of it (a static pre-trigger, white noise at a given SNR). Nothing here calls the model
-package: the contact constants are Hertz's, computed from the materials by hand."""
+package: the contact constants are Hertz's, computed from the materials by hand. Only
+:func:`features_of` reads a trace with the signal package, as a measurement is read."""
 
 from __future__ import annotations
 
@@ -74,6 +75,21 @@ def sensor_trace(plate: Mapping[str, float], thickness_m: float, diameter_m: flo
     y = sol.sol(t)
     f, _ = contacts(y[: n + 1], y[-1], y[n + 1: 2 * n + 2])
     return t, 0.5 * (f[sensor_index - 1] + f[sensor_index])
+
+
+def features_of(plate: Mapping[str, float], thickness_m: float, tau_s: float = 0.0
+                ) -> tuple[float, float]:
+    """(TOF s, ARR) of the noise-free trace (:func:`sensor_trace`, 0.8 ms) as the signal
+    package's extractor reads it, with 400 samples of static pre-trigger."""
+    from solitonde.signal.features import extract
+    from solitonde.signal.waveform import Waveform
+
+    t, force = sensor_trace(plate, thickness_m, duration_s=8.0e-4, tau_s=tau_s)
+    dt = t[1] - t[0]
+    pre = np.full(400, force[0])
+    f = extract(Waveform(t[0] - dt * pre.size, dt, np.concatenate([pre, force])))
+    assert f.tof_s is not None and f.arr is not None
+    return f.tof_s, f.arr
 
 
 @functools.lru_cache(maxsize=16)
