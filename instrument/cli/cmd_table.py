@@ -131,7 +131,7 @@ def build_command(
     dissipation_layer: list[float] = typer.Option(
         [], "--dissipation-layer", metavar="TAU",
         help="also simulate the sweep with Kuwabara-Kono contact damping TAU s (repeatable; the "
-             "bundled tables: 7e-8 and 2e-7) and store it in the table, so that a calibration "
+             "bundled tables: 7e-8, 1.2e-7 and 2e-7) and store it in the table, so that a calibration "
              "can fit the chain's damping"),
 ) -> None:
     """Simulate the sweep (resuming an interrupted build) and write the table atomically."""
@@ -280,8 +280,8 @@ def dissipation_command(
     file: Path = typer.Argument(DEFAULT_TABLE_PATH, help="table file"),
     damping: list[float] = typer.Option([], "--damping", metavar="TAU",
                                         help="simulate a slice at this Kuwabara-Kono time "
-                                             "constant, s (repeatable; default 7e-8 and 2e-7 "
-                                             "without --from)"),
+                                             "constant, s (repeatable; default 7e-8, 1.2e-7 "
+                                             "and 2e-7 without --from)"),
     source: list[Path] = typer.Option([], "--from", help="take a slice from this table: the "
                                       "same sweep built with --set effects.dissipation=true "
                                       "--set effects.damping=TAU (repeatable)"),
