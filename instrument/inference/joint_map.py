@@ -30,7 +30,12 @@ unknown:
   (status, intervals, one-sided bounds).
 * **Do the positions agree with one straight edge?** ``fit = {chi2, dof, p_value}``: the misfit
   of every position at the joint best answer, against ``n_terms - p_D`` degrees of freedom (p_D
-  the joint posterior's effective number of parameters, as in :mod:`.adequacy`). A single
+  the joint posterior's effective number of parameters: the posterior mean of the misfit over
+  its value at the answer, which is the parameter count for a linear-Gaussian model; unlike a
+  single inversion's (:mod:`.adequacy`) it leaves out the deviance's log-determinant, which
+  varies across the posterior with the model's stated error and summed over a scan's positions
+  took p_D to 18.5 for 10 positions of a 1.93 mm plate (12 parameters): five of the map study's
+  30 right-family scans were flagged so, none now; docs/joint-map.md). A single
   position near a support fits any edge and leaves no degree of freedom; together they test the
   edge. Below ``p = 0.001`` the joint answers are marked ``inconsistent`` and the warning names
   the positions that disagree most.
@@ -716,7 +721,9 @@ class PositionAnswer:
     conditional: tuple[np.ndarray, np.ndarray]
     """E[log t | L] and Var[log t | L] on the distance grid (hyper values mixed by the
     posterior): what the next position's choice reads for the thickness map."""
-    expected_deviance: float
+    expected_misfit: float
+    """The posterior mean of the position's misfit (the chi^2 part of its deviance; with the
+    tie's term for ``common``)."""
 
 
 def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
@@ -753,13 +760,17 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
     cond /= np.maximum(cond.sum(axis=0, keepdims=True), 1e-300)
     mean = (lk.log_t[:, None] * cond).sum(axis=0)
     var = ((lk.log_t[:, None] - mean[None, :]) ** 2 * cond).sum(axis=0)
-    dev = np.where(lk.like > 0, lk.deviance, 0.0)
-    s = post.hyper_like(lk, lk.like * dev)
-    if post.prior.kind == "common":  # the tie's own term, (log t - log mu)^2 / s^2
-        s = s + np.einsum("ht,ktl->khl", post.p_matrix * _tie_z2(post, lk.log_t),
-                          lk.like).reshape(s.shape)
-    expected = float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
-    return PositionAnswer(thickness, distance, d_map, (mean, var), expected)
+    tie = (np.einsum("ht,ktl->khl", post.p_matrix * _tie_z2(post, lk.log_t),
+                     lk.like).reshape(-1, lk.like.shape[-1])
+           if post.prior.kind == "common" else 0.0)  # the tie's own term, (log t - log mu)^2 / s^2
+
+    def expectation(values: np.ndarray) -> float:
+        s = post.hyper_like(lk, lk.like * np.where(lk.like > 0, values, 0.0)) + tie
+        return float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
+
+    with np.errstate(invalid="ignore"):
+        misfit = lk.deviance - lk.rest[None]
+    return PositionAnswer(thickness, distance, d_map, (mean, var), expectation(misfit))
 
 
 def _tie_z2(post: JointPosterior, log_t: np.ndarray) -> np.ndarray:
@@ -888,11 +899,14 @@ def summary(post: JointPosterior) -> dict[str, Any]:
     a_lo, a_hi = weighted_quantiles(np.degrees(rel), mass, (0.025, 0.975))
     o_lo, o_hi = weighted_quantiles(offsets, mass, (0.025, 0.975))
     answers = [position_answer(post, i) for i in range(len(post.likes))]
-    misfits, d_best, n_terms, z_node = _best_fit(post)
+    misfits, _, n_terms, z_node = _best_fit(post)
     chi2 = float(sum(misfits)) + z_node
     node_w, mu_w = post.hyper_weights()
-    p_d = max(sum(a.expected_deviance for a in answers) + float(node_w @ post.node_z2)
-              - d_best, 0.0)
+    # the misfit's own drop from the posterior's mean to the answer: the deviance's other
+    # terms (the log-determinant of a covariance that grows next to the clamp) vary across the
+    # posterior without being a parameter the data fix
+    p_d = max(sum(a.expected_misfit for a in answers) + float(node_w @ post.node_z2) - chi2,
+              0.0)
     dof = max(n_terms - min(p_d, n_terms), 1.0)
     p_value = float(chi2_dist.sf(chi2, dof))
     warnings: list[str] = []
