@@ -81,9 +81,9 @@ def _read(table: ModelTable, cal: Calibration, t: float) -> tuple[float, float, 
 def test_the_fitted_damping_is_the_chains(table, damped_chain):
     cal = fit_calibration(table, _references(damped_chain))
     entry = cal.per_diameter[D]
-    # piecewise linear in tau between slices at 7e-8 and 2e-7 s, while the loss is concave in
-    # tau (7.6 % of a 5.5 mm plate's ARR at 1e-7 s, 13.5 % at 2e-7 s): the read between the
-    # slices runs low, so the fitted tau a little high; the ARR factor is left near 1
+    # piecewise linear in tau between the slices, while the loss is concave in tau (7.6 % of a
+    # 5.5 mm plate's ARR at 1e-7 s, 13.5 % at 2e-7 s): the read between two slices runs low, so
+    # the fitted tau a little high; the ARR factor is left near 1
     assert 0.9 * TAU_S <= entry["damping_s"] <= 1.2 * TAU_S, entry
     assert 0 < entry["damping_std_s"] < 0.2 * TAU_S, entry
     assert abs(entry["arr_factor"] - 1.0) < 0.02, entry
