@@ -131,8 +131,8 @@ def build_command(
     dissipation_layer: list[float] = typer.Option(
         [], "--dissipation-layer", metavar="TAU",
         help="also simulate the sweep with Kuwabara-Kono contact damping TAU s (repeatable; the "
-             "bundled tables: 7e-8, 1.2e-7 and 2e-7) and store it in the table, so that a calibration "
-             "can fit the chain's damping"),
+             "bundled tables: 7e-8, 1.2e-7 and 2e-7) and store it in the table, so that a "
+             "calibration can fit the chain's damping"),
 ) -> None:
     """Simulate the sweep (resuming an interrupted build) and write the table atomically."""
     if table_id is not None and not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}", table_id):

@@ -13,11 +13,12 @@ reflection are inverted together. The dissipation is compensated as an operator 
 calibration fitted by :func:`~solitonde.instrument.inference.calibration_fit.fit_calibration`
 from shots simulated the same way on two reference plates far from the supports
 (:data:`REFERENCE_THICKNESS_M`, :data:`REFERENCE2_THICKNESS_M` at :data:`REFERENCE_DISTANCE_M`):
-against a table with a dissipation layer (the bundled ones, whose slices are at 7e-8,
-1.2e-7 and 2e-7 s, so the truths' damping lies between two of them) the chain's damping, then an ARR factor and TOF
-offset per size for what it leaves, with their uncertainty; against a table without one the
-factor and offset alone, whose spread between the two plates (the dissipation's effect is not a
-constant factor and delay) is what the calibration states as its transfer uncertainty.
+against a table with a dissipation layer (the bundled ones, whose slices are at 7e-8, 1.2e-7
+and 2e-7 s, so the truths' damping lies between two of them) the chain's damping, then an ARR
+factor and TOF offset per size for what it leaves, with their uncertainty; against a table
+without one the factor and offset alone, whose spread between the two plates (the dissipation's
+effect is not a constant factor and delay) is what the calibration states as its transfer
+uncertainty.
 
 Scored: relative thickness error of the posterior median (median and 90th percentile, over the
 plates where thickness comes back ``constrained``); ``coverage_95``, the fraction of thickness

@@ -32,8 +32,8 @@ and 1.35 x 1e-7 s at 44 random points (D 9.53 mm, t 1.9-6 mm, L 3-450 mm), the r
 units of its stated error (with the elastic table's interpolation error) had an rms of 0.91 in
 ARR and 0.74 in TOF, the largest 2.2 (one point in 44 each); without the uniform spread they
 were 1.57 and 0.98, the largest 4.4 (docs/inversion.md, "Dissipation"). The fitted tau's
-uncertainty adds ``(sd_tau * dF/dtau)^2``. A node where a slice lost the reflection the elastic table has takes the relative loss of its
-row's nearest node with both, all of it as error.
+uncertainty adds ``(sd_tau * dF/dtau)^2``. A node where a slice lost the reflection the elastic
+table has takes the relative loss of its row's nearest node with both, all of it as error.
 
 ``table build --dissipation-layer TAU`` (repeatable) writes the layer; ``table dissipation FILE``
 adds slices to a table built before, simulated or taken from tables built with the same sweep

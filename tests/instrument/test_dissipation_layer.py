@@ -142,13 +142,6 @@ def test_read_at_zero_at_each_slice_and_between(table):
             # on a slice the read is the simulation itself: no error of its own
             assert not read.model_variance[name][both].any()
 
-        def departure(k):
-            """Node k off the straight line through its neighbours, as the mid-segment error
-            of a quadratic through the three: the departure times h^2 / (4 h_l h_r)."""
-            h_l, h_r = nodes[k] - nodes[k - 1], nodes[k + 1] - nodes[k]
-            w = h_l / (h_l + h_r)
-            return np.abs(values[k] - ((1 - w) * values[k - 1] + w * values[k + 1])), h_l * h_r
-
         for j in range(nodes.size - 1):
             # mid-segment: the mean of the two ends, with as error the larger of the ends'
             # departures (scaled to the segment as a quadratic's) and a uniform spread between
@@ -162,8 +155,12 @@ def test_read_at_zero_at_each_slice_and_between(table):
             bends = [np.zeros(table.shape)]
             for k in (j, j + 1):
                 if 0 < k < nodes.size - 1:
-                    dev, span = departure(k)
-                    bends.append(dev * h**2 / (4 * span))
+                    # node k off the straight line through its neighbours, read as a
+                    # quadratic's error mid-segment: times h^2 / (4 h_l h_r)
+                    h_l, h_r = nodes[k] - nodes[k - 1], nodes[k + 1] - nodes[k]
+                    w = h_l / (h_l + h_r)
+                    dev = np.abs(values[k] - ((1 - w) * values[k - 1] + w * values[k + 1]))
+                    bends.append(dev * h**2 / (4 * h_l * h_r))
             spread = np.abs(hi - lo) / 12**0.5 * weak
             slope = (hi - lo) / h
             want = (0.1 * tau1 * slope) ** 2 + np.maximum.reduce([*bends, spread]) ** 2
