@@ -769,7 +769,7 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
         return float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
 
     with np.errstate(invalid="ignore"):
-        misfit = lk.deviance - lk.rest[None]
+        misfit = np.maximum(lk.deviance - lk.rest[None], 0.0)  # as PositionLikelihood.misfit
     return PositionAnswer(thickness, distance, d_map, (mean, var), expectation(misfit))
 
 
