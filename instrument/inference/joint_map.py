@@ -760,17 +760,14 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
     cond /= np.maximum(cond.sum(axis=0, keepdims=True), 1e-300)
     mean = (lk.log_t[:, None] * cond).sum(axis=0)
     var = ((lk.log_t[:, None] - mean[None, :]) ** 2 * cond).sum(axis=0)
-    tie = (np.einsum("ht,ktl->khl", post.p_matrix * _tie_z2(post, lk.log_t),
-                     lk.like).reshape(-1, lk.like.shape[-1])
-           if post.prior.kind == "common" else 0.0)  # the tie's own term, (log t - log mu)^2 / s^2
-
-    def expectation(values: np.ndarray) -> float:
-        s = post.hyper_like(lk, lk.like * np.where(lk.like > 0, values, 0.0)) + tie
-        return float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
-
     with np.errstate(invalid="ignore"):
         misfit = np.maximum(lk.deviance - lk.rest[None], 0.0)  # as PositionLikelihood.misfit
-    return PositionAnswer(thickness, distance, d_map, (mean, var), expectation(misfit))
+    s = post.hyper_like(lk, lk.like * np.where(lk.like > 0, misfit, 0.0))
+    if post.prior.kind == "common":  # the tie's own term, (log t - log mu)^2 / s^2
+        s = s + np.einsum("ht,ktl->khl", post.p_matrix * _tie_z2(post, lk.log_t),
+                          lk.like).reshape(s.shape)
+    expected = float(np.sum(np.divide(w_bins * s, m, out=np.zeros_like(s), where=m > 0)))
+    return PositionAnswer(thickness, distance, d_map, (mean, var), expected)
 
 
 def _tie_z2(post: JointPosterior, log_t: np.ndarray) -> np.ndarray:
@@ -778,12 +775,12 @@ def _tie_z2(post: JointPosterior, log_t: np.ndarray) -> np.ndarray:
     return ((log_t[None, :] - post.log_mu[:, None]) / post.prior.spread_rel) ** 2
 
 
-def _best_fit(post: JointPosterior) -> tuple[list[float], float, int, float]:
+def _best_fit(post: JointPosterior) -> tuple[list[float], int, float]:
     """At the joint best fit (the edge's cell, the shared calibration's node, and there each
     position's thickness, with the common mean's best value for ``common``, that together have
-    the least deviance): each position's misfit, the total deviance (the tie's and the shared
-    calibration's prior terms included), the number of terms (theirs included) and the shared
-    calibration's own term (``sum (eta / sd)^2`` at the best node)."""
+    the least deviance): each position's misfit (with the tie's term for ``common``), the number
+    of terms (the tie's and the shared calibration's included) and the shared calibration's own
+    term (``sum (eta / sd)^2`` at the best node)."""
     common = post.prior.kind == "common"
     z2 = _tie_z2(post, post.likes[0].log_t) if common else np.zeros((1, post.likes[0].log_t.size))
     support = np.flatnonzero(post.mass > 1e-9 * post.mass.max())
@@ -817,9 +814,8 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int, float]:
     n_terms = sum(lk.n_terms for lk in post.likes) + len(post.keys)
     if post.prior.kind == "free":
         picks = [int(np.argmin(dev)) for dev, _ in columns]
-        return ([float(mis[k]) for (_, mis), k in zip(columns, picks, strict=True)],
-                float(sum(dev[k] for (dev, _), k in zip(columns, picks, strict=True))) + z_node,
-                n_terms, z_node)
+        return ([float(mis[k]) for (_, mis), k in zip(columns, picks, strict=True)], n_terms,
+                z_node)
     best: tuple[float, list[int], int] | None = None
     for h in range(z2.shape[0]):
         picks = [int(np.argmin(dev + z2[h])) for dev, _ in columns]
@@ -837,9 +833,8 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], float, int, float]:
         z = ((log_t - log_mu) / spread) ** 2
         picks = [int(np.argmin(dev + z)) for dev, _ in columns]
     z = ((log_t - log_mu) / spread) ** 2
-    d_total = float(sum(dev[k] + z[k] for (dev, _), k in zip(columns, picks, strict=True)))
     misfits = [float(mis[k] + z[k]) for (_, mis), k in zip(columns, picks, strict=True)]
-    return misfits, d_total + z_node, n_terms + len(post.likes), z_node
+    return misfits, n_terms + len(post.likes), z_node
 
 
 def median_edge(post: JointPosterior) -> tuple[float, float]:
@@ -899,7 +894,7 @@ def summary(post: JointPosterior) -> dict[str, Any]:
     a_lo, a_hi = weighted_quantiles(np.degrees(rel), mass, (0.025, 0.975))
     o_lo, o_hi = weighted_quantiles(offsets, mass, (0.025, 0.975))
     answers = [position_answer(post, i) for i in range(len(post.likes))]
-    misfits, _, n_terms, z_node = _best_fit(post)
+    misfits, n_terms, z_node = _best_fit(post)
     chi2 = float(sum(misfits)) + z_node
     node_w, mu_w = post.hyper_weights()
     # the misfit's own drop from the posterior's mean to the answer: the deviance's other
