@@ -132,13 +132,16 @@ THIN = [(0.004, 0.05), (0.008, 0.62), (0.0115, 0.21), (0.026, 0.40), (0.06, 0.70
 @pytest.mark.parametrize("thickness_m", [1.83e-3, 1.93e-3])
 def test_a_thin_plates_scan_counts_its_parameters_and_is_not_flagged(table, thickness_m):
     """Six positions of a 1.8-1.9 mm plate, each the table's own features with noise: a right
-    scan. The fit's p_D must not exceed its parameters (six thicknesses and the edge's two):
+    scan. The fit's p_D must come to about its parameters (six thicknesses and the edge's two):
     counted from the deviance, whose log-determinant varies across the posterior with the
-    table's stated error (loose for weak reflections), it came to 11 and flagged the scan."""
+    table's stated error (loose for weak reflections), it came to 11 and flagged the scan.
+    The misfit's p_D equals the parameter count only for a linear-Gaussian model; the
+    near-clamp positions' (t, L) ridges are curved, and on the bundled table it reads 6.4 and
+    8.1 here, so one parameter's allowance, a third of the failure's excess."""
     positions = scan(table, Edge(12.0, 0.05), THIN, thickness_m)
     out = joint_map.summary(joint_map.posterior(table, positions))
     p_d = 2 * len(positions) - out["fit"]["dof"]
-    assert 0.0 < p_d <= len(positions) + 2, out["fit"]
+    assert 0.0 < p_d <= len(positions) + 2 + 1, out["fit"]
     assert out["fit"]["p_value"] > 1e-3, out["fit"]
     assert not any(w.startswith("inconsistent") for w in out["warnings"]), out["warnings"]
 
