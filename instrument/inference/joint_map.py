@@ -112,10 +112,11 @@ PROFILE_SUPPORT = 1e-4
 at least this fraction of its peak."""
 POSITION_SD_M = 1.0e-3
 """How well a position's distance from the edge follows from its recorded coordinates (1 sd):
-the coordinates' own error (the chain's contact point against the mark, read off a rule) and the
-table's coarse distance axis next to the clamp (nodes 10 mm apart, where TOF and ARR turn fast),
-so a joint edge is not sharper than the positions can place it. Each position's likelihood is
-averaged over it along L."""
+the coordinates' own error (the chain's contact point against the mark, read off a rule), so a
+joint edge is not sharper than the positions can place it. (It was first sized for a distance
+axis 10 mm apart next to the clamp too; the axis is 2.5 mm apart there now, and the value was
+kept: in the map study dropping it did not narrow the edge's angle, docs/joint-map.md.) Each
+position's likelihood is averaged over it along L."""
 
 
 class JointMapError(InstrumentError, ValueError):
