@@ -68,8 +68,9 @@ def test_steel_against_the_aluminium_table_is_flagged_inconsistent(recording: Pa
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "on the 20-distance steel table, with the drift on the gap and the grade's spread about the "
-    "table's own nu (0.021), this recording's 95 % interval misses 4.0 mm by 0.010 mm "
+    "on the steel table (26 distances, as on 20), with the drift on the gap and the grade's "
+    "spread about the table's own nu (0.021), this recording's 95 % interval misses 4.0 mm by "
+    "0.010 mm "
     "(4.010-4.242): over noise seeds 1-12 it holds 4.0 mm in 10 (7 on the 8-node table), a "
     "constrained miss with no warning in 2 (seeds 1 and 5, by 0.010 and 0.012 mm): open in "
     "issue 28"))
