@@ -204,10 +204,12 @@ class PositionLikelihood:
     """(t, L): the deviance's terms beside the misfit (log det of the covariance, penalties)."""
     n_terms: int
 
-    def misfit(self, node: int) -> np.ndarray:
-        """The chi^2 part of the deviance at a node of the shared calibration error."""
-        return np.where(np.isfinite(self.deviance[node]),
-                        np.maximum(self.deviance[node] - self.rest, 0.0), np.inf)
+    def misfit(self, node: int | None = None) -> np.ndarray:
+        """The chi^2 part of the deviance at a node of the shared calibration error (at every
+        node, ``(node, t, L)``, when ``node`` is None); inf where the model is impossible."""
+        deviance = self.deviance if node is None else self.deviance[node]
+        with np.errstate(invalid="ignore"):
+            return np.where(np.isfinite(deviance), np.maximum(deviance - self.rest, 0.0), np.inf)
 
 
 @dataclass
@@ -763,9 +765,7 @@ def position_answer(post: JointPosterior, i: int) -> PositionAnswer:
     cond /= np.maximum(cond.sum(axis=0, keepdims=True), 1e-300)
     mean = (lk.log_t[:, None] * cond).sum(axis=0)
     var = ((lk.log_t[:, None] - mean[None, :]) ** 2 * cond).sum(axis=0)
-    with np.errstate(invalid="ignore"):
-        misfit = np.maximum(lk.deviance - lk.rest[None], 0.0)  # as PositionLikelihood.misfit
-    s = post.hyper_like(lk, lk.like * np.where(lk.like > 0, misfit, 0.0))
+    s = post.hyper_like(lk, lk.like * np.where(lk.like > 0, lk.misfit(), 0.0))
     if post.prior.kind == "common":  # the tie's own term, (log t - log mu)^2 / s^2
         s = s + np.einsum("ht,ktl->khl", post.p_matrix * _tie_z2(post, lk.log_t),
                           lk.like).reshape(s.shape)
