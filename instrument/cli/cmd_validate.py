@@ -61,6 +61,9 @@ def validate_command(
         None, "--wrong-family", help="simulate the truths on a plate of this library material "
         "(e.g. steel_structural against the aluminium table): how often the answer is flagged "
         "or covers the truth anyway"),
+    draw_material: bool = typer.Option(
+        True, "--draw-material/--exact-material", help="give each plate a material drawn from "
+        "the spread of the table's plate material (default), or the table's exact properties"),
     out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
@@ -84,7 +87,7 @@ def validate_command(
                           workers=default_workers() if workers is None else workers,
                           scheduler=scheduler, progress=progress, diameters=sizes,
                           measurements=measurements, truth_plate_theory=truth_plate_theory,
-                          wrong_family=wrong_family)
+                          wrong_family=wrong_family, draw_material=draw_material)
     except ValidationInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {exc.full_message}")
     m = report.metrics

@@ -1,7 +1,9 @@
 """Synthetic validation: random plates simulated, measured as real shots are, and inverted.
 
 For each of ``n`` scenes (seeded): a thickness drawn log-uniformly and a distance to the support
-drawn uniformly inside the table's range (so almost surely between its grid points), simulated
+drawn uniformly inside the table's range (so almost surely between its grid points), and a plate
+material drawn from the spread of the table's (:func:`draw_plate_materials`: a plate of the grade,
+as a user's is, not the table's exact properties; ``--exact-material`` turns it off), simulated
 for every sphere size of the table with the plate model ``auto`` picks and with a known
 dissipation the table does not have (Kuwabara-Kono contact damping, :data:`DAMPING_S`). Each
 size's noise-free trace becomes :data:`SHOTS` shots with white noise at :data:`SNR_DB`, measured
@@ -61,6 +63,7 @@ from solitonde.instrument.inference.calibration import Calibration, calibrated_t
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.chain_geometry import measure_shot
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
+from solitonde.instrument.inference.material_spread import spread_of
 from solitonde.instrument.inference.pipeline import SizeSummary
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import ModelTable
@@ -135,6 +138,25 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
             "wall_s": time.perf_counter() - started}
 
 
+def draw_plate_materials(table: ModelTable, spread: Mapping[str, float], n: int,
+                         rng: np.random.Generator) -> list[dict[str, Any]]:
+    """``n`` plates of the table's plate material as a grade's plates come: E, nu and rho each
+    drawn from a normal distribution about the table's value with the grade's spread (relative
+    sd for E and rho, sd for nu), as property mappings for ``plate.material``. Normal, with the
+    spread the intervals state, so a coverage measured on them tests that statement."""
+    props = (table.family or {}).get("plate_material")
+    if not props:
+        raise ValidationInputError("draw_material", "the table records no plate material to "
+                                   "draw about (rebuild it, or validate with exact material)")
+    z = rng.standard_normal((n, 3))
+    e, nu, rho = (float(props[k]) for k in ("youngs_modulus", "poisson_ratio", "density"))
+    return [{"name": f"{props['name']} (drawn)",
+             "youngs_modulus": e * (1.0 + spread["youngs_modulus_rel_sd"] * ze),
+             "poisson_ratio": nu + spread["poisson_ratio_sd"] * zn,
+             "density": rho * (1.0 + spread["density_rel_sd"] * zr)}
+            for ze, zn, zr in z.tolist()]
+
+
 def _inputs(summaries: Mapping[float, Any]) -> list[FeatureSummary]:
     return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"], s["arr_std"],
                            int(s["n_shots"]), s.get("arr_upper_bound"))
@@ -207,7 +229,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
              diameters: Sequence[float] | None = None,
              measurements: str | Path | None = None,
              truth_plate_theory: str = "auto",
-             wrong_family: str | None = None) -> ValidationReport:
+             wrong_family: str | None = None,
+             draw_material: bool = True) -> ValidationReport:
     """Run the synthetic validation on ``table`` (see the module doc).
 
     ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
@@ -222,6 +245,12 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     flagged (``inconsistent`` or ``out_of_range``) or covers the truth anyway
     (``flagged_or_covered``), and how often a constrained interval misses with no flag
     (``missed_unflagged``).
+    ``draw_material`` gives each plate its own material, drawn from the spread of the table's
+    plate material (:func:`draw_plate_materials`): the plates a user measures are of a grade,
+    not of the table's exact properties, and the intervals carry that spread, so only plates
+    drawn from it test that they carry it rightly. Off, every plate is the table's material
+    exactly. The reference plates stay the table's material (a reference block's properties are
+    known), and so do ``wrong_family`` truths (the library's value of that material).
 
     Raises
     ------
@@ -263,9 +292,13 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     seeds = rng.integers(0, 2**31, size=n + 1)
     t_ref = float(np.clip(REFERENCE_THICKNESS_M, t_axis[0], t_axis[-1]))
     l_ref = float(np.clip(REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
+    spread = spread_of(table) if draw_material and wrong_family is None else None
+    materials = (draw_plate_materials(table, spread, n, np.random.default_rng([seed, 3]))
+                 if spread is not None else [None] * n)
     tasks = [(reference_base, diameters, t_ref, l_ref, int(seeds[0]))]
-    tasks += [(base, diameters, t, length, int(s)) for (t, length), s in zip(draws, seeds[1:],
-                                                                             strict=True)]
+    tasks += [(base if mat is None else apply_overrides(dict(base), {"plate.material": mat}),
+               diameters, t, length, int(s))
+              for (t, length), s, mat in zip(draws, seeds[1:], materials, strict=True)]
     bar = None
     if progress:
         from tqdm import tqdm
@@ -275,7 +308,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
            "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
            "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
            "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB,
-           "wrong_family": wrong_family}
+           "wrong_family": wrong_family, "material_spread_drawn": spread}
     stored = _load_measurements(measurements, key)
     started = time.perf_counter()
     if stored is not None:
@@ -302,13 +335,15 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     refs += [Reference(t_ref2, l_ref, s) for s in _inputs(ref2["summaries"]) if not s.hidden]
     calibration = fit_calibration(table, refs)
     order = {(t, length): i for i, (t, length) in enumerate(draws)}
+    drawn = {(t, length): mat for (t, length), mat in zip(draws, materials, strict=True)}
     measured.sort(key=lambda m: order[(m["thickness_m"], m["distance_m"])])
 
     rows = []
     for m in measured:
         inputs = _inputs(m["summaries"])
         row: dict[str, Any] = {"thickness_m": m["thickness_m"], "distance_m": m["distance_m"],
-                               "n_sizes": len(inputs), "wall_s": m["wall_s"]}
+                               "n_sizes": len(inputs), "wall_s": m["wall_s"],
+                               "plate_material": drawn[(m["thickness_m"], m["distance_m"])]}
         if not inputs:
             row.update(status_ok=False, reason="no reflection detected for any sphere size")
             rows.append(row)
@@ -384,6 +419,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "flagged_or_covered": float(np.mean(handled)) if rows else None,
         "missed_unflagged": float(np.mean(missed)) if rows else None,
         "wrong_family": wrong_family,
+        "material_spread_drawn": spread,
         "distance_coverage_95": float(np.mean(l_cov)) if l_cov else None,
         "status_accuracy": float(np.mean([r["status_ok"] for r in rows])) if rows else None,
         "status_accuracy_slice": float(np.mean([r.get("status_ok_slice", False) for r in rows])),
