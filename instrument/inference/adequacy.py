@@ -99,6 +99,17 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
         for name in ("thickness_m", "distance_m"):
             getattr(est, name).status = "inconsistent"
         est.reason = (est.reason + "; " if est.reason else "") + f"inconsistent: {why}"
+    other = est.extra.get("other_reading")
+    if other is not None and why is None and not est.out_of_range:
+        lo, hi = other["thickness_m"]
+        warnings.append(
+            f"another reading fits as well: the data allow {lo * 1e3:.3g}-{hi * 1e3:.3g} mm over "
+            f"every distance to a support (e.g. {other['thickness_at_m'] * 1e3:.3g} mm at "
+            f"{other['distance_m'] * 1e3:.3g} mm from it), beyond the interval given, which "
+            "weighs the readings by how much of the table's distance range fits each. Near a "
+            "support a thinner plate nearer to it can mimic a thicker one farther out; a known "
+            "distance (a scan's edge: solitonde map --joint) or another sphere size tells them "
+            "apart")
     hidden = [i for i in est.inputs if i.hidden]
     for i in hidden:
         within = ("" if i.tof_window_s is None else

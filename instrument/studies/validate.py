@@ -30,7 +30,9 @@ answers whose 95 % bounds hold the truth, every answer counted with its bounds (
 with any answer (a thickness with at least one bound, not flagged); ``interval_width_median``,
 the median width of the two-sided 95 % intervals relative to the truth; ``inconsistent_rate``,
 the fraction flagged ``inconsistent`` or ``out_of_range`` (on the table's own family: false
-alarms); the distance's coverage (one-sided bounds counted as such); and the status. A size
+alarms); ``missed_unflagged``, the fraction whose constrained interval misses with no flag, and
+``missed_unwarned`` those of them with no warning of another reading either
+(``other_reading_rate``: how often that warning comes); the distance's coverage (one-sided bounds counted as such); and the status. A size
 whose shots show no reflection enters with its ARR bound (instrument.inference.inversion).
 The expected status is what the noise-free model says the data can tell. For each end of each
 parameter's range, ``d`` is how many standard errors (the inversion's own sigmas,
@@ -362,7 +364,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         row.update(thickness=t_est.to_dict(), distance=l_est.to_dict(),
                    excluded_diameters_m=excluded, fit=est.fit, warnings=est.warnings,
                    hidden_diameters_m=[i.diameter_m for i in inputs if i.hidden],
-                   flagged=flagged, answered=answered)
+                   flagged=flagged, answered=answered,
+                   other_reading=est.extra.get("other_reading"))
         if used:
             sep = separations(table, used, true_t, true_l, calibration)
             # a slice (the other parameter at its true value) misses joint (t, L)
@@ -406,6 +409,9 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     handled = [bool(r.get("flagged")) or bool(r.get("thickness_covered")) for r in rows]
     missed = [not r.get("flagged") and r.get("thickness", {}).get("status") == "constrained"
               and not r.get("thickness_covered") for r in rows]
+    # ... and of those, the ones no warning of another reading came with
+    unwarned = [m and r.get("other_reading") is None for m, r in zip(missed, rows, strict=True)]
+    warned = [r.get("other_reading") is not None for r in rows]
     metrics = {
         "n": n,
         "seed": seed,
@@ -418,6 +424,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "inconsistent_rate": float(np.mean(flagged)) if rows else None,
         "flagged_or_covered": float(np.mean(handled)) if rows else None,
         "missed_unflagged": float(np.mean(missed)) if rows else None,
+        "missed_unwarned": float(np.mean(unwarned)) if rows else None,
+        "other_reading_rate": float(np.mean(warned)) if rows else None,
         "wrong_family": wrong_family,
         "material_spread_drawn": spread,
         "distance_coverage_95": float(np.mean(l_cov)) if l_cov else None,
