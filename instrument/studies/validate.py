@@ -32,8 +32,9 @@ the median width of the two-sided 95 % intervals relative to the truth; ``incons
 the fraction flagged ``inconsistent`` or ``out_of_range`` (on the table's own family: false
 alarms); ``missed_unflagged``, the fraction whose constrained interval misses with no flag, and
 ``missed_unwarned`` those of them with no warning of another reading either
-(``other_reading_rate``: how often that warning comes); the distance's coverage (one-sided bounds counted as such); and the status. A size
-whose shots show no reflection enters with its ARR bound (instrument.inference.inversion).
+(``other_reading_rate``: how often that warning comes); the distance's coverage (one-sided
+bounds counted as such); and the status. A size whose shots show no reflection enters with its
+ARR bound (instrument.inference.inversion).
 The expected status is what the noise-free model says the data can tell. For each end of each
 parameter's range, ``d`` is how many standard errors (the inversion's own sigmas,
 :func:`separations`) separate the truth's features from the closest table point on that end: along
