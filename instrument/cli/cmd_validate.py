@@ -113,7 +113,11 @@ def validate_command(
                f"{num(m['interval_width_median'], '.4f')} of t")
     typer.echo(f"  flagged inconsistent {num(m['inconsistent_rate'])}; flagged or covered "
                f"{num(m['flagged_or_covered'])}; constrained, missed, unflagged "
-               f"{num(m['missed_unflagged'])}")
+               f"{num(m['missed_unflagged'])} (and unwarned {num(m['missed_unwarned'])}; "
+               f"another reading warned {num(m['other_reading_rate'])})")
+    if m.get("material_spread_drawn"):
+        typer.echo("  each plate's material drawn from the table material's spread "
+                   "(--exact-material: the table's own)")
     typer.echo(f"  status right: {num(m['status_accuracy'])}; distance statuses "
                f"{m['distance_status_counts']}")
 
