@@ -36,6 +36,10 @@ def validate_map_command(
     shared_calibration: bool = typer.Option(False, "--shared-calibration", help="the joint "
                                             "maps draw the calibration's TOF offset error "
                                             "once per scan, not per position"),
+    exact_positions: bool = typer.Option(False, "--exact-positions", help="simulate each "
+                                         "position exactly at its recorded coordinates "
+                                         "(default: the chain stands off them by the 1 mm the "
+                                         "joint map states for them)"),
     width_split: bool = typer.Option(False, "--width-split", help="instead: what each "
                                      "near-edge position's thickness interval is made of "
                                      "(its distance, the material, the calibration, the "
@@ -74,6 +78,7 @@ def validate_map_command(
         model = ModelTable.load(table_path(table))
         result = run(model, scans, seed, diameter_m=diameter, measurements=measurements,
                      sequential=sequential, shared_calibration=shared_calibration,
+                     exact_positions=exact_positions,
                      progress=lambda k, n: print(f"scan {k}/{n}", file=sys.stderr, flush=True))
     except StudyInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")

@@ -120,6 +120,9 @@ class Scan:
                                  float(self.rng.uniform(0.0, self.b)))
                                 for _ in range(MAX_POSITIONS)]
         self.seed = seed
+        self.coordinate_sd_m = 0.0
+        """How far (1 sd, per coordinate) the chain stood from its recorded coordinates: the
+        recorded (x, y) are a position's; its features are simulated where the chain stood."""
 
     def _span(self) -> np.ndarray:
         base = self.offset_m * self.normal
@@ -217,7 +220,11 @@ def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Meas
     for k, (x, y) in enumerate(xy):
         seed = int(np.random.default_rng([scan.seed, k, int(x * 1e6), int(y * 1e6)])
                    .integers(0, 2**31))
-        inputs = measure(scan.diameter_m, scan.thickness_m, scan.distance(x, y), seed)
+        stood = (x, y)
+        if scan.coordinate_sd_m > 0:
+            ex, ey = np.random.default_rng([seed, 7]).normal(0.0, scan.coordinate_sd_m, 2)
+            stood = (x + float(ex), y + float(ey))
+        inputs = measure(scan.diameter_m, scan.thickness_m, scan.distance(*stood), seed)
         out.append(joint_map.ScanPosition(f"P{k + 1:02d}", x, y, inputs, cal))
     return out
 
@@ -354,10 +361,13 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
 def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | None = None,
         measurements: str | Path | None = None, sequential: bool = True,
         progress: Callable[[int, int], None] | None = None,
-        shared_calibration: bool = False) -> dict[str, Any]:
+        shared_calibration: bool = False, exact_positions: bool = False) -> dict[str, Any]:
     """The study (see the module doc): per-scan rows and the summary metrics.
     ``shared_calibration``: the joint maps draw the calibration's TOF offset error once per
-    scan (:func:`~solitonde.instrument.inference.joint_map.posterior`)."""
+    scan (:func:`~solitonde.instrument.inference.joint_map.posterior`). Each position's chain
+    stands off its recorded coordinates by the error the joint map states for them
+    (:data:`~solitonde.instrument.inference.joint_map.POSITION_SD_M` per coordinate), so the
+    study tests that statement; ``exact_positions`` puts it exactly there."""
     if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
         raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -373,6 +383,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     rows = []
     for k in range(n_scans):
         scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
+        scan.coordinate_sd_m = 0.0 if exact_positions else joint_map.POSITION_SD_M
         rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
         if progress is not None:
@@ -380,6 +391,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     metrics = summarise(rows)
     metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
                    shared_calibration=shared_calibration,
+                   coordinate_sd_m=0.0 if exact_positions else joint_map.POSITION_SD_M,
                    simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
                    wall_s=time.perf_counter() - started,
                    calibration=cal.to_dict()["per_diameter"],
