@@ -9,7 +9,10 @@ rectangle's sides (which side at random), tilted by up to :data:`TILT_DEG` and s
 :data:`INSET_M`: a random angle and offset; the opposite clamped edge lies the plate's length
 ``a`` from it. Positions stand at distances from the edge drawn log-uniformly in
 :data:`DISTANCE_RANGE_M` (an operator looking for the support measures near it, some further
-away) and anywhere along it inside the rectangle. Every position is simulated, measured and
+away) and anywhere along it inside the rectangle. Its chain stands off those recorded
+coordinates by the joint map's stated coordinate error (a normal draw of
+:data:`~solitonde.instrument.inference.joint_map.POSITION_SD_M` per coordinate; off with
+``exact_positions``), and there every position is simulated, measured and
 calibrated exactly as :func:`.validate.measure_plate` does (the tier ``auto`` picks, a
 Kuwabara-Kono dissipation the elastic table lacks, 5 shots at 40 dB, one sphere size, the
 chain's damping (with the table's dissipation layer), an ARR factor and TOF offset fitted on two
