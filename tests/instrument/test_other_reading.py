@@ -94,3 +94,23 @@ def test_other_reading_needs_the_profile_beyond_the_interval_by_a_width() -> Non
     open_answer = ParameterEstimate(None, None, (4.95e-3, None), (4.9e-3, None),
                                     "lower_bound_only")
     assert _other_reading(t, two, best_l, open_answer) is None
+
+
+def test_the_service_answers_with_the_other_reading(tmp_path: Path) -> None:
+    """POST /v1/invert with a near-clamp case and its calibration: the answer carries
+    ``other_reading`` and the warning, as the command line's does."""
+    from fastapi.testclient import TestClient
+
+    from solitonde.instrument.service.app import build_app
+    from solitonde.instrument.service.settings import Settings
+
+    (t_true, _), summary = NEAR_CLAMP[0]
+    settings = Settings(store_path=tmp_path / "s.sqlite", table_path=DEFAULT_TABLE)
+    with TestClient(build_app(settings)) as client:
+        r = client.post("/v1/invert", json={"inputs": [vars(summary)],
+                                            "calibration": CALIBRATION})
+    assert r.status_code == 200, r.text
+    body = r.json()["estimate"]
+    lo, hi = body["other_reading"]["thickness_m"]
+    assert lo <= t_true <= hi
+    assert any(w.startswith("another reading fits as well") for w in body["warnings"])
