@@ -8,7 +8,9 @@ joined by "; ". What the estimate was made from follows, so that a plate's scan 
 jointly from the file (`solitonde map --joint`): ``table`` (the model table's id),
 ``size_summaries`` (JSON: per sphere size ``diameter_m``, ``tof_s``, ``tof_std_s``, ``arr``,
 ``arr_std``, ``n_shots``, ``arr_upper_bound``, ``tof_window_s``, as the inversion read them),
-``calibration`` and ``material_spread`` (JSON, empty when none).
+``calibration`` and ``material_spread`` (JSON, empty when none). ``other_reading`` (JSON,
+empty when none) is a thickness the data fit as well beyond the interval, next to a support
+(instrument.inference.inversion).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ STATS = ("map", "median", "ci68_low", "ci68_high", "ci95_low", "ci95_high", "sta
 LOCATION_COLUMNS = ("plate_id", "position", "x_m", "y_m", "sphere_diameters_m", "n_shots")
 ESTIMATE_COLUMNS = (*LOCATION_COLUMNS, *(f"{p}_{s}" for p in PARAMETERS for s in STATS),
                     "reason", "fit_chi2", "fit_dof", "fit_p_value", "warnings", "table",
-                    "size_summaries", "calibration", "material_spread")
+                    "size_summaries", "calibration", "material_spread", "other_reading")
 """The columns of an estimates file, in order."""
 
 
@@ -82,7 +84,8 @@ def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shot
     row["table"] = (estimate or {}).get("table")
     for key, value in (("size_summaries", (estimate or {}).get("inputs")),
                        ("calibration", (estimate or {}).get("calibration")),
-                       ("material_spread", (estimate or {}).get("material_spread"))):
+                       ("material_spread", (estimate or {}).get("material_spread")),
+                       ("other_reading", (estimate or {}).get("other_reading"))):
         row[key] = json.dumps(json_ready(value), allow_nan=False) if value else None
     return row
 
@@ -116,7 +119,7 @@ def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
         if col in frame:
             frame[col] = frame[col].astype("Int64")
     for col in ("plate_id", "position", "sphere_diameters_m", "reason", "warnings", "created_at",
-                "table", "size_summaries", "calibration", "material_spread",
+                "table", "size_summaries", "calibration", "material_spread", "other_reading",
                 *(f"{p}_status" for p in PARAMETERS)):
         if col in frame:
             frame[col] = frame[col].astype("string")
