@@ -129,9 +129,10 @@ interval's widths, where the profile likelihood (the best fit over every distanc
 above the 95 % likelihood-ratio level, is another reading of the data (:func:`_other_reading`):
 near a support a thinner plate nearer to it can fit as well as a thicker one farther out, and
 the marginal weighs the two by how much of the table's distance range fits each, not by how
-well. In validate's 600 plates (three seeds, D 9.53 mm) every constrained interval that missed
-next to a support reached beyond by 1.45-2.0 widths, the other misses 0.14 at most; of those
-that held the truth, 2 reached beyond 1.0 width (docs/inversion.md)."""
+well. In validate's 600 plates (three seeds, D 9.53 mm, drawn or exact materials) every
+constrained interval that missed next to a support reached beyond by 1.45-2.0 widths, the other
+misses 0.14 at most; of those that held the truth, 2 reached beyond 1.0 width
+(docs/inversion.md)."""
 MIN_FLOOR_MASS = 0.1
 """Posterior mean weight on floor nodes above which the adequacy check asks whether a size's
 features are explained without the floor's looseness (instrument.inference.adequacy)."""
