@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any
@@ -531,12 +531,14 @@ class Estimate:
         return out
 
 
-def _other_reading(thickness_m: np.ndarray, profile: np.ndarray, best_l: np.ndarray,
-                   answer: ParameterEstimate) -> dict[str, Any] | None:
+def _other_reading(thickness_m: np.ndarray, profile: np.ndarray,
+                   best_l: Callable[[int], float], answer: ParameterEstimate
+                   ) -> dict[str, Any] | None:
     """Another reading of the data than a constrained thickness answer, or None: the
     thicknesses whose profile likelihood is above the 95 % likelihood-ratio level, when they
     reach beyond the answer's 95 % interval by more than :data:`OTHER_READING_WIDTHS` of its
-    widths; with the farthest such thickness and the distance at which it fits best."""
+    widths; with the farthest such thickness and the distance at which it fits best
+    (``best_l(k)`` for thickness index k, asked only when there is such a reading)."""
     if answer.status != "constrained" or answer.ci95 is None:
         return None
     lo, hi = answer.ci95
@@ -552,7 +554,7 @@ def _other_reading(thickness_m: np.ndarray, profile: np.ndarray, best_l: np.ndar
         return None
     k = first if below >= above else last
     return {"thickness_m": [float(thickness_m[first]), float(thickness_m[last])],
-            "thickness_at_m": float(thickness_m[k]), "distance_m": float(best_l[k])}
+            "thickness_at_m": float(thickness_m[k]), "distance_m": best_l(k)}
 
 
 def _quantiles(x: np.ndarray, mass: np.ndarray, qs: Sequence[float]) -> list[float]:
@@ -878,7 +880,6 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     post = np.exp(chi2, out=chi2)
     # the profile likelihood of each parameter (the best over the other), before the prior
     profile_t, profile_l = post.max(axis=1), post.max(axis=0)
-    best_l = g0.distance_m[post.argmax(axis=1)]
     post *= g0.weight_t[:, None]  # prior mass of each cell: uniform in log t and in L
     post *= g0.weight_l[None, :]
     post /= post.sum()
@@ -887,7 +888,9 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     distance = _summarise(g0.distance_m, post.sum(axis=0), g0.weight_l,
                           lower_physical=bool(g0.distance_m[0] <= 0.0), profile=profile_l)
     est = Estimate(thickness, distance, items, cal, fit, n_terms)
-    other = _other_reading(g0.thickness_m, profile_t, best_l, thickness)
+    # a row's best distance by likelihood: the posterior's row over its prior's cell widths
+    other = _other_reading(g0.thickness_m, profile_t, lambda k: float(
+        g0.distance_m[np.argmax(post[k] / g0.weight_l)]), thickness)
     if other is not None:
         est.extra["other_reading"] = other
     # what the adequacy check reads: the effective number of parameters the data fix (the

@@ -95,7 +95,8 @@ def _width(p: Mapping[str, Any], t_range: tuple[float, float]) -> float:
 class Scan:
     """One random plate and the positions one may measure on it."""
 
-    def __init__(self, table: ModelTable, seed: int, diameter_m: float) -> None:
+    def __init__(self, table: ModelTable, seed: int, diameter_m: float,
+                 coordinate_sd_m: float = 0.0) -> None:
         family = table.family or {}
         size = family.get("plate_size_m") or [0.914, 0.914]
         self.a, self.b = float(size[0]), float(size[1])
@@ -123,7 +124,7 @@ class Scan:
                                  float(self.rng.uniform(0.0, self.b)))
                                 for _ in range(MAX_POSITIONS)]
         self.seed = seed
-        self.coordinate_sd_m = 0.0
+        self.coordinate_sd_m = coordinate_sd_m
         """How far (1 sd, per coordinate) the chain stood from its recorded coordinates: the
         recorded (x, y) are a position's; its features are simulated where the chain stood."""
 
@@ -383,10 +384,11 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     measure = Measurer(table.sweep.get("scene", {}), measurements)
     started = time.perf_counter()
     cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
+    coordinate_sd_m = 0.0 if exact_positions else joint_map.POSITION_SD_M
     rows = []
     for k in range(n_scans):
-        scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
-        scan.coordinate_sd_m = 0.0 if exact_positions else joint_map.POSITION_SD_M
+        scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m,
+                    coordinate_sd_m)
         rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
         if progress is not None:
@@ -394,7 +396,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     metrics = summarise(rows)
     metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
                    shared_calibration=shared_calibration,
-                   coordinate_sd_m=0.0 if exact_positions else joint_map.POSITION_SD_M,
+                   coordinate_sd_m=coordinate_sd_m,
                    simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
                    wall_s=time.perf_counter() - started,
                    calibration=cal.to_dict()["per_diameter"],

@@ -81,7 +81,11 @@ def test_other_reading_needs_the_profile_beyond_the_interval_by_a_width() -> Non
     t = np.geomspace(1.5e-3, 6e-3, 400)
     answer = ParameterEstimate(5.0e-3, 5.0e-3, (4.95e-3, 5.05e-3), (4.9e-3, 5.1e-3),
                                "constrained")
-    best_l = np.where(t < 4.7e-3, 0.02, 0.3)
+    best = np.where(t < 4.7e-3, 0.02, 0.3)
+
+    def best_l(k: int) -> float:
+        return float(best[k])
+
     one = np.exp(-0.5 * ((t - 5.0e-3) / 0.05e-3) ** 2)
     assert _other_reading(t, one, best_l, answer) is None
     two = np.maximum(one, np.where(np.abs(t - 4.5e-3) < 0.05e-3, 2 * LR_LEVELS[1], 0.0))
