@@ -40,6 +40,13 @@ def validate_map_command(
                                          "position exactly at its recorded coordinates "
                                          "(default: the chain stands off them by the 1 mm the "
                                          "joint map states for them)"),
+    truth_plate_theory: str = typer.Option("auto", "--truth-plate-theory", help="the "
+                                           "simulated plates' sem.plate_theory: auto (the "
+                                           "table's own tiers), 3d (the 3-D plate next to a "
+                                           "support, where the table holds the 2-D plate), "
+                                           "mindlin"),
+    workers: int = typer.Option(1, "--workers", help="simulate the scans' positions this "
+                                "many at a time"),
     width_split: bool = typer.Option(False, "--width-split", help="instead: what each "
                                      "near-edge position's thickness interval is made of "
                                      "(its distance, the material, the calibration, the "
@@ -79,6 +86,7 @@ def validate_map_command(
         result = run(model, scans, seed, diameter_m=diameter, measurements=measurements,
                      sequential=sequential, shared_calibration=shared_calibration,
                      exact_positions=exact_positions,
+                     truth_plate_theory=truth_plate_theory, workers=workers,
                      progress=lambda k, n: print(f"scan {k}/{n}", file=sys.stderr, flush=True))
     except StudyInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
@@ -102,6 +110,8 @@ def report_lines(m: dict[str, Any]) -> list[str]:
     lines = [f"map study on {m['table']}: {m['n_scans']} scans, seed {m['seed']}, D "
              f"{m['diameter_m'] * 1e3:.2f} mm"
              + (", the calibration's TOF offset shared" if m.get("shared_calibration") else "")
+             + (f", truths on sem.plate_theory {m['truth_plate_theory']}"
+                if m.get("truth_plate_theory", "auto") != "auto" else "")
              + f", {m['simulated_positions']} positions simulated "
              f"({m['simulation_wall_s']:.0f} s), {m['wall_s']:.0f} s in all"]
     names = {"alone": "position by position", "free": "joint, thickness free",

@@ -56,6 +56,8 @@ from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.instrument.inference.support import locate
 from solitonde.instrument.studies import validate as single
 from solitonde.instrument.tables.table import ModelTable
+from solitonde.instrument.tables.table_build import run_tasks
+from solitonde.model.scene import apply_overrides
 from solitonde.signal.atomic import write_text
 
 TILT_DEG = 5.0
@@ -71,6 +73,8 @@ STRATEGIES = ("suggested", "random_near_edge", "random_on_plate")
 at random as the first ones were (near the true edge: an operator who already knows roughly
 where the support is); at random anywhere on the plate."""
 COMMON_SPREAD = 0.05
+TRUTH_PLATE_THEORIES = ("auto", "3d", "mindlin")
+"""``sem.plate_theory`` of the simulated plates (:func:`run`)."""
 
 
 class StudyInputError(InstrumentError, ValueError):
@@ -172,7 +176,9 @@ class Scan:
 
 class Measurer:
     """Simulated positions, measured as :func:`.validate.measure_plate` measures them; kept
-    in a file (optional) so that a study can be re-scored without simulating again."""
+    in a file (optional) so that a study can be re-scored without simulating again. The file
+    records the scene its positions were simulated on (the truths' plate theory among it): a
+    file of another scene is refused, not mixed in."""
 
     def __init__(self, base: Mapping[str, Any], path: str | Path | None) -> None:
         self.base = dict(base)
@@ -180,15 +186,42 @@ class Measurer:
         self.cache: dict[str, Any] = {}
         if self.path is not None and self.path.is_file():
             try:
-                self.cache = json.loads(self.path.read_text(encoding="utf-8"))["positions"]
+                data = json.loads(self.path.read_text(encoding="utf-8"))
+                self.cache = data["positions"]
+                # files written before the scene was recorded hold the table's own scene
+                stored = data.get("scene")
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
                                       f"study wrote ({exc}); delete it or give another") from None
+            if stored is not None and stored != json.loads(json.dumps(self.base)):
+                theory = (stored.get("sem") or {}).get("plate_theory", "auto")
+                raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
+                                      f"simulated on another scene (sem.plate_theory "
+                                      f"{theory!r}); give another file")
         self.simulated = 0
         self.wall_s = 0.0
 
+    @staticmethod
+    def key(d: float, t: float, length: float, seed: int) -> str:
+        return f"{d:.6e}|{t:.9e}|{length:.9e}|{seed}"
+
+    def prefetch(self, requests: Sequence[tuple[float, float, float, int]], workers: int
+                 ) -> None:
+        """Simulate the requested ``(d, t, length, seed)`` not yet kept, ``workers`` at a time
+        (a study's positions are independent runs)."""
+        todo = {self.key(*r): r for r in requests if self.key(*r) not in self.cache}
+        if not todo:
+            return
+        started = time.perf_counter()
+        tasks = [(self.base, [d], t, max(length, 0.0), seed, k)
+                 for k, (d, t, length, seed) in todo.items()]
+        for key, m in run_tasks(_measure_keyed, tasks, workers, None):
+            self.cache[key] = {str(k): v for k, v in m["summaries"].items()}
+            self.simulated += 1
+        self.wall_s += time.perf_counter() - started
+
     def __call__(self, d: float, t: float, length: float, seed: int) -> list[FeatureSummary]:
-        key = f"{d:.6e}|{t:.9e}|{length:.9e}|{seed}"
+        key = self.key(d, t, length, seed)
         if key not in self.cache:
             started = time.perf_counter()
             m = single.measure_plate(self.base, [d], t, max(length, 0.0), seed)
@@ -202,24 +235,40 @@ class Measurer:
     def save(self) -> None:
         if self.path is None:
             return
-        write_text(self.path, json.dumps({"positions": self.cache}))
+        write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache}))
+
+
+def _measure_keyed(base: Mapping[str, Any], diameters: Sequence[float], t: float,
+                   length: float, seed: int, key: str) -> tuple[str, dict[str, Any]]:
+    """:func:`.validate.measure_plate` with the key it is kept under (results come back in the
+    order they finish)."""
+    return key, single.measure_plate(base, diameters, t, length, seed)
+
+
+def _references(table: ModelTable, d: float, seed: int
+                ) -> list[tuple[float, float, float, int]]:
+    """The two reference plates' ``(d, t, length, seed)``: far from the supports, as
+    :mod:`.validate` places them."""
+    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
+    l_ref = float(np.clip(single.REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
+    return [(d, float(np.clip(t_ref, t_axis[0], t_axis[-1])), l_ref, seed + k)
+            for k, t_ref in enumerate((single.REFERENCE_THICKNESS_M,
+                                       single.REFERENCE2_THICKNESS_M))]
 
 
 def _calibration(table: ModelTable, measure: Measurer, d: float, seed: int) -> Calibration:
     """The chain's damping, an ARR factor and TOF offset fitted on two reference plates, as
     :mod:`.validate` does."""
-    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
-    l_ref = float(np.clip(single.REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
     refs = []
-    for k, t_ref in enumerate((single.REFERENCE_THICKNESS_M, single.REFERENCE2_THICKNESS_M)):
-        t_ref = float(np.clip(t_ref, t_axis[0], t_axis[-1]))
-        refs += [Reference(t_ref, l_ref, s) for s in measure(d, t_ref, l_ref, seed + k)
+    for d_ref, t_ref, l_ref, s_ref in _references(table, d, seed):
+        refs += [Reference(t_ref, l_ref, s) for s in measure(d_ref, t_ref, l_ref, s_ref)
                  if not s.hidden]
     return fit_calibration(table, refs)
 
 
-def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Measurer,
-                    cal: Calibration) -> list[joint_map.ScanPosition]:
+def _stood(scan: Scan, xy: Sequence[tuple[float, float]]) -> list[tuple[float, int]]:
+    """Per recorded position, the distance from the edge where its chain stood (off the
+    recorded coordinates by the scan's coordinate error) and its noise seed."""
     out = []
     for k, (x, y) in enumerate(xy):
         seed = int(np.random.default_rng([scan.seed, k, int(x * 1e6), int(y * 1e6)])
@@ -228,7 +277,15 @@ def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Meas
         if scan.coordinate_sd_m > 0:
             ex, ey = np.random.default_rng([seed, 7]).normal(0.0, scan.coordinate_sd_m, 2)
             stood = (x + float(ex), y + float(ey))
-        inputs = measure(scan.diameter_m, scan.thickness_m, scan.distance(*stood), seed)
+        out.append((scan.distance(*stood), seed))
+    return out
+
+
+def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Measurer,
+                    cal: Calibration) -> list[joint_map.ScanPosition]:
+    out = []
+    for k, ((x, y), (length, seed)) in enumerate(zip(xy, _stood(scan, xy), strict=True)):
+        inputs = measure(scan.diameter_m, scan.thickness_m, length, seed)
         out.append(joint_map.ScanPosition(f"P{k + 1:02d}", x, y, inputs, cal))
     return out
 
@@ -365,13 +422,19 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
 def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | None = None,
         measurements: str | Path | None = None, sequential: bool = True,
         progress: Callable[[int, int], None] | None = None,
-        shared_calibration: bool = False, exact_positions: bool = False) -> dict[str, Any]:
+        shared_calibration: bool = False, exact_positions: bool = False,
+        truth_plate_theory: str = "auto", workers: int = 1) -> dict[str, Any]:
     """The study (see the module doc): per-scan rows and the summary metrics.
     ``shared_calibration``: the joint maps draw the calibration's TOF offset error once per
     scan (:func:`~solitonde.instrument.inference.joint_map.posterior`). Each position's chain
     stands off its recorded coordinates by the error the joint map states for them
     (:data:`~solitonde.instrument.inference.joint_map.POSITION_SD_M` per coordinate), so the
-    study tests that statement; ``exact_positions`` puts it exactly there."""
+    study tests that statement; ``exact_positions`` puts it exactly there.
+    ``truth_plate_theory`` (``sem.plate_theory`` of every simulated plate, the reference plates
+    included, as :func:`.validate.validate` does): ``3d`` simulates next to a support on the 3-D
+    plate while the table holds the 2-D plate there, so the 2-D plate's own error, which the
+    intervals state, is in the truths too. ``workers`` simulate the scans' first positions
+    (all of them without ``sequential``) in parallel before the scans are scored."""
     if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
         raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -381,14 +444,34 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
         diameter_m = min(sizes, key=lambda d: abs(d - 9.53e-3))
     else:
         diameter_m = float(table.axes["diameter_m"][table.diameter_index(diameter_m)])
-    measure = Measurer(table.sweep.get("scene", {}), measurements)
+    if truth_plate_theory not in TRUTH_PLATE_THEORIES:
+        raise StudyInputError("truth_plate_theory", f"must be one of "
+                              f"{', '.join(TRUTH_PLATE_THEORIES)}, got {truth_plate_theory!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise StudyInputError("workers", f"must be an integer >= 1, got {workers!r}")
+    base = dict(table.sweep.get("scene", {}))
+    if truth_plate_theory != "auto":
+        base = apply_overrides(base, {"sem.plate_theory": truth_plate_theory})
+    measure = Measurer(base, measurements)
     started = time.perf_counter()
-    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
     coordinate_sd_m = 0.0 if exact_positions else joint_map.POSITION_SD_M
+    scans = [Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m,
+                  coordinate_sd_m) for k in range(n_scans)]
+    requests = _references(table, diameter_m, seed * 1000 + 1)
+    for scan in scans:
+        lists = [scan.random_positions[:scan.n_positions]]
+        if sequential:
+            lists += [scan.random_positions,
+                      scan.random_positions[:START_POSITIONS]
+                      + scan.plate_positions[START_POSITIONS:]]
+        for xy in lists:
+            requests += [(diameter_m, scan.thickness_m, length, s)
+                         for length, s in _stood(scan, xy)]
+    measure.prefetch(requests, workers)
+    measure.save()
+    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
     rows = []
-    for k in range(n_scans):
-        scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m,
-                    coordinate_sd_m)
+    for k, scan in enumerate(scans):
         rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
         if progress is not None:
@@ -396,7 +479,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     metrics = summarise(rows)
     metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
                    shared_calibration=shared_calibration,
-                   coordinate_sd_m=coordinate_sd_m,
+                   coordinate_sd_m=coordinate_sd_m, truth_plate_theory=truth_plate_theory,
                    simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
                    wall_s=time.perf_counter() - started,
                    calibration=cal.to_dict()["per_diameter"],
