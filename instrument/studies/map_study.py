@@ -194,10 +194,13 @@ class Measurer:
                 raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
                                       f"study wrote ({exc}); delete it or give another") from None
             if stored is not None and stored != json.loads(json.dumps(self.base)):
-                theory = (stored.get("sem") or {}).get("plate_theory", "auto")
+                def theory(scene: Mapping[str, Any]) -> str:
+                    return str((scene.get("sem") or {}).get("plate_theory", "auto"))
+
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
-                                      f"simulated on another scene (sem.plate_theory "
-                                      f"{theory!r}); give another file")
+                                      f"simulated on another scene (its sem.plate_theory "
+                                      f"{theory(stored)!r}, this study's "
+                                      f"{theory(self.base)!r}); give another file")
         self.simulated = 0
         self.wall_s = 0.0
 

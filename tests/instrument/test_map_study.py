@@ -78,6 +78,43 @@ def test_a_position_is_simulated_where_the_chain_stood_off_its_recorded_coordina
     assert abs(shift.mean()) < 4 * 1e-3 / math.sqrt(len(xy))
 
 
+def test_the_measurements_file_keeps_its_scene_and_refuses_another(tmp_path, monkeypatch):
+    """Positions are simulated once (in parallel when asked) and kept with the scene they were
+    simulated on: the same file for truths on another plate theory is refused by name, not
+    mixed in."""
+    calls: list[tuple] = []
+
+    def fake(base, diameters, t, length, seed):
+        calls.append((base.get("sem", {}).get("plate_theory", "auto"), t, length, seed))
+        return {"summaries": {diameters[0]: {"diameter_m": diameters[0], "tof_s": 5e-4 + length,
+                                             "arr": 0.5, "tof_std_s": 1e-7, "arr_std": 1e-3,
+                                             "n_shots": 5}}}
+
+    monkeypatch.setattr(map_study.single, "measure_plate", fake)
+    path = tmp_path / "m.json"
+    auto = {"sem": {"plate_theory": "auto"}}
+    m = map_study.Measurer(auto, path)
+    m.prefetch([(9.53e-3, 3e-3, 0.01, 1), (9.53e-3, 3e-3, 0.02, 2)], workers=1)
+    m.prefetch([(9.53e-3, 3e-3, 0.02, 2)], workers=1)  # kept: not simulated again
+    assert len(calls) == 2 and m.simulated == 2
+    assert m(9.53e-3, 3e-3, 0.02, 2)[0].tof_s == pytest.approx(5e-4 + 0.02)
+    assert len(calls) == 2
+    m.save()
+    assert map_study.Measurer(auto, path).cache == m.cache
+    with pytest.raises(map_study.StudyInputError, match=r"another scene.*'3d'") as err:
+        map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)
+    assert err.value.field == "measurements"
+
+
+@pytest.mark.parametrize(("kwargs", "field"), [({"truth_plate_theory": "2d"}, "truth_plate_theory"),
+                                               ({"workers": 0}, "workers")])
+def test_the_study_refuses_a_truth_plate_theory_or_worker_count_it_does_not_know(table, kwargs,
+                                                                                   field):
+    with pytest.raises(map_study.StudyInputError) as err:
+        map_study.run(table, 1, 0, **kwargs)
+    assert err.value.field == field
+
+
 def _row(thickness: float, positions: list[tuple[float, dict, dict, dict]],
          edges: dict, sequence: dict | None = None) -> dict:
     row = {"thickness_m": thickness, "positions": [
