@@ -87,7 +87,8 @@ def validate_map_command(
                      sequential=sequential, shared_calibration=shared_calibration,
                      exact_positions=exact_positions,
                      truth_plate_theory=truth_plate_theory, workers=workers,
-                     progress=lambda k, n: print(f"scan {k}/{n}", file=sys.stderr, flush=True))
+                     progress=lambda what, k, n: print(f"{what} {k}/{n}", file=sys.stderr,
+                                                       flush=True))
     except StudyInputError as exc:
         _fail(f"--{exc.field.replace('_', '-')}: {str(exc).partition(': ')[2]}")
     except TableError as exc:

@@ -208,8 +208,8 @@ class Measurer:
     def key(d: float, t: float, length: float, seed: int) -> str:
         return f"{d:.6e}|{t:.9e}|{length:.9e}|{seed}"
 
-    def prefetch(self, requests: Sequence[tuple[float, float, float, int]], workers: int
-                 ) -> None:
+    def prefetch(self, requests: Sequence[tuple[float, float, float, int]], workers: int,
+                 progress: Callable[[str, int, int], None] | None = None) -> None:
         """Simulate the requested ``(d, t, length, seed)`` not yet kept, ``workers`` at a time
         (a study's positions are independent runs)."""
         todo = {self.key(*r): r for r in requests if self.key(*r) not in self.cache}
@@ -218,9 +218,11 @@ class Measurer:
         started = time.perf_counter()
         tasks = [(self.base, [d], t, max(length, 0.0), seed, k)
                  for k, (d, t, length, seed) in todo.items()]
-        for key, m in run_tasks(_measure_keyed, tasks, workers, None):
+        for done, (key, m) in enumerate(run_tasks(_measure_keyed, tasks, workers, None), 1):
             self.cache[key] = {str(k): v for k, v in m["summaries"].items()}
             self.simulated += 1
+            if progress is not None:
+                progress("positions simulated", done, len(tasks))
         self.wall_s += time.perf_counter() - started
 
     def __call__(self, d: float, t: float, length: float, seed: int) -> list[FeatureSummary]:
@@ -424,7 +426,7 @@ def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration
 
 def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | None = None,
         measurements: str | Path | None = None, sequential: bool = True,
-        progress: Callable[[int, int], None] | None = None,
+        progress: Callable[[str, int, int], None] | None = None,
         shared_calibration: bool = False, exact_positions: bool = False,
         truth_plate_theory: str = "auto", workers: int = 1) -> dict[str, Any]:
     """The study (see the module doc): per-scan rows and the summary metrics.
@@ -470,7 +472,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
         for xy in lists:
             requests += [(diameter_m, scan.thickness_m, length, s)
                          for length, s in _stood(scan, xy)]
-    measure.prefetch(requests, workers)
+    measure.prefetch(requests, workers, progress)
     measure.save()
     cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
     rows = []
@@ -478,7 +480,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
         rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
         if progress is not None:
-            progress(k + 1, n_scans)
+            progress("scans scored", k + 1, n_scans)
     metrics = summarise(rows)
     metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
                    shared_calibration=shared_calibration,
