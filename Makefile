@@ -20,8 +20,12 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(BIN)/solitonde serve --host '$(HOST)' --port '$(PORT)' --table data_samples/default_table.h5
 
+# The tests run on TEST_WORKERS processes (pytest-xdist), a test file per process at a time
+# (module fixtures are built once); TEST_WORKERS=0 runs them in this one.
+TEST_WORKERS ?= 2
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
