@@ -115,6 +115,13 @@ def test_the_study_refuses_a_truth_plate_theory_or_worker_count_it_does_not_know
     assert err.value.field == field
 
 
+def test_validate_map_names_the_flag_of_an_unknown_plate_theory(tmp_path):
+    res = CliRunner().invoke(build_cli(), ["validate-map", "--scans", "1",
+                                           "--truth-plate-theory", "2d"])
+    assert res.exit_code == 1
+    assert "--truth-plate-theory: must be one of auto, 3d, mindlin, got '2d'" in res.output
+
+
 def _row(thickness: float, positions: list[tuple[float, dict, dict, dict]],
          edges: dict, sequence: dict | None = None) -> dict:
     row = {"thickness_m": thickness, "positions": [
