@@ -124,17 +124,22 @@ def report_lines(m: dict[str, Any]) -> list[str]:
                      f"width {num(t['near_edge_width_median_m'] * 1e3, '.2f')} mm "
                      f"({num(t['near_edge_width_median_rel'], '.3f')} of t, "
                      f"{t['near_edge_positions']} positions); edge offset coverage "
-                     f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located), median "
+                     f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located; "
+                     f"error over stated sd, rms {num(e.get('offset_z_rms'), '.2f')}), median "
                      f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm, median 95 % "
                      f"width {num((e['ci95_width_median_m'] or 0) * 1e3, '.1f')} mm")
         if "angle_coverage_95" in e:
             lines.append(f"    the edge as the scan sees it: angle coverage "
-                         f"{num(e['angle_coverage_95'])} (median 95 % width "
+                         f"{num(e['angle_coverage_95'])} (rms z "
+                         f"{num(e.get('angle_z_rms'), '.2f')}; median 95 % width "
                          f"{num(e['angle_ci95_width_median_deg'], '.2f')} deg); where it lies "
                          f"at the positions' centroid: coverage {num(e['at_scan_coverage_95'])} "
-                         f"(median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm); "
+                         f"(rms z {num(e.get('at_scan_z_rms'), '.2f')}; "
+                         f"median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm); "
                          f"the frame's origin lies a median "
                          f"{e['lever_median_m'] * 1e3:.0f} mm along the edge from them")
+    lines.append("  (rms z: each miss over the sd its 95 % interval states; 1 where the intervals "
+                 "are as wide as the errors, below 1 where they are wider)")
     for strategy in ("suggested", "random_near_edge", "random_on_plate"):
         s = m.get(f"sequence_{strategy}")
         if not s:
