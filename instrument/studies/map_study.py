@@ -188,19 +188,17 @@ class Measurer:
             try:
                 data = json.loads(self.path.read_text(encoding="utf-8"))
                 self.cache = data["positions"]
-                # files written before the scene was recorded hold the table's own scene
+                # files written before the scene was recorded hold the table's own tiers
                 stored = data.get("scene")
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
                                       f"study wrote ({exc}); delete it or give another") from None
-            if stored is not None and stored != json.loads(json.dumps(self.base)):
-                def theory(scene: Mapping[str, Any]) -> str:
-                    return str((scene.get("sem") or {}).get("plate_theory", "auto"))
-
+            if (stored is None and _plate_theory(self.base) != "auto") or (
+                    stored is not None and stored != json.loads(json.dumps(self.base))):
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
                                       f"simulated on another scene (its sem.plate_theory "
-                                      f"{theory(stored)!r}, this study's "
-                                      f"{theory(self.base)!r}); give another file")
+                                      f"{_plate_theory(stored or {})!r}, this study's "
+                                      f"{_plate_theory(self.base)!r}); give another file")
         self.simulated = 0
         self.wall_s = 0.0
 
@@ -241,6 +239,10 @@ class Measurer:
         if self.path is None:
             return
         write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache}))
+
+
+def _plate_theory(scene: Mapping[str, Any]) -> str:
+    return str((scene.get("sem") or {}).get("plate_theory", "auto"))
 
 
 def _measure_keyed(base: Mapping[str, Any], diameters: Sequence[float], t: float,

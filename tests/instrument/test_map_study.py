@@ -104,6 +104,11 @@ def test_the_measurements_file_keeps_its_scene_and_refuses_another(tmp_path, mon
     with pytest.raises(map_study.StudyInputError, match=r"another scene.*'3d'") as err:
         map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)
     assert err.value.field == "measurements"
+    # a file written before the scene was recorded holds the table's own tiers
+    path.write_text(json.dumps({"positions": m.cache}))
+    assert map_study.Measurer(auto, path).cache == m.cache
+    with pytest.raises(map_study.StudyInputError, match=r"its sem.plate_theory 'auto'"):
+        map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)
 
 
 @pytest.mark.parametrize(("kwargs", "field"), [({"truth_plate_theory": "2d"}, "truth_plate_theory"),
