@@ -135,7 +135,9 @@ def report_lines(m: dict[str, Any]) -> list[str]:
                          f"{num(e['angle_ci95_width_median_deg'], '.2f')} deg); where it lies "
                          f"at the positions' centroid: coverage {num(e['at_scan_coverage_95'])} "
                          f"(rms z {num(e.get('at_scan_z_rms'), '.2f')}; "
-                         f"median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm); "
+                         f"median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm; "
+                         f"{num(e.get('at_scan_coverage_95_direction_fixed'))} over the "
+                         f"{e.get('direction_fixed_scans')} scans whose direction is fixed); "
                          f"the frame's origin lies a median "
                          f"{e['lever_median_m'] * 1e3:.0f} mm along the edge from them")
     lines.append("  (rms z: each miss over the sd its 95 % interval states; 1 where the intervals "

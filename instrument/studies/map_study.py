@@ -666,6 +666,14 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                 lever_median_m=float(np.median([e["lever_m"] for e in seen])),
                 angle_z_rms=_rms([e.get("angle_z") for e in seen]),
                 at_scan_z_rms=_rms([e.get("at_scan_z") for e in seen]))
+            # where the edge lies at the scan means something only where its direction is
+            # fixed: the joint map warns beyond joint_map.WIDE_ANGLE_DEG
+            fixed = [e for e in seen if e["angle_ci95_width_deg"] <= joint_map.WIDE_ANGLE_DEG]
+            out[f"edge_{name}"].update(
+                direction_fixed_scans=len(fixed),
+                at_scan_coverage_95_direction_fixed=float(np.mean(
+                    [e["at_scan_covered"] for e in fixed])) if fixed else None,
+                at_scan_z_rms_direction_fixed=_rms([e.get("at_scan_z") for e in fixed]))
     free = [r["edge_free"]["fit"]["p_value"] for r in rows if r.get("edge_free")]
     out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
     seqs = [r["sequence"] for r in rows if "sequence" in r]

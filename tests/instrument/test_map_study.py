@@ -139,6 +139,26 @@ def test_an_edges_miss_is_scored_in_the_sds_its_interval_states():
         math.sqrt(0.9 * 0.1 / 30))
 
 
+def test_the_edge_at_the_scan_is_scored_where_its_direction_is_fixed():
+    """A scan whose positions do not fix the edge's direction (the joint map warns beyond
+    WIDE_ANGLE_DEG) has no meaningful place of the edge at the scan: scored apart."""
+    def scan_row(angle_width: float, at_scan_covered: bool, at_scan_z: float) -> dict:
+        edge = {"ci95_offset_m": [0.0, 0.01], "covered": True, "error_m": 0.002,
+                "fit": {"p_value": 0.5}, "angle_covered": True, "angle_ci95_width_deg":
+                angle_width, "at_scan_covered": at_scan_covered, "at_scan_z": at_scan_z,
+                "at_scan_ci95_width_m": 0.004, "lever_m": 0.4, "angle_z": 0.5}
+        return {"thickness_m": 3e-3, "positions": [], "edge_free": edge, "edge_common": edge,
+                "edge_alone": None}
+
+    m = map_study.summarise([scan_row(5.0, True, 0.5), scan_row(10.0, False, 2.5),
+                             scan_row(300.0, False, 22.0)])
+    e = m["edge_free"]
+    assert e["at_scan_coverage_95"] == pytest.approx(1 / 3)
+    assert e["direction_fixed_scans"] == 2
+    assert e["at_scan_coverage_95_direction_fixed"] == pytest.approx(0.5)
+    assert e["at_scan_z_rms_direction_fixed"] == pytest.approx(math.sqrt((0.25 + 6.25) / 2))
+
+
 def _row(thickness: float, positions: list[tuple[float, dict, dict, dict]],
          edges: dict, sequence: dict | None = None) -> dict:
     row = {"thickness_m": thickness, "positions": [
