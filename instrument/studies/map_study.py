@@ -228,12 +228,7 @@ class Measurer:
 
     def __call__(self, d: float, t: float, length: float, seed: int) -> list[FeatureSummary]:
         key = self.key(d, t, length, seed)
-        if key not in self.cache:
-            started = time.perf_counter()
-            m = single.measure_plate(self.base, [d], t, max(length, 0.0), seed)
-            self.wall_s += time.perf_counter() - started
-            self.simulated += 1
-            self.cache[key] = {str(k): v for k, v in m["summaries"].items()}
+        self.prefetch([(d, t, length, seed)], 1)
         return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"],
                                s["arr_std"], int(s["n_shots"]), s.get("arr_upper_bound"))
                 for s in self.cache[key].values() if s is not None]
