@@ -31,6 +31,12 @@ from .kernels import TRUNC_SPAN
 from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
+READING_VERSION = 2
+"""How the extractor reads a shot, as a number a model table records (``reading_version``): a
+table's features compare with shots read the same way only. 2: the incident and the reflection
+read on the slow trend of the record cut 2.5 FWHM after the reflection (the same reading however
+long the record runs on); 1: on the whole record's trend (tables built before 2026-11-27)."""
+
 OUTLIER_Z = 3.5
 """Modified z-score (0.6745 |x - median| / MAD) above which a shot is rejected
 (Iglewicz-Hoaglin)."""

@@ -587,7 +587,7 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
     that runs on past the cut, nothing changes. Returns the pulses on the new line (``line``
     and ``v`` are updated in place)."""
     n = y.size
-    for it in range(2):
+    for _ in range(2):
         m = peaks.size
         if gate_1n <= 0 or m < 2:
             return peaks

@@ -16,6 +16,11 @@ types and the flag logic. The steps, each chosen so that a number is never picke
    from their neighbours (hysteresis search).
 4. Slow trend: a least-squares quadratic through every sample further than 2 FWHM from a pulse
    (follows acquisition drift and the chain's slow level changes); detection is redone against it.
+   With a travel gate, the trend under the incident and the reflection is refitted on the record
+   as it stands 2.5 FWHM after the reflection's peak (the whole record's kept beyond), so that a
+   shot reads the same however long its record runs on (the chain's level after the reflection
+   bent the whole record's quadratic: ARR up to 0.6 % apart between records ending 4 and 10
+   widths after it).
 5. Incident = first pulse; reflected = the next one (flagged ``overlapping`` if the incident has
    not decayed in between); the rest are secondary pulses.
 6. Each pulse is measured on the raw samples, as the paper defines TOF and ARR: its peak time,

@@ -211,6 +211,12 @@ def info_command(
                                           if layer is None else
                                           "Kuwabara-Kono tau = " + ", ".join(
                                               f"{t:g}" for t in layer["damping_s"]) + " s"))
+    from solitonde.signal.features import READING_VERSION
+
+    reading = data["reading_version"]
+    typer.echo(f"  reading: {reading}" + ("" if reading == READING_VERSION else
+                                           f" (shots are read with {READING_VERSION}: rebuild "
+                                           "the table before inverting with it)"))
     prov = data["provenance"]
     if prov:
         typer.echo(f"  built {prov.get('built_at')} in {prov.get('build_wall_s', 0):.0f} s "

@@ -69,6 +69,20 @@ def _dof(est: Any) -> float:
     return max(est.n_terms - min(max(p_d, 0.0), est.n_terms), 1.0)
 
 
+def reading_mismatch(table_version: int) -> str | None:
+    """The warning for a table whose points were read another way than shots are now
+    (:data:`solitonde.signal.features.READING_VERSION`), or None."""
+    from solitonde.signal.features import READING_VERSION
+
+    if table_version == READING_VERSION:
+        return None
+    return (f"the table's points were read with the extractor's reading {table_version}, shots "
+            f"are read with reading {READING_VERSION} (the trend under the reflection now ends "
+            "2.5 FWHM after it, so a record reads the same however long it runs on): ARR can "
+            "differ by up to 0.6 % (D 19.05 mm) between the two; rebuild the table "
+            "(`solitonde table build`) before acting on this answer")
+
+
 def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
     """Fill ``est.fit`` and ``est.warnings`` of an inversion's ``Estimate``; mark the answer
     ``inconsistent`` when the family does not explain the data (see the module doc);

@@ -718,6 +718,9 @@ def invert(
             est = best
     est.material_spread = spread
     adequacy.judge(est, FLOOR_ARR_MAX, REFLECTION_D_OVER_T)
+    stale = adequacy.reading_mismatch(table.reading_version)
+    if stale is not None:
+        est.warnings.append(stale)
     return est
 
 

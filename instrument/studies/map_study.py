@@ -62,6 +62,7 @@ from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides
 from solitonde.signal.atomic import write_text
+from solitonde.signal.features import READING_VERSION
 
 TILT_DEG = 5.0
 INSET_M = 0.03
@@ -180,8 +181,9 @@ class Scan:
 class Measurer:
     """Simulated positions, measured as :func:`.validate.measure_plate` measures them; kept
     in a file (optional) so that a study can be re-scored without simulating again. The file
-    records the scene its positions were simulated on (the truths' plate theory among it): a
-    file of another scene is refused, not mixed in."""
+    records the scene its positions were simulated on (the truths' plate theory among it) and
+    the extractor's reading they were read with: a file of another scene or reading is refused,
+    not mixed in."""
 
     def __init__(self, base: Mapping[str, Any], path: str | Path | None) -> None:
         self.base = dict(base)
@@ -193,6 +195,7 @@ class Measurer:
                 self.cache = data["positions"]
                 # files written before the scene was recorded hold the table's own tiers
                 stored = data.get("scene")
+                reading = int(data.get("reading_version", 1))
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
                                       f"study wrote ({exc}); delete it or give another") from None
@@ -202,6 +205,10 @@ class Measurer:
                                       f"simulated on another scene (its sem.plate_theory "
                                       f"{_plate_theory(stored or {})!r}, this study's "
                                       f"{_plate_theory(self.base)!r}); give another file")
+            if reading != READING_VERSION:
+                raise StudyInputError("measurements", f"{str(self.path)!r} holds positions read "
+                                      f"with the extractor's reading {reading}, this solitonde "
+                                      f"reads with {READING_VERSION}; give another file")
         self.simulated = 0
         self.wall_s = 0.0
 
@@ -236,7 +243,8 @@ class Measurer:
     def save(self) -> None:
         if self.path is None:
             return
-        write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache}))
+        write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache,
+                                          "reading_version": READING_VERSION}))
 
 
 def _plate_theory(scene: Mapping[str, Any]) -> str:

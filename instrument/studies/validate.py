@@ -75,7 +75,7 @@ from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.atomic import write_text
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import aggregate
+from solitonde.signal.features import READING_VERSION, aggregate
 from solitonde.signal.synth import degrade
 
 DAMPING_S = 1e-7
@@ -311,7 +311,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
            "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
            "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
            "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB,
-           "wrong_family": wrong_family, "material_spread_drawn": spread}
+           "wrong_family": wrong_family, "material_spread_drawn": spread,
+           "reading_version": READING_VERSION}
     stored = _load_measurements(measurements, key)
     started = time.perf_counter()
     if stored is not None:

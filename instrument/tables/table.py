@@ -155,6 +155,9 @@ class ModelTable:
     dissipation: DissipationLayer | None = None
     """The features simulated with contact damping (:mod:`.dissipation`), or None for a table
     without that layer."""
+    reading_version: int = 1
+    """How the table's points were read (:data:`solitonde.signal.features.READING_VERSION` of the
+    build; 1 for a table that does not say)."""
     model_variance: dict[str, np.ndarray] | None = None
     """Per-node variance of ``tof_s`` and ``arr`` the inversion adds to the table's
     interpolation error (a table read at a fitted damping: :func:`.dissipation.damped`)."""
@@ -240,6 +243,7 @@ class ModelTable:
                 path=path,
                 material_slopes=read_slopes(fh, grid),
                 dissipation=read_layer(fh, grid),
+                reading_version=_reading_version(fh),
             )
             table._cache["sha256"] = digest
             return table
@@ -275,6 +279,7 @@ class ModelTable:
             "family": self.family,
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
+            "reading_version": self.reading_version,
             "complete": self.complete,
             "shape": list(self.shape),
             "n_points": int(np.prod(self.shape)),
@@ -293,6 +298,15 @@ class ModelTable:
 
 
 # Reading and checking a table file ---------------------------------------------------------------
+
+
+def _reading_version(fh: h5py.File) -> int:
+    """The table's ``reading_version`` attribute (1 where it has none)."""
+    raw = fh.attrs.get("reading_version", 1)
+    try:
+        return int(raw)
+    except (TypeError, ValueError):
+        raise TableError("reading_version", f"expected an integer, got {raw!r}") from None
 
 
 MATERIAL_SLOPES = "material_slopes"

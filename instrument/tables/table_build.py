@@ -58,7 +58,7 @@ from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
 from solitonde.model.simulate import SimulationResult, simulate
 from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import Features, extract
+from solitonde.signal.features import READING_VERSION, Features, extract
 from solitonde.signal.pulses import FLAGS
 
 #: Environment of Dask worker processes: one compute thread each (the cores are the workers).
@@ -220,6 +220,7 @@ def _create(fh: h5py.File, sweep: Sweep) -> None:
     shape = sweep.shape
     fh.attrs["format"] = FORMAT
     fh.attrs["format_version"] = FORMAT_VERSION
+    fh.attrs["reading_version"] = READING_VERSION
     fh.attrs["sweep"] = json.dumps(sweep.to_dict(), sort_keys=True)
     # The chain's options every point was measured with (the reflection's travel gate, the
     # solitary wave's width law), per sphere size: what a measured shot of that size gets too.

@@ -80,8 +80,8 @@ def test_a_position_is_simulated_where_the_chain_stood_off_its_recorded_coordina
 
 def test_the_measurements_file_keeps_its_scene_and_refuses_another(tmp_path, monkeypatch):
     """Positions are simulated once (in parallel when asked) and kept with the scene they were
-    simulated on: the same file for truths on another plate theory is refused by name, not
-    mixed in."""
+    simulated on and the extractor's reading: the same file for truths on another plate theory,
+    or read another way, is refused by name, not mixed in."""
     calls: list[tuple] = []
 
     def fake(base, diameters, t, length, seed):
@@ -104,8 +104,13 @@ def test_the_measurements_file_keeps_its_scene_and_refuses_another(tmp_path, mon
     with pytest.raises(map_study.StudyInputError, match=r"another scene.*'3d'") as err:
         map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)
     assert err.value.field == "measurements"
-    # a file written before the scene was recorded holds the table's own tiers
+    # a file written before the reading was recorded was read with reading 1: refused
     path.write_text(json.dumps({"positions": m.cache}))
+    with pytest.raises(map_study.StudyInputError,
+                       match=r"read with the extractor's reading 1, this solitonde reads with 2"):
+        map_study.Measurer(auto, path)
+    # one written before the scene was recorded holds the table's own tiers
+    path.write_text(json.dumps({"positions": m.cache, "reading_version": 2}))
     assert map_study.Measurer(auto, path).cache == m.cache
     with pytest.raises(map_study.StudyInputError, match=r"its sem.plate_theory 'auto'"):
         map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)
