@@ -526,6 +526,7 @@ def build_table(
             with h5py.File(part, "r") as fh:
                 ours = fh.attrs.get("format") == FORMAT and "done" in fh
                 stored = json.loads(fh.attrs.get("sweep", "null")) if ours else None
+                reading = int(fh.attrs.get("reading_version", 1)) if ours else READING_VERSION
         except (OSError, ValueError) as exc:  # not HDF5 (empty, garbage, truncated); bad JSON
             raise TableError("partial", not_ours.format(exc)) from None
         if not ours:
@@ -534,6 +535,10 @@ def build_table(
         if stored != json.loads(json.dumps(spec, sort_keys=True)):
             raise TableError("sweep", f"{str(part)!r} holds an interrupted build of another sweep; "
                              "rerun with the same grid and scene to resume, or delete it")
+        if reading != READING_VERSION:
+            raise TableError("partial", f"{str(part)!r} holds points read with the extractor's "
+                             f"reading {reading}, this solitonde reads with {READING_VERSION}: "
+                             "one table holds one reading; delete it to start the build afresh")
     else:
         with h5py.File(part, "w") as fh:
             _create(fh, sweep)

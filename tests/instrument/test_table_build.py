@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from solitonde.instrument.tables.measured import as_measured
+from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,
     SECONDARY_FEATURES,
@@ -26,7 +26,8 @@ from solitonde.instrument.tables.table_build import (
 )
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
-from solitonde.signal.features import extract
+from solitonde.instrument.inference.inversion import FeatureSummary, invert
+from solitonde.signal.features import READING_VERSION, extract
 
 # A coarse spectral-element plate keeps a Green's function to a fraction of a second.
 FAST = {"sem": {"elements": [6, 6, 1], "order": [2, 2, 2]}}
@@ -74,6 +75,7 @@ def test_reference_table_is_complete_and_sane(reference: Path) -> None:
                 "machine", "git_revision"):
         assert key in prov
     json.dumps(s)  # JSON-ready for the service
+    assert t.reading_version == s["reading_version"] == READING_VERSION
     # at the support the plate barely moves: ARR close to 1 for both sizes, far from it lower
     assert (t.features["arr"][:, :, 0] > 0.9).all()
     assert (t.features["arr"][:, :, 2] < t.features["arr"][:, :, 0]).all()
@@ -124,6 +126,36 @@ def test_partial_of_another_sweep_is_refused(tmp_path: Path) -> None:
         build_table(Sweep([4.76e-3], [3e-3], [0.3], scene=FAST), out, workers=1)
 
 
+def test_partial_read_another_way_is_refused(tmp_path: Path) -> None:
+    """A build started under another reading of the extractor is not resumed: one table holds
+    one reading."""
+    out = tmp_path / "t.h5"
+    build_table(tiny_sweep(), out, workers=1, max_plates=1)
+    with h5py.File(partial_path(out), "r+") as fh:
+        fh.attrs["reading_version"] = READING_VERSION - 1
+    with pytest.raises(TableError, match=f"reading {READING_VERSION - 1}, this solitonde reads "
+                                         f"with {READING_VERSION}") as info:
+        build_table(tiny_sweep(), out, workers=1)
+    assert info.value.field == "partial" and partial_path(out).exists()
+
+
+def test_an_answer_from_a_table_read_another_way_says_so(reference: Path,
+                                                         tmp_path: Path) -> None:
+    """A table that records no reading (built before tables did) was read with reading 1:
+    its answers carry a warning to rebuild it; the table's own reading gives none."""
+    table = ModelTable.load(reference)
+    node = FeatureSummary(4.76e-3, float(table.features["tof_s"][0, 1, 2]),
+                          float(table.features["arr"][0, 1, 2]), None, None, 5)
+    assert not any("reading" in w for w in invert(table, [node]).warnings)
+    old = tmp_path / "old.h5"
+    old.write_bytes(reference.read_bytes())
+    with h5py.File(old, "r+") as fh:
+        del fh.attrs["reading_version"]
+    warned = [w for w in invert(ModelTable.load(old), [node]).warnings if "reading" in w]
+    assert len(warned) == 1 and "read with the extractor's reading 1" in warned[0]
+    assert "rebuild the table" in warned[0]
+
+
 def test_one_greens_function_serves_every_sphere_size() -> None:
     """Near the support all sizes use the finite plate; on the 3-D plate (one mesh for every
     size) the task computes one response."""
@@ -148,10 +180,11 @@ def test_the_mindlin_plate_computes_one_response_per_mesh() -> None:
 
 
 def test_point_features_are_the_signal_packages(reference: Path) -> None:
-    """A table point holds what extract() reads from the simulated trace with its pre-trigger."""
+    """A table point holds what extract() reads from the simulated trace with its pre-trigger
+    and its chain's options (the travel gate: a measured shot of that size gets the same)."""
     t = ModelTable.load(reference)
     scene = tiny_sweep().scene_at(1, 1, 2)
-    f = extract(as_measured(simulate(scene)))
+    f = extract(as_measured(simulate(scene)), **detect_options(scene))
     assert t.features["tof_s"][1, 1, 2] == f.tof_s
     assert t.features["arr"][1, 1, 2] == f.arr
     # and the extractor agrees with the model's own peak times within a sample
