@@ -10,6 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
+from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,
@@ -26,7 +27,6 @@ from solitonde.instrument.tables.table_build import (
 )
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
-from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.signal.features import READING_VERSION, extract
 
 # A coarse spectral-element plate keeps a Green's function to a fraction of a second.
