@@ -584,8 +584,11 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
     scale), and beyond the cut the whole record's trend is kept, shifted to meet it (a constant
     moves no later pulse's rise). The reflection is the first pulse inside the travel gate (as
     :func:`_gate_reflection` picks it, on ``v``); without a gate, a pulse in it, or a record
-    that runs on past the cut, nothing changes. Returns the pulses on the new line (``line``
-    and ``v`` are updated in place)."""
+    that runs on past the cut, nothing changes. The pulses stay the whole record's: where the
+    new line would add or drop one (a step of the level between the pulses, bent into a hump),
+    they are kept as they were found, so that such a shot is still measured, and refused, as
+    before (``unsteady_baseline``). Returns the pulses (their peaks on the new line); ``line``
+    and ``v`` are updated in place."""
     n = y.size
     for _ in range(2):
         m = peaks.size
@@ -633,12 +636,13 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
             v[i] = s[i] - line[i]
         before = peaks
         peaks = find_peaks_hysteresis(v, thr, thr)
-        if peaks.size == before.size:
-            same = True
-            for j in range(peaks.size):
-                same = same and abs(peaks[j] - before[j]) <= h
-            if same:
-                break  # the same pulses: the quiet samples, hence the line, would not change
+        if peaks.size != before.size:
+            return before  # the pulses are the whole record's: a refit adds or drops none
+        same = True
+        for j in range(peaks.size):
+            same = same and abs(peaks[j] - before[j]) <= h
+        if same:
+            break  # the same pulses: the quiet samples, hence the line, would not change
     return peaks
 
 
