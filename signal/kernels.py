@@ -585,10 +585,11 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
     moves no later pulse's rise). The reflection is the first pulse inside the travel gate (as
     :func:`_gate_reflection` picks it, on ``v``); without a gate, a pulse in it, or a record
     that runs on past the cut, nothing changes. The pulses stay the whole record's: where the
-    new line would add or drop one (a step of the level between the pulses, bent into a hump),
-    they are kept as they were found, so that such a shot is still measured, and refused, as
-    before (``unsteady_baseline``). Returns the pulses (their peaks on the new line); ``line``
-    and ``v`` are updated in place."""
+    new line would add or drop one (a step of the level between the pulses, bent into a hump
+    that a pulse's test passes), the pulses found on the whole record's are kept and measured on
+    the new line, so that such a shot still fails the gap's drift fit (``unsteady_baseline``)
+    instead of hiding the step as a pulse. Returns the pulses (their peaks on the new line
+    otherwise); ``line`` and ``v`` are updated in place."""
     n = y.size
     for _ in range(2):
         m = peaks.size
