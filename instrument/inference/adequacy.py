@@ -78,9 +78,10 @@ def reading_mismatch(table_version: int) -> str | None:
         return None
     return (f"the table's points were read with the extractor's reading {table_version}, shots "
             f"are read with reading {READING_VERSION} (the trend under the reflection now ends "
-            "2.5 FWHM after it, so a record reads the same however long it runs on): ARR can "
-            "differ by up to 0.6 % (D 19.05 mm) between the two; rebuild the table "
-            "(`solitonde table build`) before acting on this answer")
+            "2.5 FWHM after it, so a record reads the same however long it runs on): on the "
+            "bundled table's points the two differ in ARR by up to 0.3 % where the reflection "
+            "is clear (ARR above 0.3) and by percents where it is weak beyond D/t 5; rebuild "
+            "the table (`solitonde table build`) before acting on this answer")
 
 
 def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
