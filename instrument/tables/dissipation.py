@@ -121,6 +121,11 @@ def layer_from_table(table: ModelTable, damped_table: ModelTable) -> Dissipation
     if _undamped(mine.get("scene") or {}) != _undamped(theirs.get("scene") or {}):
         raise TableError("source.scene", "the damped table's scene differs from the table's in "
                          "more than effects.dissipation and effects.damping")
+    if damped_table.reading_version != table.reading_version:
+        raise TableError("source.reading_version", f"the damped table's points were read with "
+                         f"the extractor's reading {damped_table.reading_version}, the table's "
+                         f"with {table.reading_version}: rebuild the table with its layer "
+                         "(`table build --dissipation-layer TAU`)")
     return DissipationLayer((float(effects.get("damping", 0.0)),),
                             {k: np.array(damped_table.features[k])[None] for k in LAYER_FEATURES},
                             np.array(damped_table.status)[None])

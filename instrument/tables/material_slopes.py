@@ -30,11 +30,13 @@ import numpy as np
 
 from solitonde.instrument.tables.table import (
     ModelTable,
+    TableError,
     add_to_file,
     read_slopes,
     require_complete,
 )
 from solitonde.instrument.tables.table_build import Sweep, simulate_slopes, write_slopes
+from solitonde.signal.features import READING_VERSION
 
 
 def add_to_table(path: str | Path) -> dict[str, np.ndarray]:
@@ -42,6 +44,11 @@ def add_to_table(path: str | Path) -> dict[str, np.ndarray]:
     onto the file only once written, so an interrupted run leaves the table as it was."""
     require_complete(path)
     table = ModelTable.load(path)
+    if table.reading_version != READING_VERSION:
+        raise TableError("reading_version", f"the table's points were read with the extractor's "
+                         f"reading {table.reading_version}, slopes now would be read with "
+                         f"{READING_VERSION}: rebuild the table (`table build`, which simulates "
+                         "its slopes)")
     slopes = simulate_slopes(Sweep.from_dict(table.sweep))
     add_to_file(path, ".slopes", lambda fh: write_slopes(fh, slopes),
                 lambda fh: read_slopes(fh, table.shape))

@@ -243,6 +243,11 @@ def test_cli_adds_the_layer_from_a_damped_build_and_refuses_another_sweep(table,
     with pytest.raises(TableError) as err:
         layer_from_table(table, ModelTable.load(bare))
     assert err.value.field == "source"  # an undamped table is no layer
+    with h5py.File(source, "r+") as fh:  # a slice read another way than the table's points
+        fh.attrs["reading_version"] = table.reading_version - 1
+    refused = runner.invoke(build_app(), ["table", "dissipation", str(bare), "--from", str(source)])
+    assert refused.exit_code == 2 and "source.reading_version" in refused.output
+    assert bare.read_bytes() == before
     bad = runner.invoke(build_app(), ["table", "dissipation", str(bare), "--damping", "-1"])
     assert bad.exit_code == 2 and "--damping" in bad.output
 

@@ -21,7 +21,7 @@ from independent_chain import features_of
 from solitonde.instrument.inference.inversion import fine_grid
 from solitonde.instrument.inference.material_spread import sensitivity
 from solitonde.instrument.tables.material_slopes import add_to_table
-from solitonde.instrument.tables.table import MATERIAL_SLOPES, ModelTable
+from solitonde.instrument.tables.table import MATERIAL_SLOPES, ModelTable, TableError
 
 ROOT = Path(__file__).resolve().parents[2]
 STEEL_TABLE = ROOT / "data_samples" / "steel_table.h5"
@@ -87,3 +87,10 @@ def test_slopes_are_added_to_an_older_table_in_place(tmp_path: Path) -> None:
     assert np.array_equal(after.features["arr"], before.features["arr"], equal_nan=True)
     assert np.allclose(after.material_slopes["arr"],
                        ModelTable.load(STEEL_TABLE).material_slopes["arr"], equal_nan=True)
+    # a table read another way than shots are now gets no slopes read this way
+    with h5py.File(old, "r+") as fh:
+        del fh[MATERIAL_SLOPES]
+        fh.attrs["reading_version"] = after.reading_version - 1
+    with pytest.raises(TableError, match="rebuild the table") as err:
+        add_to_table(old)
+    assert err.value.field == "reading_version"
