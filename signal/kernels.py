@@ -521,37 +521,61 @@ def _pretrigger_after_peaks(v: np.ndarray, peaks: np.ndarray, n_pre: int, h: int
 
 
 @njit(cache=True)
+def _quiet_fit(y: np.ndarray, v: np.ndarray, peaks: np.ndarray, widths: np.ndarray,
+               n_pre: int, h: int, end: int) -> tuple[bool, float, float, float]:
+    """The slow trend of ``y[:end]``: (whether fitted, c0, c1, c2) of the polynomial in
+    u = i / end through its quiet samples, those further than 2 FWHM (and the smoother's reach)
+    from every pulse. A quadratic where quiet samples lie both in the middle and the last third
+    of ``y[:end]``, else a line (a quadratic would bend freely where nothing holds it); no fit
+    where fewer than 2 MIN_PRETRIGGER quiet samples, or fewer than MIN_PRETRIGGER after the
+    pre-trigger, are left."""
+    # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
+    # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
+    big = 0  # the largest pulse (the first of equals)
+    for j in range(1, peaks.size):
+        if v[peaks[j]] > v[peaks[big]]:
+            big = j
+    cap = 3.0 * widths[big]
+    reach = np.empty(peaks.size, dtype=np.int64)
+    for j in range(peaks.size):
+        reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
+    quiet = quiet_runs(peaks, reach, end)
+    count_pre = run_count(quiet, 0, n_pre)
+    count_post = run_count(quiet, n_pre, end)
+    if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
+        return False, 0.0, 0.0, 0.0
+    late = run_count(quiet, 2 * end // 3, end) > 0
+    middle = run_count(quiet, end // 3, 2 * end // 3) > 0
+    coef, _ = quadratic_fit(y[:end], quiet, 2 if late and middle else 1)
+    return True, coef[0], coef[1], coef[2]
+
+
+@njit(cache=True)
+def _same_pulses(peaks: np.ndarray, before: np.ndarray, h: int) -> bool:
+    """Whether ``peaks`` are ``before``'s pulses, each within ``h`` samples."""
+    if peaks.size != before.size:
+        return False
+    for j in range(peaks.size):
+        if abs(peaks[j] - before[j]) > h:
+            return False
+    return True
+
+
+@njit(cache=True)
 def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks: np.ndarray,
            n_pre: int, h: int, sigma_s: float, thr_sigma: float, min_ratio: float,
            thr: float) -> tuple[np.ndarray, float]:
     """Fit the slow trend (drift and the chain's slow level changes) into ``line`` (and ``v``):
-    a quadratic through the quiet samples, those further than 2 FWHM from every pulse; twice,
-    since the pulses depend on the line. Returns the pulses and threshold on the new line."""
+    :func:`_quiet_fit` on the whole record, twice, since the pulses depend on the line. Returns
+    the pulses and threshold on the new line."""
     n = y.size
     for it in range(2):
         if peaks.size == 0:
             break
-        bounds = _bounds(v, peaks)
-        widths = _widths(v, peaks, bounds)
-        # A drifting record can hold a wide hump that only looks like a pulse; solitary pulses in
-        # one record differ in width by tens of percent, so no pulse hides more than 3 largest.
-        big = 0  # the largest pulse (the first of equals)
-        for j in range(1, peaks.size):
-            if v[peaks[j]] > v[peaks[big]]:
-                big = j
-        cap = 3.0 * widths[big]
-        reach = np.empty(peaks.size, dtype=np.int64)
-        for j in range(peaks.size):
-            reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
-        quiet = quiet_runs(peaks, reach, n)
-        count_pre = run_count(quiet, 0, n_pre)
-        count_post = run_count(quiet, n_pre, n)
-        late = run_count(quiet, 2 * n // 3, n) > 0
-        middle = run_count(quiet, n // 3, 2 * n // 3) > 0
-        if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
+        widths = _widths(v, peaks, _bounds(v, peaks))
+        fitted, c0, c1, c2 = _quiet_fit(y, v, peaks, widths, n_pre, h, n)
+        if not fitted:
             break
-        coef, _ = quadratic_fit(y, quiet, 2 if late and middle else 1)
-        c0, c1, c2 = coef[0], coef[1], coef[2]
         inv = 1.0 / n
         for i in range(n):
             u = i * inv
@@ -559,12 +583,8 @@ def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks:
             v[i] = s[i] - line[i]
         before = peaks
         peaks, thr = _peaks(v, sigma_s, thr_sigma, min_ratio)
-        if it == 0 and peaks.size == before.size:
-            same = True
-            for j in range(peaks.size):
-                same = same and abs(peaks[j] - before[j]) <= h
-            if same:
-                break  # the same pulses: the quiet samples, hence the line, would not change
+        if it == 0 and _same_pulses(peaks, before, h):
+            break  # the same pulses: the quiet samples, hence the line, would not change
     return peaks, thr
 
 
@@ -604,28 +624,13 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
                 break
         if pick < 0:
             return peaks
-        bounds = _bounds(v, peaks)
-        widths = _widths(v, peaks, bounds)
+        widths = _widths(v, peaks, _bounds(v, peaks))
         cut = int(peaks[pick] + TRUNC_SPAN * widths[pick]) + 1
         if cut >= n:
             return peaks
-        big = 0
-        for j in range(1, m):
-            if v[peaks[j]] > v[peaks[big]]:
-                big = j
-        cap = 3.0 * widths[big]
-        reach = np.empty(m, dtype=np.int64)
-        for j in range(m):
-            reach[j] = int(2.0 * min(widths[j], cap)) + 2 * h + 2
-        quiet = quiet_runs(peaks, reach, cut)
-        count_pre = run_count(quiet, 0, n_pre)
-        count_post = run_count(quiet, n_pre, cut)
-        if count_pre + count_post < 2 * MIN_PRETRIGGER or count_post < MIN_PRETRIGGER:
+        fitted, c0, c1, c2 = _quiet_fit(y, v, peaks, widths, n_pre, h, cut)
+        if not fitted:
             return peaks
-        late = run_count(quiet, 2 * cut // 3, cut) > 0
-        middle = run_count(quiet, cut // 3, 2 * cut // 3) > 0
-        coef, _ = quadratic_fit(y[:cut], quiet, 2 if late and middle else 1)
-        c0, c1, c2 = coef[0], coef[1], coef[2]
         shift = c0 + c1 + c2 - line[cut]  # the cut's trend at u = 1 against the record's there
         inv = 1.0 / cut
         for i in range(n):
@@ -639,10 +644,7 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
         peaks = find_peaks_hysteresis(v, thr, thr)
         if peaks.size != before.size:
             return before  # the pulses are the whole record's: a refit adds or drops none
-        same = True
-        for j in range(peaks.size):
-            same = same and abs(peaks[j] - before[j]) <= h
-        if same:
+        if _same_pulses(peaks, before, h):
             break  # the same pulses: the quiet samples, hence the line, would not change
     return peaks
 
