@@ -555,7 +555,7 @@ def _same_pulses(peaks: np.ndarray, before: np.ndarray, h: int) -> bool:
     """Whether ``peaks`` are ``before``'s pulses, each within ``h`` samples."""
     if peaks.size != before.size:
         return False
-    for j in range(peaks.size):
+    for j in range(peaks.size):  # noqa: SIM110 (numba compiles no generator inside all())
         if abs(peaks[j] - before[j]) > h:
             return False
     return True
