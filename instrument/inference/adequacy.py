@@ -15,10 +15,11 @@ Every estimate carries ``fit = {chi2, dof, p_value}`` and ``warnings``. A record
 * no table point explains it at all (``out_of_range``, a TOF/ARR pair the family cannot reach);
 * or a sphere size had to be left out to answer at all (with every size no table point explains
   the data) where the answer puts that size's reflection clear (D/t below 5 over the whole 95 %
-  interval): the known reason to leave a size out is a large sphere on a thin plate, whose
-  "reflection" beyond D/t = 5 is a train at the detection floor; anything else is the family
-  disagreeing with the sizes together (a steel plate read against the aluminium table shows it
-  most often this way: each size alone maps onto some aluminium thickness, not all at once);
+  interval, an "at most" one running down to the table's thinnest plate): the known reason to
+  leave a size out is a large sphere on a thin plate, whose "reflection" beyond D/t = 5 is a
+  train at the detection floor; anything else is the family disagreeing with the sizes
+  together (a steel plate read against the aluminium table shows it most often this way: each
+  size alone maps onto some aluminium thickness, not all at once);
 * or its reflection is unlike the family's where the answer lies: the answer leans on cells
   whose features come in part from floor nodes (D/t beyond 5, where the family's reflection is
   a train at the detection floor, ARR below 0.3, so the table states it loosely: 10 % in TOF,
@@ -84,12 +85,13 @@ def reading_mismatch(table_version: int) -> str | None:
             "the table (`solitonde table build`) before acting on this answer")
 
 
-def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
+def judge(est: Any, floor_arr_max: float, floor_d_over_t: float, thinnest_m: float) -> None:
     """Fill ``est.fit`` and ``est.warnings`` of an inversion's ``Estimate``; mark the answer
     ``inconsistent`` when the family does not explain the data (see the module doc);
     ``floor_arr_max`` and ``floor_d_over_t`` are the inversion's floor level of ARR and the D/t
     beyond which the family's reflection is at the floor (``FLOOR_ARR_MAX``,
-    ``REFLECTION_D_OVER_T``)."""
+    ``REFLECTION_D_OVER_T``); ``thinnest_m`` is the table's thinnest plate, where an "at most"
+    answer's interval ends."""
     warnings: list[str] = []
     why: str | None = None
     if est.n_terms:
@@ -105,7 +107,7 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float) -> None:
     if why is None and not est.out_of_range:
         why = _floor_mismatch(est, floor_arr_max)
     if why is None and not est.out_of_range:
-        why = _unexplained_exclusion(est, floor_d_over_t)
+        why = _unexplained_exclusion(est, floor_d_over_t, thinnest_m)
     if est.out_of_range:
         warnings.append(f"inconsistent: {est.reason}; likely causes: " + "; ".join(CAUSES))
     elif why is not None:
@@ -161,15 +163,18 @@ def _floor_mismatch(est: Any, floor_arr_max: float) -> str | None:
     return None
 
 
-def _unexplained_exclusion(est: Any, floor_d_over_t: float) -> str | None:
+def _unexplained_exclusion(est: Any, floor_d_over_t: float, thinnest_m: float) -> str | None:
     """Why a sphere size the inversion left out (all sizes together were out of range, the
     others agree) is not the known case, or None. The known case is a large sphere on a thin
     plate, beyond D/t = ``floor_d_over_t``, whose "reflection" is a train at the detection floor;
     a size left out where the answer puts its reflection clear (D / t below that over the whole
-    95 % interval) disagrees with the family itself."""
+    95 % interval) disagrees with the family itself. An interval with no lower end ("at most")
+    runs down to the table's thinnest plate ``thinnest_m``: a 2.3 mm steel plate read against
+    the aluminium table answered "at most 1.86 mm" with the 4.76 mm sphere left out, whose D/t
+    stays below 3.2 over the whole table."""
     low = (est.thickness_m.ci95 or (None, None))[0]
     if low is None:
-        return None
+        low = thinnest_m
     for d in est.extra.get("excluded_diameters_m", []):
         if d / low <= floor_d_over_t:
             return (f"with the sphere size D = {d * 1e3:.3g} mm no table point explains the "

@@ -717,7 +717,8 @@ def invert(
             best.inputs = items
             est = best
     est.material_spread = spread
-    adequacy.judge(est, FLOOR_ARR_MAX, REFLECTION_D_OVER_T)
+    adequacy.judge(est, FLOOR_ARR_MAX, REFLECTION_D_OVER_T,
+                   float(np.min(table.axes["thickness_m"])))
     stale = adequacy.reading_mismatch(table.reading_version)
     if stale is not None:
         est.warnings.append(stale)

@@ -179,6 +179,33 @@ def test_a_size_left_out_where_its_reflection_is_clear_flags_the_answer() -> Non
     assert low <= table.axes["thickness_m"][mid] <= high
 
 
+
+def test_an_at_most_answer_with_a_clear_size_left_out_is_flagged() -> None:
+    """A 2.28 mm A36 steel plate 193 mm from the support, as `validate --wrong-family
+    steel_structural --seed 0` simulated and read it (5 shots at 40 dB, three sizes) and
+    calibrated it on two aluminium references, against the aluminium table: with the 4.76 mm
+    sphere left out the other two answered "at most 1.86 mm", p = 0.0016, with no flag. An
+    "at most" interval runs down to the table's thinnest plate, 1.5 mm, where that sphere's D/t
+    is 3.2 and its reflection clear: the family does not explain the sizes together."""
+    table = ModelTable.load(ALUMINIUM)
+    measured = [FeatureSummary(19.05e-3, 2039.12e-6, 0.034213, 0.437e-6, 0.000756, 4),
+                FeatureSummary(9.53e-3, 531.991e-6, 0.285918, 0.0869e-6, 0.001952, 5),
+                FeatureSummary(4.76e-3, 251.116e-6, 0.629333, 0.0114e-6, 0.001727, 4)]
+    calibration = {"per_diameter": [
+        {"diameter_m": 4.76e-3, "arr_factor": 0.99979, "tof_offset_s": -0.0801e-6,
+         "tof_offset_std_s": 0.0975e-6, "damping_s": 1.015e-7, "damping_std_s": 1.6e-9},
+        {"diameter_m": 9.53e-3, "arr_factor": 0.99944, "arr_factor_std": 0.00742,
+         "arr_factor_transfer_std": 0.00742, "tof_offset_s": -0.0568e-6,
+         "tof_offset_std_s": 0.138e-6, "damping_s": 1.0175e-7, "damping_std_s": 4.2e-9},
+        {"diameter_m": 19.05e-3, "arr_factor": 1.0401, "arr_factor_std": 0.228,
+         "arr_factor_transfer_std": 0.228, "tof_offset_s": 19.28e-6, "tof_offset_std_s": 56.9e-6,
+         "tof_offset_transfer_std_s": 56.9e-6, "damping_s": 3e-7, "damping_std_s": 3e-7}]}
+    est = invert(table, measured, calibration=calibration)
+    assert est.extra["excluded_diameters_m"] == [4.76e-3]
+    assert est.thickness_m.ci95[0] is None  # the other sizes' answer is an "at most" one
+    assert est.thickness_m.status == "inconsistent"
+    assert "t >= 1.5 mm" in est.warnings[0] and "clear one" in est.warnings[0]
+
 def test_invert_exits_1_on_an_inconsistent_answer(recording: Path) -> None:
     """`solitonde invert` with the steel recording's features against the aluminium table:
     the answer is printed in full, but the exit status is 1 and stderr says why (issue 28)."""
