@@ -600,8 +600,8 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
     the reflection the chain's own level (gravity) bends it: the same clean trace read ARR up to
     1 % apart (D 19.05 mm) as its record ended 2.6, 4 or 10 FWHM after the reflection. A record
     that holds the reflection whole holds ``TRUNC_SPAN`` FWHM after its peak, so the trend is
-    refitted there as :func:`_trend` fits a record cut there (its quiet samples, degree rule and
-    scale), and beyond the cut the whole record's trend is kept, shifted to meet it (a constant
+    refitted there, :func:`_quiet_fit` on the record cut there as :func:`_trend` fits a whole
+    record, and beyond the cut the whole record's trend is kept, shifted to meet it (a constant
     moves no later pulse's rise). The reflection is the first pulse inside the travel gate (as
     :func:`_gate_reflection` picks it, on ``v``); without a gate, a pulse in it, or a record
     that runs on past the cut, nothing changes. The pulses stay the whole record's: where the
