@@ -562,6 +562,19 @@ def _same_pulses(peaks: np.ndarray, before: np.ndarray, h: int) -> bool:
 
 
 @njit(cache=True)
+def _in_gate(times: np.ndarray, incident_amp: float, gate_1n: float) -> tuple[int, float]:
+    """(index of the first pulse after ``times[0]``, the incident's, inside the travel gate, or
+    -1; the trip ``gate_1n F_inc^(-1/6)`` in samples). The gate runs from :data:`GATE_LO` to
+    :data:`GATE_HI` trips after the incident."""
+    trip = gate_1n * max(incident_amp, 1e-300) ** (-1.0 / 6.0)
+    for j in range(1, times.size):
+        delay = times[j] - times[0]
+        if GATE_LO * trip <= delay <= GATE_HI * trip:
+            return j, trip
+    return -1, trip
+
+
+@njit(cache=True)
 def _trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndarray, peaks: np.ndarray,
            n_pre: int, h: int, sigma_s: float, thr_sigma: float, min_ratio: float,
            thr: float) -> tuple[np.ndarray, float]:
@@ -615,13 +628,7 @@ def _reflection_trend(y: np.ndarray, s: np.ndarray, v: np.ndarray, line: np.ndar
         m = peaks.size
         if gate_1n <= 0 or m < 2:
             return peaks
-        trip = gate_1n * max(v[peaks[0]], 1e-300) ** (-1.0 / 6.0)
-        pick = -1
-        for j in range(1, m):
-            delay = peaks[j] - peaks[0]
-            if GATE_LO * trip <= delay <= GATE_HI * trip:
-                pick = j
-                break
+        pick, _ = _in_gate(peaks, v[peaks[0]], gate_1n)
         if pick < 0:
             return peaks
         widths = _widths(v, peaks, _bounds(v, peaks))
@@ -756,13 +763,7 @@ def _gate_reflection(out: np.ndarray, gate_1n: float, head: np.ndarray) -> np.nd
     comes second; the pulses before it (the incident's train) follow it, then the later ones, in
     time order. No pulse inside the gate sets ``head[H_NOREF]``."""
     m = out.shape[0]
-    trip = gate_1n * max(out[0, P_AMP], 1e-300) ** (-1.0 / 6.0)
-    pick = -1
-    for j in range(1, m):
-        delay = out[j, P_TIME] - out[0, P_TIME]
-        if GATE_LO * trip <= delay <= GATE_HI * trip:
-            pick = j
-            break
+    pick, trip = _in_gate(out[:, P_TIME], out[0, P_AMP], gate_1n)
     if pick < 0:
         head[H_NOREF] = 1.0
         head[H_TRAIN] = 0.0

@@ -36,6 +36,7 @@ from solitonde.instrument.tables.table_build import (
 )
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import apply_overrides, load_scene_file, scene_from_dict
+from solitonde.signal.features import READING_VERSION
 
 DEFAULT_TABLE_PATH = DEFAULT_TABLE
 
@@ -211,8 +212,6 @@ def info_command(
                                           if layer is None else
                                           "Kuwabara-Kono tau = " + ", ".join(
                                               f"{t:g}" for t in layer["damping_s"]) + " s"))
-    from solitonde.signal.features import READING_VERSION
-
     reading = data["reading_version"]
     typer.echo(f"  reading: {reading}" + ("" if reading == READING_VERSION else
                                            f" (shots are read with {READING_VERSION}: rebuild "

@@ -42,6 +42,8 @@ from typing import Any
 
 from scipy.stats import chi2 as chi2_dist
 
+from solitonde.signal.features import READING_VERSION
+
 # The inversion calls this module on every estimate, so this module does not import it back:
 # an estimate (``Estimate``) and its parameters are used through their attributes, and the
 # floor level comes with the call.
@@ -73,8 +75,6 @@ def _dof(est: Any) -> float:
 def reading_mismatch(table_version: int) -> str | None:
     """The warning for a table whose points were read another way than shots are now
     (:data:`solitonde.signal.features.READING_VERSION`), or None."""
-    from solitonde.signal.features import READING_VERSION
-
     if table_version == READING_VERSION:
         return None
     return (f"the table's points were read with the extractor's reading {table_version}, shots "

@@ -243,7 +243,7 @@ class ModelTable:
                 path=path,
                 material_slopes=read_slopes(fh, grid),
                 dissipation=read_layer(fh, grid),
-                reading_version=_reading_version(fh),
+                reading_version=reading_version_of(fh),
             )
             table._cache["sha256"] = digest
             return table
@@ -300,7 +300,7 @@ class ModelTable:
 # Reading and checking a table file ---------------------------------------------------------------
 
 
-def _reading_version(fh: h5py.File) -> int:
+def reading_version_of(fh: h5py.File) -> int:
     """The table's ``reading_version`` attribute (1 where it has none)."""
     raw = fh.attrs.get("reading_version", 1)
     try:

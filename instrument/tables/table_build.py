@@ -50,6 +50,7 @@ from solitonde.instrument.tables.table import (
     STATUS_OK,
     STATUS_PENDING,
     TableError,
+    reading_version_of,
 )
 from solitonde.model import greens
 from solitonde.model.errors import SceneError, SimulationError
@@ -526,7 +527,7 @@ def build_table(
             with h5py.File(part, "r") as fh:
                 ours = fh.attrs.get("format") == FORMAT and "done" in fh
                 stored = json.loads(fh.attrs.get("sweep", "null")) if ours else None
-                reading = int(fh.attrs.get("reading_version", 1)) if ours else READING_VERSION
+                reading = reading_version_of(fh) if ours else READING_VERSION
         except (OSError, ValueError) as exc:  # not HDF5 (empty, garbage, truncated); bad JSON
             raise TableError("partial", not_ours.format(exc)) from None
         if not ours:
