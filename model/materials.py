@@ -234,10 +234,28 @@ def properties_from(value: object) -> dict[str, object]:
     return out
 
 
+DEFAULT_PROPERTY_SPREAD = {"youngs_modulus_rel_sd": 0.03, "poisson_ratio_sd": 0.02,
+                           "density_rel_sd": 0.01}
+"""The spread of a material given by its properties without one (1 sd): a wide grade's. The
+library's widest metal plate grade, structural steel, has E +- 2.9 % and nu +- 0.021 about its
+value; densities are known to a percent. A user states the spread (0 where the properties are
+measured) to replace it; every answer carrying it says so."""
+
+
+def is_default_spread(spread: object) -> bool:
+    """Whether ``spread`` is :data:`DEFAULT_PROPERTY_SPREAD` (by value: the spread a material
+    given by its properties alone gets)."""
+    from collections.abc import Mapping
+
+    return isinstance(spread, Mapping) and all(
+        spread.get(k) == v for k, v in DEFAULT_PROPERTY_SPREAD.items())
+
+
 def material_spread(props: object) -> dict[str, float]:
     """The spread of a material (:data:`SPREAD_KEYS`): the one a property mapping states, else
     the library's for a library name whose properties it has (a table's family records the
-    properties it was built with), else none (0: the properties are taken as exact)."""
+    properties it was built with), else, for properties alone, the stated default
+    (:data:`DEFAULT_PROPERTY_SPREAD`); none (0) where there is no material at all."""
     from collections.abc import Mapping
     from math import isclose
 
@@ -254,7 +272,9 @@ def material_spread(props: object) -> dict[str, float]:
             isclose(float(props.get(k, float("nan"))), getattr(known, k), rel_tol=1e-6)
             for k in ("youngs_modulus", "poisson_ratio", "density")):
         return {k: float(getattr(known, k)) for k in SPREAD_KEYS}
-    return dict.fromkeys(SPREAD_KEYS, 0.0)
+    if props.get("youngs_modulus") is None:  # not a material's properties
+        return dict.fromkeys(SPREAD_KEYS, 0.0)
+    return dict(DEFAULT_PROPERTY_SPREAD)
 
 
 def material_of(spec: object, field: str = "material") -> Material:

@@ -19,6 +19,7 @@ from typing import Any
 import typer
 
 from solitonde.instrument.cli.cmd_table import DEFAULT_TABLE_PATH
+from solitonde.instrument.cli.common import sphere_sizes
 from solitonde.instrument.inference.calibration import Calibration, CalibrationError
 from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, InversionError
 from solitonde.instrument.inference.pipeline import estimate
@@ -87,40 +88,61 @@ def _fmt_mm(v: float | None) -> str:
     return "-" if v is None else f"{v * 1e3:.3f}"
 
 
+def _parameter_text(p: Mapping[str, Any], full: bool) -> str:
+    """One parameter's answer in words (``full``: with the MAP and the 68 % interval)."""
+    status, ci95 = p["status"], p.get("ci95") or [None, None]
+    if status == "constrained":
+        if full:
+            return (f"{_fmt_mm(p['median'])} mm (MAP {_fmt_mm(p['map'])}; 68 % "
+                    f"{_fmt_mm(p['ci68'][0])}..{_fmt_mm(p['ci68'][1])}; 95 % "
+                    f"{_fmt_mm(ci95[0])}..{_fmt_mm(ci95[1])} mm)")
+        return f"{_fmt_mm(p['median'])} mm (95 % {_fmt_mm(ci95[0])}..{_fmt_mm(ci95[1])} mm)"
+    if status == "lower_bound_only":
+        return f"at least {_fmt_mm(ci95[0])} mm (95 %)" + (
+            "; the data do not bound it from above" if full else "")
+    if status == "upper_bound_only":
+        return f"at most {_fmt_mm(ci95[1])} mm (95 %)" + (
+            "; the data do not bound it from below" if full else "")
+    if status == "ambiguous":
+        return ("AMBIGUOUS: the data fit the readings below, "
+                f"{_fmt_mm(ci95[0])}..{_fmt_mm(ci95[1])} mm over them all (95 %)")
+    if status == "inconsistent":
+        return "INCONSISTENT with the table's family (no estimate)"
+    return "unconstrained by these data" if full else status
+
+
+def estimate_lines(est: Mapping[str, Any], full: bool = True, indent: str = "") -> list[str]:
+    """An estimate (``Estimate.to_dict()``) in words: each parameter, an ambiguous answer's
+    readings, the fit, the warnings last."""
+    lines = []
+    for key, name in (("thickness_m", "thickness"), ("distance_m", "distance to support")):
+        lines.append(f"{indent}{name}: {_parameter_text(est[key], full)}")
+    for k, r in enumerate(est.get("readings") or [], 1):
+        lines.append(f"{indent}  reading {k} (weight {r['weight']:.2g}): thickness "
+                     f"{_parameter_text(r['thickness_m'], False)}, distance to support "
+                     f"{_parameter_text(r['distance_m'], False)}")
+    fit = est.get("fit") or {}
+    if fit.get("p_value") is not None:
+        lines.append(f"{indent}fit: chi^2 {fit['chi2']:.3g} for {fit['dof']:.2g} degrees of "
+                     f"freedom, p = {fit['p_value']:.2g}")
+    lines += [f"{indent}warning: {w}" for w in est.get("warnings", [])]
+    return lines
+
+
 def describe(est: Estimate) -> str:
     """Human-readable lines for an estimate, its warnings last."""
     if est.out_of_range:
         return "\n".join([f"out of range: {est.reason}", *(f"warning: {w}" for w in
                                                           est.warnings)])
-    lines = []
-    for name, p in (("thickness", est.thickness_m), ("distance to support", est.distance_m)):
-        if p.status == "constrained":
-            lines.append(f"{name}: {_fmt_mm(p.median)} mm (MAP {_fmt_mm(p.map)}; 68 % "
-                         f"{_fmt_mm(p.ci68[0])}..{_fmt_mm(p.ci68[1])}; 95 % "
-                         f"{_fmt_mm(p.ci95[0])}..{_fmt_mm(p.ci95[1])} mm)")
-        elif p.status == "lower_bound_only":
-            lines.append(f"{name}: at least {_fmt_mm(p.ci95[0])} mm (95 %); the data do not "
-                         "bound it from above")
-        elif p.status == "upper_bound_only":
-            lines.append(f"{name}: at most {_fmt_mm(p.ci95[1])} mm (95 %); the data do not "
-                         "bound it from below")
-        elif p.status == "inconsistent":
-            lines.append(f"{name}: INCONSISTENT with the table's family (no estimate)")
-        else:
-            lines.append(f"{name}: unconstrained by these data")
-    fit = est.fit
-    if fit.get("p_value") is not None:
-        lines.append(f"fit: chi^2 {fit['chi2']:.3g} for {fit['dof']:.2g} degrees of freedom, "
-                     f"p = {fit['p_value']:.2g}")
-    lines += [f"warning: {w}" for w in est.warnings]
-    return "\n".join(lines)
+    return "\n".join(estimate_lines(est.to_dict()))
 
 
 def invert_command(
     tof: list[float] = typer.Option(..., "--tof", help="mean time of flight, s (repeat per "
                                     "sphere size)"),
     arr: list[float] = typer.Option(..., "--arr", help="mean amplitude ratio (repeat)"),
-    diameter: list[float] = typer.Option(..., "--diameter", help="sphere diameter, m (repeat)"),
+    diameter: list[float] = typer.Option(..., "--diameter", help="sphere diameter, m (repeat)",
+                                         callback=sphere_sizes),
     tof_std: list[float] = typer.Option([], "--tof-std", help="shot scatter of TOF, s"),
     arr_std: list[float] = typer.Option([], "--arr-std", help="shot scatter of ARR"),
     shots: list[int] = typer.Option([], "--shots", help="number of shots averaged"),
@@ -190,23 +212,5 @@ def describe_row(row: Mapping[str, Any]) -> str:
     if est is None:
         why = row.get("error") or "; ".join(s["reason"] for s in row.get("skipped", [])) or "-"
         return f"{head} none ({why})"
-    lines = [head]
-    for key, name in (("thickness_m", "thickness"), ("distance_m", "distance to support")):
-        p = est[key]
-        if p["status"] == "constrained":
-            lines.append(f"  {name}: {_fmt_mm(p['median'])} mm (95 % {_fmt_mm(p['ci95'][0])}.."
-                         f"{_fmt_mm(p['ci95'][1])} mm)")
-        elif p["status"] == "lower_bound_only":
-            lines.append(f"  {name}: at least {_fmt_mm(p['ci95'][0])} mm (95 %)")
-        elif p["status"] == "upper_bound_only":
-            lines.append(f"  {name}: at most {_fmt_mm(p['ci95'][1])} mm (95 %)")
-        elif p["status"] == "inconsistent":
-            lines.append(f"  {name}: INCONSISTENT with the table's family (no estimate)")
-        else:
-            lines.append(f"  {name}: {p['status']}")
-    fit = est.get("fit") or {}
-    if fit.get("p_value") is not None:
-        lines.append(f"  fit: chi^2 {fit['chi2']:.3g} for {fit['dof']:.2g} degrees of freedom, "
-                     f"p = {fit['p_value']:.2g}")
-    lines += [f"  warning: {w}" for w in est.get("warnings", [])]
+    lines = [head, *estimate_lines(est, full=False, indent="  ")]
     return "\n".join(lines)

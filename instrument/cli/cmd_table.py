@@ -23,6 +23,11 @@ import numpy as np
 import typer
 
 from solitonde.instrument.cli.main import HELP_MARKUP
+from solitonde.instrument.inference.material_spread import (
+    describe_spread,
+    spread_of,
+    spread_source,
+)
 from solitonde.instrument.service.settings import DEFAULT_TABLE
 from solitonde.instrument.tables.table import ModelTable, TableError
 from solitonde.instrument.tables.table_build import (
@@ -186,6 +191,14 @@ def build_command(
                    f"({report.scenes_per_s:.2f} scenes/s, {report.runner})")
 
 
+SPREAD_SOURCES = {
+    "library": "its grade's (the library's)",
+    "stated": "stated with the plate's properties",
+    "default": "the default for a material given by its properties alone: state "
+               "youngs_modulus_rel_sd, poisson_ratio_sd, density_rel_sd with them to replace it",
+    "none": "none (the table records no plate material)"}
+
+
 def info_command(
     file: Path = typer.Argument(DEFAULT_TABLE_PATH, help="table file"),
     as_json: bool = typer.Option(False, "--json", help="print JSON"),
@@ -197,6 +210,7 @@ def info_command(
         _fail(str(exc))
         return
     data = table.summary()
+    data["material_spread"] = {**spread_of(table), "source": spread_source(table)}
     if as_json:
         typer.echo(json.dumps(data, indent=2))
         return
@@ -212,6 +226,9 @@ def info_command(
                                           if layer is None else
                                           "Kuwabara-Kono tau = " + ", ".join(
                                               f"{t:g}" for t in layer["damping_s"]) + " s"))
+    spread = data["material_spread"]
+    typer.echo(f"  plate material spread: {describe_spread(spread)}, "
+               + SPREAD_SOURCES[spread["source"]])
     reading = data["reading_version"]
     typer.echo(f"  reading: {reading}" + ("" if reading == READING_VERSION else
                                            f" (shots are read with {READING_VERSION}: rebuild "

@@ -10,7 +10,7 @@ from typing import NoReturn
 import typer
 
 from solitonde.instrument.cli.cmd_invert import table_path
-from solitonde.instrument.studies.validate import ValidationInputError, validate
+from solitonde.instrument.studies.validate import SHOTS, ValidationInputError, validate
 from solitonde.instrument.tables.table import ModelTable, TableError
 from solitonde.instrument.tables.table_build import default_workers
 
@@ -64,6 +64,11 @@ def validate_command(
     draw_material: bool = typer.Option(
         True, "--draw-material/--exact-material", help="give each plate a material drawn from "
         "the spread of the table's plate material (default), or the table's exact properties"),
+    shots: int = typer.Option(SHOTS, "--shots", min=1, help="shots per plate and sphere size "
+                              "(1: a lab reading one shot at a time)"),
+    near_support: float | None = typer.Option(
+        None, "--near-support", help="draw the distances within this many m of a support "
+        "(e.g. 0.05) instead of over the whole table"),
     out: Path | None = typer.Option(None, "--out", help="also write every scene's row as JSON"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the metrics as JSON"),
@@ -87,9 +92,11 @@ def validate_command(
                           workers=default_workers() if workers is None else workers,
                           scheduler=scheduler, progress=progress, diameters=sizes,
                           measurements=measurements, truth_plate_theory=truth_plate_theory,
-                          wrong_family=wrong_family, draw_material=draw_material)
+                          wrong_family=wrong_family, draw_material=draw_material,
+                          shots=shots, near_support_m=near_support)
     except ValidationInputError as exc:
-        _fail(f"--{exc.field.replace('_', '-')}: {exc.full_message}")
+        flag = "near-support" if exc.field == "near_support_m" else exc.field.replace("_", "-")
+        _fail(f"--{flag}: {exc.full_message}")
     m = report.metrics
     if out is not None:
         try:
@@ -118,8 +125,15 @@ def validate_command(
     if m.get("material_spread_drawn"):
         typer.echo("  each plate's material drawn from the table material's spread "
                    "(--exact-material: the table's own)")
+    typer.echo(f"  ambiguous (separate readings near a support) {num(m['ambiguous_rate'])}")
     typer.echo(f"  status right: {num(m['status_accuracy'])}; distance statuses "
                f"{m['distance_status_counts']}")
+    for b in m["by_distance"]:
+        lo, hi = b["distance_m"]
+        span = f"{lo * 1e3:g}-{hi * 1e3:g} mm" if hi is not None else f"beyond {lo * 1e3:g} mm"
+        typer.echo(f"  {span} from the support: {b['n']} plates, answered {num(b['answered'])}, "
+                   f"coverage {num(b['coverage_95'])}, missed unflagged "
+                   f"{num(b['missed_unflagged'])}, ambiguous {num(b['ambiguous_rate'])}")
 
 
 def register(app: typer.Typer) -> None:

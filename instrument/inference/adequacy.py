@@ -62,6 +62,12 @@ CAUSES = ("the plate's material is not the table's (check the plate, or give "
           "no calibration, or one made on another set-up (solitonde calibrate on a reference "
           "plate)",
           "the units or the sensor's calibration of the recording (N, V, N/V)")
+MATERIAL_EDGE_SD = 1.0
+"""The material term's posterior mean, in its spread's sd of E', at which the answer says the data
+sit at the edge of the material's range. The data barely move it on a plate of the grade (over
+validate's right-family plates, drawn from the spread: sd 0.15 on the aluminium table, 0.39 on
+the steel table, at least 1 in 1 of 278); a steel plate of E 210 GPa, nu 0.30 read against a
+table of E 200 GPa, nu 0.26 (E' 2.4 sd out) moves it by 1.0-1.16."""
 NO_CALIBRATION = ("no calibration on a reference plate: the model's ARR runs above measured ones "
                   "(the paper's Figs. 5 and 7), so thickness comes out low; run `solitonde "
                   "calibrate` on a reference plate and give its file")
@@ -117,7 +123,19 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float, thinnest_m: flo
             getattr(est, name).status = "inconsistent"
         est.reason = (est.reason + "; " if est.reason else "") + f"inconsistent: {why}"
     other = est.extra.get("other_reading")
-    if other is not None and why is None and not est.out_of_range:
+    readings = getattr(est, "readings", [])
+    widened = est.extra.get("ridge_widened")
+    if readings and why is None and not est.out_of_range:
+        warnings.append(_readings_warning(readings))
+    elif widened is not None and why is None and not est.out_of_range:
+        warnings.append(
+            f"another reading fits as well: the 95 % interval reaches over "
+            f"{_interval_mm(widened['ci95'])}, thicknesses that fit as well at some distance to a "
+            f"support, beyond the {_interval_mm(widened['marginal_ci95'])} that weighing the "
+            "distances by how much of the table's range fits each would give. Near a support "
+            "a thinner plate nearer to it can mimic a thicker one farther out; a known distance "
+            "(a scan's edge: solitonde map --joint) or another sphere size tells them apart")
+    elif other is not None and why is None and not est.out_of_range:
         lo, hi = other["thickness_m"]
         warnings.append(
             f"another reading fits as well: the data allow {lo * 1e3:.3g}-{hi * 1e3:.3g} mm over "
@@ -136,9 +154,68 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float, thinnest_m: flo
         warnings.append(f"no reflection with D = {i.diameter_m * 1e3:.3g} mm{within}: its ARR "
                         f"bound {i.arr_upper_bound:.3g} enters as an upper bound on the "
                         f"reflection{later}")
+    edge = _material_edge(est)
+    if edge is not None and not est.out_of_range:
+        warnings.append(edge)
+    spread_note = default_spread_note(est.material_spread)
+    if spread_note is not None:
+        warnings.append(spread_note)
     if est.calibration is None:
         warnings.append(NO_CALIBRATION)
     est.warnings = warnings + [w for w in est.warnings if w not in warnings]
+
+
+def _interval_mm(ci: Any) -> str:
+    """A 95 % interval in mm, an open side said in words."""
+    lo, hi = ci if ci is not None else (None, None)
+    if lo is None and hi is None:
+        return "unbounded"
+    if hi is None:
+        return f"at least {lo * 1e3:.3g} mm"
+    if lo is None:
+        return f"at most {hi * 1e3:.3g} mm"
+    return f"{lo * 1e3:.3g}-{hi * 1e3:.3g} mm"
+
+
+def _readings_warning(readings: Any) -> str:
+    """The warning of an ``ambiguous`` answer: each reading's thickness, distance and weight."""
+    parts = [f"{_interval_mm(r.thickness_m.ci95)} with the support "
+             f"{_interval_mm(r.distance_m.ci95)} away (weight {r.weight:.2g})" for r in readings]
+    return ("another reading fits as well: the data fit separate readings along the "
+            "thickness-distance ridge, " + "; ".join(parts) + " (95 %). Near a support a thinner "
+            "plate nearer to it can mimic a thicker one farther out, and the weights count how "
+            "much of the table's distance range fits each, not how well; a known distance (a "
+            "scan's edge: solitonde map --joint) or another sphere size tells them apart")
+
+
+def _material_edge(est: Any) -> str | None:
+    """The warning that the data lean to the edge of the plate material's range, or None: the
+    posterior mean of the material term (``material_shift_sd``, in the spread's standard
+    deviations of E' = E / (1 - nu^2)) at :data:`MATERIAL_EDGE_SD` or beyond."""
+    shift = est.extra.get("material_shift_sd")
+    if not shift or abs(shift[0]) < MATERIAL_EDGE_SD:
+        return None
+    side = "stiffer" if shift[0] > 0 else "more compliant"
+    return (f"the data sit at the edge of the material's range: they fit best with a plate "
+            f"{side} than the table's (E' = E / (1 - nu^2) {abs(shift[0]):.2g} sd from it, on "
+            "average over the answer), where the material's spread holds the answer only in "
+            "part. Check the plate's grade; a table built for its material (solitonde table "
+            "build --scene) or a calibration on a reference plate of it reads it exactly")
+
+
+def default_spread_note(spread: Any) -> str | None:
+    """The warning that a material given by its properties carries the default spread, or
+    None (:data:`solitonde.model.materials.DEFAULT_PROPERTY_SPREAD`)."""
+    from solitonde.model.materials import DEFAULT_PROPERTY_SPREAD, is_default_spread
+
+    if spread is None or not is_default_spread(spread):
+        return None
+    e, nu, rho = (DEFAULT_PROPERTY_SPREAD[k] for k in ("youngs_modulus_rel_sd",
+                                                        "poisson_ratio_sd", "density_rel_sd"))
+    return (f"the plate material is given by its properties without their spread: the answer "
+            f"carries the default spread of E +- {100 * e:.3g} %, nu +- {nu:.3g}, rho +- "
+            f"{100 * rho:.3g} % (1 sd); state youngs_modulus_rel_sd, poisson_ratio_sd and "
+            "density_rel_sd with the properties (0 where they are measured exactly)")
 
 
 def _floor_mismatch(est: Any, floor_arr_max: float) -> str | None:

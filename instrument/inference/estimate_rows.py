@@ -10,7 +10,8 @@ jointly from the file (`solitonde map --joint`): ``table`` (the model table's id
 ``arr_std``, ``n_shots``, ``arr_upper_bound``, ``tof_window_s``, as the inversion read them),
 ``calibration`` and ``material_spread`` (JSON, empty when none). ``other_reading`` (JSON,
 empty when none) is a thickness the data fit as well beyond the interval, next to a support
-(instrument.inference.inversion).
+(instrument.inference.inversion); ``readings`` (JSON, empty when none) an ``ambiguous`` answer's
+readings, each ``thickness_m``, ``distance_m`` (summaries as above) and ``weight``.
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ STATS = ("map", "median", "ci68_low", "ci68_high", "ci95_low", "ci95_high", "sta
 LOCATION_COLUMNS = ("plate_id", "position", "x_m", "y_m", "sphere_diameters_m", "n_shots")
 ESTIMATE_COLUMNS = (*LOCATION_COLUMNS, *(f"{p}_{s}" for p in PARAMETERS for s in STATS),
                     "reason", "fit_chi2", "fit_dof", "fit_p_value", "warnings", "table",
-                    "size_summaries", "calibration", "material_spread", "other_reading")
+                    "size_summaries", "calibration", "material_spread", "other_reading",
+                    "readings")
 """The columns of an estimates file, in order."""
 
 
@@ -85,7 +87,8 @@ def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shot
     for key, value in (("size_summaries", (estimate or {}).get("inputs")),
                        ("calibration", (estimate or {}).get("calibration")),
                        ("material_spread", (estimate or {}).get("material_spread")),
-                       ("other_reading", (estimate or {}).get("other_reading"))):
+                       ("other_reading", (estimate or {}).get("other_reading")),
+                       ("readings", (estimate or {}).get("readings"))):
         row[key] = json.dumps(json_ready(value), allow_nan=False) if value else None
     return row
 
@@ -120,7 +123,7 @@ def to_bytes(rows: Iterable[Mapping[str, Any]], fmt: str,
             frame[col] = frame[col].astype("Int64")
     for col in ("plate_id", "position", "sphere_diameters_m", "reason", "warnings", "created_at",
                 "table", "size_summaries", "calibration", "material_spread", "other_reading",
-                *(f"{p}_status" for p in PARAMETERS)):
+                "readings", *(f"{p}_status" for p in PARAMETERS)):
         if col in frame:
             frame[col] = frame[col].astype("string")
     if fmt == "parquet":

@@ -32,20 +32,26 @@ had one). Elsewhere, grid points where the model detects no reflection cannot ex
 one and get zero posterior. Sphere sizes multiply their likelihoods.
 
 Per parameter the marginal posterior gives MAP, median, 68 % and 95 % central intervals, and a
-status: when the posterior still carries at least :data:`EDGE_FRACTION` of its peak density at an
-end of the table that is not a physical limit, the data do not bound the parameter on that side
-(``lower_bound_only``: e.g. L beyond the critical distance, where TOF and ARR no longer depend on
-L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
+status (:mod:`.marginals`): when the posterior still carries at least a fifth of its peak density
+at an end of the table that is not a physical limit, the data do not bound the parameter on that
+side (``lower_bound_only``: e.g. L beyond the critical distance, where TOF and ARR no longer depend
+on L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
 bound (``ci95 = [lower, null]``), no MAP or median: the table's end is not an estimate; the bound
 is where the density falls to the level of a likelihood-ratio interval (:data:`LR_LEVELS`), since a
 quantile of a density flat out to the table's end would follow the table's extent. A measurement no
 table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no numbers at all. With
 several sphere sizes, when all together are out of range but the others are not once one size is
 left out, that answer is given, with the size left out named (``excluded_diameters_m``,
-``reason``): one disagreeing channel does not void the others. Unless the size left out is a
-large sphere beyond D/t = 5 at the answer (its floor-level train), the answer is then marked
+``reason``): one disagreeing channel does not void the others. Unless the size left out is a large
+sphere beyond D/t = 5 at the answer (its floor-level train), the answer is then marked
 ``inconsistent`` (:mod:`.adequacy`): its numbers are the other sizes', but the family does not
 explain the sizes together.
+
+Near a support the likelihood is a ridge in (t, L), and the marginal weighs its parts by the
+prior's volume in L, not by how well they fit. The thickness answer is therefore checked against
+the profile likelihood (:mod:`.ridge`): its intervals reach over the thicknesses the profile
+holds at their level, and where those fall into separate groups the answer is ``ambiguous``,
+with one reading per group (``Estimate.readings``: thickness, distance, weight).
 
 The plate material's spread (the library's for the table's plate material, or the one a
 property mapping states) adds a rank-2 covariance shared by every term, from Zener's exchange
@@ -60,7 +66,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 from typing import Any
@@ -69,7 +75,13 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 from solitonde.instrument.errors import InstrumentError
+from solitonde.instrument.inference import ridge
 from solitonde.instrument.inference.calibration import Calibration, calibrated_table
+from solitonde.instrument.inference.marginals import (
+    ParameterEstimate,
+    _summarise,
+)
+from solitonde.instrument.inference.sizes import SPHERE_DIAMETER_MAX, size_problem
 from solitonde.instrument.tables.table import (
     STATUS_NO_REFLECTION,
     STATUS_OK,
@@ -86,9 +98,6 @@ MIN_TOF_STD_S = 0.2e-6
 identical shots must not make the likelihood infinitely sharp."""
 MIN_ARR_STD = 0.003
 """Floor of the per-shot ARR scatter."""
-EDGE_FRACTION = 0.2
-"""A marginal posterior with at least this fraction of its peak density at a table end is open
-there (the data do not bound the parameter on that side)."""
 OUT_OF_RANGE_TAIL = 1e-6
 """Tail probability of the best chi^2 beyond which no table point explains the data."""
 REFLECTION_D_OVER_T = 5.0
@@ -119,20 +128,11 @@ FINE_THICKNESS_STEPS = 32
 """Fine cells per table interval in thickness (log-uniform within each interval)."""
 FINE_DISTANCE_STEP_M = 0.0025
 """Largest fine cell in distance (each table interval is split evenly)."""
-LR_LEVELS = (math.exp(-0.5), math.exp(-0.5 * 3.841458820694124))
-"""Ratios of the marginal posterior density to its peak that bound a one-sided 68 % and 95 %
-answer, the levels of a likelihood-ratio interval for one parameter (chi^2_1 of 1 and 3.84): the
-bound then follows the data, not how far the table extends."""
-OTHER_READING_WIDTHS = 1.0
-"""A thickness beyond a constrained answer's 95 % interval by more than this many of the
-interval's widths, where the profile likelihood (the best fit over every distance) is still
-above the 95 % likelihood-ratio level, is another reading of the data (:func:`_other_reading`):
-near a support a thinner plate nearer to it can fit as well as a thicker one farther out, and
-the marginal weighs the two by how much of the table's distance range fits each, not by how
-well. In validate's 600 plates (three seeds, D 9.53 mm, drawn or exact materials) every
-constrained interval that missed next to a support reached beyond by 1.45-2.0 widths, the other
-misses 0.14 at most; of those that held the truth, 2 reached beyond 1.0 width
-(docs/inversion.md)."""
+FINE_DISTANCE_MIN_STEPS = 5
+"""Fewest fine cells per table interval in distance. Next to a support TOF and ARR change fast
+with L (a 1.5 mm plate: 27 us and 0.15 in ARR between the nodes 5 and 7.5 mm from the clamp), and
+a grid of the nodes alone there placed a plate 6.2 mm from it at 5 or 7.5 mm, where neither fits:
+its interval missed it."""
 MIN_FLOOR_MASS = 0.1
 """Posterior mean weight on floor nodes above which the adequacy check asks whether a size's
 features are explained without the floor's looseness (instrument.inference.adequacy)."""
@@ -183,7 +183,8 @@ class FeatureSummary:
             check(name, v, number(v), "a finite number" + (
                 " (a size without TOF and ARR needs the bound of its hidden reflection)"
                 if name == "arr_upper_bound" else ""))
-        check("diameter_m", self.diameter_m, self.diameter_m > 0, "> 0 m")
+        check("diameter_m", self.diameter_m, size_problem(self.diameter_m) is None,
+              f"0 < D <= {SPHERE_DIAMETER_MAX:g} m; " + (size_problem(self.diameter_m) or ""))
         if hidden:
             check("arr_upper_bound", self.arr_upper_bound, 0 < self.arr_upper_bound <= 1.5,
                   "0 < bound <= 1.5")
@@ -373,7 +374,8 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     # features); log-uniform in t inside each interval, as the prior is uniform in log t.
     log_t = _refine(np.log(t_nodes), lambda width: FINE_THICKNESS_STEPS)
     t_f = np.exp(log_t)
-    l_f = _refine(l_nodes, lambda width: max(1, math.ceil(width / FINE_DISTANCE_STEP_M - 1e-9)))
+    l_f = _refine(l_nodes, lambda width: max(FINE_DISTANCE_MIN_STEPS,
+                                             math.ceil(width / FINE_DISTANCE_STEP_M - 1e-9)))
     wt = _interp_matrix(np.log(t_nodes), log_t)
     wl = _interp_matrix(l_nodes, l_f)
     ok = table.status[i_d] == STATUS_OK
@@ -468,22 +470,6 @@ def predict(table: ModelTable, diameter_m: float, thickness_m: float,
 
 
 @dataclass
-class ParameterEstimate:
-    """One parameter's answer. Numbers the data do not support are None."""
-
-    map: float | None
-    median: float | None
-    ci68: tuple[float | None, float | None] | None
-    ci95: tuple[float | None, float | None] | None
-    status: str
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"map": self.map, "median": self.median,
-                "ci68": None if self.ci68 is None else list(self.ci68),
-                "ci95": None if self.ci95 is None else list(self.ci95), "status": self.status}
-
-
-@dataclass
 class Estimate:
     """Thickness and distance to the support, with what the inversion used, how well the table's
     family explains the data (``fit``) and what the answer should be read with (``warnings``)."""
@@ -500,6 +486,9 @@ class Estimate:
     fit: dict[str, float | None] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     material_spread: dict[str, float] | None = None
+    readings: list[ridge.Reading] = field(default_factory=list)
+    """An ``ambiguous`` answer's readings along the thickness-distance ridge (:mod:`.ridge`),
+    most probable first; empty otherwise."""
 
     @property
     def out_of_range(self) -> bool:
@@ -525,119 +514,27 @@ class Estimate:
             "material_spread": None if self.material_spread is None else dict(
                 self.material_spread),
             "other_reading": self.extra.get("other_reading"),
+            "readings": [r.to_dict() for r in self.readings],
+            "material_shift_sd": self.extra.get("material_shift_sd"),
         }
         if posterior and self.posterior is not None:
             out["posterior"] = {k: v.tolist() for k, v in self.posterior.items()}
         return out
 
 
-def _other_reading(thickness_m: np.ndarray, profile: np.ndarray,
-                   best_l: Callable[[int], float], answer: ParameterEstimate
-                   ) -> dict[str, Any] | None:
-    """Another reading of the data than a constrained thickness answer, or None: the
-    thicknesses whose profile likelihood is above the 95 % likelihood-ratio level, when they
-    reach beyond the answer's 95 % interval by more than :data:`OTHER_READING_WIDTHS` of its
-    widths; with the farthest such thickness and the distance at which it fits best
-    (``best_l(k)`` for thickness index k, asked only when there is such a reading)."""
-    if answer.status != "constrained" or answer.ci95 is None:
-        return None
-    lo, hi = answer.ci95
-    if lo is None or hi is None:
-        return None
-    inside = np.nonzero(profile >= LR_LEVELS[1])[0]
-    if inside.size == 0:
-        return None
-    first, last = int(inside[0]), int(inside[-1])
-    reach = OTHER_READING_WIDTHS * (hi - lo)
-    below, above = lo - float(thickness_m[first]), float(thickness_m[last]) - hi
-    if max(below, above) <= reach:
-        return None
-    k = first if below >= above else last
-    return {"thickness_m": [float(thickness_m[first]), float(thickness_m[last])],
-            "thickness_at_m": float(thickness_m[k]), "distance_m": best_l(k)}
-
-
-def _quantiles(x: np.ndarray, mass: np.ndarray, qs: Sequence[float]) -> list[float]:
-    """Quantiles of a distribution given as the mass of each point's cell (cells from midpoint
-    to midpoint between the points, half cells at the ends; mass spread evenly in a cell)."""
-    if x.size == 1:
-        return [float(x[0])] * len(qs)
-    edges = np.concatenate([x[:1], 0.5 * (x[1:] + x[:-1]), x[-1:]])
-    cdf = np.concatenate([[0.0], np.cumsum(mass)])
-    cdf /= cdf[-1]
-    return [float(np.interp(q, cdf, edges)) for q in qs]
-
-
-def _crossing(x: np.ndarray, density: np.ndarray, level: float, from_left: bool) -> float:
-    """Where ``density`` first reaches ``level`` walking in from one end (linear between points)."""
-    order = range(x.size) if from_left else range(x.size - 1, -1, -1)
-    prev = None
-    for i in order:
-        if density[i] >= level:
-            if prev is None:
-                return float(x[i])
-            f = (level - density[prev]) / (density[i] - density[prev])
-            return float(x[prev] + f * (x[i] - x[prev]))
-        prev = i
-    return float(x[-1] if from_left else x[0])
-
-
-def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physical: bool,
-               transform: Any = None, profile: np.ndarray | None = None) -> ParameterEstimate:
-    """MAP, median, intervals and status of a marginal posterior given as the mass of each point
-    of ``x`` (cells of ``widths``); ``transform`` maps x back to the parameter (exp for log t)."""
-    est = _summarise_x(x, mass, widths, lower_physical, profile)
-    if transform is None:
-        return est
-
-    def f(v: float | None) -> float | None:
-        return None if v is None else float(transform(v))
-
-    Pair = tuple[float | None, float | None] | None
-
-    def pair(c: Pair) -> Pair:
-        return None if c is None else (f(c[0]), f(c[1]))
-
-    return ParameterEstimate(f(est.map), f(est.median), pair(est.ci68), pair(est.ci95), est.status)
-
-
-def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
-                 lower_physical: bool, profile: np.ndarray | None = None) -> ParameterEstimate:
-    """The summary of :func:`_summarise` on the grid's own axis.
-
-    A side is open (the data do not bound the parameter there) when the density at the table's end
-    is at least :data:`EDGE_FRACTION` of its peak, or when the profile likelihood there (the best
-    fit over the other parameter, relative to the overall best) is above the 95 % likelihood-ratio
-    level: a marginal can fall towards an end only because less of the other parameter's range
-    fits there (near a support thickness and distance trade off, and thin plates fit a narrower
-    band of L), which is prior volume, not evidence against that end. A physical limit (L = 0) is
-    never open. A one-
-    sided answer reports the likelihood-ratio bound (:data:`LR_LEVELS`), not a quantile: with the
-    density flat out to the table's end, a quantile would follow the table's extent, not the data.
-    At a physical limit an interval whose end falls in the limit's own cell starts there.
-    """
-    density = mass / widths
-    peak = density.max()
-    q = _quantiles(x, mass, (0.025, 0.16, 0.5, 0.84, 0.975))
-    ends = np.zeros(2, dtype=bool) if profile is None else profile[[0, -1]] >= LR_LEVELS[1]
-    lower_open = x.size > 1 and not lower_physical and (density[0] >= EDGE_FRACTION * peak
-                                                         or bool(ends[0]))
-    upper_open = x.size > 1 and (density[-1] >= EDGE_FRACTION * peak or bool(ends[1]))
-    if lower_open and upper_open:
-        return ParameterEstimate(None, None, None, None, "unconstrained")
-    if upper_open:
-        b68, b95 = (_crossing(x, density, lv * peak, from_left=True) for lv in LR_LEVELS)
-        if lower_physical:
-            b68, b95 = (float(x[0]) if b <= 0.5 * (x[0] + x[1]) else b for b in (b68, b95))
-        return ParameterEstimate(None, None, (b68, None), (b95, None), "lower_bound_only")
-    if lower_open:
-        b68, b95 = (_crossing(x, density, lv * peak, from_left=False) for lv in LR_LEVELS)
-        return ParameterEstimate(None, None, (None, b68), (None, b95), "upper_bound_only")
-    if lower_physical and x.size > 1:
-        first_cell = 0.5 * (x[0] + x[1])
-        q = [float(x[0]) if (k < 2 and v <= first_cell) else v for k, v in enumerate(q)]
-    return ParameterEstimate(float(x[int(np.argmax(density))]), q[2], (q[1], q[3]), (q[0], q[4]),
-                             "constrained")
+def _second_reading(readings: list[ridge.Reading], thickness_m: np.ndarray) -> dict[str, Any]:
+    """An ambiguous answer's ``other_reading``: the thicknesses of every reading (an open side
+    at the table's end) and the second most probable reading's thickness and distance."""
+    lows = [r.thickness_m.ci95[0] if r.thickness_m.ci95 else None for r in readings]
+    highs = [r.thickness_m.ci95[1] if r.thickness_m.ci95 else None for r in readings]
+    lo = min(float(thickness_m[0]) if v is None else v for v in lows)
+    hi = max(float(thickness_m[-1]) if v is None else v for v in highs)
+    t2, d2 = readings[1].thickness_m, readings[1].distance_m
+    t_at = t2.median if t2.median is not None else next(
+        v for v in (t2.ci95 or (None, None)) if v is not None)
+    d_at = d2.median if d2.median is not None else next(
+        (v for v in (d2.ci95 or (None, None)) if v is not None), None)
+    return {"thickness_m": [lo, hi], "thickness_at_m": float(t_at), "distance_m": d_at}
 
 
 @functools.lru_cache(maxsize=8)
@@ -891,12 +788,16 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                            lower_physical=False, transform=np.exp, profile=profile_t)
     distance = _summarise(g0.distance_m, post.sum(axis=0), g0.weight_l,
                           lower_physical=bool(g0.distance_m[0] <= 0.0), profile=profile_l)
-    est = Estimate(thickness, distance, items, cal, fit, n_terms)
-    # a row's best distance by likelihood: the posterior's row over its prior's cell widths
-    other = _other_reading(g0.thickness_m, profile_t, lambda k: float(
-        g0.distance_m[np.argmax(post[k] / g0.weight_l)]), thickness)
-    if other is not None:
-        est.extra["other_reading"] = other
+    marginal = thickness
+    thickness, distance, readings = ridge.resolve(
+        thickness, distance, g0.thickness_m, g0.distance_m, post, g0.weight_t, g0.weight_l,
+        profile_t, lower_physical=bool(g0.distance_m[0] <= 0.0))
+    est = Estimate(thickness, distance, items, cal, fit, n_terms, readings=readings)
+    if thickness.status == marginal.status and thickness.ci95 != marginal.ci95:
+        est.extra["ridge_widened"] = {"marginal_ci95": list(marginal.ci95 or ()),
+                                      "ci95": list(thickness.ci95 or ())}
+    if len(readings) > 1:
+        est.extra["other_reading"] = _second_reading(readings, g0.thickness_m)
     # what the adequacy check reads: the effective number of parameters the data fix (the
     # posterior mean of the deviance over its minimum, Spiegelhalter et al.'s p_D) and, per
     # seen size, the posterior's weight on floor cells
@@ -904,6 +805,8 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     d_best = float(deviance[i_best])
     p_d = float(np.sum(post[finite] * (deviance[finite] - d_best)))
     est.extra["p_d"] = p_d
+    if m_sum is not None and ur_sum is not None:
+        est.extra["material_shift_sd"] = _material_shift(m_sum, ur_sum, post)
     est.extra["floor_mass"] = {
         i.diameter_m: float(np.sum(post * g.floor_weight))
         for i, g in zip(items, grids, strict=True) if not i.hidden}
@@ -942,6 +845,22 @@ def _solve2(m3: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     b0, b1 = b
     quad = (a11 * b0 * b0 - 2.0 * a01 * b0 * b1 + a00 * b1 * b1) / det
     return quad, np.log(det)
+
+
+def _material_shift(m3: np.ndarray, b: np.ndarray, post: np.ndarray) -> list[float]:
+    """The posterior mean of the plate material's departure from the table's, in its spread's
+    standard deviations along ``(d ln E', d ln rho)``: per cell ``(I + M)^-1 b`` (the Gaussian
+    material term's own posterior mean, M and b as in :func:`_solve2`), averaged over the
+    posterior. Two or more in E' means the data fit a plate at the edge of the grade's range."""
+    a00, a01, a11 = m3
+    a00 = a00 + 1.0
+    a11 = a11 + 1.0
+    det = a00 * a11 - a01 * a01
+    b0, b1 = b
+    ok = post > 0
+    u0 = np.where(ok, (a11 * b0 - a01 * b1) / np.where(ok, det, 1.0), 0.0)
+    u1 = np.where(ok, (a00 * b1 - a01 * b0) / np.where(ok, det, 1.0), 0.0)
+    return [float(np.sum(post * u0)), float(np.sum(post * u1))]
 
 
 def _bilinear2(m3: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:

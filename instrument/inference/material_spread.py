@@ -175,19 +175,32 @@ def _far_correction(nodes: np.ndarray, t_nodes: np.ndarray, log_t: np.ndarray,
 
 
 def spread_of(table: ModelTable, plate_material: Any = None) -> dict[str, float]:
-    """The plate's spread for an inversion on ``table``: the one ``plate_material`` states (a
-    property mapping with spread keys), else the library's for the table's plate material."""
+    """The plate's spread for an inversion on ``table``: ``plate_material``'s where the caller
+    names one (a library grade's, the one a property mapping states, or for properties alone
+    the stated default: :data:`solitonde.model.materials.DEFAULT_PROPERTY_SPREAD`), else that of
+    the table's plate material by the same rules."""
     from solitonde.model.materials import material_spread
 
     if plate_material is not None:
-        stated = material_spread(plate_material)
-        if isinstance(plate_material, Mapping) and any(
-                plate_material.get(k) is not None for k in SPREAD_ORDER):
-            return stated
+        return material_spread(plate_material)
     family = table.family or {}
     if not family.get("plate_material"):
         return dict.fromkeys(SPREAD_ORDER, 0.0)
     return material_spread(family["plate_material"])
+
+
+def spread_source(table: ModelTable) -> str:
+    """Where the table's plate material spread comes from: ``library`` (a library grade's),
+    ``stated`` (with the properties), ``default`` (properties alone: the stated default) or
+    ``none`` (the table records no plate material)."""
+    from solitonde.model.materials import is_default_spread
+
+    plate = (table.family or {}).get("plate_material")
+    if not plate:
+        return "none"
+    if isinstance(plate, Mapping) and any(plate.get(k) is not None for k in SPREAD_ORDER):
+        return "stated"
+    return "default" if is_default_spread(spread_of(table)) else "library"
 
 
 def describe_spread(spread: Mapping[str, float]) -> str:
@@ -196,4 +209,5 @@ def describe_spread(spread: Mapping[str, float]) -> str:
     return f"E +- {100 * e:.3g} %, nu +- {nu:.3g}, rho +- {100 * rho:.3g} % (1 sd)"
 
 
-__all__ = ["SPREAD_ORDER", "describe_spread", "exchange_rates", "sensitivity", "spread_of"]
+__all__ = ["SPREAD_ORDER", "describe_spread", "exchange_rates", "sensitivity", "spread_of",
+           "spread_source"]

@@ -121,6 +121,7 @@ def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,
         entry[p] = None if value is None else {k: value.get(k) for k in
                                                ("map", "median", "ci68", "ci95", "status")}
     entry["reason"] = reason if estimate is None else estimate.get("reason")
+    entry["readings"] = list((estimate or {}).get("readings") or [])
     return entry
 
 
@@ -137,6 +138,9 @@ def from_estimate_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
                                       ("ci68_low", "ci68_high", "ci95_low", "ci95_high"))
             estimate[p] = {"map": _num(row.get(f"{p}_map")), "median": _num(row.get(f"{p}_median")),
                            "ci68": [lo68, hi68], "ci95": [lo95, hi95], "status": status}
+        readings = _text(row.get("readings"))
+        if estimate and readings:
+            estimate["readings"] = json.loads(readings)
         n = _num(row.get("n_shots"))
         out.append(position_entry(_text(row.get("position")), _num(row.get("x_m")),
                                   _num(row.get("y_m")), int(n) if n is not None else 0,

@@ -30,9 +30,13 @@ answers whose 95 % bounds hold the truth, every answer counted with its bounds (
 with any answer (a thickness with at least one bound, not flagged); ``interval_width_median``,
 the median width of the two-sided 95 % intervals relative to the truth; ``inconsistent_rate``,
 the fraction flagged ``inconsistent`` or ``out_of_range`` (on the table's own family: false
-alarms); ``missed_unflagged``, the fraction whose constrained interval misses with no flag, and
-``missed_unwarned`` those of them with no warning of another reading either
-(``other_reading_rate``: how often that warning comes); the distance's coverage (one-sided
+alarms); ``missed_unflagged``, the fraction whose answer (two-sided or one-sided) misses with no
+flag, and ``missed_unwarned`` those of them with no warning of another reading either
+(``other_reading_rate``: how often that warning comes); ``ambiguous_rate``, the fraction answered
+``ambiguous`` (separate readings along the thickness-distance ridge, instrument.inference.ridge),
+which counts as covered when one of its readings covers the truth and as flagged otherwise;
+``by_distance``, these scores per bin of the true distance to the support
+(:data:`DISTANCE_BINS_M`); the distance's coverage (one-sided
 bounds counted as such); and the status. A size whose shots show no reflection enters with its
 ARR bound (instrument.inference.inversion).
 The expected status is what the noise-free model says the data can tell. For each end of each
@@ -56,6 +60,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -89,8 +94,11 @@ REFERENCE_DISTANCE_M = 0.457
 OPEN_BELOW = 1.5
 CLOSED_ABOVE = 3.0
 STATUSES = ("constrained", "lower_bound_only", "upper_bound_only", "unconstrained")
-ANSWERS = ("constrained", "lower_bound_only", "upper_bound_only")
-"""Thickness statuses that are an answer (with at least one bound)."""
+ANSWERS = ("constrained", "lower_bound_only", "upper_bound_only", "ambiguous")
+"""Thickness statuses that are an answer (with at least one bound; an ``ambiguous`` one with
+its readings)."""
+DISTANCE_BINS_M = (0.0, 0.015, 0.03, 0.06, 0.12, None)
+"""Edges of the distance bins ``by_distance`` scores (m; the last bin open)."""
 
 
 class ValidationInputError(InstrumentError, ValueError):
@@ -233,7 +241,9 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
              measurements: str | Path | None = None,
              truth_plate_theory: str = "auto",
              wrong_family: str | None = None,
-             draw_material: bool = True) -> ValidationReport:
+             draw_material: bool = True,
+             shots: int = SHOTS,
+             near_support_m: float | None = None) -> ValidationReport:
     """Run the synthetic validation on ``table`` (see the module doc).
 
     ``diameters`` restricts the sphere sizes (default: all of the table's). ``measurements``
@@ -254,12 +264,17 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     drawn from it test that they carry it rightly. Off, every plate is the table's material
     exactly. The reference plates stay the table's material (a reference block's properties are
     known), and so do ``wrong_family`` truths (the library's value of that material).
+    ``shots`` is the number of shots per plate and sphere size (a lab reading one shot at a time:
+    1); the reference plates keep :data:`SHOTS`. ``near_support_m`` draws the distances
+    uniformly between the table's nearest distance and this far from the support instead of over
+    the whole table: the plates a scan next to a clamp measures.
 
     Raises
     ------
     ValidationInputError
-        (``seed``, ``diameters``, ``measurements``) A negative seed, a sphere size listed twice,
-        or a measurements file that is not one this function wrote.
+        (``seed``, ``diameters``, ``measurements``, ``shots``, ``near_support_m``) A negative
+        seed, a sphere size listed twice, a measurements file that is not one this function
+        wrote, fewer than one shot, or a near-support band that holds no table distance.
     TableError
         (``diameter_m``) A sphere size the table does not hold.
     """
@@ -289,8 +304,18 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     base = reference_base
     if wrong_family is not None:
         base = apply_overrides(dict(base), {"plate.material": wrong_family})
+    if isinstance(shots, bool) or not isinstance(shots, int | np.integer) or shots < 1:
+        raise ValidationInputError("shots", f"must be an integer >= 1, got {shots!r}")
+    l_far = float(l_axis[-1])
+    if near_support_m is not None:
+        if not (isinstance(near_support_m, int | float) and math.isfinite(near_support_m)
+                and near_support_m > l_axis[0]):
+            raise ValidationInputError("near_support_m", f"must be a distance in m beyond the "
+                                       f"table's nearest ({float(l_axis[0]):g} m), got "
+                                       f"{near_support_m!r}")
+        l_far = min(l_far, float(near_support_m))
     lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
-    draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_axis[-1])))
+    draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_far)))
              for _ in range(n)]
     seeds = rng.integers(0, 2**31, size=n + 1)
     t_ref = float(np.clip(REFERENCE_THICKNESS_M, t_axis[0], t_axis[-1]))
@@ -300,7 +325,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
                  if spread is not None else [None] * n)
     tasks = [(reference_base, diameters, t_ref, l_ref, int(seeds[0]))]
     tasks += [(base if mat is None else apply_overrides(dict(base), {"plate.material": mat}),
-               diameters, t, length, int(s))
+               diameters, t, length, int(s), shots)
               for (t, length), s, mat in zip(draws, seeds[1:], materials, strict=True)]
     bar = None
     if progress:
@@ -310,9 +335,11 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     key = {"n": n, "seed": seed, "diameters_m": diameters, "scene": base,
            "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
            "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
-           "damping_s": DAMPING_S, "shots": SHOTS, "snr_db": SNR_DB,
+           "damping_s": DAMPING_S, "shots": shots, "snr_db": SNR_DB,
            "wrong_family": wrong_family, "material_spread_drawn": spread,
            "reading_version": READING_VERSION}
+    if near_support_m is not None:  # absent from the default draw's key: its files stay valid
+        key["near_support_m"] = l_far
     stored = _load_measurements(measurements, key)
     started = time.perf_counter()
     if stored is not None:
@@ -361,12 +388,17 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         excluded = est.extra.get("excluded_diameters_m", [])
         used = [i for i in inputs if i.diameter_m not in excluded and not i.hidden]
         phys = bool(l_axis[0] <= 0.0)
-        flagged = est.inconsistent
+        ambiguous = t_est.status == "ambiguous"
+        # an ambiguous answer covers when one of its readings does, and is flagged otherwise
+        reading_covered = ambiguous and any(
+            _covered(r.thickness_m.ci95, true_t) for r in est.readings)
+        flagged = est.inconsistent or (ambiguous and not reading_covered)
         answered = t_est.status in ANSWERS and not flagged
         row.update(thickness=t_est.to_dict(), distance=l_est.to_dict(),
                    excluded_diameters_m=excluded, fit=est.fit, warnings=est.warnings,
                    hidden_diameters_m=[i.diameter_m for i in inputs if i.hidden],
-                   flagged=flagged, answered=answered,
+                   flagged=flagged, answered=answered, ambiguous=ambiguous,
+                   readings=[r.to_dict() for r in est.readings],
                    other_reading=est.extra.get("other_reading"))
         if used:
             sep = separations(table, used, true_t, true_l, calibration)
@@ -391,7 +423,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
             thickness_error=(abs(t_est.median - true_t) / true_t
                              if t_est.median is not None and not flagged else None),
             # every answer with its bounds: a one-sided one covers when its bound holds
-            thickness_covered=_covered(t_est.ci95, true_t) if answered else None,
+            thickness_covered=(reading_covered if ambiguous else _covered(t_est.ci95, true_t))
+            if answered else None,
             thickness_covered_two_sided=(
                 t_est.ci95[0] <= true_t <= t_est.ci95[1]
                 if answered and t_est.status == "constrained" else None),
@@ -409,8 +442,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     flagged = [bool(r.get("flagged")) for r in rows]
     # a wrong family is handled when the answer is flagged or covers the truth anyway
     handled = [bool(r.get("flagged")) or bool(r.get("thickness_covered")) for r in rows]
-    missed = [not r.get("flagged") and r.get("thickness", {}).get("status") == "constrained"
-              and not r.get("thickness_covered") for r in rows]
+    missed = [_missed_unflagged(r) for r in rows]
     # ... and of those, the ones no warning of another reading came with
     unwarned = [m and r.get("other_reading") is None for m, r in zip(missed, rows, strict=True)]
     warned = [r.get("other_reading") is not None for r in rows]
@@ -428,6 +460,9 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "missed_unflagged": float(np.mean(missed)) if rows else None,
         "missed_unwarned": float(np.mean(unwarned)) if rows else None,
         "other_reading_rate": float(np.mean(warned)) if rows else None,
+        "ambiguous_rate": float(np.mean([bool(r.get("ambiguous")) for r in rows]))
+        if rows else None,
+        "by_distance": by_distance(rows),
         "wrong_family": wrong_family,
         "material_spread_drawn": spread,
         "distance_coverage_95": float(np.mean(l_cov)) if l_cov else None,
@@ -441,7 +476,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "distance_status_counts": _counts(r.get("distance", {}).get("status") for r in rows),
         "n_estimated": int(errors.size),
         "damping_s": DAMPING_S,
-        "shots": SHOTS,
+        "shots": shots,
+        "near_support_m": None if near_support_m is None else l_far,
         "snr_db": SNR_DB,
         "reference": {"thickness_m": [t_ref, t_ref2], "distance_m": l_ref},
         "calibration": calibration.to_dict()["per_diameter"],
@@ -503,6 +539,32 @@ def _load_measurements(path: str | Path | None,
 def _save_measurements(path: str | Path, key: Mapping[str, Any], plates: list[dict[str, Any]],
                        wall: float) -> None:
     write_text(path, json.dumps({"key": key, "plates": plates, "wall_s": wall}))
+
+
+def _missed_unflagged(row: Mapping[str, Any]) -> bool:
+    """Whether a plate's answer misses its truth with nothing said: not flagged, not ambiguous,
+    a thickness with bounds (two-sided or one-sided) that do not hold it."""
+    status = row.get("thickness", {}).get("status")
+    return (not row.get("flagged") and status in ANSWERS and status != "ambiguous"
+            and row.get("thickness_covered") is False)
+
+
+def by_distance(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The scores per bin of the true distance to the support (:data:`DISTANCE_BINS_M`):
+    plates, answered, the 95 % coverage, the unflagged misses and the ambiguous answers; a bin
+    without plates is left out."""
+    out = []
+    for lo, hi in pairwise(DISTANCE_BINS_M):
+        inside = [r for r in rows if r["distance_m"] >= lo and (hi is None or r["distance_m"] < hi)]
+        if not inside:
+            continue
+        cov = [r["thickness_covered"] for r in inside if r.get("thickness_covered") is not None]
+        out.append({"distance_m": [lo, hi], "n": len(inside),
+                    "answered": float(np.mean([bool(r.get("answered")) for r in inside])),
+                    "coverage_95": float(np.mean(cov)) if cov else None,
+                    "missed_unflagged": float(np.mean([_missed_unflagged(r) for r in inside])),
+                    "ambiguous_rate": float(np.mean([bool(r.get("ambiguous")) for r in inside]))})
+    return out
 
 
 def _covered(ci: Any, truth: float) -> bool | None:

@@ -4,11 +4,12 @@ A 4.0 mm structural-steel plate (E 210 GPa, nu 0.30, rho 7850) under the paper's
 gravity on), solved by scipy's DOP853 on Zener's dashpot (tests/support/independent_chain.py, no
 model code), five shots at 40 dB. Against the bundled aluminium table the answer must be flagged
 inconsistent (the command exits 1, the service answers 201 with the warning); against the bundled
-steel table (E 200 GPa, nu 0.26: a near miss) the 95 % interval must hold 4.0 mm, which it does
-through the material's spread once the record's length no longer moves the reading (reading 2):
-4.0496 mm, 95 % 3.9994-4.2377. Over noise seeds 1-12 of this recording 11 intervals hold it; the
-twelfth misses by 0.001 mm (the plate sits at the corner of its grade's range, 2.4 sd out in E':
-docs/inversion.md). Never a constrained interval that misses with no warning.
+steel table (E 200 GPa, nu 0.26: a near miss, the plate 2.4 sd out in E' at the corner of its
+grade's range) the 95 % interval must hold 4.0 mm: 4.0496 mm, 95 % 3.8676-4.2452 at the test's
+draw, reaching down to where a thinner plate nearer to a support fits as well. Over noise draws
+1-12 every interval holds it by 83 um or more (it held by 0.6 um and missed by 1 um in two draws
+before the answer read the thickness-distance ridge). Never a constrained interval that misses
+with no warning.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
-from independent_chain import sensor_trace
+from independent_chain import sensor_trace, write_shots
 from recordings import STEEL, STEEL_TABLE, post_recording, steel_shots
 from typer.testing import CliRunner
 
@@ -27,6 +28,7 @@ from solitonde.instrument.inference.inversion import FeatureSummary, invert
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.tables.table import ModelTable
+from solitonde.model.materials import DEFAULT_PROPERTY_SPREAD
 
 ROOT = Path(__file__).resolve().parents[2]
 ALUMINIUM = ROOT / "data_samples" / "default_table.h5"
@@ -112,6 +114,24 @@ def test_a_plate_given_by_its_properties_is_checked_against_the_table(recording:
     assert bad.exit_code == 2 and "--plate-material: [youngs_modulus] missing" in bad.output
 
 
+def test_the_near_miss_holds_in_every_noise_draw(tmp_path: Path) -> None:
+    """The same plate in noise draws 1-12: each answer holds 4.0 mm, by more than 50 um (the
+    material spread and the profile over the distance, not a micrometre's luck), or one of its
+    readings does. Before, draw 1 held by 0.6 um and draw 5 missed by 1 um."""
+    t, force = sensor_trace(STEEL, TRUTH_M)
+    for seed in range(1, 13):
+        path = write_shots(tmp_path / f"s{seed}.csv", t, force, shots=5, snr_db=40.0, seed=seed,
+                           metadata={"plate_id": "steel-4mm"})
+        code, out = _analyze(str(path), "--invert", "--sphere-diameter", "9.53e-3", "--table",
+                             str(STEEL_TABLE))
+        assert code == 0, (seed, out["errors"])
+        est = out["estimates"][0]["estimate"]
+        spans = ([r["thickness_m"]["ci95"] for r in est["readings"]]
+                 or [est["thickness_m"]["ci95"]])
+        margins = [min(TRUTH_M - lo, hi - TRUTH_M) for lo, hi in spans]
+        assert max(margins) > 50e-6, (seed, est["thickness_m"], est["warnings"])
+
+
 def test_invert_without_a_sphere_size_names_the_flag(recording: Path, tmp_path: Path) -> None:
     text = recording.read_text().splitlines()
     bare = tmp_path / "bare.csv"
@@ -137,6 +157,14 @@ def test_rest_plate_material_by_properties_and_a_hidden_reflection(tmp_path: Pat
         est = r.json()["estimate"]
         assert est["material_spread"]["youngs_modulus_rel_sd"] == 0.05
         assert est["thickness_m"]["status"] == "constrained" and est["fit"]["p_value"] > 1e-3
+        # the same properties under the user's own name, no spread: the stated default,
+        # said in the answer's warnings, never a spread of 0
+        plain = {**table.family["plate_material"], "name": "plant steel"}
+        r = client.post("/v1/invert", json={"inputs": [item], "plate_material": plain})
+        assert r.status_code == 200, r.text
+        est = r.json()["estimate"]
+        assert est["material_spread"] == DEFAULT_PROPERTY_SPREAD
+        assert any("default spread of E +- 3 %" in w for w in est["warnings"])
         other = {"name": "S235", **STEEL}
         r = client.post("/v1/invert", json={"inputs": [item], "plate_material": other})
         assert r.status_code == 422 and "plate_material" in r.json()["detail"]

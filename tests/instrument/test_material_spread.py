@@ -13,7 +13,14 @@ from solitonde.instrument.inference.inversion import FeatureSummary, _solve2, in
 from solitonde.instrument.inference.material_spread import exchange_rates, spread_of
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.model import zener
-from solitonde.model.materials import MATERIALS, SPREAD_KEYS, material_spread, properties_from
+from solitonde.model.materials import (
+    DEFAULT_PROPERTY_SPREAD,
+    MATERIALS,
+    SPREAD_KEYS,
+    is_default_spread,
+    material_spread,
+    properties_from,
+)
 from solitonde.model.scene import scene_from_dict
 
 TABLE = Path(__file__).resolve().parents[2] / "data_samples" / "default_table.h5"
@@ -33,7 +40,7 @@ def test_every_library_material_states_a_grade_spread_about_its_own_value() -> N
     assert a36.youngs_modulus_rel_sd == pytest.approx(20e9 / math.sqrt(12) / 200e9)
 
 
-def test_a_spread_comes_from_the_mapping_the_library_or_nowhere() -> None:
+def test_a_spread_comes_from_the_mapping_the_library_or_the_stated_default() -> None:
     steel = MATERIALS["steel_structural"]
     # a table's family records properties with the library's name: the library's spread
     assert material_spread(properties_from("steel_structural"))["youngs_modulus_rel_sd"] == \
@@ -42,9 +49,16 @@ def test_a_spread_comes_from_the_mapping_the_library_or_nowhere() -> None:
               "youngs_modulus_rel_sd": 0.05}
     assert material_spread(properties_from(stated)) == {
         "youngs_modulus_rel_sd": 0.05, "poisson_ratio_sd": 0.0, "density_rel_sd": 0.0}
-    # a library name with other properties is not that grade: no spread is invented
+    # a library name with other properties is not that grade: the stated default, never 0
     other = {**properties_from("steel_structural"), "youngs_modulus": 210e9}
-    assert material_spread(other) == NO_SPREAD
+    assert material_spread(other) == DEFAULT_PROPERTY_SPREAD
+    assert is_default_spread(material_spread(other))
+    assert not is_default_spread(material_spread(properties_from(stated)))
+    # exact properties are said so by stating zeros
+    exact = {**other, "youngs_modulus_rel_sd": 0.0, "poisson_ratio_sd": 0.0,
+             "density_rel_sd": 0.0}
+    assert material_spread(properties_from(exact)) == NO_SPREAD
+    assert material_spread(None) == NO_SPREAD
     table = ModelTable.load(TABLE)
     assert spread_of(table)["youngs_modulus_rel_sd"] == MATERIALS["al_6061"].youngs_modulus_rel_sd
     assert spread_of(table, stated)["youngs_modulus_rel_sd"] == 0.05

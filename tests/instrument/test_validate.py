@@ -56,9 +56,39 @@ def test_validate_cli_json_keys(tiny: Path) -> None:
     data = json.loads(result.output)
     for key in ("thickness_error_median", "thickness_error_p90", "coverage_95",
                 "status_accuracy", "coverage_95_two_sided", "answered", "interval_width_median",
-                "inconsistent_rate", "flagged_or_covered", "missed_unflagged"):
+                "inconsistent_rate", "flagged_or_covered", "missed_unflagged",
+                "ambiguous_rate", "by_distance"):
         assert key in data
     assert data["wrong_family"] is None and 0.0 <= data["answered"] <= 1.0
+
+
+def test_validate_one_shot_near_the_support_scores_by_distance(tiny: Path) -> None:
+    """``--shots 1 --near-support 0.03``: every plate drawn within 30 mm of the support, one shot
+    per size; ``by_distance`` holds the non-empty bins and adds up to the plates."""
+    result = CliRunner().invoke(build_app(), [
+        "validate", "--n", "3", "--seed", "4", "--table", str(tiny), "--workers", "1",
+        "--no-progress", "--diameters", "9.53e-3", "--shots", "1", "--near-support", "0.03",
+        "--json"])
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["shots"] == 1 and data["near_support_m"] == 0.03
+    assert 0.0 <= data["ambiguous_rate"] <= 1.0
+    bins = data["by_distance"]
+    assert sum(b["n"] for b in bins) == 3
+    for b in bins:
+        assert b["distance_m"][1] is not None and b["distance_m"][1] <= 0.03
+        assert set(b) == {"distance_m", "n", "answered", "coverage_95", "missed_unflagged",
+                          "ambiguous_rate"}
+
+
+@pytest.mark.parametrize(("args", "field", "hint"), [
+    (["--near-support", "0"], "--near-support", "beyond the table's nearest"),
+    (["--near-support", "nan"], "--near-support", "beyond the table's nearest"),
+])
+def test_validate_near_support_must_hold_a_distance(tmp_path: Path, args: list[str], field: str,
+                                                    hint: str) -> None:
+    output = _bad_validate(tmp_path, *args)
+    assert output.startswith(f"error: {field}:") and hint in output
 
 
 def test_validate_wrong_family_simulates_another_material(tiny: Path) -> None:
