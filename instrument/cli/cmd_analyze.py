@@ -40,11 +40,13 @@ from typing import Any
 import typer
 from rich.console import Console
 
+from solitonde.instrument.cli.common import sphere_sizes
 from solitonde.instrument.cli.console_tables import Column, fitted_table
 from solitonde.instrument.cli.manifest import ManifestError, Row
 from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.measured_shots import (
     LOCATION_KEYS,
+    PEAK_READING,
     PositionShots,
     ShotInputError,
 )
@@ -54,7 +56,8 @@ from solitonde.signal.features import FEATURES
 from solitonde.signal.waveform import UNITS
 
 OUT_SUFFIXES = (".csv", ".parquet")
-ROW_KEYS = ("source", "shot", "channel", *FEATURES, "flags", "arr_upper_bound", "baseline",
+ROW_KEYS = ("source", "shot", "channel", *FEATURES, *PEAK_READING, "flags", "arr_upper_bound",
+            "baseline",
             *LOCATION_KEYS, "error")
 FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
          "sphere_diameter": "--sphere-diameter", "sample_rate": "--sample-rate",
@@ -236,7 +239,7 @@ def analyze(
                                       "channel. Default: the channels that are sensor traces."),
     group: str | None = typer.Option(None, "--group", help="Only the channels of this TDMS "
                                      "group."),
-    sphere_diameter: float | None = typer.Option(None, "--sphere-diameter", min=1e-6, max=1.0,
+    sphere_diameter: float | None = typer.Option(None, "--sphere-diameter", callback=sphere_sizes,
                                                  help="m, for every file (a file's own must "
                                                  "agree)."),
     baseline: str | None = typer.Option(None, "--baseline", help="What a shot of a stated "

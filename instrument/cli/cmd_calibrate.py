@@ -19,6 +19,7 @@ from pathlib import Path
 import typer
 
 from solitonde.instrument.cli.cmd_invert import table_path
+from solitonde.instrument.cli.common import sphere_sizes
 from solitonde.instrument.inference.calibration import CalibrationError
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, InversionError
@@ -70,7 +71,8 @@ def calibrate_command(
     files: list[Path] = typer.Argument(None, help="waveform files or folders of reference shots"),
     thickness: float = typer.Option(..., "--thickness", help="reference plate thickness, m"),
     distance: float = typer.Option(..., "--distance", help="reference distance to support, m"),
-    diameter: list[float] = typer.Option([], "--diameter", help="sphere diameter, m (for files "
+    diameter: list[float] = typer.Option([], "--diameter", callback=sphere_sizes,
+                                         help="sphere diameter, m (for files "
                                          "without metadata: one value; with --tof: repeat)"),
     tof: list[float] = typer.Option([], "--tof", help="mean TOF, s (instead of files; repeat)"),
     arr: list[float] = typer.Option([], "--arr", help="mean ARR (instead of files; repeat)"),

@@ -22,6 +22,7 @@ from typing import Any
 
 import typer
 
+from solitonde.instrument.cli.common import sphere_sizes
 from solitonde.instrument.cli.uploader import (
     Client,
     Outcome,
@@ -43,7 +44,7 @@ PLATE_ID = typer.Option(None, "--plate-id", help="Plate, for every file.")
 POSITION = typer.Option(None, "--position", help="Position name, for every file.")
 X = typer.Option(None, "--x", help="m, the position's x on the plate.")
 Y = typer.Option(None, "--y", help="m, the position's y on the plate.")
-SPHERE = typer.Option(None, "--sphere-diameter", min=1e-6, max=1.0, help="m, for every file "
+SPHERE = typer.Option(None, "--sphere-diameter", callback=sphere_sizes, help="m, for every file "
                       "(a file's own must agree).")
 CALIBRATION = typer.Option(None, "--calibration", help="N/V, for files in volts that carry "
                            "no calibration.")

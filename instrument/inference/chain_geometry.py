@@ -74,6 +74,30 @@ def shot_options(diameter: Any, family: Scene | None = None) -> dict[str, float]
     return {} if d is None else detect_options(chain_scene(d, family))
 
 
+def _solitary_width(force: float, diameter: float, family: Scene | None) -> float:
+    """The FWHM of a solitary wave of ``force`` N in a chain of ``diameter`` m spheres, s."""
+    scene = chain_scene(diameter, family)
+    return zener.pulse_width_at_unit_force(scene) * max(force, 1e-300) ** (-1.0 / 6.0)
+
+
+def _size_of_width(width: float, force: float, stated: float, family: Scene | None
+                   ) -> float | None:
+    """Another of the paper's sphere sizes whose solitary wave of this force is as wide as the
+    incident (within the detector's tolerance, the closest), where the stated size's is not;
+    None otherwise. A force in the wrong units can mimic one (a factor 1000 widens a wave 3.2
+    times, two sizes apart 2.5 times), so the message names both causes."""
+    from solitonde.signal.pulses import WIDTH_TOLERANCE
+
+    def off(d: float) -> float:
+        return abs(math.log(width / _solitary_width(force, d, family)))
+
+    if not (width > 0 and force > 0) or off(stated) <= math.log(WIDTH_TOLERANCE):
+        return None
+    fits = [d for d in STANDARD_DIAMETERS if abs(d - stated) > 0.01 * stated
+            and off(d) <= math.log(WIDTH_TOLERANCE)]
+    return min(fits, key=off) if fits else None
+
+
 def units_message(features: Features, diameter: float | None,
                   family: Scene | None = None) -> str:
     """Why a shot flagged ``implausible_units`` is not used, with the expected and measured
@@ -81,11 +105,22 @@ def units_message(features: Features, diameter: float | None,
     force = features.incident_peak_N
     width = features.incident_width_s
     if diameter is not None:
-        scene = chain_scene(diameter, family)
-        expected = zener.pulse_width_at_unit_force(scene) * max(force, 1e-300) ** (-1.0 / 6.0)
+        expected = _solitary_width(force, diameter, family)
         said = (f"a solitary wave of {force:.4g} N in a chain of {diameter * 1e3:.3g} mm "
                 f"spheres is {expected * 1e6:.3g} us wide at half height, the incident pulse "
                 f"{width * 1e6:.3g} us ({width / expected:.3g} times)")
+        other = _size_of_width(width, force, diameter, family)
+        if other is not None and fits_some_chain(features, [other], family):
+            # a wave's width and its round trip scale alike with the size and the force, so a
+            # size stated wrong and a force in the wrong units look the same: both are named
+            return (f"implausible_units: the incident pulse is {width * 1e6:.3g} us wide: a "
+                    f"solitary wave of {other * 1e3:.4g} mm spheres, not {diameter * 1e3:.4g} "
+                    f"mm ({said}). Check the "
+                    "sphere size stated (--sphere-diameter, a manifest's sphere_diameter_m or "
+                    "the file's sphere_diameter: sizes are in metres); if it is right, the force "
+                    "or the time axis is not in the units stated: check --calibration (N/V), the "
+                    "file's unit row (V or mV, s or ms or us) or --units; the shot is not "
+                    "inverted")
     else:
         said = (f"a reflection {(features.tof_s or 0.0) * 1e6:.3g} us after a {force:.4g} N "
                 "incident fits no chain of the table's sphere sizes (the round trip from the "

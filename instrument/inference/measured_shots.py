@@ -34,6 +34,7 @@ import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference import chain_geometry
+from solitonde.instrument.inference.sizes import SPHERE_DIAMETER_MAX, size_problem
 from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
@@ -54,7 +55,6 @@ METADATA_KEYS_MAX = 100
 """Most keys one shot's metadata may hold."""
 NESTED_MAX = 16_384
 """Largest nested metadata value (a mapping or list), in bytes of JSON."""
-SPHERE_DIAMETER_MAX = 1.0
 """Largest sphere diameter, m (0 < D <= this)."""
 COORDINATE_MAX = 1e3
 """Largest ``|x_m|``, ``|y_m|`` a request states, m (the plate's own size bounds them further
@@ -79,6 +79,11 @@ class ShotLimitError(ShotInputError):
 
     kind = "limit"
 
+
+PEAK_READING = ("tof_peak_s", "arr_peak")
+"""A shot row's paper reading beside the template's ``tof_s`` and ``arr``: the time between the
+trace's own two peaks and their heights' ratio, the paper's definition (a hand reading of the
+scope)."""
 
 FieldOf = Callable[[int, str], str]
 """The field name of metadata key ``key`` of shot ``i``, for errors."""
@@ -200,10 +205,10 @@ def check_metadata(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf,
     for i, meta in enumerate(metadata):
         check_sizes(meta, functools.partial(field_of, i))
         d = meta.get("sphere_diameter")
-        if d is not None and not (_real(d) and 0.0 < float(d) <= SPHERE_DIAMETER_MAX):
-            raise ShotInputError(field_of(i, "sphere_diameter"), f"{d!r} is not a sphere "
-                                 "diameter", f"a number of metres, 0 < D <= "
-                                 f"{SPHERE_DIAMETER_MAX:g}")
+        if d is not None and (not _real(d) or size_problem(float(d)) is not None):
+            why = size_problem(float(d)) if _real(d) else f"{d!r} is not a sphere diameter"
+            raise ShotInputError(field_of(i, "sphere_diameter"), str(why), f"a number of "
+                                 f"metres, 0 < D <= {SPHERE_DIAMETER_MAX:g}")
         b = meta.get("baseline")
         if b is not None and b not in chain_geometry.BASELINES:
             raise ShotInputError(field_of(i, "baseline"), f"{b!r} is not a baseline",
@@ -296,7 +301,7 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
                 feat, chain_geometry.STANDARD_DIAMETERS):
             feat = dataclasses.replace(feat, flags=[*feat.flags, "implausible_units"])
         d = feat.to_dict()
-        row.update({k: json_ready(d[k]) for k in FEATURES})
+        row.update({k: json_ready(d[k]) for k in (*FEATURES, *PEAK_READING)})
         row["flags"] = d["flags"]
         row["arr_upper_bound"] = json_ready(d["arr_upper_bound"])
         if "implausible_units" in feat.flags:  # listed with its numbers, never summarised

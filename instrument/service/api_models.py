@@ -9,19 +9,38 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    create_model,
+)
 
 from solitonde.instrument.inference.measured_shots import (
     COORDINATE_MAX,
     IDENTIFIER_MAX,
     KEY_MAX,
-    SPHERE_DIAMETER_MAX,
     TEXT_MAX,
 )
+from solitonde.instrument.inference.sizes import SPHERE_DIAMETER_MAX, size_in_metres_message
+from solitonde.signal.features import FIELD_KINDS
 from solitonde.signal.waveform import MIN_SAMPLES
 
 SCALAR = Annotated[str, StringConstraints(max_length=TEXT_MAX)] | float | int | bool | None
 Key = Annotated[str, StringConstraints(max_length=KEY_MAX)]
+
+
+def _in_metres(value: float) -> float:
+    if value > SPHERE_DIAMETER_MAX:
+        raise ValueError(size_in_metres_message(value))
+    return value
+
+
+SphereSize = Annotated[float, Field(gt=0, json_schema_extra={"maximum": SPHERE_DIAMETER_MAX}),
+                       AfterValidator(_in_metres)]
+"""A sphere size in metres; one over :data:`SPHERE_DIAMETER_MAX` is refused as a size in mm."""
 
 
 class Strict(BaseModel):
@@ -67,8 +86,8 @@ class ShotMetadata(Strict):
     plate_id: str | None = Field(None, max_length=IDENTIFIER_MAX, description="plate identifier")
     position: str | None = Field(None, max_length=IDENTIFIER_MAX,
                                  description="measurement position label on the plate")
-    sphere_diameter: float | None = Field(None, gt=0, le=SPHERE_DIAMETER_MAX,
-                                          description="chain sphere diameter D, m")
+    sphere_diameter: SphereSize | None = Field(None, description="chain sphere diameter D, m "
+                                               "(sizes are in metres: 9.53 mm is 9.53e-3)")
     shot: int | None = Field(None, ge=0, le=2**31, description="shot number at this position")
     x_m: float | None = Field(None, ge=-COORDINATE_MAX, le=COORDINATE_MAX,
                               description="the chain's position on the "
@@ -153,6 +172,58 @@ def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type
     return shot, measurement
 
 
+FEATURE_DESCRIPTIONS = {
+    "tof_s": "time of flight, s, the template reading: between the peaks of the solitary-wave "
+             "template fitted to each pulse (what the model tables hold, so the inversion reads "
+             "it); null where no reflection was detected",
+    "arr": "amplitude ratio, reflection over incident, the template reading (above the level "
+           "before the impact); null where no reflection was detected",
+    "incident_time_s": "the incident's peak, s from the record's start (template)",
+    "reflected_time_s": "the reflection's peak, s (template); null without one",
+    "incident_peak_N": "the incident's peak force above the pre-impact level, N (template)",
+    "reflected_peak_N": "the reflection's peak force, N (template); null without one",
+    "snr_db": "the incident's peak over the noise, dB",
+    "flags": "what the detector noticed (e.g. overlapping, saturated, implausible_units)",
+    "arr_upper_bound": "for a shot without a reflection: the largest ARR that could hide under "
+                       "the noise",
+    "secondary_times_s": "the pulses after the reflection, s from the incident",
+    "secondary_ratios": "their peaks over the incident's",
+    "baseline_N": "the sensor's reading before the impact at the incident's peak, N",
+    "noise_N": "the noise's standard deviation, N",
+    "arr_local": "the ratio of the pulses' rises above the level just before each (drift-immune, "
+                 "larger than arr where the chain decompresses between the pulses)",
+    "incident_rise_N": "the incident's rise above the level just before it, N",
+    "reflected_rise_N": "the reflection's rise above the level just before it, N",
+    "tof_peak_s": "time of flight between the trace's own peaks, s: the paper's definition, a hand "
+                  "reading of the scope (on a noisy shot the template's peak wherever the data "
+                  "cannot tell the two apart)",
+    "arr_peak": "amplitude ratio of the trace's own peaks: the paper's definition",
+    "incident_width_s": "the incident's full width at half maximum, s (a solitary wave ties it to "
+                        "its force and the sphere size)",
+    "reflection_window_s": "the longest TOF the record could show whole, s",
+}
+"""What each shot feature is, for the schema (one line per :class:`Features` field)."""
+
+_KIND_TYPES: dict[str, Any] = {"number": float | None, "optional": float | None,
+                               "series": list[float], "flags": list[str]}
+
+
+def _shot_features_model() -> type[BaseModel]:
+    """The shot features as a typed model, from the one declaration of them
+    (:class:`~solitonde.signal.features.Features`); keys a later extractor adds pass through."""
+    fields: dict[str, Any] = {
+        name: (_KIND_TYPES[kind], Field(None if kind in ("number", "optional") else [],
+                                        description=FEATURE_DESCRIPTIONS.get(name)))
+        for name, kind in FIELD_KINDS.items()}
+    return create_model("ShotFeatures", __config__=ConfigDict(extra="allow"),
+                        __doc__="What the extractor read of one shot: the template reading "
+                        "(tof_s, arr: what the inversion uses) and the paper's peak reading "
+                        "(tof_peak_s, arr_peak) beside it.", **fields)
+
+
+ShotFeatures = _shot_features_model()
+
+
 class ShotOut(BaseModel):
     """Features measured on one shot."""
 
@@ -162,9 +233,8 @@ class ShotOut(BaseModel):
     t0: float
     dt: float
     units: str
-    features: dict[str, Any] = Field(
-        description="tof_s, arr, incident_time_s, reflected_time_s, incident_peak_N, "
-                    "reflected_peak_N, snr_db, flags, ...")
+    features: ShotFeatures = Field(  # type: ignore[valid-type]
+        description="what the extractor read of the shot (each field says which reading)")
 
 
 class MeasurementOut(BaseModel):
@@ -180,7 +250,10 @@ class MeasurementOut(BaseModel):
     aggregates: list[dict[str, Any]] = Field(
         description="per sphere diameter: mean, std and count of TOF and ARR, outliers reported")
     estimate: dict[str, Any] | None = Field(
-        description="thickness_m and distance_m (map, median, ci68, ci95, status), or null")
+        description="thickness_m and distance_m (map, median, ci68, ci95, status: "
+        "constrained, lower_bound_only, upper_bound_only, unconstrained, ambiguous, "
+        "inconsistent or out_of_range), readings (an ambiguous answer's: thickness_m, "
+        "distance_m, weight), fit, warnings; or null")
     estimate_reason: str | None = Field(None, description="why the estimate is null")
     table: str | None = Field(None, description="id of the model table the estimate used "
                               "(GET /v1/tables gives its plate family)")
@@ -224,7 +297,7 @@ class MeasurementPage(BaseModel):
 class InversionInput(Strict):
     """Summary of the shots with one sphere size."""
 
-    diameter_m: float = Field(gt=0, le=1.0, description="sphere diameter D, m")
+    diameter_m: SphereSize = Field(description="sphere diameter D, m")
     tof_s: float | None = Field(None, gt=0, le=1.0, description="mean time of flight, s (null "
                                 "with arr for a size whose shots show no reflection)")
     tof_std_s: float | None = Field(None, ge=0, le=1.0,
@@ -244,7 +317,7 @@ class InversionInput(Strict):
 class CalibrationEntry(Strict):
     """One sphere size's calibration, as ``solitonde calibrate`` writes it."""
 
-    diameter_m: float = Field(gt=0, le=1.0, description="sphere diameter D, m")
+    diameter_m: SphereSize = Field(description="sphere diameter D, m")
     arr_factor: float = Field(1.0, gt=0, le=10.0)
     tof_offset_s: float = Field(0.0, ge=-1e-2, le=1e-2)
     arr_factor_std: float | None = Field(None, ge=0, le=10.0)

@@ -88,18 +88,20 @@ def test_a_flag_the_service_would_refuse_is_a_usage_error_naming_the_flag() -> N
 
 def test_the_cli_and_the_service_refuse_the_same_file(tmp_path: Path) -> None:
     """A file stating a sphere size of 2.5 m: the service answers 422 naming the metadata key,
-    `analyze` fails that file naming the same key (it analysed it before)."""
+    `analyze` fails that file naming the same key (it analysed it before), each saying that
+    sizes are in metres."""
     path = _with_header(tmp_path, "sphere_diameter", "2.5")
     res = _cli("analyze", path, "--json")
     assert res.exit_code == 1, res.output
     (err,) = json.loads(res.stdout)["errors"]
-    assert err["error"].startswith("metadata.sphere_diameter: 2.5 is not a sphere diameter")
+    assert err["error"].startswith("metadata.sphere_diameter: sizes are in metres: 2.5 mm is "
+                                   "2.5e-3")
     settings = Settings(store_path=tmp_path / "store.sqlite")
     with TestClient(build_app(settings)) as client:
         r = client.post("/v1/measurements", files={"file": (path.name, path.read_bytes())})
     assert r.status_code == 422, r.text
     assert r.json()["field"] == "file.shots.0.metadata.sphere_diameter"
-    assert "2.5 is not a sphere diameter" in r.json()["detail"]
+    assert "sizes are in metres: 2.5 mm is 2.5e-3" in r.json()["detail"]
     # the same file with a plausible size goes through both
     good = _with_header(tmp_path, "sphere_diameter", "0.00953")
     assert _cli("analyze", good, "--json").exit_code == 0
