@@ -138,3 +138,41 @@ def test_the_schema_types_the_shot_features_and_says_which_reading_each_is(
     assert "paper's definition" in props["tof_peak_s"]["description"]
     assert "paper's definition" in props["arr_peak"]["description"]
     assert {"type": "number"} in props["arr"]["anyOf"]
+
+
+def test_an_ambiguous_answers_readings_travel_through_the_estimates_file_to_the_map() -> None:
+    """The estimates file keeps the readings (JSON column); a map made from the file shows them
+    at their position."""
+    import io
+
+    import pandas as pd
+
+    from solitonde.instrument.inference.estimate_rows import estimate_row, to_bytes
+    from solitonde.instrument.inference.plate_map import from_estimate_rows
+
+    reading = {"thickness_m": {"map": 3.0e-3, "median": 3.0e-3, "ci68": [2.9e-3, 3.1e-3],
+                               "ci95": [2.8e-3, 3.2e-3], "status": "constrained"},
+               "distance_m": {"map": 0.02, "median": 0.02, "ci68": [0.018, 0.022],
+                              "ci95": [0.015, 0.025], "status": "constrained"}, "weight": 0.3}
+    estimate = {"thickness_m": {"map": None, "median": None, "ci68": None,
+                                "ci95": [2.8e-3, 3.6e-3], "status": "ambiguous"},
+                "distance_m": {"map": None, "median": None, "ci68": None,
+                               "ci95": [0.015, 0.4], "status": "ambiguous"},
+                "readings": [reading, {**reading, "weight": 0.7}], "warnings": []}
+    row = estimate_row({"plate_id": "P", "position": "A", "x_m": 0.1, "y_m": 0.2}, [9.53e-3], 1,
+                       estimate, None)
+    frame = pd.read_csv(io.BytesIO(to_bytes([row], "csv")))
+    assert frame.loc[0, "thickness_m_status"] == "ambiguous"
+    assert json.loads(frame.loc[0, "readings"])[0] == reading
+    (position,) = from_estimate_rows(frame.to_dict("records"))
+    assert [r["weight"] for r in position["readings"]] == [0.3, 0.7]
+    assert position["thickness_m"]["status"] == "ambiguous"
+
+
+def test_table_info_names_the_material_spread_and_where_it_comes_from() -> None:
+    result = CliRunner().invoke(build_cli(), ["table", "info", str(DEFAULT_TABLE), "--json"])
+    assert result.exit_code == 0, result.output
+    spread = json.loads(result.output)["material_spread"]
+    assert spread["source"] == "library" and spread["youngs_modulus_rel_sd"] > 0
+    text = CliRunner().invoke(build_cli(), ["table", "info", str(DEFAULT_TABLE)]).output
+    assert "plate material spread: E +- 0.85 %" in text and "its grade's" in text
