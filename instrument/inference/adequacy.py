@@ -65,9 +65,9 @@ CAUSES = ("the plate's material is not the table's (check the plate, or give "
 MATERIAL_EDGE_SD = 1.0
 """The material term's posterior mean, in its spread's sd of E', at which the answer says the data
 sit at the edge of the material's range. The data barely move it on a plate of the grade (over
-validate's right-family plates, drawn from the spread: sd 0.15 on the aluminium table, 0.39 on
-the steel table, at least 1 in 1 of 278); a steel plate of E 210 GPa, nu 0.30 read against a
-table of E 200 GPa, nu 0.26 (E' 2.4 sd out) moves it by 1.0-1.16."""
+validate's right-family plates, drawn from the spread, D 9.53 mm: sd 0.15 and none of 178 at 1 or
+beyond on the aluminium table; sd 0.39 and 1 of 100 on the steel table); a steel plate of E 210
+GPa, nu 0.30 read against a table of E 200 GPa, nu 0.26 (E' 2.4 sd out) moves it by 1.0-1.16."""
 NO_CALIBRATION = ("no calibration on a reference plate: the model's ARR runs above measured ones "
                   "(the paper's Figs. 5 and 7), so thickness comes out low; run `solitonde "
                   "calibrate` on a reference plate and give its file")
@@ -122,7 +122,6 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float, thinnest_m: flo
         for name in ("thickness_m", "distance_m"):
             getattr(est, name).status = "inconsistent"
         est.reason = (est.reason + "; " if est.reason else "") + f"inconsistent: {why}"
-    other = est.extra.get("other_reading")
     readings = getattr(est, "readings", [])
     widened = est.extra.get("ridge_widened")
     if readings and why is None and not est.out_of_range:
@@ -135,16 +134,6 @@ def judge(est: Any, floor_arr_max: float, floor_d_over_t: float, thinnest_m: flo
             "distances by how much of the table's range fits each would give. Near a support "
             "a thinner plate nearer to it can mimic a thicker one farther out; a known distance "
             "(a scan's edge: solitonde map --joint) or another sphere size tells them apart")
-    elif other is not None and why is None and not est.out_of_range:
-        lo, hi = other["thickness_m"]
-        warnings.append(
-            f"another reading fits as well: the data allow {lo * 1e3:.3g}-{hi * 1e3:.3g} mm over "
-            f"every distance to a support (e.g. {other['thickness_at_m'] * 1e3:.3g} mm at "
-            f"{other['distance_m'] * 1e3:.3g} mm from it), beyond the interval given, which "
-            "weighs the readings by how much of the table's distance range fits each. Near a "
-            "support a thinner plate nearer to it can mimic a thicker one farther out; a known "
-            "distance (a scan's edge: solitonde map --joint) or another sphere size tells them "
-            "apart")
     hidden = [i for i in est.inputs if i.hidden]
     for i in hidden:
         within = ("" if i.tof_window_s is None else

@@ -37,15 +37,15 @@ at an end of the table that is not a physical limit, the data do not bound the p
 side (``lower_bound_only``: e.g. L beyond the critical distance, where TOF and ARR no longer depend
 on L; ``upper_bound_only``; ``unconstrained`` on both sides). A one-sided result reports only the
 bound (``ci95 = [lower, null]``), no MAP or median: the table's end is not an estimate; the bound
-is where the density falls to the level of a likelihood-ratio interval (:data:`LR_LEVELS`), since a
-quantile of a density flat out to the table's end would follow the table's extent. A measurement no
-table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no numbers at all. With
-several sphere sizes, when all together are out of range but the others are not once one size is
-left out, that answer is given, with the size left out named (``excluded_diameters_m``,
-``reason``): one disagreeing channel does not void the others. Unless the size left out is a large
-sphere beyond D/t = 5 at the answer (its floor-level train), the answer is then marked
-``inconsistent`` (:mod:`.adequacy`): its numbers are the other sizes', but the family does not
-explain the sizes together.
+is where the density falls to the level of a likelihood-ratio interval (``marginals.LR_LEVELS``),
+since a quantile of a density flat out to the table's end would follow the table's extent. A
+measurement no table point explains (chi^2 beyond the 1e-6 tail) is ``out_of_range`` with no
+numbers at all. With several sphere sizes, when all together are out of range but the others are
+not once one size is left out, that answer is given, with the size left out named
+(``excluded_diameters_m``, ``reason``): one disagreeing channel does not void the others. Unless
+the size left out is a large sphere beyond D/t = 5 at the answer (its floor-level train), the
+answer is then marked ``inconsistent`` (:mod:`.adequacy`): its numbers are the other sizes', but
+the family does not explain the sizes together.
 
 Near a support the likelihood is a ridge in (t, L), and the marginal weighs its parts by the
 prior's volume in L, not by how well they fit. The thickness answer is therefore checked against
@@ -852,15 +852,15 @@ def _material_shift(m3: np.ndarray, b: np.ndarray, post: np.ndarray) -> list[flo
     standard deviations along ``(d ln E', d ln rho)``: per cell ``(I + M)^-1 b`` (the Gaussian
     material term's own posterior mean, M and b as in :func:`_solve2`), averaged over the
     posterior. Two or more in E' means the data fit a plate at the edge of the grade's range."""
-    a00, a01, a11 = m3
+    # the cells that carry the posterior (a billionth of its peak and up) decide the mean
+    cells = np.flatnonzero(post.ravel() > 1e-9 * float(post.max()))
+    a00, a01, a11 = (m.ravel()[cells] for m in m3)
     a00 = a00 + 1.0
     a11 = a11 + 1.0
     det = a00 * a11 - a01 * a01
-    b0, b1 = b
-    ok = post > 0
-    u0 = np.where(ok, (a11 * b0 - a01 * b1) / np.where(ok, det, 1.0), 0.0)
-    u1 = np.where(ok, (a00 * b1 - a01 * b0) / np.where(ok, det, 1.0), 0.0)
-    return [float(np.sum(post * u0)), float(np.sum(post * u1))]
+    b0, b1 = (v.ravel()[cells] for v in b)
+    w = post.ravel()[cells] / det
+    return [float(np.dot(w, a11 * b0 - a01 * b1)), float(np.dot(w, a00 * b1 - a01 * b0))]
 
 
 def _bilinear2(m3: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -9,8 +9,10 @@ a 3.25 mm plate anywhere beyond 30 mm, and the marginal, carried by the far part
 
 The profile likelihood of thickness (the best fit over every distance) has no such volume. Its
 95 % set, the thicknesses whose profile is above the likelihood-ratio level of chi^2_1 = 3.84
-(:data:`~solitonde.instrument.inference.marginals.LR_LEVELS`), is a union of runs on the grid.
-With the marginal's own 95 % interval they make groups (runs that touch or overlap merge):
+(:data:`~solitonde.instrument.inference.marginals.LR_LEVELS`), is a union of runs on the grid. A
+run counts where it reaches beyond the marginal's 95 % interval by more than :data:`REACH`; runs
+the profile joins above the 99 % level are one (:data:`SEPARATE_LEVEL`). With the marginal's own
+95 % interval the counted runs make groups (spans that touch or overlap merge):
 
 * one group: the answer keeps its status, and its intervals reach over the group (the hull of the
   marginal's interval and the profile's runs at that level, 68 % and 95 % alike): each of the

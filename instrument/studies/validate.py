@@ -97,6 +97,9 @@ STATUSES = ("constrained", "lower_bound_only", "upper_bound_only", "unconstraine
 ANSWERS = ("constrained", "lower_bound_only", "upper_bound_only", "ambiguous")
 """Thickness statuses that are an answer (with at least one bound; an ``ambiguous`` one with
 its readings)."""
+OTHER_READING_WARNING = "another reading fits as well"
+"""How the warning of another reading near a support starts (a widened answer's or an ambiguous
+one's: instrument.inference.adequacy)."""
 DISTANCE_BINS_M = (0.0, 0.015, 0.03, 0.06, 0.12, None)
 """Edges of the distance bins ``by_distance`` scores (m; the last bin open)."""
 
@@ -444,8 +447,9 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     handled = [bool(r.get("flagged")) or bool(r.get("thickness_covered")) for r in rows]
     missed = [_missed_unflagged(r) for r in rows]
     # ... and of those, the ones no warning of another reading came with
-    unwarned = [m and r.get("other_reading") is None for m, r in zip(missed, rows, strict=True)]
-    warned = [r.get("other_reading") is not None for r in rows]
+    warned = [any(w.startswith(OTHER_READING_WARNING) for w in r.get("warnings") or [])
+              for r in rows]
+    unwarned = [m and not w for m, w in zip(missed, warned, strict=True)]
     metrics = {
         "n": n,
         "seed": seed,
