@@ -62,8 +62,10 @@ class Outcome:
     """What became of one upload.
 
     ``state`` is ``stored`` (201, new), ``replayed`` (201, the server had it: the same id as the
-    first time), ``refused`` (a 4xx the request itself caused: not retried) or ``unreachable``
-    (no answer, or a transient status: try again later).
+    first time), ``duplicate`` (200: the server holds these shots' samples already, as the
+    measurement it names; what the metadata says otherwise is listed), ``refused`` (a 4xx the
+    request itself caused: not retried) or ``unreachable`` (no answer, or a transient status:
+    try again later).
     """
 
     source: str
@@ -75,7 +77,7 @@ class Outcome:
 
     @property
     def ok(self) -> bool:
-        return self.state in ("stored", "replayed")
+        return self.state in ("stored", "replayed", "duplicate")
 
     @property
     def transient(self) -> bool:
@@ -87,7 +89,9 @@ class Outcome:
                 "status_code": self.status_code, "idempotency_key": self.key,
                 "plate_id": m.get("plate_id"), "position": m.get("position"),
                 "n_shots": m.get("n_shots"), "estimate": m.get("estimate"),
-                "estimate_reason": m.get("estimate_reason"), "error": self.error}
+                "estimate_reason": m.get("estimate_reason"), "error": self.error,
+                "duplicate_of": m.get("duplicate_of"),
+                "metadata_differences": m.get("metadata_differences")}
 
 
 @dataclass
@@ -136,6 +140,8 @@ class Client:
         if r.status_code == 201:
             replayed = r.headers.get("idempotent-replayed", "").lower() == "true"
             return Outcome(str(path), "replayed" if replayed else "stored", key, 201, r.json())
+        if r.status_code == 200 and r.json().get("duplicate_of") is not None:
+            return Outcome(str(path), "duplicate", key, 200, r.json())
         return Outcome(str(path), "unreachable" if r.status_code in TRANSIENT_STATUS
                        else "refused", key, r.status_code, error=_problem_text(r))
 
@@ -230,6 +236,10 @@ def status_line(outcome: Outcome) -> str:
         text = (f"{outcome.state}: {outcome.source} -> measurement {m.get('id')}"
                 f" ({m.get('n_shots')} shot{'s' if m.get('n_shots') != 1 else ''}"
                 f"{', ' + where if where else ''})")
+        if outcome.state == "duplicate":
+            text += " (these shots were stored already; not stored again" + "".join(
+                f"; shot {d['shot']} {d['key']}: stored {d['stored']!r}, sent {d['sent']!r}"
+                for d in m.get("metadata_differences") or []) + ")"
         est = estimate_text(m)
         return f"{text}: {est}" if est else text
     return f"{'failed' if outcome.state == 'refused' else 'not sent'}: {outcome.source}: " \

@@ -55,7 +55,6 @@ METADATA_KEYS_MAX = 100
 """Most keys one shot's metadata may hold."""
 NESTED_MAX = 16_384
 """Largest nested metadata value (a mapping or list), in bytes of JSON."""
-"""Largest sphere diameter, m (0 < D <= this)."""
 COORDINATE_MAX = 1e3
 """Largest ``|x_m|``, ``|y_m|`` a request states, m (the plate's own size bounds them further
 where a table gives it)."""
@@ -167,6 +166,21 @@ def _real(value: Any) -> bool:
             and math.isfinite(float(value)))
 
 
+IDENTIFIERS = ("plate_id", "position")
+"""The metadata that name a plate and a position: stored, listed and put in URLs."""
+
+
+def check_identifier(value: str, field: str) -> None:
+    """A plate id or position: printable text, not blank (any printable character, ``/`` and
+    spaces included, is kept and served). ShotInputError naming ``field``."""
+    if not value.strip():
+        raise ShotInputError(field, f"{value!r} is blank", "printable text, not only spaces")
+    odd = next((ch for ch in value if not ch.isprintable()), None)
+    if odd is not None:
+        raise ShotInputError(field, f"{value!r} holds the control character {odd!r}",
+                             "printable text (letters, digits, spaces, punctuation, / )")
+
+
 def check_sizes(meta: Mapping[str, Any], field_of: Callable[[str], str]) -> None:
     """The limits JSON metadata has, for metadata from any source: plate_id and position at most
     :data:`IDENTIFIER_MAX` characters, other text at most :data:`TEXT_MAX`, a key at most
@@ -181,10 +195,12 @@ def check_sizes(meta: Mapping[str, Any], field_of: Callable[[str], str]) -> None
             raise ShotLimitError(field_of(key[:40]), f"a key of {len(key)} characters; at most "
                                  f"{KEY_MAX}")
         if isinstance(value, str):
-            limit = IDENTIFIER_MAX if key in ("plate_id", "position") else TEXT_MAX
+            limit = IDENTIFIER_MAX if key in IDENTIFIERS else TEXT_MAX
             if len(value) > limit:
                 raise ShotLimitError(field_of(key), f"{len(value):,} characters; at most "
                                      f"{limit}")
+            if key in IDENTIFIERS:
+                check_identifier(value, field_of(key))
         elif isinstance(value, Mapping | list | tuple):
             size = len(json.dumps(json_ready(value), default=str))
             if size > NESTED_MAX:

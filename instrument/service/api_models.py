@@ -131,6 +131,9 @@ class _QueryParams(Strict):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
 
 
+ALLOW_DUPLICATE_HELP = ("store the shots even where a stored measurement has the same samples "
+                        "in the same order (default: that measurement is answered, 200, with "
+                        "duplicate_of and metadata_differences)")
 _SHOT_QUERY_KEYS = ("dt", "t0", "units", "calibration")
 _METADATA_QUERY_KEYS = ("plate_id", "position", "sphere_diameter", "shot")
 
@@ -148,6 +151,7 @@ BinaryShotParams = create_model(
        for k in _SHOT_QUERY_KEYS},
     **{k: (ShotMetadata.model_fields[k].annotation, ShotMetadata.model_fields[k])
        for k in _METADATA_QUERY_KEYS},
+    allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
 )
 
 
@@ -168,6 +172,7 @@ def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type
                  "Top-level metadata applies to every shot unless a shot sets the key itself."),
         shots=(list[shot], Field(..., min_length=1, max_length=max_shots)),  # type: ignore[valid-type]
         metadata=(ShotMetadata | None, Field(None, description="metadata shared by all shots")),
+        allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
     )
     return shot, measurement
 
@@ -267,6 +272,11 @@ class MeasurementOut(BaseModel):
         "replaced, oldest first: superseded_at, provenance, table, aggregates, estimate, "
         "estimate_reason, shot_features")
     links: dict[str, str] = Field(default_factory=dict)
+    duplicate_of: int | None = Field(None, description="on a 200 to a post: the stored "
+                                     "measurement whose samples these shots are, in order")
+    metadata_differences: list[dict[str, Any]] | None = Field(
+        None, description="on a 200 to a post: per shot, what the request's metadata says "
+        "otherwise than the stored measurement's (shot, key, stored, sent)")
     skipped_channels: list[dict[str, str]] = Field(
         default_factory=list, description="an upload's channels not analysed: {channel, reason} "
         "(a trigger step or flat line, or not the channel asked for); not stored")

@@ -22,7 +22,12 @@ from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import ShotMetadata
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.settings import Settings
-from solitonde.instrument.service.store import MeasurementRecord, ShotRecord, Store
+from solitonde.instrument.service.store import (
+    MeasurementRecord,
+    ShotRecord,
+    Store,
+    samples_digest,
+)
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
@@ -266,9 +271,22 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet,
 
 def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: TableSet,
                       source: str, prefix: str,
-                      idempotency: tuple[str, str] | None = None) -> dict[str, Any]:
-    """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict."""
+                      idempotency: tuple[str, str] | None = None,
+                      allow_duplicate: bool = False) -> dict[str, Any]:
+    """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict.
+
+    Shots whose samples are, in order, a stored measurement's are not stored again (unless
+    ``allow_duplicate``): the answer is that measurement with ``duplicate_of`` (its id) and
+    ``metadata_differences`` (what the request says otherwise, per shot)."""
     plate_id, position = location_of(waveforms, prefix)
+    chosen = choose_table(waveforms, tables, prefix)  # the checks a new one would get first
+    check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
+    if not allow_duplicate:
+        found = store.same_samples([samples_digest(wf.samples) for wf in waveforms])
+        record = None if found is None else store.get(found)
+        if record is not None:
+            return {**measurement_dict(record), "duplicate_of": record.id,
+                    "metadata_differences": metadata_differences(waveforms, record)}
     shots, result = compute_result(waveforms, tables, prefix)
     records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
                           calibration=wf.calibration, metadata=s["metadata"],
@@ -279,6 +297,19 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
     return measurement_dict(MeasurementRecord(
         id=new_id, created_at=created_at, plate_id=plate_id, position=position,
         n_shots=len(records), source=source, result=result, shots=records))
+
+
+def metadata_differences(waveforms: Sequence[Waveform], record: Any) -> list[dict[str, Any]]:
+    """Per shot, the metadata keys whose value a request states otherwise than the stored
+    measurement ``record`` (``stored`` and ``sent``, JSON values)."""
+    out = []
+    for i, (wf, shot) in enumerate(zip(waveforms, record.shots, strict=True)):
+        sent, stored = json_ready(dict(wf.metadata)), shot.metadata
+        for key in sorted(set(sent) | set(stored)):
+            if sent.get(key) != stored.get(key):
+                out.append({"shot": i, "key": key, "stored": stored.get(key),
+                            "sent": sent.get(key)})
+    return out
 
 
 def measurement_dict(record: Any) -> dict[str, Any]:

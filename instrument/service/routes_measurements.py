@@ -27,6 +27,7 @@ from pydantic import ConfigDict, Field, ValidationError, create_model
 from pydantic.fields import FieldInfo
 
 from solitonde.instrument.service.api_models import (
+    ALLOW_DUPLICATE_HELP,
     BINARY_DTYPES,
     BINARY_MEDIA_TYPE,
     BinaryShotParams,
@@ -104,6 +105,7 @@ UploadFields = create_model(
                                "default: the file's channels that are sensor traces (a trigger "
                                "step or a flat line is skipped, and listed)")),
     dataset=(str | None, Field(None, max_length=200, description="HDF5 dataset")),
+    allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
 )
 """Form fields that come with an uploaded file; the metadata's and the sampling's limits are
 :class:`ShotMetadata`'s and :class:`ShotBase`'s own (one declaration)."""
@@ -143,6 +145,11 @@ _POST_LINKS = {201: {"description": "the stored measurement", "links": {
                             ("GetShot", "get_shot", {"shot_index": 0}),
                             ("PlotMeasurement", "plot_measurement", {}),
                             ("DeleteMeasurement", "delete_measurement", {}))}}}
+_POST_LINKS[200] = {"description": "these shots' samples are a stored measurement's, in order: "
+                    "that measurement, not stored again, with duplicate_of (its id) and "
+                    "metadata_differences (unless allow_duplicate)",
+                    "content": {"application/json": {"schema": {
+                        "$ref": "#/components/schemas/MeasurementOut"}}}}
 _FULL = {507: {**PROBLEM_RESPONSE, "description": "the store (or the upload's temporary "
                 "folder) has no room: nothing was written; retry later (Retry-After)"}}
 FULL_RETRY_AFTER_S = 60
@@ -251,7 +258,8 @@ async def _post(request: Request, svc: Service, media: str) -> JSONResponse:
             raise Problem(409, "Idempotency-Key: the request that took this key was removed "
                           "meanwhile; retry", kind="conflict", field="Idempotency-Key") from None
         return replay
-    return JSONResponse(result, status_code=201,
+    # shots already stored: that measurement, 200 (nothing was created)
+    return JSONResponse(result, status_code=200 if result.get("duplicate_of") else 201,
                         headers={"Location": f"/v1/measurements/{result['id']}"})
 
 
@@ -316,7 +324,8 @@ def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None)
         raise from_pydantic(exc, svc.measurement_model) from None
     waveforms = waveforms_from_shots(request.shots, request.metadata)
     check_counts(waveforms, svc.settings, "shots")
-    return measure_and_store(waveforms, svc.store, svc.tables, "json", "shots", idem)
+    return measure_and_store(waveforms, svc.store, svc.tables, "json", "shots", idem,
+                             request.allow_duplicate)
 
 
 def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
@@ -351,7 +360,8 @@ def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
                             units=params.units, calibration=params.calibration, metadata=meta)
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
-    return measure_and_store([waveform], svc.store, svc.tables, "binary", "", idem)
+    return measure_and_store([waveform], svc.store, svc.tables, "binary", "", idem,
+                             params.allow_duplicate)
 
 
 async def _ingest_upload(svc: Service, request: Request, key: str | None = None) -> Any:
@@ -445,7 +455,7 @@ def _ingest_file(svc: Service, stream: Any, fmt: str, opts: Any,
         waveforms = [wf.with_metadata(**meta) for wf in waveforms]
     check_counts(waveforms, settings, "file.shots")
     stored = measure_and_store(waveforms, svc.store, svc.tables, f"upload:{fmt}", "file.shots",
-                               idem)
+                               idem, opts.allow_duplicate)
     return {**stored, "skipped_channels": skipped}
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 from typing import TYPE_CHECKING, Any, Literal
+from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
@@ -32,7 +33,15 @@ router = APIRouter(tags=["plates"], dependencies=[AUTH])
 MAP_POSITIONS_MAX = 5_000
 """Measurements read for one map; a plate with more is refused with 422 (a limit, stated)."""
 
-PlateId = Path(..., min_length=1, max_length=200, description="the plate's plate_id")
+PlateId = Path(..., min_length=1, max_length=200, description="the plate's plate_id, "
+               "percent-encoded (a / in it as %2F, or as it is)")
+
+
+def plate_links(plate_id: str) -> dict[str, str]:
+    """A plate's links, its id percent-encoded whole (a ``/``, a space or a ``?`` in it stays
+    part of the id)."""
+    key = quote(plate_id, safe="")
+    return {"map": f"/v1/plates/{key}/map", "map_png": f"/v1/plates/{key}/map.png"}
 
 
 @router.get("/plates", responses=ERRORS, summary="Plates in the store, with counts")
@@ -44,8 +53,7 @@ async def list_plates(svc: ServiceDep) -> dict[str, Any]:
     plates = await run_in_threadpool(svc.store.plates)
     for p in plates:
         p["last_activity"] = iso_utc(p["last_activity"])
-        p["links"] = {"map": f"/v1/plates/{p['plate_id']}/map",
-                      "map_png": f"/v1/plates/{p['plate_id']}/map.png"}
+        p["links"] = plate_links(p["plate_id"])
     return {"items": plates}
 
 
@@ -122,7 +130,7 @@ def _map(svc: Service, plate_id: str, options: JointOptions | None = None) -> di
     return result
 
 
-@router.get("/plates/{plate_id}/map", responses={**ERRORS, 404: PROBLEM_RESPONSE},
+@router.get("/plates/{plate_id:path}/map", responses={**ERRORS, 404: PROBLEM_RESPONSE},
             operation_id="plate_map",
             summary="A plate's map: positions, estimates, the located support")
 async def get_map(svc: ServiceDep, plate_id: str = PlateId,
@@ -142,7 +150,7 @@ async def get_map(svc: ServiceDep, plate_id: str = PlateId,
     return await run_in_threadpool(_map, svc, plate_id, query.options)
 
 
-@router.get("/plates/{plate_id}/map.png", response_class=Response,
+@router.get("/plates/{plate_id:path}/map.png", response_class=Response,
             responses={**ERRORS, 404: PROBLEM_RESPONSE, 200: {"content": {"image/png": {}}}},
             operation_id="plate_map_png",
             summary="PNG of a plate's thickness and distance-to-support maps")

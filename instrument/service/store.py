@@ -74,6 +74,7 @@ CREATE TABLE IF NOT EXISTS earlier_results (
 );
 CREATE INDEX IF NOT EXISTS earlier_results_by_measurement
     ON earlier_results (measurement_id, superseded_at);
+CREATE INDEX IF NOT EXISTS shots_by_content ON shots (sha256, shot_index);
 """
 
 
@@ -180,11 +181,21 @@ class MeasurementRecord:
     """Results a reanalysis replaced (:meth:`Store.earlier_results`); :meth:`Store.get` fills it."""
 
 
-def encode_samples(samples: np.ndarray) -> tuple[str, str, bytes]:
-    """Compress a trace losslessly; returns (dtype, sha256 of the raw samples, blob)."""
+def _stored_form(samples: np.ndarray) -> np.ndarray:
+    """The samples as stored: float32 where that is exact, else float64 (little-endian)."""
     x = np.ascontiguousarray(samples, dtype="<f8")
     x32 = x.astype("<f4")
-    raw = x32 if np.array_equal(x32.astype("<f8"), x) else x
+    return x32 if np.array_equal(x32.astype("<f8"), x) else x
+
+
+def samples_digest(samples: np.ndarray) -> str:
+    """The SHA-256 of a trace's samples as stored (what ``shots.sha256`` holds)."""
+    return hashlib.sha256(_stored_form(samples).tobytes()).hexdigest()
+
+
+def encode_samples(samples: np.ndarray) -> tuple[str, str, bytes]:
+    """Compress a trace losslessly; returns (dtype, sha256 of the raw samples, blob)."""
+    raw = _stored_form(samples)
     data = raw.tobytes()
     digest = hashlib.sha256(data).hexdigest()
     return raw.dtype.str, digest, pa.compress(data, codec="zstd", asbytes=True)
@@ -434,6 +445,24 @@ class Store:
                 "measurement_id = ? ORDER BY superseded_at, rowid", (measurement_id,)).fetchall()
         return [{"superseded_at": r[0], "result": json.loads(r[1]),
                  "shot_features": json.loads(r[2])} for r in rows]
+
+    def same_samples(self, digests: Sequence[str]) -> int | None:
+        """The first stored measurement whose shots' samples are, in order, these (their
+        :func:`samples_digest`), or None."""
+        if not digests:
+            return None
+        with self._lock:
+            candidates = [row[0] for row in self._conn.execute(
+                "SELECT s.measurement_id FROM shots s JOIN measurements m ON m.id = "
+                "s.measurement_id WHERE s.sha256 = ? AND s.shot_index = 0 AND m.n_shots = ? "
+                "ORDER BY s.measurement_id", (digests[0], len(digests)))]
+            for measurement_id in candidates:
+                stored = [row[0] for row in self._conn.execute(
+                    "SELECT sha256 FROM shots WHERE measurement_id = ? ORDER BY shot_index",
+                    (measurement_id,))]
+                if stored == list(digests):
+                    return int(measurement_id)
+        return None
 
     def idempotent(self, key: str) -> tuple[str, int] | None:
         """The request digest and measurement id stored under ``key``, or None."""

@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+import h5py
 import httpx
 import pytest
 from service_support import free_port, start_uvicorn, stop_group
@@ -85,8 +86,11 @@ def test_post_twice_stores_one_measurement_and_the_second_answer_is_a_replay(ser
                                                             f"{answers[0]['id']} (2 shots")
 
 
-def test_post_other_metadata_is_another_measurement_and_a_refusal_exits_1(server, tmp_path):
-    """The key includes the metadata; a file the server refuses is reported and exits 1."""
+def test_post_the_same_shots_under_other_metadata_are_a_duplicate_and_a_refusal_exits_1(
+        server, tmp_path):
+    """The same file under another plate id: the server holds its shots already, and says so
+    (``duplicate``, the stored measurement's id, what the metadata says otherwise) rather than
+    storing them twice; a file the server refuses is reported and exits 1."""
     bad = tmp_path / "empty.csv"
     bad.write_text("time_s,force_N\n")
     run = subprocess.run(_cli("post", str(CSV), str(bad), "--server", server, "--plate-id",
@@ -94,7 +98,9 @@ def test_post_other_metadata_is_another_measurement_and_a_refusal_exits_1(server
                          timeout=120)
     assert run.returncode == 1
     good, refused = (json.loads(line) for line in run.stdout.splitlines())
-    assert good["state"] == "stored" and good["plate_id"] == "P-OTHER"
+    assert good["state"] == "duplicate" and good["duplicate_of"] == good["id"]
+    assert {"shot": 0, "key": "plate_id", "stored": good["plate_id"], "sent": "P-OTHER"} in \
+        good["metadata_differences"]
     assert refused["state"] == "refused" and refused["status_code"] == 422, refused
 
 
@@ -220,16 +226,24 @@ def test_watch_stores_every_file_exactly_once_through_an_outage_and_a_restart(tm
         assert crash.returncode == 0
         assert f"replayed: shot_a.csv -> measurement {by_source['upload:csv']['id']} " \
             in crash.stdout, crash.stdout
-        # New content under an old name is a new version, stored once.
+        # New content under an old name is a new version, stored once; the same samples
+        # under a new name (or a file changed only in its text) are not stored twice.
         shutil.copy(NPY, folder / "shot_a.csv.npy")
         shutil.copy(CSV, folder / "shot_a.csv")
         with (folder / "shot_a.csv").open("a") as fh:
             fh.write("\n")
+        shutil.copy(H5, folder / "shot_d.h5")
+        with h5py.File(folder / "shot_d.h5", "r+") as fh:  # one sample of one shot changed
+            samples = fh["shots/shot_000"]
+            samples[0] = samples[0] + 1.0
         time.sleep(0.05)
         last = subprocess.run([*args, "--once"], capture_output=True, text=True, env=_env(),
                               timeout=180)
         assert last.returncode == 0, last.stdout
-        assert len(_items(url)) == 5
+        dup = sorted(s.split(": ")[1].split(" ->")[0] for s in last.stdout.splitlines()
+                     if s.startswith("duplicate: "))
+        assert dup == ["shot_a.csv", "shot_a.csv.npy"], last.stdout
+        assert len(_items(url)) == 4
     finally:
         stop_group(proc)
 
