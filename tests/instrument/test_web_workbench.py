@@ -87,8 +87,8 @@ def test_upload_see_the_estimate_open_the_second_shot_and_see_live_updates(serve
             result = page.locator("#upload-result")
             result.filter(has_text="thickness").wait_for(timeout=60_000)
             text = result.inner_text()
-            m = re.match(r"scope_0001\.csv: measurement (\d+), 2 shots; thickness (\S+) \(95 %",
-                         text)
+            m = re.match(r"scope_0001\.csv: measurement (\d+), 2 shots; thickness (\S+) mm "
+                         r"\(95 %", text)
             assert m, text
             measurement_id = int(m.group(1))
             assert abs(float(m.group(2)) - 4.83) < 0.1, text  # the sample's plate: 4.83 mm
@@ -125,9 +125,11 @@ def test_upload_see_the_estimate_open_the_second_shot_and_see_live_updates(serve
             assert parquet.ok and parquet.body()[:4] == b"PAR1"
             # live: a measurement posted by another client appears without a reload
             shots = [{**w.to_dict(), "metadata": {}} for w in signal_io.read(recording)]
+            # (the same recording: stored again only because the request says so)
             r = httpx.post(f"{server}/v1/measurements", timeout=120, json={
-                "shots": shots, "metadata": {"plate_id": "WEB-1", "position": "A2", "x_m": 0.15,
-                                             "y_m": 0.2, "sphere_diameter": 9.53e-3}})
+                "shots": shots, "allow_duplicate": True,
+                "metadata": {"plate_id": "WEB-1", "position": "A2", "x_m": 0.15, "y_m": 0.2,
+                             "sphere_diameter": 9.53e-3}})
             assert r.status_code == 201, r.text
             page.locator("#positions tbody tr", has_text="A2").wait_for(timeout=20_000)
             page.locator("#measurements tbody tr", has_text="A2").wait_for(timeout=20_000)
@@ -157,3 +159,101 @@ def test_a_refused_upload_says_why_on_the_page(server, tmp_path):
             assert result.inner_text().startswith("empty.csv: 422: ")
         finally:
             browser.close()
+
+
+def _stored_with_readings(store_path: Path) -> int:
+    """A store holding one measurement whose estimate is ``ambiguous``: two readings along the
+    thickness-distance ridge and their warning, as the inversion writes them (a real shot of the
+    bundled scan, its estimate as the service would store it)."""
+    from solitonde.instrument.service.store import ShotRecord, Store
+
+    wave = signal_io.read(ROOT / "data_samples" / "scan" / "scan_P04_shot0.csv")[0]
+    reading = {"thickness_m": {"map": 2.9e-3, "median": 2.95e-3, "ci68": [2.85e-3, 3.05e-3],
+                               "ci95": [2.7e-3, 3.1e-3], "status": "constrained"},
+               "distance_m": {"map": 0.016, "median": 0.016, "ci68": [0.015, 0.017],
+                              "ci95": [0.013, 0.019], "status": "constrained"}, "weight": 0.2}
+    far = {"thickness_m": {**reading["thickness_m"], "median": 3.4e-3, "ci95": [3.3e-3, 3.6e-3]},
+           "distance_m": {"map": None, "median": None, "ci68": [0.05, None],
+                          "ci95": [0.04, None], "status": "lower_bound_only"}, "weight": 0.8}
+    estimate = {"thickness_m": {"map": None, "median": None, "ci68": None,
+                                "ci95": [2.7e-3, 3.6e-3], "status": "ambiguous"},
+                "distance_m": {"map": None, "median": None, "ci68": None,
+                               "ci95": [0.013, None], "status": "ambiguous"},
+                "readings": [far, reading], "reason": None, "fit": {},
+                "warnings": ["another reading fits as well: the data fit separate readings along "
+                             "the thickness-distance ridge"]}
+    store = Store(store_path)
+    try:
+        new_id, _ = store.add([ShotRecord(wave.t0, wave.dt, wave.samples, "N", None,
+                                          {"plate_id": "RIDGE", "position": "P04"}, {})],
+                              {"aggregates": [], "estimate": estimate, "table": None},
+                              source="test", plate_id="RIDGE", position="P04")
+    finally:
+        store.close()
+    return new_id
+
+
+def test_a_measurements_warnings_reasons_and_readings_are_on_the_page(tmp_path):
+    """An inconsistent answer shows why; an ambiguous one its readings; warnings are listed; no
+    unit follows a missing number."""
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "support"))
+    from independent_chain import sensor_trace
+    from recordings import STEEL, steel_shots
+
+    sync_playwright = _playwright()
+    store_path = tmp_path / "store.sqlite"
+    ambiguous_id = _stored_with_readings(store_path)
+    t, force = sensor_trace(STEEL, 4.0e-3)
+    steel = steel_shots(tmp_path / "steel.csv", t, force)
+    proc, url = start_uvicorn(store_path, env={"SOLITONDE_TABLE": str(TABLE)})
+    errors: list[str] = []
+    try:
+        with steel.open("rb") as fh:
+            r = httpx.post(f"{url}/v1/measurements", files={"file": ("steel.csv", fh)},
+                           data={"sphere_diameter": "9.53e-3", "position": "S1"}, timeout=120)
+        assert r.status_code == 201, r.text
+        steel_id = r.json()["id"]
+        assert r.json()["estimate"]["thickness_m"]["status"] == "inconsistent"
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM,
+                                        args=["--no-sandbox", "--disable-gpu"])
+            try:
+                page = browser.new_page(viewport={"width": 1280, "height": 1400})
+                page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+                page.on("pageerror", lambda e: errors.append(str(e)))
+                page.goto(f"{url}/#plate=steel-4mm&m={steel_id}&shot=0")
+                notes = page.locator("#measurement-notes li")
+                notes.first.wait_for(timeout=30_000)
+                texts = notes.all_inner_texts()
+                assert texts[0].startswith("Why: inconsistent:"), texts
+                assert any(t.startswith("Warning: inconsistent:") for t in texts), texts
+                assert page.locator("#measurement-notes li.error").count() >= 2
+                title = page.inner_text("#measurement-title")
+                assert "thickness inconsistent, distance inconsistent" in title, title
+                assert "inconsistent mm" not in title and "- mm" not in title
+                page.goto(f"{url}/#plate=RIDGE&m={ambiguous_id}&shot=0")
+                page.locator("#measurement-notes li", has_text="Reading 2").wait_for(
+                    timeout=30_000)
+                texts = page.locator("#measurement-notes li").all_inner_texts()
+                assert texts[0] == ("Reading 1 (weight 0.80): thickness 3.40 mm (95 % 3.30..3.60 "
+                                    "mm), distance to the support at least 40.00 mm"), texts
+                assert texts[1].startswith("Reading 2 (weight 0.20): thickness 2.95 mm")
+                assert texts[2].startswith("Warning: another reading fits as well")
+                title = page.inner_text("#measurement-title")
+                assert "ambiguous 2.70..3.60 mm (see the readings)" in title, title
+                row = page.locator("#measurements tbody tr", has_text="ambiguous")
+                row.wait_for(timeout=30_000)
+                assert "1 note" in row.inner_text()
+                body = page.inner_text("body")
+                assert "- mm" not in body and "inconsistent mm" not in body
+                figures = os.environ.get("SOLITONDE_FIGURES")
+                shot = Path(figures) if figures else tmp_path
+                shot.mkdir(parents=True, exist_ok=True)
+                page.screenshot(path=str(shot / "web_readings.png"), full_page=True)
+            finally:
+                browser.close()
+    finally:
+        stop_group(proc)
+    assert not errors, errors

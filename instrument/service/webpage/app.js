@@ -40,8 +40,10 @@ async function api(path, options = {}) {
 }
 
 async function image(img, path) {
-  const blob = await (await api(path)).blob();
+  // the old picture goes first: a failed load never leaves another measurement's on show
   if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+  img.removeAttribute("src");
+  const blob = await (await api(path)).blob();
   img.src = URL.createObjectURL(blob);
 }
 
@@ -71,12 +73,42 @@ function num(value, digits) {
   return value === null || value === undefined ? "-" : Number(value).toFixed(digits);
 }
 
-function answer(p) {
+// A length in mm with its unit, or "-" alone: never a unit after a missing number.
+function mmUnit(value) {
+  return value === null || value === undefined ? "-" : `${mm(value)} mm`;
+}
+
+// One parameter's answer in words; `unit`: with "mm" after each number (a table's column says it
+// otherwise). A status without numbers (inconsistent, unconstrained) is said as it is.
+function answer(p, unit = true) {
   if (!p) return "-";
-  if (p.status === "constrained") return `${mm(p.median)} (95 % ${mm(p.ci95[0])}..${mm(p.ci95[1])})`;
-  if (p.status === "lower_bound_only") return `at least ${mm(p.ci95[0])}`;
-  if (p.status === "upper_bound_only") return `at most ${mm(p.ci95[1])}`;
+  const v = unit ? mmUnit : mm;
+  const ci = p.ci95 || [null, null];
+  if (p.status === "constrained") return `${v(p.median)} (95 % ${mm(ci[0])}..${v(ci[1])})`;
+  if (p.status === "lower_bound_only") return `at least ${v(ci[0])}`;
+  if (p.status === "upper_bound_only") return `at most ${v(ci[1])}`;
+  if (p.status === "ambiguous") {
+    let span = "";
+    if (ci[0] !== null && ci[1] !== null) span = ` ${mm(ci[0])}..${v(ci[1])}`;
+    else if (ci[0] !== null) span = ` from ${v(ci[0])}`;
+    else if (ci[1] !== null) span = ` up to ${v(ci[1])}`;
+    return `ambiguous${span} (see the readings)`;
+  }
   return p.status;
+}
+
+// What an estimate should be read with: the reason it is inconsistent, an ambiguous answer's
+// readings, its warnings; one line each.
+function estimateNotes(est) {
+  if (!est) return [];
+  const lines = [];
+  if (est.reason) lines.push(`Why: ${est.reason}`);
+  (est.readings || []).forEach((r, k) => {
+    lines.push(`Reading ${k + 1} (weight ${num(r.weight, 2)}): thickness ` +
+               `${answer(r.thickness_m)}, distance to the support ${answer(r.distance_m)}`);
+  });
+  for (const w of est.warnings || []) lines.push(`Warning: ${w}`);
+  return lines;
 }
 
 // --- where we are: #plate=ID&m=N&shot=K -------------------------------------------------------
@@ -181,9 +213,9 @@ async function showPlate(plateId) {
   const map = await (await api(`/v1/plates/${id}/map${query}`)).json();
   const s = map.support;
   $("support").textContent = s
-    ? `Located support${map.joint ? " (joint)" : ""}: normal ${s.normal_angle_deg.toFixed(1)} deg, ` +
-      `offset ${mm(s.offset_m)} mm (95 % ${mm(s.ci95_offset_m[0])}..${mm(s.ci95_offset_m[1])} mm) ` +
-      `from ${s.n_positions} positions, rms residual ${mm(s.residual_m)} mm`
+    ? `Located support${map.joint ? " (joint)" : ""}: normal ${num(s.normal_angle_deg, 1)} deg, ` +
+      `offset ${mmUnit(s.offset_m)} (95 % ${mm(s.ci95_offset_m[0])}..${mmUnit(s.ci95_offset_m[1])}) ` +
+      `from ${s.n_positions} positions, rms residual ${mmUnit(s.residual_m)}`
     : `Support not located: ${map.support_reason || "-"}`;
   const notes = [];
   if (map.joint && map.fit) {
@@ -211,8 +243,8 @@ async function showPlate(plateId) {
     cell(row, p.position);
     cell(row, p.x_m === null || p.x_m === undefined ? "-" : `${mm(p.x_m)}, ${mm(p.y_m)}`);
     cell(row, p.n_shots);
-    cell(row, answer(p.thickness_m));
-    cell(row, answer(p.distance_m));
+    cell(row, answer(p.thickness_m, false));
+    cell(row, answer(p.distance_m, false));
     cell(row, mm(p.distance_to_located_support_m));
     const ids = cell(row, "");
     for (const mid of p.measurement_ids || []) {
@@ -242,8 +274,17 @@ async function showPlate(plateId) {
       flags.appendChild(span);
     }
     const est = m.estimate || {};
-    cell(row, answer(est.thickness_m));
-    cell(row, answer(est.distance_m));
+    const answerCell = cell(row, answer(est.thickness_m, false));
+    const notes = estimateNotes(m.estimate);
+    if (notes.length) {  // the reasons and warnings, one click away on the measurement's view
+      answerCell.title = notes.join("\n");
+      const mark = document.createElement("span");
+      mark.className = "flag";
+      mark.textContent = `${(m.estimate.warnings || []).length} note` +
+        `${(m.estimate.warnings || []).length === 1 ? "" : "s"}`;
+      answerCell.appendChild(mark);
+    }
+    cell(row, answer(est.distance_m, false));
     cell(row, m.table || "-");
     if (m.table) used.add(m.table);
     link(cell(row, ""), "delete", () => remove(m.id, plateId));
@@ -264,9 +305,19 @@ async function showMeasurement(measurementId, shot) {
     .filter(Boolean).join(", ");
   $("measurement-title").textContent = `Measurement ${m.id}${where ? ` (${where})` : ""}: ` +
     `${m.n_shots} shot${m.n_shots === 1 ? "" : "s"}; thickness ` +
-    `${answer((m.estimate || {}).thickness_m)} mm, distance ${answer((m.estimate || {}).distance_m)} mm`;
+    `${answer((m.estimate || {}).thickness_m)}, distance ${answer((m.estimate || {}).distance_m)}`;
   $("measurement-table").textContent = m.estimate ? `Estimated with ${await tableText(m.table)}` :
     `No estimate: ${m.estimate_reason || "-"}`;
+  const notes = $("measurement-notes");
+  notes.textContent = "";
+  for (const line of estimateNotes(m.estimate)) {
+    const item = document.createElement("li");
+    item.textContent = line;
+    if (line.startsWith("Warning: inconsistent") || line.startsWith("Why: ")) {
+      item.className = "error";
+    }
+    notes.appendChild(item);
+  }
   const body = $("shots").querySelector("tbody");
   body.textContent = "";
   for (const s of m.shots) {
@@ -314,9 +365,10 @@ async function upload(event) {
   try {
     const m = await (await api("/v1/measurements", { method: "POST", body: form })).json();
     const est = m.estimate || {};
-    $("upload-result").textContent = `${file.name}: measurement ${m.id}, ${m.n_shots} shot` +
-      `${m.n_shots === 1 ? "" : "s"}; thickness ${answer(est.thickness_m)} mm, distance ` +
-      `${answer(est.distance_m)} mm` + (m.estimate ? "" : ` (no estimate: ${m.estimate_reason})`);
+    const already = m.duplicate_of ? " (these shots were stored already: not stored again)" : "";
+    $("upload-result").textContent = `${file.name}: measurement ${m.id}${already}, ${m.n_shots} ` +
+      `shot${m.n_shots === 1 ? "" : "s"}; thickness ${answer(est.thickness_m)}, distance ` +
+      `${answer(est.distance_m)}` + (m.estimate ? "" : ` (no estimate: ${m.estimate_reason})`);
     go(m.plate_id, m.id);
     await refresh(true);
   } catch (error) {
