@@ -56,7 +56,10 @@ CHANNEL = typer.Option(None, "--channel", help="Analyse this channel (a column n
                        "TDMS channel as group/channel). Default: the sensor traces.")
 GROUP = typer.Option(None, "--group", help="Only the channels of this TDMS group.")
 MATERIAL = typer.Option(None, "--plate-material", help="The plate's material (a library "
-                        "name): the server estimates with the table of that family.")
+                        "name, or its properties as JSON): the server estimates with the table "
+                        "of that family.")
+TABLE = typer.Option(None, "--table", help="The server's model table to estimate with, by id "
+                     "(GET /v1/tables; where several could serve).")
 MANIFEST = typer.Option(None, "--manifest", help="Campaign manifest (.csv or .yaml): per file "
                         "or glob, plate_id, position, x_m, y_m, sphere_diameter_m, "
                         "calibration_N_per_V.")
@@ -67,8 +70,8 @@ AS_JSON = typer.Option(False, "--json", help="Print one JSON object per file (id
 def given_fields(plate_id: str | None, position: str | None, x: float | None,
                  y: float | None, sphere_diameter: float | None, calibration: float | None,
                  units: str | None, sample_rate: float | None, fmt: str | None,
-                 channel: str | None, group: str | None, plate_material: str | None
-                 ) -> dict[str, Any]:
+                 channel: str | None, group: str | None, plate_material: str | None,
+                 table: str | None = None) -> dict[str, Any]:
     """The command line's metadata as the upload's form fields; a bad value is a
     :class:`typer.BadParameter` naming the flag and what is allowed."""
     for flag, value in (("--x", x), ("--y", y), ("--sample-rate", sample_rate),
@@ -86,7 +89,7 @@ def given_fields(plate_id: str | None, position: str | None, x: float | None,
     fields = {"plate_id": plate_id, "position": position, "x_m": x, "y_m": y,
               "sphere_diameter": sphere_diameter, "calibration": calibration, "units": units,
               "sample_rate": sample_rate, "format": fmt, "channel": channel, "group": group,
-              "plate_material": plate_material}
+              "plate_material": plate_material, "table": table}
     return {k: v for k, v in fields.items() if v is not None}
 
 
@@ -139,6 +142,7 @@ def post(
     channel: str | None = CHANNEL,
     group: str | None = GROUP,
     plate_material: str | None = MATERIAL,
+    table: str | None = TABLE,
     manifest: Path | None = MANIFEST,
     as_json: bool = AS_JSON,
 ) -> None:
@@ -151,7 +155,7 @@ def post(
 
     try:
         given = given_fields(plate_id, position, x, y, sphere_diameter, calibration, units,
-                             sample_rate, fmt, channel, group, plate_material)
+                             sample_rate, fmt, channel, group, plate_material, table)
         rows = load_manifest(manifest)
     except typer.BadParameter as exc:
         usage(f"{exc.param_hint}: {exc.message}")

@@ -44,6 +44,7 @@ from solitonde.instrument.cli.cmd_post import (
     SAMPLE_RATE,
     SERVER,
     SPHERE,
+    TABLE,
     UNITS,
     X,
     Y,
@@ -220,6 +221,7 @@ def watch(
     channel: str | None = CHANNEL,
     group: str | None = GROUP,
     plate_material: str | None = MATERIAL,
+    table: str | None = TABLE,
     manifest: Path | None = MANIFEST,
     pattern: str | None = typer.Option(None, "--pattern", help="Glob of the files to post, "
                                        "e.g. '*.csv' (default: every file the upload reads)."),
@@ -246,7 +248,7 @@ def watch(
         usage(f"FOLDER: no such folder: {folder}")
     try:
         given = given_fields(plate_id, position, x, y, sphere_diameter, calibration, units,
-                             sample_rate, fmt, channel, group, plate_material)
+                             sample_rate, fmt, channel, group, plate_material, table)
         rows = load_manifest(manifest)
     except typer.BadParameter as exc:
         usage(f"{exc.param_hint}: {exc.message}")

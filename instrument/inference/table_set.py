@@ -135,7 +135,8 @@ class TableSet:
                                    f"no table serves {what} (tables: {ids})")
         raise TableChoiceError("table", "more than one table could serve this measurement: "
                                f"{', '.join(e.table.table_id for e in candidates)}; name one "
-                               "in metadata.table (or give metadata.plate_material)")
+                               "as table (a shot's metadata.table, an upload's or the raw "
+                               "route's table field, post's --table), or give plate_material")
 
     @staticmethod
     def _check_family(est: LoadedTable, stated: Mapping[str, Any]) -> None:

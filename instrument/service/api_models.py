@@ -151,6 +151,10 @@ BinaryShotParams = create_model(
        for k in _SHOT_QUERY_KEYS},
     **{k: (ShotMetadata.model_fields[k].annotation, ShotMetadata.model_fields[k])
        for k in _METADATA_QUERY_KEYS},
+    table=(ShotMetadata.model_fields["table"].annotation, ShotMetadata.model_fields["table"]),
+    plate_material=(MaterialName | None, Field(None, description="the plate's material: a "
+                                               "library name, or its properties as JSON; the "
+                                               "table of that family is used")),
     allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
 )
 

@@ -198,8 +198,8 @@ def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
 
 def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -> Any:
     """The table for these shots (their ``table`` / ``plate_material`` and sphere sizes), or
-    None when the service has none; a 422 naming ``metadata.table`` (or ``plate_material``)
-    when none fits or several could serve."""
+    None when the service has none; a 422 naming ``table`` or ``plate_material`` (under
+    ``metadata.`` for a JSON body) when none fits or several could serve."""
     if not tables.loaded:
         return None
     meta = waveforms[0].metadata
@@ -208,7 +208,8 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
     try:
         return tables.choose(diameters, meta.get("table"), meta.get("plate_material"))
     except TableChoiceError as exc:
-        field = f"metadata.{exc.field}"
+        # a JSON body states it in metadata; an upload's form and the raw route's query as such
+        field = f"metadata.{exc.field}" if prefix == "shots" else exc.field
         raise Problem(422, f"{field}: {exc.message}", kind="invalid-input", field=field) from None
 
 

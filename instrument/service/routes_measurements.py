@@ -353,7 +353,8 @@ def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
     if n > limit:
         raise Problem(422, f"samples: {n:,} samples; at most {limit:,} per shot", kind="limit",
                       field="samples")
-    meta = {k: getattr(params, k) for k in ("plate_id", "position", "sphere_diameter", "shot")
+    meta = {k: getattr(params, k) for k in ("plate_id", "position", "sphere_diameter", "shot",
+                                            "table", "plate_material")
             if getattr(params, k) is not None}
     try:
         waveform = Waveform(t0=params.t0, dt=params.dt, samples=np.frombuffer(body, dtype),

@@ -122,3 +122,58 @@ def test_an_idempotent_replay_stays_a_201_replay(client: TestClient) -> None:
     assert first.status_code == replay.status_code == 201
     assert replay.headers.get("Idempotent-Replayed") == "true"
     assert replay.json()["id"] == first.json()["id"]
+
+
+def test_the_raw_route_takes_the_table_and_the_plate_material(client: TestClient) -> None:
+    """The binary route names the table (by id) or the plate's family as the other doors do; an
+    unknown table or another family is a 422 naming the field."""
+    wave = (SCAN / "scan_P06_shot0.csv")
+    from solitonde.signal import io as signal_io
+
+    samples = signal_io.read(wave)[0].samples
+    body = np.asarray(samples, "<f8").tobytes()
+    base = "/v1/measurements/raw?dtype=float64&dt=5e-7&units=N&sphere_diameter=9.53e-3"
+    headers = {"content-type": "application/octet-stream"}
+    r = client.post(base + "&table=default_table", content=body, headers=headers)
+    assert r.status_code == 201, r.text
+    assert r.json()["table"] == "default_table"
+    r = client.post(base + "&table=nope&allow_duplicate=true", content=body, headers=headers)
+    assert r.status_code == 422 and r.json()["field"] == "table", r.text
+    r = client.post(base + "&plate_material=al_6061&allow_duplicate=true", content=body,
+                    headers=headers)
+    assert r.status_code == 201, r.text
+    r = client.post(base + "&plate_material=steel_structural&allow_duplicate=true",
+                    content=body, headers=headers)
+    assert r.status_code == 422 and r.json()["field"] == "plate_material", r.text
+
+
+def test_post_takes_the_table_by_id(tmp_path: Path) -> None:
+    """`post --table ID` sends the table's id with the file; an unknown one is refused by the
+    server, naming the field (exit 1)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "support"))
+    from service_support import start_uvicorn, stop_group
+
+    proc, url = start_uvicorn(tmp_path / "s.sqlite", env={"SOLITONDE_TABLE": str(DEFAULT_TABLE)})
+    try:
+        def post(*args: str) -> subprocess.CompletedProcess[str]:
+            return subprocess.run([sys.executable, "-m", "solitonde.instrument.cli.main", "post",
+                                   str(SCAN / "scan_P06_shot0.csv"), "--server", url,
+                                   "--sphere-diameter", "9.53e-3", "--json", *args],
+                                  capture_output=True, text=True, timeout=120, cwd=ROOT,
+                                  env={k: v for k, v in os.environ.items()
+                                       if not k.startswith("SOLITONDE_")})
+
+        run = post("--table", "default_table")
+        assert run.returncode == 0, run.stdout + run.stderr
+        assert json.loads(run.stdout)["state"] == "stored"
+        run = post("--table", "nope", "--plate-id", "X")
+        assert run.returncode == 1
+        out = json.loads(run.stdout)
+        assert out["state"] == "refused" and "table" in out["error"]
+    finally:
+        stop_group(proc)

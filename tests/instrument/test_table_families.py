@@ -117,7 +117,8 @@ def test_the_service_serves_both_and_a_steel_shot_gets_its_thickness(tables, tmp
         assert r.status_code == 422 and r.json()["field"] == "metadata.table"
         assert "al_plates, steel-A36" in r.json()["detail"]
         for meta in ({"table": "steel-A36"}, {"plate_material": "steel_structural"}):
-            r = client.post("/v1/measurements", json={"shots": shots, "metadata": meta})
+            r = client.post("/v1/measurements", json={"shots": shots, "metadata": meta,
+                                                      "allow_duplicate": True})
             assert r.status_code == 201, r.text
             est = r.json()["estimate"]
             assert est["table"] == "steel-A36"
