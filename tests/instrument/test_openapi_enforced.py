@@ -74,7 +74,7 @@ def test_a_raw_shot_has_its_own_route_and_the_old_one_still_takes_it(served):
     client, _ = served
     body = shot_samples().astype("<f4").tobytes()
     query = {"dtype": "float32", "dt": 5e-7, "units": "N", "plate_id": "RAW",
-             "sphere_diameter": 9.53e-3}
+             "sphere_diameter": 9.53e-3, "allow_duplicate": "true"}  # the same shot, both routes
     headers = {"content-type": "application/octet-stream"}
     for path in ("/v1/measurements/raw", "/v1/measurements"):
         r = client.post(path, params=query, content=body, headers=headers)

@@ -95,7 +95,7 @@ def test_backup_and_check_while_8_clients_post(tmp_path: Path) -> None:
 
     def client_loop(k: int) -> None:
         with httpx.Client(base_url=url, timeout=120) as client:
-            seed = 1000 * k
+            seed = 1000 * (k + 1)  # shots of their own: not the ones posted before
             while not stop.is_set():
                 seed += 1
                 r = _post(client, seed, plate=f"c{k}")

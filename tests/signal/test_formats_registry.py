@@ -140,7 +140,8 @@ def test_an_upload_named_by_the_alias_hdf_is_read(tmp_path: Path) -> None:
     with TestClient(build_app(settings)) as client:
         for name in ("hdf", "h5", "HDF5"):
             r = client.post("/v1/measurements", files={"file": ("shot.bin", path.read_bytes())},
-                            data={"format": name, "sphere_diameter": "0.00953"})
+                            data={"format": name, "sphere_diameter": "0.00953",
+                                  "allow_duplicate": "true"})  # the same shot, read each way
             assert r.status_code == 201, (name, r.text)
         r = client.post("/v1/measurements", files={"file": ("shot.bin", path.read_bytes())},
                         data={"format": "hdf4"})
