@@ -104,8 +104,11 @@ def _parameter_text(p: Mapping[str, Any], full: bool) -> str:
         return f"at most {_fmt_mm(ci95[1])} mm (95 %)" + (
             "; the data do not bound it from below" if full else "")
     if status == "ambiguous":
-        return ("AMBIGUOUS: the data fit the readings below, "
-                f"{_fmt_mm(ci95[0])}..{_fmt_mm(ci95[1])} mm over them all (95 %)")
+        lo, hi = ci95
+        span = (f"{_fmt_mm(lo)}..{_fmt_mm(hi)} mm" if lo is not None and hi is not None else
+                f"from {_fmt_mm(lo)} mm" if lo is not None else
+                f"up to {_fmt_mm(hi)} mm" if hi is not None else "unbounded")
+        return f"AMBIGUOUS: the data fit the readings below, {span} over them all (95 %)"
     if status == "inconsistent":
         return "INCONSISTENT with the table's family (no estimate)"
     return "unconstrained by these data" if full else status
