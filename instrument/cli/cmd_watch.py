@@ -32,6 +32,7 @@ from typing import Any
 import typer
 
 from solitonde.instrument.cli.cmd_post import (
+    ALLOW_DUPLICATE,
     API_KEY_ENV,
     CALIBRATION,
     CHANNEL,
@@ -222,6 +223,7 @@ def watch(
     group: str | None = GROUP,
     plate_material: str | None = MATERIAL,
     table: str | None = TABLE,
+    allow_duplicate: bool = ALLOW_DUPLICATE,
     manifest: Path | None = MANIFEST,
     pattern: str | None = typer.Option(None, "--pattern", help="Glob of the files to post, "
                                        "e.g. '*.csv' (default: every file the upload reads)."),
@@ -248,7 +250,8 @@ def watch(
         usage(f"FOLDER: no such folder: {folder}")
     try:
         given = given_fields(plate_id, position, x, y, sphere_diameter, calibration, units,
-                             sample_rate, fmt, channel, group, plate_material, table)
+                             sample_rate, fmt, channel, group, plate_material, table,
+                             allow_duplicate)
         rows = load_manifest(manifest)
     except typer.BadParameter as exc:
         usage(f"{exc.param_hint}: {exc.message}")

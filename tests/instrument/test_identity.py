@@ -147,9 +147,11 @@ def test_the_raw_route_takes_the_table_and_the_plate_material(client: TestClient
     assert r.status_code == 422 and r.json()["field"] == "plate_material", r.text
 
 
-def test_post_takes_the_table_by_id(tmp_path: Path) -> None:
+def test_post_takes_the_table_by_id_and_stores_a_duplicate_only_when_asked(tmp_path: Path
+                                                                           ) -> None:
     """`post --table ID` sends the table's id with the file; an unknown one is refused by the
-    server, naming the field (exit 1)."""
+    server, naming the field (exit 1). The same file for another plate is a duplicate (exit 0,
+    nothing stored) unless `--allow-duplicate`."""
     import json
     import os
     import subprocess
@@ -169,6 +171,12 @@ def test_post_takes_the_table_by_id(tmp_path: Path) -> None:
                                        if not k.startswith("SOLITONDE_")})
 
         run = post("--table", "default_table")
+        assert run.returncode == 0, run.stdout + run.stderr
+        assert json.loads(run.stdout)["state"] == "stored"
+        # the same file for another plate: the service holds its shots already
+        run = post("--table", "default_table", "--plate-id", "Y")
+        assert run.returncode == 0 and json.loads(run.stdout)["state"] == "duplicate"
+        run = post("--table", "default_table", "--plate-id", "Y", "--allow-duplicate")
         assert run.returncode == 0, run.stdout + run.stderr
         assert json.loads(run.stdout)["state"] == "stored"
         run = post("--table", "nope", "--plate-id", "X")
