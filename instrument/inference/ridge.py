@@ -37,6 +37,7 @@ import numpy as np
 from solitonde.instrument.inference.marginals import (
     LR_LEVELS,
     ParameterEstimate,
+    _crossing,
     _quantiles,
     _summarise,
 )
@@ -83,13 +84,8 @@ def _edges(x: np.ndarray, profile: np.ndarray, level: float, span: Span) -> tupl
     """Where the profile crosses ``level`` at a run's two ends, linear between grid points (the
     grid's own end where the run reaches it): a run's end is not a whole cell out."""
     a, b = span
-    lo, hi = float(x[a]), float(x[b])
-    if a > 0 and profile[a] > profile[a - 1]:
-        lo = float(x[a - 1] + (level - profile[a - 1]) / (profile[a] - profile[a - 1])
-                   * (x[a] - x[a - 1]))
-    if b < x.size - 1 and profile[b] > profile[b + 1]:
-        hi = float(x[b + 1] + (level - profile[b + 1]) / (profile[b] - profile[b + 1])
-                   * (x[b] - x[b + 1]))
+    lo = _crossing(x[max(a - 1, 0):a + 1], profile[max(a - 1, 0):a + 1], level, from_left=True)
+    hi = _crossing(x[b:b + 2], profile[b:b + 2], level, from_left=False)
     return lo, hi
 
 

@@ -241,12 +241,14 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = ()) -> dict[str, Any
             "table": table, "computed_at": time.time()}
 
 
-def compute_result(waveforms: Sequence[Waveform], tables: TableSet,
-                   prefix: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
+                   chosen: Any = ...) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Features of every shot (as the API shows them) and the measurement's result: aggregates,
-    estimate (or why none), the table, the location, the provenance."""
-    chosen = choose_table(waveforms, tables, prefix)
-    check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
+    estimate (or why none), the table, the location, the provenance. ``chosen``: the table a
+    caller already chose (:func:`choose_table`) and checked the metadata against."""
+    if chosen is ...:
+        chosen = choose_table(waveforms, tables, prefix)
+        check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
     feats, summaries = measure_shots(waveforms, prefix)
     estimate, reason = None, tables.reason
     if chosen is not None:
@@ -288,7 +290,7 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
         if record is not None:
             return {**measurement_dict(record), "duplicate_of": record.id,
                     "metadata_differences": metadata_differences(waveforms, record)}
-    shots, result = compute_result(waveforms, tables, prefix)
+    shots, result = compute_result(waveforms, tables, prefix, chosen)
     records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
                           calibration=wf.calibration, metadata=s["metadata"],
                           features=s["features"], shot_index=i)

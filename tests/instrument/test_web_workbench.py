@@ -51,6 +51,14 @@ def server(tmp_path_factory):
         stop_group(proc)
 
 
+def _watched_page(browser, errors: list[str], height: int):
+    """A page whose console errors and uncaught exceptions are collected in ``errors``."""
+    page = browser.new_page(viewport={"width": 1280, "height": height})
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    return page
+
+
 def _recording(folder: Path) -> Path:
     """The bundled recording without its plate and position: what a scope saves."""
     from solitonde.signal.waveform import Waveform
@@ -68,9 +76,7 @@ def test_upload_see_the_estimate_open_the_second_shot_and_see_live_updates(serve
         browser = p.chromium.launch(executable_path=CHROMIUM,
                                     args=["--no-sandbox", "--disable-gpu"])
         try:
-            page = browser.new_page(viewport={"width": 1280, "height": 1500})
-            page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-            page.on("pageerror", lambda e: errors.append(str(e)))
+            page = _watched_page(browser, errors, 1500)
             page.on("response", lambda r: errors.append(f"{r.status} {r.url}")
                     if r.status >= 400 else None)
             page.goto(server + "/")
@@ -220,9 +226,7 @@ def test_a_measurements_warnings_reasons_and_readings_are_on_the_page(tmp_path):
             browser = p.chromium.launch(executable_path=CHROMIUM,
                                         args=["--no-sandbox", "--disable-gpu"])
             try:
-                page = browser.new_page(viewport={"width": 1280, "height": 1400})
-                page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-                page.on("pageerror", lambda e: errors.append(str(e)))
+                page = _watched_page(browser, errors, 1400)
                 page.goto(f"{url}/#plate=steel-4mm&m={steel_id}&shot=0")
                 notes = page.locator("#measurement-notes li")
                 notes.first.wait_for(timeout=30_000)
