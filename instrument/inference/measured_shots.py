@@ -307,15 +307,11 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
                                **{k: meta.get(k) for k in LOCATION_KEYS}}
         diameter = _number(meta.get("sphere_diameter"))
         try:
-            feat, row["baseline"] = chain_geometry.measure_shot_baseline(
-                w, diameter, baseline=meta.get("baseline") or "gap")
+            feat, row["baseline"] = measure_waveform(w, meta)
         except WaveformError as exc:
             row["error"] = str(exc)
             rows.append(row)
             continue
-        if diameter is None and not chain_geometry.fits_some_chain(
-                feat, chain_geometry.STANDARD_DIAMETERS):
-            feat = dataclasses.replace(feat, flags=[*feat.flags, "implausible_units"])
         d = feat.to_dict()
         row.update({k: json_ready(d[k]) for k in (*FEATURES, *PEAK_READING)})
         row["flags"] = d["flags"]
@@ -328,6 +324,24 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
         row["waveform"] = w
         rows.append(row)
     return rows, used
+
+
+def measure_waveform(waveform: Waveform, meta: Mapping[str, Any] | None = None
+                     ) -> tuple[Any, str]:
+    """A shot's features and the baseline they were measured on: the one measurement every
+    door makes (``analyze``, the service's uploads and JSON shots, reanalysis).
+
+    ``meta`` (the shot's metadata by default) gives the sphere size and the ``baseline`` asked
+    for; a shot without a size whose pulses fit no standard chain is flagged
+    ``implausible_units``. WaveformError where the extractor cannot read the shot."""
+    meta = waveform.metadata if meta is None else meta
+    diameter = _number(meta.get("sphere_diameter"))
+    feat, baseline = chain_geometry.measure_shot_baseline(
+        waveform, diameter, baseline=meta.get("baseline") or "gap")
+    if diameter is None and not chain_geometry.fits_some_chain(
+            feat, chain_geometry.STANDARD_DIAMETERS):
+        feat = dataclasses.replace(feat, flags=[*feat.flags, "implausible_units"])
+    return feat, baseline
 
 
 # -- group by position, summarise ---------------------------------------------------------------

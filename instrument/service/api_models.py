@@ -134,6 +134,11 @@ class _QueryParams(Strict):
 ALLOW_DUPLICATE_HELP = ("store the shots even where a stored measurement has the same samples "
                         "in the same order (default: that measurement is answered, 200, with "
                         "duplicate_of and metadata_differences)")
+SETUP_HELP = ("the instrument set-up to measure with, by id (GET /v1/setups): its newest "
+              "revision's sphere size (for shots that state none), table and chain calibration; "
+              "a shot whose size or table contradicts it is a 422")
+SetupName = Annotated[str, StringConstraints(min_length=1, max_length=128)]
+"""A set-up's id as a request names it."""
 _SHOT_QUERY_KEYS = ("dt", "t0", "units", "calibration")
 _METADATA_QUERY_KEYS = ("plate_id", "position", "sphere_diameter", "shot")
 
@@ -156,6 +161,7 @@ BinaryShotParams = create_model(
                                                "library name, or its properties as JSON; the "
                                                "table of that family is used")),
     allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
+    setup=(SetupName | None, Field(None, description=SETUP_HELP)),
 )
 
 
@@ -177,6 +183,7 @@ def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type
         shots=(list[shot], Field(..., min_length=1, max_length=max_shots)),  # type: ignore[valid-type]
         metadata=(ShotMetadata | None, Field(None, description="metadata shared by all shots")),
         allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
+        setup=(SetupName | None, Field(None, description=SETUP_HELP)),
     )
     return shot, measurement
 
@@ -210,6 +217,8 @@ FEATURE_DESCRIPTIONS = {
     "incident_width_s": "the incident's full width at half maximum, s (a solitary wave ties it to "
                         "its force and the sphere size)",
     "reflection_window_s": "the longest TOF the record could show whole, s",
+    "baseline": "what the baseline was measured on: 'gap' (the chain's relaxation taken out) or "
+                "'pre-trigger'",
 }
 """What each shot feature is, for the schema (one line per :class:`Features` field)."""
 
@@ -224,6 +233,7 @@ def _shot_features_model() -> type[BaseModel]:
         name: (_KIND_TYPES[kind], Field(None if kind in ("number", "optional") else [],
                                         description=FEATURE_DESCRIPTIONS.get(name)))
         for name, kind in FIELD_KINDS.items()}
+    fields["baseline"] = (str | None, Field(None, description=FEATURE_DESCRIPTIONS["baseline"]))
     return create_model("ShotFeatures", __config__=ConfigDict(extra="allow"),
                         __doc__="What the extractor read of one shot: the template reading "
                         "(tof_s, arr: what the inversion uses) and the paper's peak reading "

@@ -161,12 +161,14 @@ def build_app(settings: Settings | None = None) -> FastAPI:
         routes_measurements,
         routes_plates,
         routes_service,
+        routes_setups,
         web,
     )
 
     app.include_router(routes_measurements.router, prefix="/v1")
     app.include_router(routes_plates.router, prefix="/v1")
     app.include_router(routes_compute.router, prefix="/v1")
+    app.include_router(routes_setups.router, prefix="/v1")
     app.include_router(web.router)
     app.include_router(routes_service.router)
 

@@ -17,6 +17,7 @@ from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.measured_shots import ShotInputError
 from solitonde.instrument.inference.pipeline import SizeSummary
+from solitonde.instrument.inference.setups import Setup, SetupError
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import ShotMetadata
@@ -155,19 +156,33 @@ def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None,
 
 
 def measure_shots(waveforms: Sequence[Waveform], prefix: str
-                  ) -> tuple[list[Any], list[SizeSummary]]:
-    """Features per shot and a summary per sphere diameter."""
-    from solitonde.instrument.inference import chain_geometry
-
-    feats = []
+                  ) -> tuple[list[Any], list[str], list[SizeSummary]]:
+    """Features per shot, the baseline each was measured on, and a summary per sphere
+    diameter (the measured-shot road's :func:`~measured_shots.measure_waveform`)."""
+    feats, baselines = [], []
     for i, wf in enumerate(waveforms):
         try:
-            feats.append(chain_geometry.measure_shot(wf, wf.metadata.get("sphere_diameter"),
-                                                     baseline=wf.metadata.get("baseline")
-                                                     or "gap"))
+            feat, baseline = measured_shots.measure_waveform(wf)
         except WaveformError as exc:  # an empty prefix: a lone shot whose fields are top-level
             raise waveform_error(exc, f"{prefix}.{i}" if prefix else "") from None
-    return feats, measured_shots.summarise_shots(waveforms, feats)
+        feats.append(feat)
+        baselines.append(baseline)
+    return feats, baselines, measured_shots.summarise_shots(waveforms, feats)
+
+
+def apply_setup(waveforms: Sequence[Waveform], setup: Setup | None,
+                prefix: str) -> list[Waveform]:
+    """The shots as ``setup`` completes them (:meth:`Setup.apply`: its size and table); a
+    shot that contradicts it is a 422 naming the shot's field and the set-up's."""
+    if setup is None:
+        return list(waveforms)
+    try:
+        metas = setup.apply([wf.metadata for wf in waveforms], measured_shots.shot_fields(prefix))
+    except SetupError as exc:
+        raise Problem(422, str(exc), kind="invalid-input", field=exc.field) from None
+    return [Waveform(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
+                     calibration=wf.calibration, metadata=meta)
+            for wf, meta in zip(waveforms, metas, strict=True)]
 
 
 def warm_up() -> float:
@@ -191,9 +206,11 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def shot_out(index: int, wf: Waveform, features: Any) -> dict[str, Any]:
+def shot_out(index: int, wf: Waveform, features: Any, baseline: str) -> dict[str, Any]:
+    """A measured shot as the API shows it; its features name the baseline they used."""
     return {"shot_index": index, "metadata": json_ready(wf.metadata), "n_samples": wf.n,
-            "t0": wf.t0, "dt": wf.dt, "units": wf.units, "features": json_ready(features.to_dict())}
+            "t0": wf.t0, "dt": wf.dt, "units": wf.units,
+            "features": {**json_ready(features.to_dict()), "baseline": baseline}}
 
 
 def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -> Any:
@@ -213,10 +230,12 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
         raise Problem(422, f"{field}: {exc.message}", kind="invalid-input", field=field) from None
 
 
-def provenance(chosen: Any, waveforms: Sequence[Waveform] = ()) -> dict[str, Any]:
+def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
+               setup: Setup | None = None) -> dict[str, Any]:
     """What a result was computed with: the software version, the feature extractor and its
     settings (the defaults, and the chain's options each stated sphere size added), the table
-    (id and SHA-256 of its file) or None, and when."""
+    (id and SHA-256 of its file) or None, the set-up revision and its chain calibration (or
+    None), and when."""
     import dataclasses
     import time
     from importlib import metadata
@@ -238,22 +257,30 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = ()) -> dict[str, Any
                               f"{d}": shot_options(d) for d in
                               {wf.metadata.get("sphere_diameter") for wf in waveforms}
                               if shot_options(d)}},
-            "table": table, "computed_at": time.time()}
+            "table": table,
+            "setup": None if setup is None else setup.reference(),
+            "chain_calibration": None if setup is None else setup.chain_calibration,
+            "computed_at": time.time()}
 
 
 def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
-                   chosen: Any = ...) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+                   chosen: Any = ..., setup: Setup | None = None
+                   ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Features of every shot (as the API shows them) and the measurement's result: aggregates,
     estimate (or why none), the table, the location, the provenance. ``chosen``: the table a
-    caller already chose (:func:`choose_table`) and checked the metadata against."""
+    caller already chose (:func:`choose_table`) and checked the metadata against; ``setup``:
+    the set-up the shots were completed with (:func:`apply_setup`), whose chain calibration
+    the estimate applies."""
     if chosen is ...:
         chosen = choose_table(waveforms, tables, prefix)
         check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
-    feats, summaries = measure_shots(waveforms, prefix)
+    feats, baselines, summaries = measure_shots(waveforms, prefix)
     estimate, reason = None, tables.reason
     if chosen is not None:
         try:
-            estimate = estimate_from(tables, summaries, table=chosen.table.table_id,
+            estimate = estimate_from(tables, summaries,
+                                     None if setup is None else setup.calibration(),
+                                     table=chosen.table.table_id,
                                      plate_material=waveforms[0].metadata.get(
                                          "plate_material")).to_dict()
             reason = None
@@ -261,26 +288,31 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
             reason = str(exc)
         except Exception as exc:  # an inversion that refuses these features (e.g. out of range)
             reason = f"inversion failed: {exc}"
-    shots = [shot_out(i, wf, f) for i, (wf, f) in enumerate(zip(waveforms, feats, strict=True))]
+    shots = [shot_out(i, wf, f, b) for i, (wf, f, b)
+             in enumerate(zip(waveforms, feats, baselines, strict=True))]
     result = {"aggregates": [m.to_dict() for m in summaries], "estimate": estimate,
               "estimate_reason": reason, "table": chosen.table.table_id if chosen else None}
     coordinates = {k: float(waveforms[0].metadata[k]) for k in ("x_m", "y_m")
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export
         result["location"] = coordinates
-    result["provenance"] = provenance(chosen, waveforms)
+    result["provenance"] = provenance(chosen, waveforms, setup)
     return shots, result
 
 
 def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: TableSet,
                       source: str, prefix: str,
                       idempotency: tuple[str, str] | None = None,
-                      allow_duplicate: bool = False) -> dict[str, Any]:
+                      allow_duplicate: bool = False,
+                      setup: Setup | None = None) -> dict[str, Any]:
     """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict.
 
     Shots whose samples are, in order, a stored measurement's are not stored again (unless
     ``allow_duplicate``): the answer is that measurement with ``duplicate_of`` (its id) and
-    ``metadata_differences`` (what the request says otherwise, per shot)."""
+    ``metadata_differences`` (what the request says otherwise, per shot). With ``setup`` the
+    shots are completed by it and estimated with its chain calibration, and the measurement
+    records the revision."""
+    waveforms = apply_setup(waveforms, setup, prefix)
     plate_id, position = location_of(waveforms, prefix)
     chosen = choose_table(waveforms, tables, prefix)  # the checks a new one would get first
     check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
@@ -290,13 +322,14 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
         if record is not None:
             return {**measurement_dict(record), "duplicate_of": record.id,
                     "metadata_differences": metadata_differences(waveforms, record)}
-    shots, result = compute_result(waveforms, tables, prefix, chosen)
+    shots, result = compute_result(waveforms, tables, prefix, chosen, setup)
     records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
                           calibration=wf.calibration, metadata=s["metadata"],
                           features=s["features"], shot_index=i)
                for i, (wf, s) in enumerate(zip(waveforms, shots, strict=True))]
     new_id, created_at = store.add(records, result, source=source, plate_id=plate_id,
-                                   position=position, idempotency=idempotency)
+                                   position=position, idempotency=idempotency,
+                                   setup=None if setup is None else (setup.id, setup.revision))
     return measurement_dict(MeasurementRecord(
         id=new_id, created_at=created_at, plate_id=plate_id, position=position,
         n_shots=len(records), source=source, result=result, shots=records))

@@ -11,10 +11,15 @@ serves the newest and lists the others.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal
 
+from solitonde.instrument.inference.setups import Setup
 from solitonde.instrument.inference.table_set import TableSet
-from solitonde.instrument.service.ingest import compute_result, waveforms_from_records
+from solitonde.instrument.service.ingest import (
+    apply_setup,
+    compute_result,
+    waveforms_from_records,
+)
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.store import Store
 from solitonde.signal.errors import WaveformError
@@ -31,9 +36,43 @@ def _brief(result: dict[str, Any]) -> dict[str, Any]:
             "estimate_reason": result.get("estimate_reason")}
 
 
+def setup_of(store: Store, measurement_id: int) -> Setup | None:
+    """The set-up revision a measurement was estimated with, or None."""
+    from solitonde.instrument.service import setup_book
+
+    rows = store.rows("SELECT setup_id, revision FROM setup_uses WHERE measurement_id = ?",
+                      (measurement_id,))
+    return setup_book.revision(store, rows[0][0], rows[0][1]) if rows else None
+
+
+def recompute(store: Store, tables: TableSet, measurement_id: int,
+              setup: Setup | None | Literal["recorded"] = "recorded") -> dict[str, Any] | None:
+    """Recompute one measurement through the upload's road and make that its newest result,
+    keeping the earlier one; the summary line, or None when it was deleted meanwhile.
+
+    ``setup``: the set-up revision to estimate with; ``"recorded"`` (the default) the one the
+    measurement names, if any. Problem or WaveformError where the current version refuses it
+    (nothing is changed then)."""
+    record = store.get(measurement_id, with_samples=True)
+    if record is None:
+        return None
+    if setup == "recorded":
+        setup = setup_of(store, measurement_id)
+    waveforms = apply_setup(waveforms_from_records(record.shots), setup, "shots")
+    shots, result = compute_result(waveforms, tables, "shots", setup=setup)
+    if "location" in record.result and "location" not in result:
+        result["location"] = record.result["location"]
+    store.replace_result(record.id, result, [s["features"] for s in shots],
+                         None if setup is None else (setup.id, setup.revision))
+    return {"id": record.id, "plate_id": record.plate_id, "position": record.position,
+            "before": _brief(record.result), "after": _brief(result),
+            "earlier_results": len(record.earlier) + 1}
+
+
 def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
               progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
-    """Recompute every measurement (of ``plate_id``, or all) and keep the earlier results.
+    """Recompute every measurement (of ``plate_id``, or all) and keep the earlier results; each
+    with the set-up revision it names.
 
     A measurement the current version refuses (its metadata no longer accepted, no table that
     fits) keeps its result untouched and is listed under ``failed`` with the reason."""
@@ -46,24 +85,16 @@ def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
             break
         for summary in page:
             after = summary.id
-            record = store.get(summary.id, with_samples=True)
-            if record is None:  # deleted meanwhile
-                continue
             try:
-                waveforms = waveforms_from_records(record.shots)
-                shots, result = compute_result(waveforms, tables, "shots")
+                line = recompute(store, tables, summary.id)
             except Problem as exc:
-                failed.append({"id": record.id, "reason": exc.detail})
+                failed.append({"id": summary.id, "reason": exc.detail})
                 continue
             except WaveformError as exc:
-                failed.append({"id": record.id, "reason": str(exc)})
+                failed.append({"id": summary.id, "reason": str(exc)})
                 continue
-            if "location" in record.result and "location" not in result:
-                result["location"] = record.result["location"]
-            store.replace_result(record.id, result, [s["features"] for s in shots])
-            line = {"id": record.id, "plate_id": record.plate_id, "position": record.position,
-                    "before": _brief(record.result), "after": _brief(result),
-                    "earlier_results": len(record.earlier) + 1}
+            if line is None:  # deleted meanwhile
+                continue
             done.append(line)
             if progress is not None:
                 progress(line)

@@ -14,6 +14,7 @@ import dataclasses
 import errno
 import hashlib
 import io
+import json
 import logging
 from functools import partial
 from typing import Annotated, Any
@@ -33,7 +34,9 @@ from solitonde.instrument.service.api_models import (
     BinaryShotParams,
     MaterialName,
     MeasurementOut,
+    SETUP_HELP,
     MeasurementPage,
+    SetupName,
     ShotBase,
     ShotMetadata,
     Strict,
@@ -49,6 +52,7 @@ from solitonde.instrument.service.ingest import (
     waveforms_from_shots,
 )
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
+from solitonde.instrument.service.routes_setups import resolve as resolve_setup
 from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.store import KeyTaken, StoreFull
 from solitonde.instrument.service.uploads import (
@@ -64,6 +68,23 @@ from solitonde.signal.formats.registry import all_reader_options
 from solitonde.signal.waveform import Waveform
 
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
+
+
+def material_text(text: str) -> Any:
+    """A form's or query's ``plate_material``: a library name, or its properties as JSON (a
+    mapping, as a JSON body states it); 422 naming the field for JSON that is not one."""
+    if not text.lstrip().startswith("{"):
+        return text
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise Problem(422, f"plate_material: not a JSON object ({exc.msg}); give a library "
+                      "name or {\"youngs_modulus\", \"poisson_ratio\", \"density\"}",
+                      kind="invalid-input", field="plate_material") from None
+    if not isinstance(value, dict):
+        raise Problem(422, "plate_material: expected a JSON object", kind="invalid-input",
+                      field="plate_material")
+    return value
 log = logging.getLogger("solitonde.instrument")
 IDEMPOTENCY_KEY_MAX = 200
 
@@ -93,7 +114,9 @@ UploadFields = create_model(
     format=(str | None, Field(None, description=f"one of {', '.join(FORMATS)}; default: from "
                               "the file name's suffix")),
     **{k: _optional(ShotMetadata, k) for k in _METADATA_FORM_KEYS},
-    plate_material=(MaterialName | None, Field(None, description="plate material name")),
+    plate_material=(MaterialName | None, Field(None, description="the plate's material: a "
+                                               "library name, or its properties as JSON; the "
+                                               "table of that family is used")),
     units=(str | None, Field(None, description="N or V, for files that do not say")),
     calibration=_optional(ShotBase, "calibration"),
     sample_rate=(float | None, Field(None, gt=0, le=1e10,
@@ -106,6 +129,7 @@ UploadFields = create_model(
                                "step or a flat line is skipped, and listed)")),
     dataset=(str | None, Field(None, max_length=200, description="HDF5 dataset")),
     allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
+    setup=(SetupName | None, Field(None, description=SETUP_HELP)),
 )
 """Form fields that come with an uploaded file; the metadata's and the sampling's limits are
 :class:`ShotMetadata`'s and :class:`ShotBase`'s own (one declaration)."""
@@ -325,7 +349,7 @@ def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None)
     waveforms = waveforms_from_shots(request.shots, request.metadata)
     check_counts(waveforms, svc.settings, "shots")
     return measure_and_store(waveforms, svc.store, svc.tables, "json", "shots", idem,
-                             request.allow_duplicate)
+                             request.allow_duplicate, resolve_setup(svc, request.setup))
 
 
 def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
@@ -354,15 +378,18 @@ def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
         raise Problem(422, f"samples: {n:,} samples; at most {limit:,} per shot", kind="limit",
                       field="samples")
     meta = {k: getattr(params, k) for k in ("plate_id", "position", "sphere_diameter", "shot",
-                                            "table", "plate_material")
+                                            "table")
             if getattr(params, k) is not None}
+    if params.plate_material is not None:
+        meta["plate_material"] = material_text(params.plate_material)
+    setup = resolve_setup(svc, params.setup)
     try:
         waveform = Waveform(t0=params.t0, dt=params.dt, samples=np.frombuffer(body, dtype),
                             units=params.units, calibration=params.calibration, metadata=meta)
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
     return measure_and_store([waveform], svc.store, svc.tables, "binary", "", idem,
-                             params.allow_duplicate)
+                             params.allow_duplicate, setup)
 
 
 async def _ingest_upload(svc: Service, request: Request, key: str | None = None) -> Any:
@@ -448,15 +475,18 @@ def _ingest_file(svc: Service, stream: Any, fmt: str, opts: Any,
     except WaveformError as exc:
         raise waveform_error(exc, "") from None
     meta = {k: getattr(opts, k) for k in ("plate_id", "position", "sphere_diameter", "x_m",
-                                          "y_m", "table", "plate_material")
+                                          "y_m", "table")
             if getattr(opts, k) is not None}
+    if opts.plate_material is not None:
+        meta["plate_material"] = material_text(opts.plate_material)
+    setup = resolve_setup(svc, opts.setup)
     if filename:
         meta["source"] = filename  # the reader named it after the server's temporary file
     if meta:
         waveforms = [wf.with_metadata(**meta) for wf in waveforms]
     check_counts(waveforms, settings, "file.shots")
     stored = measure_and_store(waveforms, svc.store, svc.tables, f"upload:{fmt}", "file.shots",
-                               idem, opts.allow_duplicate)
+                               idem, opts.allow_duplicate, setup)
     return {**stored, "skipped_channels": skipped}
 
 
@@ -533,7 +563,8 @@ def _export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
         from solitonde.signal.features import Features
 
         frame = pd.DataFrame(columns=[*svc.store.EXPORT_COLUMNS,
-                                      *(f.name for f in dataclasses.fields(Features))])
+                                      *(f.name for f in dataclasses.fields(Features)),
+                                      "baseline"])
     frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")
     for col in ("measurement_id", "shot_index", "shot", "n_samples"):
         numbers = pd.to_numeric(frame[col], errors="coerce")

@@ -75,17 +75,39 @@ CREATE TABLE IF NOT EXISTS earlier_results (
 CREATE INDEX IF NOT EXISTS earlier_results_by_measurement
     ON earlier_results (measurement_id, superseded_at);
 CREATE INDEX IF NOT EXISTS shots_by_content ON shots (sha256, shot_index);
+CREATE TABLE IF NOT EXISTS setups (
+    id          TEXT NOT NULL,
+    revision    INTEGER NOT NULL,
+    created_at  REAL NOT NULL,
+    body        TEXT NOT NULL,
+    PRIMARY KEY (id, revision)
+);
+CREATE TABLE IF NOT EXISTS setup_uses (
+    measurement_id  INTEGER PRIMARY KEY REFERENCES measurements (id) ON DELETE CASCADE,
+    setup_id        TEXT NOT NULL,
+    revision        INTEGER NOT NULL
+);
+CREATE INDEX IF NOT EXISTS setup_uses_by_setup ON setup_uses (setup_id, measurement_id);
+CREATE TABLE IF NOT EXISTS jobs (
+    id          TEXT PRIMARY KEY,
+    created_at  REAL NOT NULL,
+    updated_at  REAL NOT NULL,
+    body        TEXT NOT NULL
+);
 """
 
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """Stored as SQLite's ``user_version``; a store with a larger one was written by a newer
 solitonde and is refused rather than written in a layout this version does not know; one with a
 smaller one is refused until ``solitonde store migrate`` brings it up (after a backup).
 
 1: measurements, shots, idempotency keys.
 2: ``earlier_results``: the results a reanalysis replaced (the result and each shot's features),
-   kept beside the newest one."""
+   kept beside the newest one.
+3: ``setups`` (each revision of an instrument set-up, immutable), ``setup_uses`` (the set-up
+   revision a measurement was estimated with) and ``jobs`` (background work and its progress,
+   readable from any worker process)."""
 
 MIGRATIONS: dict[int, tuple[str, ...]] = {
     1: ("""CREATE TABLE earlier_results (
@@ -95,6 +117,8 @@ MIGRATIONS: dict[int, tuple[str, ...]] = {
                shot_features   TEXT NOT NULL)""",
         """CREATE INDEX earlier_results_by_measurement
                ON earlier_results (measurement_id, superseded_at)"""),
+    2: tuple(statement.strip() for statement in _SCHEMA.split(";")
+             if "setup" in statement or "jobs" in statement),
 }
 """The statements that take a store from schema ``v`` to ``v + 1``; run by :func:`migrate`."""
 
@@ -348,15 +372,43 @@ class Store:
             finally:
                 fcntl.flock(self._writer_fd, fcntl.LOCK_UN)
 
+    @contextlib.contextmanager
+    def transaction(self) -> Iterator[sqlite3.Connection]:
+        """One write transaction (``BEGIN IMMEDIATE`` under the cross-process writer lock),
+        committed when the block ends and rolled back when it raises; for the records kept
+        beside the measurements (set-ups, jobs: :mod:`.setup_book`, :mod:`.jobs`)."""
+        with self._writer():
+            c = self._conn
+            c.execute("BEGIN IMMEDIATE")
+            try:
+                yield c
+                c.execute("COMMIT")
+            except sqlite3.OperationalError as exc:
+                _rollback(c)
+                if _out_of_space(exc):
+                    raise StoreFull(f"the store at {str(self.path)!r} cannot grow ({exc}): "
+                                    "nothing was written; retry when there is room") from None
+                raise
+            except BaseException:
+                _rollback(c)
+                raise
+
+    def rows(self, sql: str, args: Sequence[Any] = ()) -> list[tuple[Any, ...]]:
+        """The rows of one read-only query."""
+        with self._lock:
+            return [tuple(r) for r in self._conn.execute(sql, args).fetchall()]
+
     # Writing ------------------------------------------------------------------------------
     def add(self, shots: Sequence[ShotRecord], result: dict[str, Any], source: str,
             plate_id: str | None = None, position: str | None = None,
-            idempotency: tuple[str, str] | None = None) -> tuple[int, float]:
+            idempotency: tuple[str, str] | None = None,
+            setup: tuple[str, int] | None = None) -> tuple[int, float]:
         """Store one measurement and its shots in one transaction; returns (id, created_at).
 
         ``idempotency`` (key, digest of the request) is stored in the same transaction, so a
         retry finds the measurement exactly when it was committed; a key already taken raises
-        :class:`KeyTaken` and writes nothing."""
+        :class:`KeyTaken` and writes nothing. ``setup`` (id, revision) records the set-up
+        revision it was estimated with."""
         rows = []
         for i, shot in enumerate(shots):
             dtype, digest, blob = encode_samples(shot.samples)
@@ -382,6 +434,9 @@ class Store:
                 if idempotency is not None:
                     c.execute("INSERT INTO idempotency (key, digest, measurement_id, created_at) "
                               "VALUES (?, ?, ?, ?)", (*idempotency, new_id, now))
+                if setup is not None:
+                    c.execute("INSERT INTO setup_uses (measurement_id, setup_id, revision) "
+                              "VALUES (?, ?, ?)", (new_id, *setup))
                 c.execute("COMMIT")
             except sqlite3.IntegrityError:
                 _rollback(c)
@@ -398,9 +453,11 @@ class Store:
         return new_id, now
 
     def replace_result(self, measurement_id: int, result: dict[str, Any],
-                       shot_features: Sequence[dict[str, Any]]) -> float:
+                       shot_features: Sequence[dict[str, Any]],
+                       setup: tuple[str, int] | None = None) -> float:
         """Make ``result`` (and each shot's ``shot_features``) the measurement's newest, keeping
-        the one it replaces in ``earlier_results``; one transaction. Returns the time."""
+        the one it replaces in ``earlier_results``; one transaction. Returns the time.
+        ``setup`` (id, revision): the set-up revision the new result used."""
         with self._writer():
             c = self._conn
             now = time.time()
@@ -424,6 +481,9 @@ class Store:
                 c.executemany("UPDATE shots SET features = ? WHERE measurement_id = ? AND "
                               "shot_index = ?", [(json.dumps(f), measurement_id, i)
                                                  for i, f in enumerate(shot_features)])
+                if setup is not None:
+                    c.execute("UPDATE setup_uses SET revision = ? WHERE measurement_id = ? AND "
+                              "setup_id = ?", (setup[1], measurement_id, setup[0]))
                 c.execute("COMMIT")
             except sqlite3.OperationalError as exc:
                 _rollback(c)
@@ -479,6 +539,7 @@ class Store:
             try:
                 c.execute("DELETE FROM shots WHERE measurement_id = ?", (measurement_id,))
                 c.execute("DELETE FROM idempotency WHERE measurement_id = ?", (measurement_id,))
+                c.execute("DELETE FROM setup_uses WHERE measurement_id = ?", (measurement_id,))
                 gone = c.execute("DELETE FROM measurements WHERE id = ?",
                                  (measurement_id,)).rowcount
                 c.execute("COMMIT")

@@ -1,0 +1,84 @@
+"""Background jobs whose progress any worker process can answer for.
+
+A job's state lives in the store's ``jobs`` table (written after every step), not in the
+process that runs it: with several uvicorn workers, ``GET /v1/jobs/{id}`` reaches any of them.
+A job runs in a daemon thread of the process that accepted it; should that process stop, the
+job's ``updated_at`` stops moving and :func:`get` reports it ``stalled``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from typing import Any
+
+from solitonde.instrument.service.store import Store
+
+log = logging.getLogger("solitonde.instrument")
+
+STALLED_AFTER_S = 600.0
+"""A running job whose state has not moved for this long is reported ``stalled``: the process
+that ran it is gone (a restart), and its remaining steps will not run."""
+
+Progress = Callable[[dict[str, Any]], None]
+"""What a job's work calls after each step with the fields to update."""
+
+
+def _write(store: Store, job: dict[str, Any]) -> None:
+    job["updated_at"] = time.time()
+    with store.transaction() as c:
+        c.execute("INSERT INTO jobs (id, created_at, updated_at, body) VALUES (?, ?, ?, ?) "
+                  "ON CONFLICT (id) DO UPDATE SET updated_at = excluded.updated_at, "
+                  "body = excluded.body",
+                  (job["id"], job["created_at"], job["updated_at"], json.dumps(job)))
+
+
+def get(store: Store, job_id: str) -> dict[str, Any] | None:
+    """A job's state as last written, or None."""
+    rows = store.rows("SELECT body FROM jobs WHERE id = ?", (job_id,))
+    if not rows:
+        return None
+    job = json.loads(rows[0][0])
+    if job["state"] in ("queued", "running") and time.time() - job["updated_at"] > \
+            STALLED_AFTER_S:
+        job["state"] = "stalled"
+    return job
+
+
+def start(store: Store, kind: str, total: int, detail: dict[str, Any],
+          work: Callable[[Progress], dict[str, Any]]) -> dict[str, Any]:
+    """Record a job (``queued``) and run ``work`` in a background thread; the job as recorded.
+
+    ``work(progress)`` does the steps, calling ``progress({...})`` after each with the fields
+    that changed (``done``, ``failed`` ...); what it returns is merged into the final state
+    (``done``). An exception ends the job ``failed`` with its message."""
+    job: dict[str, Any] = {"id": uuid.uuid4().hex, "kind": kind, "state": "queued",
+                           "total": total, "done": 0, "failed": [], "created_at": time.time(),
+                           "finished_at": None, **detail,
+                           "links": {}}
+    job["links"]["self"] = f"/v1/jobs/{job['id']}"
+    _write(store, job)
+
+    def progress(changes: dict[str, Any]) -> None:
+        job.update(changes)
+        job["state"] = "running"
+        _write(store, job)
+
+    def run() -> None:
+        try:
+            job["state"] = "running"
+            _write(store, job)
+            job.update(work(progress))
+            job["state"] = "done"
+        except Exception as exc:  # the job's answer says why; the service goes on
+            log.exception("job %s failed", job["id"])
+            job["state"], job["error"] = "failed", f"{type(exc).__name__}: {exc}"
+        job["finished_at"] = time.time()
+        _write(store, job)
+
+    threading.Thread(target=run, name=f"job-{kind}", daemon=True).start()
+    return dict(job)

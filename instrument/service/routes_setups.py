@@ -1,0 +1,338 @@
+"""REST routes for instrument set-ups, their chain calibration, and the jobs they start.
+
+A set-up (:class:`~solitonde.instrument.inference.setups.Setup`) is what a lab configures once:
+sphere sizes, the table, labels, and a chain calibration fitted on a reference plate. Every
+change makes a new, immutable revision; a measurement names the revision it used. Calibrating
+a set-up (from stored reference measurements, or a file ``solitonde calibrate`` wrote)
+re-estimates the measurements that name it in a background job (``GET /v1/jobs/{id}``), each
+keeping its earlier result.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+from urllib.parse import quote
+
+from fastapi import APIRouter, Depends, Path, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse, Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from solitonde.instrument.inference.calibration import Calibration, CalibrationError
+from solitonde.instrument.inference.setups import Setup, SetupError
+from solitonde.instrument.service import jobs, setup_book
+from solitonde.instrument.service.authentication import AUTH
+from solitonde.instrument.service.dependencies import ServiceDep, require_json
+from solitonde.instrument.service.problems import ERRORS, Problem
+from solitonde.instrument.service.state import Service
+
+router = APIRouter(tags=["setups"], dependencies=[AUTH])
+
+SetupIdPath = Path(..., min_length=1, max_length=128, description="the set-up's id, "
+                   "percent-encoded (a / in it as %2F, or as it is)")
+JobIdPath = Path(..., min_length=1, max_length=64, description="the job's id")
+
+
+class SetupIn(BaseModel):
+    """A set-up as a client states it (the service adds revision, time and calibration)."""
+
+    model_config = ConfigDict(extra="allow")
+    id: str = Field(description="the set-up's name, e.g. lab-a-chain-1 (printable, <= 128)")
+    sphere_diameters_m: list[float] = Field(description="the chain's sphere sizes, m")
+    table: str = Field(description="the id of the table its plates are read against "
+                       "(GET /v1/tables)")
+    plate_material: Any = Field(None, description="the plate family's material (a library "
+                                "name or its properties), for the material spread")
+    chain: dict[str, Any] | None = Field(None, description="the chain as mounted (material, "
+                                         "n_particles, sensor_index ...), kept as given")
+    striker: dict[str, Any] | None = Field(None, description="the striker (drop_height ...)")
+    labels: dict[str, Any] | None = Field(None, description="operator, instrument, lab ...: "
+                                          "what a report's title block names")
+
+
+class ReferenceIn(BaseModel):
+    """Stored measurements on a reference plate of known thickness and position."""
+
+    model_config = ConfigDict(extra="forbid")
+    measurement_ids: list[int] = Field(min_length=1, max_length=1000)
+    thickness_m: float = Field(gt=0, le=1.0, description="the reference plate's thickness, m")
+    distance_m: float = Field(ge=0, le=100.0, description="the chain's distance to the "
+                              "support there, m")
+
+
+class CalibrationIn(BaseModel):
+    """The references a chain calibration is fitted on."""
+
+    model_config = ConfigDict(extra="forbid")
+    references: list[ReferenceIn] = Field(min_length=1, max_length=100)
+
+
+def setup_links(setup_id: str) -> dict[str, str]:
+    """A set-up's links, its id percent-encoded whole."""
+    key = quote(setup_id, safe="")
+    return {"self": f"/v1/setups/{key}", "calibration": f"/v1/setups/{key}/calibration"}
+
+
+def _invalid(exc: SetupError | CalibrationError, prefix: str = "") -> Problem:
+    field = f"{prefix}{exc.field}"
+    return Problem(422, f"{field}: {exc.full_message}", kind="invalid-input", field=field)
+
+
+def setup_out(svc: Service, setup: Setup) -> dict[str, Any]:
+    """A set-up's newest revision, its revisions and links (saved as a file, what
+    ``analyze --setup`` reads)."""
+    return {**setup.to_dict(), "revisions": setup_book.revisions(svc.store, setup.id),
+            "links": setup_links(setup.id)}
+
+
+def check_against_tables(svc: Service, setup: Setup) -> None:
+    """A 422 naming ``table`` (or ``plate_material``) when the service has no such table, or it
+    does not serve the set-up's sizes; ``chain_calibration`` when the table cannot read it."""
+    from solitonde.instrument.inference.calibration import calibrated_table
+    from solitonde.instrument.inference.table_set import TableChoiceError
+
+    if not svc.tables.loaded:
+        raise Problem(422, f"table: this service has no table ({svc.tables.reason})",
+                      kind="invalid-input", field="table")
+    try:
+        chosen = svc.tables.choose(setup.sphere_diameters_m, setup.table, setup.plate_material)
+    except TableChoiceError as exc:
+        raise Problem(422, f"{exc.field}: {exc.message}", kind="invalid-input",
+                      field=exc.field) from None
+    try:
+        calibrated_table(chosen.table, setup.calibration())
+    except CalibrationError as exc:
+        raise _invalid(exc, "chain_calibration.") from None
+
+
+def resolve(svc: Service, setup_id: str | None, field: str = "setup") -> Setup | None:
+    """The newest revision of the set-up a request names, or a 422 naming ``field``."""
+    if setup_id is None:
+        return None
+    found = setup_book.revision(svc.store, setup_id)
+    if found is None:
+        known = [s.id for s in setup_book.newest(svc.store)]
+        raise Problem(422, f"{field}: no set-up {setup_id!r} (known: "
+                      f"{', '.join(known) if known else 'none yet; POST /v1/setups'})",
+                      kind="invalid-input", field=field)
+    return found
+
+
+async def _body(request: Request, model: type[BaseModel]) -> Any:
+    from pydantic import ValidationError
+
+    from solitonde.instrument.service.problems import from_pydantic
+
+    try:
+        return model.model_validate_json(await request.body())
+    except ValidationError as exc:
+        raise from_pydantic(exc, model) from None
+
+
+def _new_setup(svc: Service, body: SetupIn, setup_id: str | None = None) -> Setup:
+    data = body.model_dump(exclude_none=True)
+    if setup_id is not None:
+        if data.get("id", setup_id) != setup_id:
+            raise Problem(422, f"id: {data['id']!r} differs from the path's {setup_id!r}",
+                          kind="invalid-input", field="id")
+    try:
+        setup = Setup.from_dict(data, inputs_only=True)
+    except SetupError as exc:
+        raise _invalid(exc) from None
+    check_against_tables(svc, setup)
+    return setup
+
+
+@router.post("/setups", status_code=201, responses=ERRORS,
+             dependencies=[Depends(require_json)], summary="Create a set-up (revision 1)")
+async def create_setup(request: Request, svc: ServiceDep) -> Any:
+    """``{"id", "sphere_diameters_m", "table", "plate_material"?, "chain"?, "striker"?,
+    "labels"?}``: 201 with revision 1; 409 when the id exists (``PUT`` revises it)."""
+    setup = _new_setup(svc, await _body(request, SetupIn))
+    if await run_in_threadpool(setup_book.revision, svc.store, setup.id) is not None:
+        raise Problem(409, f"id: set-up {setup.id!r} exists; PUT /v1/setups/{{id}} makes a "
+                      "new revision", kind="conflict", field="id")
+    stored = await run_in_threadpool(setup_book.add_revision, svc.store, setup)
+    out = await run_in_threadpool(setup_out, svc, stored)
+    return JSONResponse(out, status_code=201, headers={"Location": out["links"]["self"]})
+
+
+@router.put("/setups/{setup_id:path}/calibration", status_code=201, responses=ERRORS,
+            dependencies=[Depends(require_json)],
+            summary="Give a set-up a chain calibration written by `solitonde calibrate`")
+async def put_calibration(request: Request, svc: ServiceDep,
+                          setup_id: str = SetupIdPath) -> dict[str, Any]:
+    """The calibration file as it is: a new revision holding it, and a job re-estimating the
+    set-up's measurements with it."""
+    current = _existing(svc, setup_id)
+    try:
+        data = json.loads(await request.body())
+        calibration = Calibration.from_any(data)
+    except json.JSONDecodeError as exc:
+        raise Problem(422, f"body: not JSON ({exc})", kind="invalid-input", field="body") from None
+    except CalibrationError as exc:
+        raise _invalid(exc, "chain_calibration.") from None
+    assert calibration is not None
+    _sizes_match(current, calibration)
+    return await run_in_threadpool(_calibrate, svc, current, calibration,
+                                   {"kind": "file", "reference": calibration.reference})
+
+
+@router.post("/setups/{setup_id:path}/calibration", status_code=201, responses=ERRORS,
+             dependencies=[Depends(require_json)],
+             summary="Fit a set-up's chain calibration on stored reference measurements")
+async def post_calibration(request: Request, svc: ServiceDep,
+                           setup_id: str = SetupIdPath) -> dict[str, Any]:
+    """``{"references": [{"measurement_ids": [..], "thickness_m", "distance_m"}]}``: fits what
+    ``solitonde calibrate`` fits (the chain's damping against the table's dissipation layer,
+    ARR factor, TOF offset, per sphere size; by distance where references sit at several) from
+    the stored shots. 201 with the fit, its uncertainty, the new revision and the job that
+    re-estimates the set-up's measurements."""
+    current = _existing(svc, setup_id)
+    body = await _body(request, CalibrationIn)
+    return await run_in_threadpool(_fit_and_calibrate, svc, current, body)
+
+
+def _existing(svc: Service, setup_id: str) -> Setup:
+    found = setup_book.revision(svc.store, setup_id)
+    if found is None:
+        raise Problem(404, f"setup_id: no set-up {setup_id!r}", kind="not-found",
+                      field="setup_id")
+    return found
+
+
+def _sizes_match(setup: Setup, calibration: Calibration) -> None:
+    sizes = [d for d in calibration.per_diameter if setup.size_of(d) is not None]
+    if calibration.per_diameter and not sizes:
+        listed = ", ".join(f"{d:g}" for d in calibration.per_diameter)
+        mounted = ", ".join(f"{d:g}" for d in setup.sphere_diameters_m)
+        raise Problem(422, f"chain_calibration.per_diameter: its sizes ({listed} m) are none of "
+                      f"set-up {setup.id!r}'s sphere_diameters_m ({mounted} m)",
+                      kind="invalid-input", field="chain_calibration.per_diameter")
+
+
+def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> dict[str, Any]:
+    from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+    from solitonde.instrument.inference.inversion import InversionError
+    from solitonde.instrument.inference.loaded_table import EstimateUnavailable
+    from solitonde.instrument.service.ingest import (
+        apply_setup,
+        measure_shots,
+        waveforms_from_records,
+    )
+
+    chosen = svc.tables.choose(setup.sphere_diameters_m, setup.table, setup.plate_material)
+    references = []
+    for i, ref in enumerate(body.references):
+        waveforms = []
+        for j, mid in enumerate(ref.measurement_ids):
+            record = svc.store.get(mid, with_samples=True)
+            if record is None:
+                raise Problem(422, f"references.{i}.measurement_ids.{j}: no measurement {mid}",
+                              kind="invalid-input", field=f"references.{i}.measurement_ids.{j}")
+            waveforms += waveforms_from_records(record.shots)
+        waveforms = apply_setup(waveforms, setup, f"references.{i}.shots")
+        _, _, summaries = measure_shots(waveforms, f"references.{i}.shots")
+        for s in summaries:
+            try:
+                references.append(Reference(ref.thickness_m, ref.distance_m, s.inputs()))
+            except EstimateUnavailable as exc:
+                raise Problem(422, f"references.{i}: {exc}", kind="invalid-input",
+                              field=f"references.{i}") from None
+            if s.hidden:
+                raise Problem(422, f"references.{i}: the shots of D = {s.diameter_m:g} m show "
+                              "no reflection; a reference needs one", kind="invalid-input",
+                              field=f"references.{i}")
+    try:
+        calibration = fit_calibration(chosen.table, references)
+    except (CalibrationError, InversionError) as exc:
+        field = f"references.{exc.field}"
+        raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
+                      field=field) from None
+    source = {"kind": "references",
+              "references": [r.model_dump() for r in body.references]}
+    return _calibrate(svc, setup, calibration, source)
+
+
+def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
+               source: dict[str, Any]) -> dict[str, Any]:
+    """A new revision holding ``calibration``, and the job that re-estimates its
+    measurements."""
+    from solitonde.instrument.service.reanalysis import recompute
+
+    revised = Setup.from_dict({**setup.to_dict(), "chain_calibration": calibration.to_dict(),
+                               "calibration_source": source})
+    check_against_tables(svc, revised)
+    stored = setup_book.add_revision(svc.store, revised)
+    ids = [m for m, _ in setup_book.users(svc.store, setup.id)]
+
+    def work(progress: jobs.Progress) -> dict[str, Any]:
+        failed: list[dict[str, Any]] = []
+        for n, mid in enumerate(ids, start=1):
+            try:
+                recompute(svc.store, svc.tables, mid, stored)
+            except Exception as exc:  # that measurement keeps its result; the job says why
+                failed.append({"id": mid, "reason": getattr(exc, "detail", None) or str(exc)})
+            progress({"done": n, "failed": failed})
+        return {"done": len(ids), "failed": failed}
+
+    job = jobs.start(svc.store, "recalibration", len(ids),
+                     {"setup": stored.reference()}, work)
+    return {"setup": setup_out(svc, stored), "revision": stored.revision,
+            "chain_calibration": stored.chain_calibration, "job": job}
+
+
+@router.put("/setups/{setup_id:path}", status_code=200, responses=ERRORS,
+            dependencies=[Depends(require_json)], summary="Revise a set-up (a new revision)")
+async def revise_setup(request: Request, svc: ServiceDep,
+                       setup_id: str = SetupIdPath) -> dict[str, Any]:
+    """The set-up as a whole, as for ``POST``; its chain calibration carries over. Earlier
+    revisions stay as they were, and measurements keep naming the one they used."""
+    current = _existing(svc, setup_id)
+    setup = _new_setup(svc, await _body(request, SetupIn), setup_id)
+    revised = Setup.from_dict({**setup.to_dict(),
+                               "chain_calibration": current.chain_calibration,
+                               "calibration_source": current.calibration_source})
+    check_against_tables(svc, revised)
+    stored = await run_in_threadpool(setup_book.add_revision, svc.store, revised)
+    return await run_in_threadpool(setup_out, svc, stored)
+
+
+@router.get("/setups", responses=ERRORS, summary="Every set-up's newest revision")
+async def list_setups(svc: ServiceDep) -> dict[str, Any]:
+    setups = await run_in_threadpool(setup_book.newest, svc.store)
+    return {"items": [{**s.to_dict(), "links": setup_links(s.id)} for s in setups]}
+
+
+@router.get("/setups/{setup_id:path}", responses=ERRORS,
+            summary="A set-up's newest revision and the list of its revisions")
+async def get_setup(svc: ServiceDep, setup_id: str = SetupIdPath) -> dict[str, Any]:
+    """Saved as a file, this is what ``solitonde analyze --setup FILE`` reads offline."""
+    return await run_in_threadpool(setup_out, svc, _existing(svc, setup_id))
+
+
+@router.delete("/setups/{setup_id:path}", status_code=204, response_class=Response,
+               responses=ERRORS, summary="Delete a set-up no measurement names")
+async def delete_setup(svc: ServiceDep, setup_id: str = SetupIdPath) -> Response:
+    _existing(svc, setup_id)
+    used = await run_in_threadpool(setup_book.users, svc.store, setup_id)
+    try:
+        if not used:
+            await run_in_threadpool(setup_book.delete, svc.store, setup_id)
+    except ValueError:
+        used = await run_in_threadpool(setup_book.users, svc.store, setup_id)
+    if used:
+        raise Problem(409, f"setup_id: {len(used)} measurements name set-up {setup_id!r} "
+                      f"(e.g. {used[0][0]}); it is kept", kind="conflict", field="setup_id")
+    return Response(status_code=204)
+
+
+@router.get("/jobs/{job_id}", responses=ERRORS, summary="A background job's progress")
+async def get_job(svc: ServiceDep, job_id: str = JobIdPath) -> dict[str, Any]:
+    """``state`` (queued, running, done, failed, stalled), ``done`` of ``total``, ``failed``
+    (each id and why); any worker process answers."""
+    job = await run_in_threadpool(jobs.get, svc.store, job_id)
+    if job is None:
+        raise Problem(404, f"job_id: no job {job_id!r}", kind="not-found", field="job_id")
+    return job
