@@ -35,7 +35,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
@@ -54,6 +54,9 @@ from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import FEATURES
 from solitonde.signal.waveform import UNITS
+
+if TYPE_CHECKING:
+    from solitonde.instrument.inference.setups import Setup
 
 OUT_SUFFIXES = (".csv", ".parquet")
 ROW_KEYS = ("source", "shot", "channel", *FEATURES, *PEAK_READING, "flags", "arr_upper_bound",
@@ -123,22 +126,28 @@ def aggregates(groups: list[PositionShots]) -> list[dict[str, Any]]:
 
 def estimates_for_locations(groups: Sequence[PositionShots], table_files: Sequence[Path] | None,
                             calibration_file: Path | None,
-                            plate_material: Any = None) -> list[dict[str, Any]]:
+                            plate_material: Any = None,
+                            setup: Setup | None = None) -> list[dict[str, Any]]:
     """Estimates per (plate_id, position) from `analyze`'s summaries, sphere sizes combined,
-    each against the table of its family (instrument.table_set's rule), through the one
-    estimate path (instrument.inference.pipeline).
+    each against the table of its family (instrument.table_set's rule) or the one its manifest
+    row or ``setup`` names, through the one estimate path (instrument.inference.pipeline).
+
+    With ``setup`` its table is found by id among ``table_files``, the bundled tables and
+    ``$SOLITONDE_TABLE``, and its chain calibration is applied, as the service does.
 
     Raises TableError/CalibrationError when a table or the calibration cannot be read.
     """
-    from solitonde.instrument.cli.cmd_invert import choice_error, table_set
+    from solitonde.instrument.cli.cmd_invert import choice_error, setup_tables, table_set
     from solitonde.instrument.inference.calibration import Calibration
     from solitonde.instrument.inference.inversion import InversionError
     from solitonde.instrument.inference.pipeline import MISSING_SIZE, estimate
     from solitonde.instrument.inference.table_set import TableChoiceError
     from solitonde.instrument.tables.table import TableError
 
-    tables = table_set(table_files)
+    tables = table_set(table_files) if setup is None else setup_tables(setup, table_files)
     cal = Calibration.load(calibration_file) if calibration_file else None
+    if setup is not None and setup.chain_calibration is not None:
+        cal = setup.calibration()
     by_location = measured_shots.by_position(
         groups, lambda g: tuple(g.location.get(k) for k in measured_shots.POSITION_KEYS))
     out = []
@@ -156,8 +165,14 @@ def estimates_for_locations(groups: Sequence[PositionShots], table_files: Sequen
         if not usable:
             out.append(row)
             continue
+        chosen = _chosen_for(sizes, setup, plate_material)
+        if "error" in chosen:
+            row["error"] = chosen["error"]
+            out.append(row)
+            continue
         try:
-            found = estimate(tables, usable, cal, plate_material=plate_material,
+            found = estimate(tables, usable, cal, table=chosen.get("table"),
+                             plate_material=chosen.get("plate_material"),
                              skipped=row["skipped"])
             row["estimate"] = found.to_dict()
         except TableChoiceError as exc:
@@ -166,6 +181,40 @@ def estimates_for_locations(groups: Sequence[PositionShots], table_files: Sequen
             row["error"] = str(exc)
         out.append(row)
     return out
+
+
+def _chosen_for(sizes: Sequence[PositionShots], setup: Setup | None,
+                plate_material: Any) -> dict[str, Any]:
+    """The table and plate material a position is estimated with: its manifest row's, else the
+    set-up's, else the command line's material; ``error`` where a row names another set-up
+    than ``--setup``, or a table that contradicts it."""
+    from solitonde.instrument.cli.cmd_invert import parse_material
+
+    loc = sizes[0].location
+    named = loc.get("setup")
+    if named is not None and (setup is None or named != setup.id):
+        return {"error": f"--manifest: setup {named!r}: give that set-up's file with --setup"
+                + ("" if setup is None else f" (--setup is {setup.id!r})")}
+    if setup is not None:
+        for g in sizes:
+            d = g.location.get("sphere_diameter")
+            if d is not None and setup.size_of(float(d)) is None:
+                return {"error": f"sphere_diameter {float(d):g} m contradicts --setup "
+                        f"{setup.id!r}, whose sphere_diameters_m are "
+                        f"{', '.join(f'{s:g}' for s in setup.sphere_diameters_m)} m"}
+    table = loc.get("table")
+    if setup is not None and table is not None and table != setup.table:
+        return {"error": f"--manifest: table {table!r} contradicts --setup {setup.id!r}, whose "
+                f"table is {setup.table!r}"}
+    material = loc.get("plate_material")
+    try:
+        material = plate_material if material is None else parse_material(str(material))
+    except ValueError as exc:
+        return {"error": f"--manifest: plate_material: {exc}"}
+    if material is None and setup is not None:
+        material = setup.plate_material
+    return {"table": table if table is not None else None if setup is None else setup.table,
+            "plate_material": material}
 
 
 def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
@@ -274,6 +323,11 @@ def analyze(
                                                  "JSON (solitonde calibrate) for --invert."),
     plots: Path | None = typer.Option(None, "--plots", help="Folder for one PNG per shot (trace "
                                       "with the detected pulses marked)."),
+    setup_file: Path | None = typer.Option(None, "--setup", help="An instrument set-up saved "
+                                           "from the service (GET /v1/setups/ID): its sphere "
+                                           "size, table (found by id among --table, the "
+                                           "bundled tables and $SOLITONDE_TABLE) and chain "
+                                           "calibration, as the service applies them."),
 ) -> None:
     """Measure TOF, ARR, SNR and quality flags of every shot; aggregate per position."""
     console = Console(stderr=as_json)
@@ -281,6 +335,25 @@ def analyze(
     def usage(message: str) -> None:
         typer.echo(f"error: {message}", err=True)  # unwrapped, one line for scripts and logs
         raise typer.Exit(code=2)
+
+    setup = None
+    if setup_file is not None:
+        from solitonde.instrument.inference.setups import Setup, SetupError
+
+        try:
+            setup = Setup.load(setup_file)
+        except SetupError as exc:
+            usage(f"--setup: {exc}")
+            return
+        if calibration_file is not None and setup.chain_calibration is not None:
+            usage(f"--calibration-file: set-up {setup.id!r} (revision {setup.revision}) has "
+                  "its own chain calibration; give one of the two")
+        if sphere_diameter is not None and setup.size_of(sphere_diameter) is None:
+            usage(f"--sphere-diameter: {sphere_diameter:g} m contradicts --setup {setup.id!r}, "
+                  f"whose sphere_diameters_m are "
+                  f"{', '.join(f'{d:g}' for d in setup.sphere_diameters_m)} m")
+        if sphere_diameter is None and len(setup.sphere_diameters_m) == 1:
+            sphere_diameter = setup.sphere_diameters_m[0]
 
     for flag, path in (("--out", out), ("--estimates-out", estimates_out)):
         if path is not None and path.suffix.lower() not in OUT_SUFFIXES:
@@ -383,7 +456,8 @@ def analyze(
         from solitonde.instrument.tables.table import TableError
 
         try:
-            estimates = estimates_for_locations(groups, table, calibration_file, material)
+            estimates = estimates_for_locations(groups, table, calibration_file, material,
+                                                setup)
         except CalibrationError as exc:
             errors.append({"source": str(calibration_file), "error": str(exc)})
         except (TableError, ValueError, OSError) as exc:  # table unreadable

@@ -14,7 +14,7 @@ import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
@@ -25,6 +25,9 @@ from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, I
 from solitonde.instrument.inference.pipeline import estimate
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.tables.table import TableError
+
+if TYPE_CHECKING:
+    from solitonde.instrument.inference.setups import Setup
 
 
 def table_path(option: Path | None) -> Path:
@@ -44,6 +47,25 @@ def table_set(options: Sequence[Path] | None) -> TableSet:
     if tables.problems:
         raise TableError("table", "; ".join(tables.problems))
     return tables
+
+
+def setup_tables(setup: Setup, options: Sequence[Path] | None) -> TableSet:
+    """The table a set-up names by id, looked for in this order: ``--table`` (files or
+    folders), the bundled tables, ``$SOLITONDE_TABLE``. TableError when none has that id."""
+    from solitonde.instrument.tables.bundled import bundled_tables
+
+    env = os.environ.get("SOLITONDE_TABLE")
+    found: list[str] = []
+    for paths in (list(options or []), bundled_tables(), [Path(env)] if env else []):
+        if not paths:
+            continue
+        tables = TableSet(paths, warm_up=False)
+        if setup.table in tables.by_id:
+            return TableSet([tables.by_id[setup.table].path], warm_up=False)
+        found += [tid for tid in tables.by_id if tid not in found]
+    raise TableError("table", f"set-up {setup.id!r} names table {setup.table!r}, which is none "
+                     f"of --table, the bundled tables and $SOLITONDE_TABLE (found: "
+                     f"{', '.join(found) or 'none'})")
 
 
 def choice_error(exc: TableChoiceError) -> str:

@@ -63,6 +63,8 @@ TABLE = typer.Option(None, "--table", help="The server's model table to estimate
 ALLOW_DUPLICATE = typer.Option(False, "--allow-duplicate", help="Store a file's shots even where "
                                "the service holds the same samples already (by default it "
                                "answers with that measurement: duplicate).")
+SETUP = typer.Option(None, "--setup", help="The server's instrument set-up, by id (GET "
+                     "/v1/setups): its sphere size, table and chain calibration for every file.")
 MANIFEST = typer.Option(None, "--manifest", help="Campaign manifest (.csv or .yaml): per file "
                         "or glob, plate_id, position, x_m, y_m, sphere_diameter_m, "
                         "calibration_N_per_V.")
@@ -74,7 +76,8 @@ def given_fields(plate_id: str | None, position: str | None, x: float | None,
                  y: float | None, sphere_diameter: float | None, calibration: float | None,
                  units: str | None, sample_rate: float | None, fmt: str | None,
                  channel: str | None, group: str | None, plate_material: str | None,
-                 table: str | None = None, allow_duplicate: bool = False) -> dict[str, Any]:
+                 table: str | None = None, allow_duplicate: bool = False,
+                 setup: str | None = None) -> dict[str, Any]:
     """The command line's metadata as the upload's form fields; a bad value is a
     :class:`typer.BadParameter` naming the flag and what is allowed."""
     for flag, value in (("--x", x), ("--y", y), ("--sample-rate", sample_rate),
@@ -92,7 +95,7 @@ def given_fields(plate_id: str | None, position: str | None, x: float | None,
     fields = {"plate_id": plate_id, "position": position, "x_m": x, "y_m": y,
               "sphere_diameter": sphere_diameter, "calibration": calibration, "units": units,
               "sample_rate": sample_rate, "format": fmt, "channel": channel, "group": group,
-              "plate_material": plate_material, "table": table,
+              "plate_material": plate_material, "table": table, "setup": setup,
               "allow_duplicate": "true" if allow_duplicate else None}
     return {k: v for k, v in fields.items() if v is not None}
 
@@ -148,6 +151,7 @@ def post(
     plate_material: str | None = MATERIAL,
     table: str | None = TABLE,
     allow_duplicate: bool = ALLOW_DUPLICATE,
+    setup: str | None = SETUP,
     manifest: Path | None = MANIFEST,
     as_json: bool = AS_JSON,
 ) -> None:
@@ -161,7 +165,7 @@ def post(
     try:
         given = given_fields(plate_id, position, x, y, sphere_diameter, calibration, units,
                              sample_rate, fmt, channel, group, plate_material, table,
-                             allow_duplicate)
+                             allow_duplicate, setup)
         rows = load_manifest(manifest)
     except typer.BadParameter as exc:
         usage(f"{exc.param_hint}: {exc.message}")

@@ -44,6 +44,7 @@ from solitonde.instrument.cli.cmd_post import (
     POSITION,
     SAMPLE_RATE,
     SERVER,
+    SETUP,
     SPHERE,
     TABLE,
     UNITS,
@@ -224,6 +225,7 @@ def watch(
     plate_material: str | None = MATERIAL,
     table: str | None = TABLE,
     allow_duplicate: bool = ALLOW_DUPLICATE,
+    setup: str | None = SETUP,
     manifest: Path | None = MANIFEST,
     pattern: str | None = typer.Option(None, "--pattern", help="Glob of the files to post, "
                                        "e.g. '*.csv' (default: every file the upload reads)."),
@@ -251,7 +253,7 @@ def watch(
     try:
         given = given_fields(plate_id, position, x, y, sphere_diameter, calibration, units,
                              sample_rate, fmt, channel, group, plate_material, table,
-                             allow_duplicate)
+                             allow_duplicate, setup)
         rows = load_manifest(manifest)
     except typer.BadParameter as exc:
         usage(f"{exc.param_hint}: {exc.message}")

@@ -50,6 +50,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "table": ("cmd_table", "Build and inspect model tables."),
     "bench": ("cmd_bench", "Benchmarks of the model."),
     "store": ("cmd_store", "Back up, check, migrate and reanalyze a measurement store."),
+    "setup": ("cmd_setup", "Instrument set-ups kept by a service: create, show, list, "
+                           "calibrate."),
 }
 """Every command: the module that registers it and its one-line help, in the order listed."""
 

@@ -25,8 +25,12 @@ from typing import Any
 from solitonde.instrument.errors import MessageError
 
 KEYS = ("file", "plate_id", "position", "x_m", "y_m", "sphere_diameter_m",
-        "calibration_N_per_V")
-"""The manifest's columns; ``file`` is required, the others optional."""
+        "calibration_N_per_V", "setup", "table", "plate_material")
+"""The manifest's columns; ``file`` is required, the others optional. ``setup`` names an
+instrument set-up by id, ``table`` a model table by id, ``plate_material`` a library material
+or its properties as JSON."""
+CHOICE_KEYS = ("setup", "table", "plate_material")
+"""The columns that choose how a file is estimated (kept as its metadata, as text)."""
 TEXT_LIMIT = 200
 """Longest plate_id or position (the service's limit)."""
 
@@ -133,6 +137,14 @@ def _row(where: str, record: Mapping[str, Any]) -> Row:
             if len(text) > TEXT_LIMIT:
                 raise ManifestError(f"--manifest: {where}: {key}: {len(text)} characters; at "
                                     f"most {TEXT_LIMIT}")
+            meta[key] = text
+    for key in CHOICE_KEYS:
+        value = record.get(key)
+        if not blank(value):
+            text = str(value).strip()
+            if len(text) > TEXT_LIMIT * 5:
+                raise ManifestError(f"--manifest: {where}: {key}: {len(text)} characters; at "
+                                    f"most {TEXT_LIMIT * 5}")
             meta[key] = text
     for key, target in (("x_m", "x_m"), ("y_m", "y_m"), ("sphere_diameter_m", "sphere_diameter")):
         if not blank(record.get(key)):

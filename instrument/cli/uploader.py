@@ -27,7 +27,8 @@ FIELD_FLAGS: dict[str, str] = {
     "plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
     "sphere_diameter": "--sphere-diameter", "calibration": "--calibration", "units": "--units",
     "sample_rate": "--sample-rate", "format": "--format", "channel": "--channel",
-    "group": "--group", "plate_material": "--plate-material",
+    "group": "--group", "plate_material": "--plate-material", "table": "--table",
+    "setup": "--setup",
 }
 """The upload's form fields (the service's names) and the command-line flag that sets each."""
 

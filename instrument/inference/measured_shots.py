@@ -63,6 +63,9 @@ POSITION_KEYS = ("plate_id", "position", "x_m", "y_m")
 """The metadata that say where a shot was taken."""
 LOCATION_KEYS = (*POSITION_KEYS, "sphere_diameter")
 """Where a shot was taken and with which spheres."""
+CHOICE_KEYS = ("setup", "table", "plate_material")
+"""What a shot's metadata (a manifest's columns) says it is estimated with: an instrument
+set-up by id, a table by id, the plate's material."""
 
 
 class ShotInputError(InstrumentError):
@@ -255,7 +258,7 @@ def located(meta: Mapping[str, Any], sources: Sequence[tuple[str, Mapping[str, A
     state; a key two of them (the file included) state differently is a WaveformError naming
     both."""
     out = dict(meta)
-    for key in (*LOCATION_KEYS, "baseline"):
+    for key in (*LOCATION_KEYS, *CHOICE_KEYS, "baseline"):
         stated = [(f"the file ({where})", meta[key])] if meta.get(key) is not None else []
         stated += [(name, m[key]) for name, m in sources if m.get(key) is not None]
         for name, value in stated[1:]:
@@ -304,7 +307,8 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
         row: dict[str, Any] = {"source": str(path), "shot": meta.get("shot"),
                                "channel": signal_channels.channel_name(w)
                                if meta.get("channel") is not None else None,
-                               **{k: meta.get(k) for k in LOCATION_KEYS}}
+                               **{k: meta.get(k) for k in LOCATION_KEYS},
+                               **{k: meta[k] for k in CHOICE_KEYS if meta.get(k) is not None}}
         diameter = _number(meta.get("sphere_diameter"))
         try:
             feat, row["baseline"] = measure_waveform(w, meta)
@@ -414,6 +418,7 @@ def summarise_positions(rows: Sequence[dict[str, Any]]) -> list[PositionShots]:
     for members in by_position((r for r in rows if "features" in r), key).values():
         first = members[0]
         location = {**{k: first.get(k) for k in LOCATION_KEYS},
+                    **{k: first[k] for k in CHOICE_KEYS if first.get(k) is not None},
                     "source": key(first)[-1]}
         (summary,) = summarise([_number(location["sphere_diameter"])] * len(members),
                                [m["features"] for m in members])
