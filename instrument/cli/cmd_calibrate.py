@@ -7,13 +7,18 @@ follows the plate, as a real chain's does. The factor and offset hold what dampi
 
 The reference plate's thickness and the chain's distance to the support are known; the shots are
 waveform files (analysed and aggregated per sphere size, as `analyze` does) or, with ``--tof``,
-``--arr`` and ``--diameter`` (repeatable, same order), already measured means. The result is
-written as JSON (``--out``) for `invert --calibration` and the service.
+``--arr`` and ``--diameter`` (repeatable, same order), already measured means. Several reference
+plates, or one plate at several distances, are given with ``--reference THICKNESS_M,DISTANCE_M,
+FILE_OR_FOLDER`` (repeatable; beside or instead of the one-plate form): references at two or more
+distances give the factor and offset per distance as well (``by_distance``), which the inversion
+reads at each candidate distance. The result is written as JSON (``--out``) for
+`invert --calibration` and the service.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
@@ -67,10 +72,49 @@ def summaries_from_files(files: list[Path], diameter: float | None) -> list[Feat
     return out
 
 
+def parse_reference(text: str) -> tuple[float, float, Path]:
+    """``THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER`` as (thickness, distance, path); the path is the
+    rest after the second comma (it may hold commas itself).
+
+    Raises
+    ------
+    CalibrationError
+        (field ``--reference``) When a part is missing, a number is not a positive finite one
+        (the distance may be 0: the clamp itself), or the path does not exist.
+    """
+    parts = text.split(",", 2)
+    if len(parts) != 3 or not parts[2].strip():
+        raise CalibrationError("--reference", f"expected THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER, "
+                               f"got {text!r}")
+    numbers = []
+    for name, raw in (("thickness", parts[0]), ("distance", parts[1])):
+        try:
+            value = float(raw)
+        except ValueError:
+            raise CalibrationError("--reference", f"{text!r}: the {name} {raw.strip()!r} is not "
+                                   "a number (in m)") from None
+        if not math.isfinite(value) or value < 0 or (name == "thickness" and value == 0):
+            raise CalibrationError("--reference", f"{text!r}: the {name} must be a "
+                                   f"{'positive' if name == 'thickness' else 'non-negative'} "
+                                   f"finite number of m, got {raw.strip()!r}")
+        numbers.append(value)
+    path = Path(parts[2].strip())
+    if not path.exists():
+        raise CalibrationError("--reference", f"{text!r}: {str(path)!r} does not exist")
+    return numbers[0], numbers[1], path
+
+
 def calibrate_command(
     files: list[Path] = typer.Argument(None, help="waveform files or folders of reference shots"),
-    thickness: float = typer.Option(..., "--thickness", help="reference plate thickness, m"),
-    distance: float = typer.Option(..., "--distance", help="reference distance to support, m"),
+    thickness: float | None = typer.Option(None, "--thickness",
+                                           help="reference plate thickness, m"),
+    distance: float | None = typer.Option(None, "--distance",
+                                          help="reference distance to support, m"),
+    reference: list[str] = typer.Option(
+        [], "--reference", metavar="THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER",
+        help="a reference plate's thickness, the chain's distance to its support and its shot "
+        "files (repeat for several plates or distances; references at two or more distances "
+        "give the factor and offset per distance)"),
     diameter: list[float] = typer.Option([], "--diameter", callback=sphere_sizes,
                                          help="sphere diameter, m (for files "
                                          "without metadata: one value; with --tof: repeat)"),
@@ -84,10 +128,25 @@ def calibrate_command(
     as_json: bool = typer.Option(False, "--json", help="print the calibration as JSON"),
 ) -> None:
     """Fit the chain's damping (with a table's dissipation layer), ARR factor and TOF offset per
-    sphere size on a reference plate; write them as JSON."""
+    sphere size on a reference plate; write them as JSON.
+
+    References at two or more distances to the support (--reference, repeated) give the
+    factor and offset per distance as well."""
     if out.is_dir():  # before any work: the fit would be lost
         _fail(f"--out: {str(out)!r} is a directory; give the name of the JSON file to write")
     try:
+        refs: list[Reference] = []
+        one_plate = bool(tof or arr or files)
+        if one_plate and (thickness is None or distance is None):
+            _fail("give the reference plate's --thickness and --distance (or each reference as "
+                  "--reference THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER)")
+            return
+        if (thickness is not None or distance is not None) and not one_plate:
+            _fail("--thickness and --distance need reference shot files or --tof/--arr/"
+                  "--diameter; with --reference each reference carries its own")
+            return
+        if (files or reference) and len(diameter) > 1:
+            _fail("with files give at most one --diameter")
         if tof or arr:
             n = len(tof)
             if len(arr) != n or len(diameter) != n:
@@ -97,14 +156,20 @@ def calibrate_command(
                                     arr_std[i] if arr_std else None,
                                     shots[i] if shots else 1) for i in range(n)]
         elif files:
-            if len(diameter) > 1:
-                _fail("with files give at most one --diameter")
             items = summaries_from_files(files, diameter[0] if diameter else None)
-        else:
-            _fail("give reference shot files, or --tof/--arr/--diameter")
+        if one_plate:
+            assert thickness is not None and distance is not None
+            refs += [Reference(thickness, distance, s) for s in items]
+        for text in reference:
+            t_ref, l_ref, path = parse_reference(text)
+            refs += [Reference(t_ref, l_ref, s)
+                     for s in summaries_from_files([path], diameter[0] if diameter else None)]
+        if not refs:
+            _fail("give reference shot files, --tof/--arr/--diameter, or --reference "
+                  "THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER")
             return
         model = ModelTable.load(table_path(table))
-        cal = fit_calibration(model, [Reference(thickness, distance, s) for s in items])
+        cal = fit_calibration(model, refs)
     except (CalibrationError, InversionError, TableError) as exc:
         _fail(str(exc))
         return
@@ -123,6 +188,12 @@ def calibrate_command(
                        f"arr_factor {e['arr_factor']:.4f} "
                        f"+- {e['arr_factor_std']:.4f}, tof_offset {e['tof_offset_s'] * 1e6:.3f} "
                        f"+- {e['tof_offset_std_s'] * 1e6:.3f} us")
+            for row in e.get("by_distance", []):
+                typer.echo(f"  at L = {row['distance_m'] * 1e3:.4g} mm "
+                           f"({row.get('n_references', 1)} ref.): arr_factor "
+                           f"{row['arr_factor']:.4f} +- {row.get('arr_factor_std', 0.0):.4f}, "
+                           f"tof_offset {row['tof_offset_s'] * 1e6:.3f} "
+                           f"+- {row.get('tof_offset_std_s', 0.0) * 1e6:.3f} us")
         typer.echo(f"wrote {out}")
 
 

@@ -42,6 +42,7 @@ from typing import Any
 
 from scipy.stats import chi2 as chi2_dist
 
+from solitonde.instrument.inference.calibration import answer_distance
 from solitonde.signal.features import READING_VERSION
 
 # The inversion calls this module on every estimate, so this module does not import it back:
@@ -215,8 +216,11 @@ def _floor_mismatch(est: Any, floor_arr_max: float) -> str | None:
     for item in est.inputs:
         if item.hidden or item.diameter_m not in explained:
             continue
-        factor, _ = ((1.0, 0.0) if est.calibration is None
-                     else est.calibration.for_diameter(item.diameter_m))
+        # the factor where the answer puts the chain (distance-dependent calibrations)
+        where = answer_distance(est.distance_m)
+        factor = (1.0 if est.calibration is None
+                  else est.calibration.for_diameter(item.diameter_m)[0] if where is None
+                  else float(est.calibration.along(item.diameter_m, where)[0]))
         _, s_arr = item.sigmas()
         level = factor * floor_arr_max
         if item.arr > level + FLOOR_Z * s_arr and explained[item.diameter_m] < STRICT_EXPLAINED:

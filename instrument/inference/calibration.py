@@ -22,6 +22,12 @@ per sphere size (inverse-variance means when several references are given; the f
 :mod:`.calibration_fit`). Several references of a size also state the spread between them as a
 transfer uncertainty. The inversion then compares ``arr_factor * ARR_model`` and ``TOF_model +
 tof_offset_s`` with new measurements. Stored as JSON (written to a temporary name, then renamed).
+
+Next to a clamped support the model's mismatch is not the one far away (a TOF offset of +3 to +7
+us within a few centimetres of the clamp against +3.5 us far from it): references at two or more
+distances give a size's factor and offset per distance (``by_distance``), and the inversion reads
+them at each cell's distance (:meth:`Calibration.along`: piecewise linear in 1/L between the
+references' distances, constant beyond them).
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.tables.dissipation import damped
@@ -78,7 +86,8 @@ def _count(name: str, value: Any) -> int:
     return int(value)
 
 
-# what a per-diameter entry may hold (as fit_calibration writes it), each with its check
+# what a per-diameter entry may hold (as fit_calibration writes it), each with its check;
+# "by_distance" besides, checked by _by_distance
 _PER_DIAMETER_KEYS: dict[str, Any] = {
     "arr_factor": _positive,
     "arr_factor_std": _nonnegative,
@@ -91,22 +100,124 @@ _PER_DIAMETER_KEYS: dict[str, Any] = {
     "damping_std_s": _nonnegative,
 }
 
+# what a by_distance row may hold; distance_m, arr_factor and tof_offset_s are required
+_BY_DISTANCE_KEYS: dict[str, Any] = {
+    "distance_m": _nonnegative,
+    "arr_factor": _positive,
+    "tof_offset_s": _finite,
+    "arr_factor_std": _nonnegative,
+    "tof_offset_std_s": _nonnegative,
+    "n_references": _count,
+}
+_BY_DISTANCE_REQUIRED = ("distance_m", "arr_factor", "tof_offset_s")
+
+MIN_DISTANCE_M = 1e-3
+"""Distances below this (the clamp itself, 0, or a negative one) are read at it: the rule is
+linear in 1/L, which must stay finite; a chain of spheres a few millimetres across stands no
+closer to the clamp than about this in any sense the table resolves."""
+
+
+def _by_distance(where: str, rows: Any) -> list[dict[str, float]]:
+    """A per-diameter entry's ``by_distance`` rows, checked: a list of at least two mappings,
+    each with ``distance_m``, ``arr_factor``, ``tof_offset_s`` (stds and ``n_references``
+    optional), sorted by distance, no two at the same distance once read at
+    :data:`MIN_DISTANCE_M` or more."""
+    if not isinstance(rows, Sequence) or isinstance(rows, str):
+        raise CalibrationError(where, f"expected a list of rows, got {type(rows).__name__}")
+    if len(rows) < 2:
+        raise CalibrationError(where, f"needs at least two rows (one per reference distance), "
+                               f"got {len(rows)}; leave by_distance out for one distance")
+    out: list[dict[str, float]] = []
+    for j, row in enumerate(rows):
+        at = f"{where}[{j}]"
+        if not isinstance(row, Mapping):
+            raise CalibrationError(at, f"expected a mapping, got {type(row).__name__}")
+        for key in row:
+            if key not in _BY_DISTANCE_KEYS:
+                raise CalibrationError(f"{at}.{key}", "unknown key (allowed: "
+                                       f"{list(_BY_DISTANCE_KEYS)})")
+        for key in _BY_DISTANCE_REQUIRED:
+            if row.get(key) is None:
+                raise CalibrationError(f"{at}.{key}", "missing")
+        checked: dict[str, float] = {key: check(f"{at}.{key}", row[key])
+                                     for key, check in _BY_DISTANCE_KEYS.items()
+                                     if row.get(key) is not None}
+        if out and max(checked["distance_m"], MIN_DISTANCE_M) <= max(out[-1]["distance_m"],
+                                                                      MIN_DISTANCE_M):
+            raise CalibrationError(f"{at}.distance_m", f"{checked['distance_m']!r} m does not "
+                                   f"exceed the previous row's {out[-1]['distance_m']!r} m (rows "
+                                   f"sorted by distance, each distance once, at most one at "
+                                   f"{MIN_DISTANCE_M:g} m or less)")
+        out.append(checked)
+    return out
+
+
+def interpolate_by_distance(rows: Sequence[Mapping[str, float]], key: str,
+                            distance_m: Any) -> np.ndarray:
+    """``rows[*][key]`` (0 where a row does not state it) at ``distance_m``: piecewise linear in
+    1/L between the rows' distances, constant below the first and beyond the last.
+
+    Why 1/L: the near-field mismatch a clamp adds fades with the distance to it, fastest next to
+    the clamp; linear in 1/L follows ``a + b / L`` exactly between two references and changes
+    little between two far ones. Distances below :data:`MIN_DISTANCE_M` are read at it."""
+    inv = 1.0 / np.maximum(np.asarray(distance_m, dtype=float), MIN_DISTANCE_M)
+    # 1/L falls with L: the rows reversed give np.interp the rising abscissa it needs
+    nodes = np.array([1.0 / max(r["distance_m"], MIN_DISTANCE_M) for r in reversed(rows)])
+    values = np.array([float(r.get(key, 0.0)) for r in reversed(rows)])
+    return np.interp(inv, nodes, values)
+
 
 @dataclass(frozen=True)
 class Calibration:
     """ARR factor and TOF offset: global, and optionally per sphere diameter.
 
     ``per_diameter`` maps a diameter in m to ``{"arr_factor": .., "tof_offset_s": ..}`` (plus
-    optional uncertainties); a sphere size not listed uses the global values.
+    optional uncertainties, the fitted damping, and ``by_distance``: the factor and offset at
+    two or more reference distances, which :meth:`along` reads between); a sphere size not
+    listed uses the global values. An entry's own ``arr_factor`` and ``tof_offset_s`` hold over
+    all its references, for readers that know no distance.
     """
 
     arr_factor: float = 1.0
     tof_offset_s: float = 0.0
-    per_diameter: dict[float, dict[str, float]] = field(default_factory=dict)
+    per_diameter: dict[float, dict[str, Any]] = field(default_factory=dict)
     reference: dict[str, Any] | None = None
 
+    def _entry(self, diameter_m: float) -> dict[str, Any] | None:
+        for d, entry in self.per_diameter.items():
+            if abs(d - diameter_m) <= 0.01 * d:
+                return entry
+        return None
+
+    def by_distance(self, diameter_m: float) -> list[dict[str, float]] | None:
+        """A sphere size's rows per reference distance, or None where it has one set of values
+        for every distance."""
+        entry = self._entry(diameter_m)
+        return None if entry is None else entry.get("by_distance")
+
+    @property
+    def has_by_distance(self) -> bool:
+        return any("by_distance" in e for e in self.per_diameter.values())
+
+    def along(self, diameter_m: float, distance_m: Any) -> tuple[Any, Any, Any, Any]:
+        """(arr_factor, tof_offset_s, arr_factor_std, tof_offset_std_s) for a sphere size at the
+        distances ``distance_m`` (m; a number or an array).
+
+        With ``by_distance`` each is an array of ``distance_m``'s shape (broadcasting with it as
+        the distance did): piecewise linear in 1/L between the rows' distances, constant beyond
+        the first and the last (:func:`interpolate_by_distance`; a near-field mismatch that
+        fades with the distance to the clamp). Without it, the size's plain numbers (those of
+        :meth:`for_diameter` and :meth:`uncertainty_for`, floats) for every distance."""
+        rows = self.by_distance(diameter_m)
+        if rows is None:
+            return (*self.for_diameter(diameter_m), *self.uncertainty_for(diameter_m))
+        f, o, f_sd, o_sd = (interpolate_by_distance(rows, key, distance_m) for key in (
+            "arr_factor", "tof_offset_s", "arr_factor_std", "tof_offset_std_s"))
+        return f, o, f_sd, o_sd
+
     def for_diameter(self, diameter_m: float) -> tuple[float, float]:
-        """(arr_factor, tof_offset_s) for a sphere size."""
+        """(arr_factor, tof_offset_s) for a sphere size (over all its reference distances; see
+        :meth:`along` for the values at a distance)."""
         for d, entry in self.per_diameter.items():
             if abs(d - diameter_m) <= 0.01 * d:
                 return float(entry["arr_factor"]), float(entry["tof_offset_s"])
@@ -138,7 +249,10 @@ class Calibration:
         return {
             "arr_factor": self.arr_factor,
             "tof_offset_s": self.tof_offset_s,
-            "per_diameter": [{"diameter_m": d, **e} for d, e in sorted(self.per_diameter.items())],
+            "per_diameter": [
+                {"diameter_m": d, **e, **({"by_distance": [dict(r) for r in e["by_distance"]]}
+                                          if "by_distance" in e else {})}
+                for d, e in sorted(self.per_diameter.items())],
             "reference": self.reference,
         }
 
@@ -165,14 +279,16 @@ class Calibration:
                 raise CalibrationError(where, "needs diameter_m, arr_factor, tof_offset_s")
             d = _positive(f"{where}.diameter_m", entry["diameter_m"])
             for key in entry:
-                if key != "diameter_m" and key not in _PER_DIAMETER_KEYS:
-                    raise CalibrationError(f"{where}.{key}", "unknown key (allowed: "
-                                           f"{['diameter_m', *_PER_DIAMETER_KEYS]})")
-            rest: dict[str, float] = {
+                if key not in ("diameter_m", "by_distance") and key not in _PER_DIAMETER_KEYS:
+                    allowed = ["diameter_m", *_PER_DIAMETER_KEYS, "by_distance"]
+                    raise CalibrationError(f"{where}.{key}", f"unknown key (allowed: {allowed})")
+            rest: dict[str, Any] = {
                 key: check(f"{where}.{key}", entry[key])
                 for key, check in _PER_DIAMETER_KEYS.items() if entry.get(key) is not None}
             rest.setdefault("arr_factor", 1.0)
             rest.setdefault("tof_offset_s", 0.0)
+            if entry.get("by_distance") is not None:
+                rest["by_distance"] = _by_distance(f"{where}.by_distance", entry["by_distance"])
             for other in per:
                 if abs(other - d) <= 0.01 * other:
                     raise CalibrationError(f"{where}.diameter_m", f"{d!r} m is listed twice "
@@ -223,6 +339,29 @@ class Calibration:
         cal = cls.from_any(data)
         assert cal is not None
         return cal
+
+
+def calibration_along(calibration: Calibration | None, diameter_m: float, distance_m: Any
+                      ) -> tuple[Any, Any, Any, Any]:
+    """(arr_factor, tof_offset_s, arr_factor_std, tof_offset_std_s) of a sphere size at the
+    distances ``distance_m``, as :meth:`Calibration.along` gives them; without a calibration
+    ``(1.0, 0.0, 0.0, 0.0)``. The inversion reads a size's calibration over its fine grid with
+    ``distance_m`` the grid's distance axis as a row, ``grid.distance_m[None, :]``, so that the
+    arrays broadcast over the (thickness, distance) cells."""
+    if calibration is None:
+        return 1.0, 0.0, 0.0, 0.0
+    return calibration.along(diameter_m, distance_m)
+
+
+def answer_distance(distance: Any) -> float | None:
+    """Where an answer puts the chain (its distance estimate's median, else its MAP, else an
+    end of its 95 % interval), to read a distance-dependent calibration at; None when it gives
+    no number."""
+    ci = getattr(distance, "ci95", None) or (None, None)
+    for value in (getattr(distance, "median", None), getattr(distance, "map", None), *ci):
+        if value is not None:
+            return float(value)
+    return None
 
 
 def calibrated_table(table: ModelTable, calibration: Calibration | None) -> ModelTable:

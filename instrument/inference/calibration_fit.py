@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -73,6 +74,60 @@ def _fit_damping(table: ModelTable, d: float, refs: Sequence[Reference]) -> tupl
     return float(taus[best]), float(sd)
 
 
+_BY_DISTANCE_FIELDS = ("arr_factor", "tof_offset_s", "arr_factor_std", "tof_offset_std_s",
+                       "n_references")
+"""What a ``by_distance`` row keeps of a distance's fit, beside its distance."""
+
+DISTINCT_DISTANCE_M = 1e-3
+"""References of a size whose distances to the support differ by more than this stand at
+different distances: with two or more such distances the factor and offset are fitted per
+distance (``by_distance``)."""
+
+
+def _distance_groups(distances: Sequence[float]) -> list[list[int]]:
+    """Indices of the references per distance, nearest first: sorted by distance, a new group
+    wherever the next distance lies more than :data:`DISTINCT_DISTANCE_M` beyond the last."""
+    order = sorted(range(len(distances)), key=lambda i: distances[i])
+    groups: list[list[int]] = []
+    for i in order:
+        if groups and distances[i] - distances[groups[-1][-1]] <= DISTINCT_DISTANCE_M:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    return groups
+
+
+def _factor_offset(d: float, rows: Sequence[tuple[float, float, float, float]],
+                   arrs: Sequence[float], damped_fit: bool) -> dict[str, float]:
+    """The ARR factor and TOF offset of a size's references ``(f, sf, o, so)`` (measured ARR
+    ``arrs``) with their stated uncertainties (:func:`_combine`: statistical and transfer
+    parts). ``damped_fit``: the references' ARR fitted the damping, whose sd holds their
+    statistical error, so the factor keeps only their disagreement beyond it."""
+    f, sf, o, so = (list(c) for c in zip(*rows, strict=True))
+    f_mean, f_stat, f_transfer = _combine(f, sf)
+    o_mean, o_stat, o_transfer = _combine(o, so)
+    if not (math.isfinite(f_mean) and f_mean > 0):
+        # ARR 0 at the reference: a factor of 0 would erase every model reflection
+        listed = ", ".join(f"{a:g}" for a in arrs)
+        raise CalibrationError("arr", f"the measured ARR at the reference (D = {d:g} m: "
+                               f"{listed}) gives an ARR factor of {f_mean:g}; it must be > 0 "
+                               "(measure a reference where the reflection is seen)")
+    if not all(math.isfinite(x) for x in (f_stat, f_transfer, o_mean, o_stat, o_transfer)):
+        raise CalibrationError("tof", f"the reference shots at D = {d:g} m give a "
+                               "non-finite TOF offset or uncertainty")
+    if damped_fit:
+        f_stat = 0.0
+    return {
+        "arr_factor": f_mean,
+        "arr_factor_std": math.hypot(f_stat, f_transfer),
+        "arr_factor_transfer_std": f_transfer,
+        "tof_offset_s": o_mean,
+        "tof_offset_std_s": math.hypot(o_stat, o_transfer),
+        "tof_offset_transfer_std_s": o_transfer,
+        "n_references": len(rows),
+    }
+
+
 @dataclass(frozen=True)
 class Reference:
     """Shots of one sphere size on a reference plate of known thickness and position."""
@@ -107,6 +162,15 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     (different plates), the scatter between them beyond their statistical errors (a
     random-effects estimate, ``*_transfer_*``): how far a factor and offset fitted on one plate
     carry over to another. One reference cannot show that and states the statistical part only.
+
+    References of a size at two or more distances to the support (more than
+    :data:`DISTINCT_DISTANCE_M` apart) also give the factor and offset per distance, combined
+    the same way over the references at each (``by_distance``, nearest first): next to a clamp
+    the model's mismatch differs from the one far away, and the inversion reads these rows at
+    each candidate distance (:meth:`~.calibration.Calibration.along`). The damping stays the one
+    fitted on all of them, and the entry's own factor and offset the combination over all (for
+    readers that know no distance, and as the transfer uncertainty shows, wider). References at
+    one distance give no rows: the result is as without them.
     """
     if not references:
         raise CalibrationError("references", "need at least one reference measurement")
@@ -140,35 +204,23 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
             sf = math.hypot(s_arr, f * arr_sd) / arr_m
             by_d.setdefault(d, []).append((f, sf, s.tof_s - tof_m, math.hypot(s_tof, tof_sd)))
             measured.setdefault(d, []).append(s.arr)
-    per: dict[float, dict[str, float]] = {}
+    per: dict[float, dict[str, Any]] = {}
     for d, rows in by_d.items():
-        f, sf, o, so = (list(c) for c in zip(*rows, strict=True))
-        f_mean, f_stat, f_transfer = _combine(f, sf)
-        o_mean, o_stat, o_transfer = _combine(o, so)
-        if not (math.isfinite(f_mean) and f_mean > 0):
-            # ARR 0 at the reference: a factor of 0 would erase every model reflection
-            arrs = ", ".join(f"{a:g}" for a in measured[d])
-            raise CalibrationError("arr", f"the measured ARR at the reference (D = {d:g} m: "
-                                   f"{arrs}) gives an ARR factor of {f_mean:g}; it must be > 0 "
-                                   "(measure a reference where the reflection is seen)")
-        if not all(math.isfinite(x) for x in (f_stat, f_transfer, o_mean, o_stat, o_transfer)):
-            raise CalibrationError("tof", f"the reference shots at D = {d:g} m give a "
-                                   "non-finite TOF offset or uncertainty")
-        if d in dampings:
-            # the references' ARR fitted the damping, whose sd holds their statistical error:
-            # the factor keeps only their disagreement beyond it
-            f_stat = 0.0
-        per[d] = {
-            "arr_factor": f_mean,
-            "arr_factor_std": math.hypot(f_stat, f_transfer),
-            "arr_factor_transfer_std": f_transfer,
-            "tof_offset_s": o_mean,
-            "tof_offset_std_s": math.hypot(o_stat, o_transfer),
-            "tof_offset_transfer_std_s": o_transfer,
-            "n_references": len(rows),
-        }
+        per[d] = _factor_offset(d, rows, measured[d], d in dampings)
         if d in dampings:
             per[d]["damping_s"], per[d]["damping_std_s"] = dampings[d]
+        # references at two or more distances: the factor and offset per distance too (the
+        # damping stays the one fitted on all of them)
+        distances = [ref.distance_m for ref in groups[d]]
+        near_far = _distance_groups(distances)
+        if len(near_far) >= 2:
+            per[d]["by_distance"] = []
+            for idx in near_far:
+                at = _factor_offset(d, [rows[i] for i in idx], [measured[d][i] for i in idx],
+                                    d in dampings)
+                per[d]["by_distance"].append(
+                    {"distance_m": sum(distances[i] for i in idx) / len(idx),
+                     **{k: at[k] for k in _BY_DISTANCE_FIELDS}})
     n = len(per)
     reference = {
         "references": [{"thickness_m": r.thickness_m, "distance_m": r.distance_m,

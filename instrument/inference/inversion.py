@@ -76,7 +76,11 @@ from scipy.stats import chi2 as chi2_dist
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference import ridge
-from solitonde.instrument.inference.calibration import Calibration, calibrated_table
+from solitonde.instrument.inference.calibration import (
+    Calibration,
+    calibrated_table,
+    calibration_along,
+)
 from solitonde.instrument.inference.marginals import (
     ParameterEstimate,
     _summarise,
@@ -664,8 +668,8 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     # shared calibration errors: per error, (diameter, kind, sd, b, q, U^T D^-1 e)
     shared: list[list[Any]] = []
     for item, g in zip(items, grids, strict=True):
-        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
-        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
+        # numbers, or rows over the grid's distance axis where the calibration follows distance
+        factor, offset, f_std, o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])
         if item.hidden:
             # no reflection seen: the model's ARR (where it has a reflection) must lie under the
             # bound; cells where the model itself detects none agree with it
@@ -694,7 +698,8 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
             (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
         )):
             # the calibration's own uncertainty: offset adds, factor scales the model ARR
-            if scale == 1.0:
+            unscaled = np.ndim(scale) == 0 and scale == 1.0
+            if unscaled:
                 np.add(model_var, s2, out=var)
                 np.subtract(obs, model, out=r)
             else:
@@ -702,13 +707,13 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                 var += s2
                 np.multiply(model, -scale, out=r)
                 r += obs
-            if rel2:
+            if np.any(rel2):
                 rel = np.multiply(model, model)
                 rel *= rel2
                 var += rel
             u_over = None
             if u_pair is not None:
-                u = u_pair[k] * scale if scale != 1.0 else u_pair[k]
+                u = u_pair[k] if unscaled else u_pair[k] * scale
                 u_over = u / var
                 ur = u_over * r
                 ur_sum = ur if ur_sum is None else ur_sum + ur
@@ -717,10 +722,12 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
                     m_sum = np.zeros((3, *shape))
                 for n_e, (a, b) in enumerate(_UPPER):
                     m_sum[n_e] += u_over[a] * u[b]
-            if share and k == 0 and o_std > 0:
-                # the TOF residual moves by -1 per unit error of the offset
-                e = np.ones(shape)
-                shared.append([g.diameter_m, "tof_offset_s", o_std,
+            if share and k == 0 and np.any(o_std > 0):
+                # the TOF residual moves by -1 per unit error of the offset (where the offset's
+                # sd follows distance: one error, scaled to each distance's sd)
+                sd = float(np.max(o_std))
+                e = np.ones(shape) if np.ndim(o_std) == 0 else np.broadcast_to(o_std / sd, shape)
+                shared.append([g.diameter_m, "tof_offset_s", sd,
                                e * r / var, e * e / var,
                                None if u_over is None else u_over * e])
             r *= r
@@ -816,8 +823,7 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
     for item, g in zip(items, grids, strict=True):
         if item.hidden or est.extra["floor_mass"][item.diameter_m] < MIN_FLOOR_MASS:
             continue
-        factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(g.diameter_m)
-        f_std, o_std = (0.0, 0.0) if cal is None else cal.uncertainty_for(g.diameter_m)
+        factor, offset, f_std, o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])
         s_tof, s_arr = item.sigmas()
         strict = ((item.tof_s - offset - g.tof_s) ** 2
                   / (s_tof**2 + o_std**2 + g.model_tof_var_strict)

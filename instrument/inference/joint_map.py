@@ -248,6 +248,8 @@ def _raw_likelihood(table: ModelTable, position: ScanPosition, shared: bool
     cal = position.calibration
     keys = []
     for d, kind, sd in keep["shared"]:
+        # the key names the calibration entry (the size's values over all its references); a
+        # distance-dependent offset shares one error, scaled to its sd at each distance
         factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(d)
         keys.append((round(d * 1e6), kind, factor if kind == "arr_factor" else offset, sd))
     return _RawLikelihood(position, est, keep, keys), None

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from solitonde.instrument.inference.calibration import calibrated_table
+from solitonde.instrument.inference.calibration import calibrated_table, calibration_along
 from solitonde.instrument.inference.inversion import (
     FeatureSummary,
     InversionError,
@@ -159,7 +159,7 @@ def _curves(post: JointPosterior, meas: _Measurement) -> np.ndarray:
                     continue
                 probe = FeatureSummary(d, tof, arr, s_tof, s_arr, n)
                 e_tof, e_arr = probe.sigmas()
-                factor, offset = (1.0, 0.0) if cal is None else cal.for_diameter(d)
+                factor, offset = (float(v) for v in calibration_along(cal, d, float(l0))[:2])
                 inputs.append(FeatureSummary(
                     d, tof + offset + e_tof * rng.standard_normal(),
                     max(factor * arr + e_arr * rng.standard_normal(), 0.0), s_tof, s_arr, n))

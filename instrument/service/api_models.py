@@ -338,6 +338,17 @@ class InversionInput(Strict):
         "is not bounded. Null: the records are taken as long enough")
 
 
+class DistanceEntry(Strict):
+    """A sphere size's ARR factor and TOF offset fitted at one distance to the support."""
+
+    distance_m: float = Field(ge=0, le=100.0, description="the references' distance, m")
+    arr_factor: float = Field(gt=0, le=10.0)
+    tof_offset_s: float = Field(ge=-1e-2, le=1e-2)
+    arr_factor_std: float | None = Field(None, ge=0, le=10.0)
+    tof_offset_std_s: float | None = Field(None, ge=0, le=1e-2)
+    n_references: int | None = Field(None, ge=1, le=100_000)
+
+
 class CalibrationEntry(Strict):
     """One sphere size's calibration, as ``solitonde calibrate`` writes it."""
 
@@ -353,6 +364,10 @@ class CalibrationEntry(Strict):
                                     "Kuwabara-Kono time constant, s: the table is read at it "
                                     "(needs a table with a dissipation layer)")
     damping_std_s: float | None = Field(None, ge=0, le=1e-3)
+    by_distance: list[DistanceEntry] | None = Field(
+        None, min_length=2, max_length=64, description="the factor and offset fitted at each "
+        "reference distance (references near a support and far from it), sorted by distance: "
+        "read piecewise linear in 1/distance between them, constant beyond")
 
 
 class Calibration(Strict):

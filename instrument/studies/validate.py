@@ -67,7 +67,11 @@ from typing import Any
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference.calibration import Calibration, calibrated_table
+from solitonde.instrument.inference.calibration import (
+    Calibration,
+    calibrated_table,
+    calibration_along,
+)
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.chain_geometry import measure_shot
 from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
@@ -194,14 +198,18 @@ def separations(table: ModelTable, inputs: Sequence[FeatureSummary], thickness_m
         g = fine_grid(table, table.diameter_index(item.diameter_m))
         i = int(np.argmin(np.abs(np.log(g.thickness_m / thickness_m))))
         j = int(np.argmin(np.abs(g.distance_m - distance_m)))
-        factor = 1.0 if calibration is None else calibration.for_diameter(g.diameter_m)[0]
-        f_std, o_std = (0.0, 0.0) if calibration is None else calibration.uncertainty_for(
-            g.diameter_m)
+        # numbers, or rows over the grid's distances where the calibration follows distance
+        factor, offset, f_std, o_std = calibration_along(calibration, g.diameter_m,
+                                                         g.distance_m[None, :])
         s_tof, s_arr = item.sigmas()
         var_tof = s_tof**2 + o_std**2 + g.model_tof_var
         var_arr = s_arr**2 + factor**2 * g.model_arr_var + (f_std * g.arr) ** 2
-        term = (g.tof_s - g.tof_s[i, j]) ** 2 / var_tof
-        term += (factor * (g.arr - g.arr[i, j])) ** 2 / var_arr
+        if np.ndim(factor) == 0:
+            term = (g.tof_s - g.tof_s[i, j]) ** 2 / var_tof
+            term += (factor * (g.arr - g.arr[i, j])) ** 2 / var_arr
+        else:  # the calibrated model at (t, L) against the calibrated truth at its own L
+            term = (g.tof_s + offset - g.tof_s[i, j] - offset[0, j]) ** 2 / var_tof
+            term += (factor * g.arr - factor[0, j] * g.arr[i, j]) ** 2 / var_arr
         term[~g.valid] = np.inf
         d2 = term if d2 is None else d2 + term
         truth = (i, j)
