@@ -20,7 +20,7 @@ is never made up from noise.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any, TypeVar
 
@@ -92,6 +92,14 @@ class Features:
     arr_peak: float | None = field(default=None, metadata=OPTIONAL)
     incident_width_s: float = field(default=0.0, metadata=NUMBER)
     reflection_window_s: float | None = field(default=None, metadata=OPTIONAL)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Features:
+        """The features again from :meth:`to_dict`'s form (a stored shot's); keys that are no
+        field (a later extractor's, a door's ``baseline`` tag) are left out."""
+        return cls(**{f.name: (list(data[f.name]) if f.metadata["kind"] in ("series", "flags")
+                               else data[f.name])
+                      for f in fields(cls) if f.name in data})
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict with unit-carrying keys, in field order; lists copied."""

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from solitonde.instrument.inference import measured_shots
+from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.inversion import FeatureSummary
 from solitonde.instrument.inference.joint_map import (
     DEFAULT_SPREAD,
@@ -31,7 +32,10 @@ from solitonde.instrument.inference.joint_map import (
 from solitonde.instrument.inference.joint_map import posterior as joint_posterior
 from solitonde.instrument.inference.joint_map import summary as joint_summary
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
-from solitonde.instrument.inference.pipeline import MISSING_SIZE, no_reflection
+from solitonde.instrument.inference.pipeline import (
+    SizeSummary,
+    summarise,
+)
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.suggest import check_request
 from solitonde.instrument.inference.suggest import describe as describe_gain
@@ -42,39 +46,6 @@ from solitonde.instrument.inference.table_set import TableSet
 PARAMETERS = ("thickness_m", "distance_m")
 
 
-def pool(aggregates: Sequence[Mapping[str, Any]]
-         ) -> tuple[list[FeatureSummary], list[dict[str, Any]]]:
-    """Stored aggregates of several measurements of one position, combined per sphere diameter
-    (the count-weighted mean and the pooled sample deviation of TOF and ARR) as the inversion's
-    inputs, and the sizes that give none with the reason."""
-    groups: dict[Any, list[Mapping[str, Any]]] = {}
-    for agg in aggregates:
-        groups.setdefault(agg.get("sphere_diameter"), []).append(agg)
-    inputs, skipped = [], []
-    for diameter, members in groups.items():
-        pooled = {name: _pooled([m.get(name) or {} for m in members]) for name in ("tof_s", "arr")}
-        if diameter is None:
-            skipped.append({"sphere_diameter": None, "reason": MISSING_SIZE})
-        elif pooled["tof_s"] is None or pooled["arr"] is None:
-            skipped.append({"sphere_diameter": diameter, "reason": no_reflection(diameter)})
-        else:
-            (tof, tof_std, n), (arr, arr_std, _) = pooled["tof_s"], pooled["arr"]
-            inputs.append(FeatureSummary(float(diameter), tof, arr, tof_std, arr_std, n))
-    return inputs, skipped
-
-
-def _pooled(stats: Sequence[Mapping[str, Any]]) -> tuple[float, float | None, int] | None:
-    """(mean, sample deviation, count) of the union of several (mean, std, count) groups."""
-    stats = [s for s in stats if s.get("mean") is not None and s.get("count")]
-    n = sum(int(s["count"]) for s in stats)
-    if not n:
-        return None
-    mean = sum(s["mean"] * s["count"] for s in stats) / n
-    within = sum((s["count"] - 1) * (s.get("std") or 0.0) ** 2 for s in stats)
-    between = sum(s["count"] * (s["mean"] - mean) ** 2 for s in stats)
-    return mean, (math.sqrt((within + between) / (n - 1)) if n > 1 else None), n
-
-
 def by_position(records: Sequence[Any]) -> dict[tuple[Any, Any, Any], list[Any]]:
     """A plate's stored measurements grouped by place, (position, x_m, y_m), as the
     measured-shot road groups shots (instrument.inference.measured_shots.position_key)."""
@@ -82,18 +53,47 @@ def by_position(records: Sequence[Any]) -> dict[tuple[Any, Any, Any], list[Any]]
         {"position": r.position, **(r.result.get("location") or {})})[1:])
 
 
+@dataclass(frozen=True)
+class PositionInputs:
+    """What one position of a plate's stored measurements is estimated from: the shots of all
+    its measurements summarised per sphere size (the upload's own road), and the table, chain
+    calibration and plate material its newest measurement was estimated with."""
+
+    summaries: list[SizeSummary]
+    table: str | None
+    calibration: Calibration | None
+    plate_material: Any
+
+
+def position_inputs(members: Sequence[Any]) -> PositionInputs:
+    """The :class:`PositionInputs` of a position's measurements (records with their shots)."""
+    from solitonde.signal.features import Features
+
+    shots = [s for m in members for s in m.shots]
+    summaries = summarise([s.metadata.get("sphere_diameter") for s in shots],
+                          [Features.from_dict(s.features) for s in shots])
+    newest = members[-1]
+    table = next((m.result["table"] for m in reversed(members) if m.result.get("table")), None)
+    calibration = Calibration.from_any((newest.result.get("provenance") or {})
+                                       .get("chain_calibration"))
+    material = next((s.metadata["plate_material"] for s in newest.shots
+                     if s.metadata.get("plate_material") is not None), None)
+    return PositionInputs(summaries, table, calibration, material)
+
+
 def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any]]:
-    """One entry per position of a plate's stored measurements (oldest first), the pooled
-    shots inverted against ``tables``."""
+    """One entry per position of a plate's stored measurements (oldest first, each with its
+    shots), their shots summarised and inverted against ``tables`` through the one estimate
+    path, as a measurement of all of them would be."""
     groups = by_position(records)
     out = []
     for (name, x, y), members in groups.items():
-        inputs, skipped = pool([a for m in members for a in m.result.get("aggregates", [])])
-        table = next((m.result["table"] for m in reversed(members) if m.result.get("table")),
-                     None)
+        given = position_inputs(members)
         estimate, reason = None, None
         try:
-            estimate = estimate_from(tables, inputs, table=table, skipped=skipped).to_dict()
+            estimate = estimate_from(tables, given.summaries, given.calibration,
+                                     table=given.table,
+                                     plate_material=given.plate_material).to_dict()
         except EstimateUnavailable as exc:
             reason = str(exc)
         except Exception as exc:  # an inversion refusing these features: say why, go on
@@ -218,19 +218,24 @@ class JointOptions:
 
 
 def scan_from_records(records: Sequence[Any]) -> tuple[list[ScanPosition], list[str | None]]:
-    """A plate's stored measurements as scan positions (grouped as :func:`from_records` groups
-    them, their aggregates pooled per sphere size), with the table each was estimated with."""
+    """A plate's stored measurements (with their shots) as scan positions, grouped and
+    summarised as :func:`from_records` does, each with its chain calibration and the table it
+    was estimated with."""
+    from solitonde.model.materials import material_spread
+
     groups = by_position(records)
     out, tables = [], []
     for (name, x, y), members in groups.items():
         if x is None or y is None:
             continue
-        inputs, _ = pool([a for m in members for a in m.result.get("aggregates", [])])
+        given = position_inputs(members)
+        inputs = [s.inputs() for s in given.summaries if s.skip_reason() is None]
         if not inputs:  # only sizes without a reflection: their bounds, as the inversion takes
             inputs = _bounds_only(members)
-        out.append(ScanPosition(name, x, y, inputs))
-        tables.append(next((m.result["table"] for m in reversed(members)
-                            if m.result.get("table")), None))
+        spread = (None if given.plate_material is None
+                  else material_spread(given.plate_material))
+        out.append(ScanPosition(name, x, y, inputs, given.calibration, spread))
+        tables.append(given.table)
     return out, tables
 
 

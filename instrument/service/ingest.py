@@ -17,8 +17,8 @@ from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.measured_shots import ShotInputError
 from solitonde.instrument.inference.pipeline import SizeSummary
-from solitonde.instrument.inference.setups import Setup, SetupError
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
+from solitonde.instrument.inference.setups import Setup, SetupError
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import ShotMetadata
 from solitonde.instrument.service.problems import Problem

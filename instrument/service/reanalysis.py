@@ -46,7 +46,7 @@ def setup_of(store: Store, measurement_id: int) -> Setup | None:
 
 
 def recompute(store: Store, tables: TableSet, measurement_id: int,
-              setup: Setup | None | Literal["recorded"] = "recorded") -> dict[str, Any] | None:
+              setup: Setup | Literal["recorded"] | None = "recorded") -> dict[str, Any] | None:
     """Recompute one measurement through the upload's road and make that its newest result,
     keeping the earlier one; the summary line, or None when it was deleted meanwhile.
 

@@ -132,10 +132,9 @@ async def _body(request: Request, model: type[BaseModel]) -> Any:
 
 def _new_setup(svc: Service, body: SetupIn, setup_id: str | None = None) -> Setup:
     data = body.model_dump(exclude_none=True)
-    if setup_id is not None:
-        if data.get("id", setup_id) != setup_id:
-            raise Problem(422, f"id: {data['id']!r} differs from the path's {setup_id!r}",
-                          kind="invalid-input", field="id")
+    if setup_id is not None and data.get("id", setup_id) != setup_id:
+        raise Problem(422, f"id: {data['id']!r} differs from the path's {setup_id!r}",
+                      kind="invalid-input", field="id")
     try:
         setup = Setup.from_dict(data, inputs_only=True)
     except SetupError as exc:

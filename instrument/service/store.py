@@ -561,13 +561,26 @@ class Store:
                  "n_positions": r[3], "last_activity": r[4]} for r in rows]
 
     def all_of_plate(self, plate_id: str, limit: int) -> list[MeasurementRecord]:
-        """Every measurement of ``plate_id`` in id order, at most ``limit``."""
+        """Every measurement of ``plate_id`` in id order, at most ``limit``, each with its shots
+        (their metadata and features; no samples)."""
         with self._lock:
             rows = self._conn.execute(
                 "SELECT id, created_at, plate_id, position, n_shots, source, result "
                 "FROM measurements WHERE plate_id = ? ORDER BY id LIMIT ?",
                 (plate_id, limit)).fetchall()
-        return [_measurement(r) for r in rows]
+            shots = self._conn.execute(
+                "SELECT s.measurement_id, s.shot_index, s.t0, s.dt, s.units, s.calibration, "
+                "s.metadata, s.features, s.n_samples FROM shots s JOIN measurements m ON "
+                "m.id = s.measurement_id WHERE m.plate_id = ? ORDER BY s.measurement_id, "
+                "s.shot_index", (plate_id,)).fetchall()
+        records = {r[0]: _measurement(r) for r in rows}
+        for s in shots:
+            if s[0] in records:
+                records[s[0]].shots.append(ShotRecord(
+                    t0=s[2], dt=s[3], samples=np.empty(0), units=s[4], calibration=s[5],
+                    metadata=json.loads(s[6]), features=json.loads(s[7]), shot_index=s[1],
+                    n_samples=s[8]))
+        return list(records.values())
 
     def count(self) -> int:
         with self._lock:
