@@ -261,3 +261,63 @@ def test_a_measurements_warnings_reasons_and_readings_are_on_the_page(tmp_path):
     finally:
         stop_group(proc)
     assert not errors, errors
+
+
+AL_6061_PROPERTIES = {"name": "6061 as measured", "youngs_modulus": 68.9e9,
+                      "poisson_ratio": 0.33, "density": 2700.0}
+"""The table's plate material stated by its properties alone: the answer carries the default
+spread, and says so in a warning."""
+
+
+def test_the_page_lists_setups_and_measures_with_the_one_picked(server, tmp_path):
+    """A set-up made and calibrated over REST is listed with its chain calibration; an upload
+    through the page with that set-up picked (no sphere size typed) is measured with it: the
+    measurement names the set-up's revision and calibration and shows its warnings."""
+    sync_playwright = _playwright()
+    recording = _recording(tmp_path)
+    (tmp_path / "rig.csv").write_bytes(recording.read_bytes())
+    r = httpx.post(f"{server}/v1/setups", json={
+        "id": "rig/A 1", "sphere_diameters_m": [9.53e-3], "table": "default_table",
+        "plate_material": AL_6061_PROPERTIES, "labels": {"operator": "kim"}}, timeout=30)
+    assert r.status_code == 201, r.text
+    r = httpx.put(f"{server}/v1/setups/rig%2FA%201/calibration", timeout=30, json={
+        "arr_factor": 0.98, "tof_offset_s": 1e-6, "per_diameter": [
+            {"diameter_m": 9.53e-3, "arr_factor": 0.98, "tof_offset_s": 1e-6,
+             "tof_offset_std_s": 5e-7, "arr_factor_std": 0.01}]})
+    assert r.status_code == 201, r.text
+    errors: list[str] = []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM,
+                                    args=["--no-sandbox", "--disable-gpu"])
+        try:
+            page = _watched_page(browser, errors, 1600)
+            page.goto(server + "/")
+            row = page.locator("#setups tbody tr").filter(has_text="rig/A 1")
+            row.wait_for(timeout=30_000)
+            text = row.inner_text()
+            assert "2" in text and "9.53" in text and "default_table" in text, text
+            assert "TOF offset 1.00 us, ARR factor 0.980" in text and "operator: kim" in text
+            page.set_input_files("#file", str(tmp_path / "rig.csv"))
+            page.fill("#f-plate_id", "WEB-RIG")
+            page.fill("#f-position", "R1")
+            page.select_option("#f-setup", "rig/A 1")
+            page.click("#upload")
+            result = page.locator("#upload-result")
+            result.filter(has_text="thickness").wait_for(timeout=60_000)
+            assert re.match(r"rig\.csv: measurement \d+, 2 shots; thickness \d", result.inner_text())
+            table = page.locator("#measurement-table")
+            table.filter(has_text="set-up rig/A 1, revision 2").wait_for(timeout=30_000)
+            assert "TOF offset 1.00 us" in table.inner_text()
+            notes = page.locator("#measurement-notes li")
+            notes.first.wait_for(timeout=30_000)
+            lines = [notes.nth(k).inner_text() for k in range(notes.count())]
+            assert any(line.startswith("Warning: the plate material is given by its properties")
+                       for line in lines), lines
+            assert not any(" mm" in line and "- mm" in line for line in lines), lines
+            figures = os.environ.get("SOLITONDE_FIGURES")
+            if figures:
+                Path(figures).mkdir(parents=True, exist_ok=True)
+                page.screenshot(path=str(Path(figures) / "web_setups.png"), full_page=True)
+        finally:
+            browser.close()
+    assert not errors, errors

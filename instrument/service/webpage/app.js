@@ -1,4 +1,5 @@
-// The solitonde page: upload a recording, plates, a plate's map (inverted position by position or
+// The solitonde page: upload a recording (with an instrument set-up), the set-ups and their chain
+// calibration, plates, a plate's map (inverted position by position or
 // as one unknown, with the next positions to measure marked), one estimate per position, its
 // measurements, and every shot's trace with the picks marked. Everything comes from the REST API
 // under /v1; the API key, when the server asks for one, is kept for this browser tab only
@@ -109,6 +110,51 @@ function estimateNotes(est) {
   });
   for (const w of est.warnings || []) lines.push(`Warning: ${w}`);
   return lines;
+}
+
+// A set-up's chain calibration in words: per sphere size the TOF offset, ARR factor and damping,
+// and how many distances it follows.
+function calibrationText(cal) {
+  if (!cal) return "not calibrated";
+  return (cal.per_diameter || []).map((e) => {
+    const parts = [`D ${num(e.diameter_m * 1e3, 2)} mm: TOF offset ` +
+                   `${num(e.tof_offset_s * 1e6, 2)} us, ARR factor ${num(e.arr_factor, 3)}`];
+    if (e.damping_s !== undefined && e.damping_s !== null) {
+      parts.push(`damping ${Number(e.damping_s).toExponential(2)} s`);
+    }
+    if (e.by_distance) parts.push(`by distance at ${e.by_distance.length} references`);
+    return parts.join(", ");
+  }).join("; ") || "calibrated";
+}
+
+function loadSetups(setups) {
+  const body = $("setups").querySelector("tbody");
+  body.textContent = "";
+  for (const s of setups) {
+    const row = document.createElement("tr");
+    cell(row, s.id);
+    cell(row, s.revision);
+    cell(row, s.sphere_diameters_m.map((d) => num(d * 1e3, 2)).join(", "));
+    cell(row, s.table);
+    cell(row, calibrationText(s.chain_calibration));
+    cell(row, Object.entries(s.labels || {}).map(([k, v]) => `${k}: ${v}`).join(", ") || "-");
+    body.appendChild(row);
+  }
+  $("setups-empty").hidden = setups.length > 0;
+  const pick = $("f-setup");
+  const chosen = pick.value;
+  pick.textContent = "";
+  const none = document.createElement("option");
+  none.value = "";
+  none.textContent = "none";
+  pick.appendChild(none);
+  for (const s of setups) {
+    const option = document.createElement("option");
+    option.value = s.id;
+    option.textContent = `${s.id} (revision ${s.revision})`;
+    pick.appendChild(option);
+  }
+  pick.value = setups.some((s) => s.id === chosen) ? chosen : "";
 }
 
 // --- where we are: #plate=ID&m=N&shot=K -------------------------------------------------------
@@ -306,8 +352,11 @@ async function showMeasurement(measurementId, shot) {
   $("measurement-title").textContent = `Measurement ${m.id}${where ? ` (${where})` : ""}: ` +
     `${m.n_shots} shot${m.n_shots === 1 ? "" : "s"}; thickness ` +
     `${answer((m.estimate || {}).thickness_m)}, distance ${answer((m.estimate || {}).distance_m)}`;
-  $("measurement-table").textContent = m.estimate ? `Estimated with ${await tableText(m.table)}` :
-    `No estimate: ${m.estimate_reason || "-"}`;
+  const setup = (m.provenance || {}).setup;
+  const measuredWith = setup ? `; set-up ${setup.id}, revision ${setup.revision} ` +
+    `(${calibrationText(m.provenance.chain_calibration)})` : "";
+  $("measurement-table").textContent = (m.estimate ? `Estimated with ${await tableText(m.table)}` :
+    `No estimate: ${m.estimate_reason || "-"}`) + measuredWith;
   const notes = $("measurement-notes");
   notes.textContent = "";
   for (const line of estimateNotes(m.estimate)) {
@@ -356,7 +405,7 @@ async function upload(event) {
   }
   const form = new FormData();
   form.append("file", file, file.name);
-  for (const input of $("upload-form").querySelectorAll(".fields input")) {
+  for (const input of $("upload-form").querySelectorAll(".fields input, .fields select")) {
     if (input.value.trim() !== "") form.append(input.name, input.value.trim());
   }
   $("upload").disabled = true;
@@ -420,11 +469,14 @@ async function refresh(force = false) {
   busy = true;
   try {
     const plates = (await (await api("/v1/plates")).json()).items;
-    const signature = JSON.stringify(plates.map((p) => [p.plate_id, p.n_measurements, p.n_shots,
-                                                         p.last_activity]));
+    const setups = (await (await api("/v1/setups")).json()).items;
+    const signature = JSON.stringify([plates.map((p) => [p.plate_id, p.n_measurements,
+                                                         p.n_shots, p.last_activity]),
+                                      setups.map((s) => [s.id, s.revision])]);
     const changed = signature !== seen;
     seen = signature;
     if (!changed && !force) return;
+    loadSetups(setups);
     await loadPlates(plates);
     const { plate, m, shot } = here();
     if (plate !== null) await showPlate(plate); else $("plate-panel").hidden = true;
