@@ -80,5 +80,26 @@ def start(store: Store, kind: str, total: int, detail: dict[str, Any],
         job["finished_at"] = time.time()
         _write(store, job)
 
-    threading.Thread(target=run, name=f"job-{kind}", daemon=True).start()
+    thread = threading.Thread(target=run, name=f"job-{kind}", daemon=True)
+    with _running_lock:
+        _running.add(thread)
+    thread.start()
     return dict(job)
+
+
+_running: set[threading.Thread] = set()
+_running_lock = threading.Lock()
+
+
+def finish(timeout_s: float = 60.0) -> None:
+    """Wait (up to ``timeout_s`` in all) for this process's jobs to end, before the store they
+    write to closes; a job still running then is left ``stalled`` for its record to say."""
+    import time as _time
+
+    deadline = _time.monotonic() + timeout_s
+    with _running_lock:
+        threads = list(_running)
+    for thread in threads:
+        thread.join(max(0.0, deadline - _time.monotonic()))
+    with _running_lock:
+        _running.difference_update(t for t in threads if not t.is_alive())

@@ -100,6 +100,15 @@ def check_against_tables(svc: Service, setup: Setup) -> None:
     except TableChoiceError as exc:
         raise Problem(422, f"{exc.field}: {exc.message}", kind="invalid-input",
                       field=exc.field) from None
+    from solitonde.instrument.tables.table import TableError
+
+    for i, d in enumerate(setup.sphere_diameters_m):
+        try:
+            chosen.table.diameter_index(d)
+        except TableError as exc:
+            raise Problem(422, f"sphere_diameters_m[{i}]: {exc.full_message} (table "
+                          f"{setup.table!r})", kind="invalid-input",
+                          field=f"sphere_diameters_m[{i}]") from None
     try:
         calibrated_table(chosen.table, setup.calibration())
     except CalibrationError as exc:
@@ -280,6 +289,21 @@ def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
                      {"setup": stored.reference()}, work)
     return {"setup": setup_out(svc, stored), "revision": stored.revision,
             "chain_calibration": stored.chain_calibration, "job": job}
+
+
+@router.get("/setups/{setup_id:path}/revisions/{number}", responses=ERRORS,
+            summary="One revision of a set-up, as it was written")
+async def get_revision(svc: ServiceDep, setup_id: str = SetupIdPath,
+                       number: int = Path(..., ge=1, le=2**31, description="the revision")
+                       ) -> dict[str, Any]:
+    """Revisions are immutable: what a measurement's ``provenance.setup`` names is here as it
+    was when that measurement used it."""
+    found = await run_in_threadpool(setup_book.revision, svc.store, setup_id, number)
+    if found is None:
+        _existing(svc, setup_id)
+        raise Problem(404, f"number: set-up {setup_id!r} has no revision {number}",
+                      kind="not-found", field="number")
+    return {**found.to_dict(), "links": setup_links(found.id)}
 
 
 @router.put("/setups/{setup_id:path}", status_code=200, responses=ERRORS,

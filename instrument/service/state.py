@@ -60,6 +60,9 @@ class Service:
         return self.upload_lane
 
     def close(self) -> None:
+        from solitonde.instrument.service import jobs
+
+        jobs.finish()  # a recalibration's last writes land before the store closes
         self.store.close()
         self.uploads.close()
 

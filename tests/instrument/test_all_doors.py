@@ -197,3 +197,32 @@ def test_every_door_gives_the_same_calibrated_answer_with_a_setup(server: Any,
     for m in doors.values():
         assert m["provenance"]["setup"] == {"id": "doors/rig 1", "revision": 2}
         assert m["provenance"]["chain_calibration"]["per_diameter"][0]["damping_s"] == 9.0e-8
+
+
+def test_setup_commands_create_list_show_and_calibrate(server: Any, tmp_path: Path) -> None:
+    """`solitonde setup` against the server: a set-up made, listed, saved as a file that
+    `analyze --setup` reads, and calibrated from a file `calibrate` wrote (its job waited on)."""
+    url, _ = server
+    run = _cli("setup", "create", "cli-rig", "--sphere-diameter", str(D), "--table",
+               "default_table", "--label", "operator=kim", "--server", url, cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("cli-rig  revision 1  D 9.53 mm  table default_table  "
+                                 "not calibrated")
+    refused = _cli("setup", "create", "cli-rig-2", "--sphere-diameter", "9.53", "--table",
+                   "default_table", "--server", url, cwd=tmp_path)
+    assert refused.returncode == 2 and "sizes are in metres" in refused.stderr
+    cal = tmp_path / "cal.json"
+    cal.write_text(json.dumps(CHAIN_CALIBRATION))
+    run = _cli("setup", "calibrate", "cli-rig", "--file", str(cal), "--server", url,
+               cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "cli-rig  revision 2" in run.stdout and "damping 9e-08 s" in run.stdout
+    assert "job " in run.stdout and ": done, 0 of 0 measurements re-estimated" in run.stdout
+    listed = _cli("setup", "list", "--server", url, cwd=tmp_path)
+    assert any(line.startswith("cli-rig  revision 2") for line in listed.stdout.splitlines())
+    run = _cli("setup", "show", "cli-rig", "--server", url, "--out", "rig.json", cwd=tmp_path)
+    assert run.returncode == 0 and "revision 2" in run.stdout
+    saved = json.loads((tmp_path / "rig.json").read_text())
+    assert saved["chain_calibration"]["per_diameter"][0]["damping_s"] == 9.0e-8
+    missing = _cli("setup", "show", "no-such-rig", "--server", url, cwd=tmp_path)
+    assert missing.returncode == 1 and "404: setup_id: no set-up 'no-such-rig'" in missing.stderr
