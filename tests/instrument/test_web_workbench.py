@@ -304,7 +304,8 @@ def test_the_page_lists_setups_and_measures_with_the_one_picked(server, tmp_path
             page.click("#upload")
             result = page.locator("#upload-result")
             result.filter(has_text="thickness").wait_for(timeout=60_000)
-            assert re.match(r"rig\.csv: measurement \d+, 2 shots; thickness \d", result.inner_text())
+            assert re.match(r"rig\.csv: measurement \d+, 2 shots; thickness \d",
+                            result.inner_text())
             table = page.locator("#measurement-table")
             table.filter(has_text="set-up rig/A 1, revision 2").wait_for(timeout=30_000)
             assert "TOF offset 1.00 us" in table.inner_text()
