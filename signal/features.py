@@ -97,9 +97,11 @@ class Features:
     def from_dict(cls, data: Mapping[str, Any]) -> Features:
         """The features again from :meth:`to_dict`'s form (a stored shot's); keys that are no
         field (a later extractor's, a door's ``baseline`` tag) are left out."""
-        return cls(**{f.name: (list(data[f.name]) if f.metadata["kind"] in ("series", "flags")
-                               else data[f.name])
-                      for f in fields(cls) if f.name in data})
+        values: dict[str, Any] = {
+            f.name: (list(data[f.name]) if f.metadata["kind"] in ("series", "flags")
+                     else data[f.name])
+            for f in fields(cls) if f.name in data}
+        return cls(**values)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dict with unit-carrying keys, in field order; lists copied."""

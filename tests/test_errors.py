@@ -54,6 +54,8 @@ EXAMPLES: dict[str, Callable[[type], BaseException]] = {
     "ShotInputError": lambda c: c("shots.0.metadata.sphere_diameter", "'abc' is not a sphere "
                                   "diameter", "a number of metres, 0 < D <= 1"),
     "ShotLimitError": lambda c: c("metadata.plate_id", "201 characters; at most 200"),
+    "SetupError": lambda c: c("shots.0.metadata.sphere_diameter", "0.01905 m contradicts "
+                              "setup 'rig' (revision 2)", "one of the set-up's sizes"),
     "Problem": lambda c: c(422, "shots[0].dt: must be > 0", kind="invalid-input",
                            field="shots[0].dt", headers={"Retry-After": "5"}),
 }

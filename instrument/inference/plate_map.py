@@ -69,9 +69,14 @@ def position_inputs(members: Sequence[Any]) -> PositionInputs:
     """The :class:`PositionInputs` of a position's measurements (records with their shots)."""
     from solitonde.signal.features import Features
 
-    shots = [s for m in members for s in m.shots]
-    summaries = summarise([s.metadata.get("sphere_diameter") for s in shots],
-                          [Features.from_dict(s.features) for s in shots])
+    diameters, features = [], []
+    for shot in (s for m in members for s in m.shots):
+        try:
+            features.append(Features.from_dict(shot.features))
+        except TypeError:  # features stored without the extractor's fields: nothing to read
+            continue
+        diameters.append(shot.metadata.get("sphere_diameter"))
+    summaries = summarise(diameters, features)
     newest = members[-1]
     table = next((m.result["table"] for m in reversed(members) if m.result.get("table")), None)
     calibration = Calibration.from_any((newest.result.get("provenance") or {})
