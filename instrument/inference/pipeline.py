@@ -19,7 +19,7 @@ from typing import Any
 
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, invert
-from solitonde.instrument.inference.loaded_table import EstimateUnavailable
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable, LoadedTable
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.signal.features import (
     EARLY_REASON,
@@ -139,14 +139,14 @@ def estimate(
     summaries: Sequence[SizeSummary | FeatureSummary],
     calibration: Calibration | Mapping[str, Any] | None = None,
     *,
-    table: str | None = None,
+    table: str | LoadedTable | None = None,
     plate_material: Any = None,
     posterior: bool = False,
     skipped: Sequence[Mapping[str, Any]] = (),
 ) -> TableEstimate:
     """Thickness and distance to the support from per-size summaries, against the table of
     their family (:meth:`TableSet.choose`: named by ``table`` or ``plate_material``, else the
-    one that covers the sizes).
+    one that covers the sizes; a table a caller already chose is used as it is).
 
     ``skipped`` lists sizes the caller already left out (``{"sphere_diameter", "reason"}``).
     ``plate_material`` (a library name or a property mapping, which may state its spread) also
@@ -178,7 +178,8 @@ def estimate(
                                   or "no shot gave a usable TOF")
     from solitonde.instrument.inference.material_spread import spread_of
 
-    chosen = tables.choose([i.diameter_m for i in inputs], table, plate_material)
+    chosen = (table if isinstance(table, LoadedTable)
+              else tables.choose([i.diameter_m for i in inputs], table, plate_material))
     result = invert(chosen.table, inputs, calibration, return_posterior=posterior,
                     material_spread=spread_of(chosen.table, plate_material))
     return TableEstimate(result, chosen.table.table_id, left_out)

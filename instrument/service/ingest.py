@@ -280,7 +280,7 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
         try:
             estimate = estimate_from(tables, summaries,
                                      None if setup is None else setup.calibration(),
-                                     table=chosen.table.table_id,
+                                     table=chosen,
                                      plate_material=waveforms[0].metadata.get(
                                          "plate_material")).to_dict()
             reason = None
