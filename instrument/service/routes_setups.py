@@ -102,6 +102,7 @@ def check_against_tables(svc: Service, setup: Setup) -> None:
                       field=exc.field) from None
     from solitonde.instrument.tables.table import TableError
 
+    _chain_matches(setup, chosen.table.family)
     for i, d in enumerate(setup.sphere_diameters_m):
         try:
             chosen.table.diameter_index(d)
@@ -113,6 +114,38 @@ def check_against_tables(svc: Service, setup: Setup) -> None:
         calibrated_table(chosen.table, setup.calibration())
     except CalibrationError as exc:
         raise _invalid(exc, "chain_calibration.") from None
+
+
+CHAIN_FAMILY = {("chain", "material"): "sphere_material",
+                ("chain", "n_particles"): "n_particles",
+                ("chain", "sensor_index"): "sensor_index",
+                ("striker", "material"): "striker_material"}
+"""The set-up's chain and striker entries a table's family states, and the family key of each:
+a set-up whose chain is not the one its table was simulated with is refused."""
+
+
+def _chain_matches(setup: Setup, family: dict[str, Any] | None) -> None:
+    """A 422 naming ``chain.<key>`` (or ``striker.<key>``) where the set-up's chain differs
+    from the one ``family`` (the table's) was simulated with."""
+    from solitonde.instrument.tables.family import describe, differences
+    from solitonde.model.materials import properties_from
+
+    if not family:
+        return
+    for (part, key), family_key in CHAIN_FAMILY.items():
+        value = (getattr(setup, part) or {}).get(key)
+        if value is None:
+            continue
+        field = f"{part}.{key}"
+        try:
+            stated = properties_from(value) if key == "material" else value
+        except ValueError as exc:
+            raise Problem(422, f"{field}: {exc}", kind="invalid-input", field=field) from None
+        if differences({family_key: stated}, family):
+            raise Problem(422, f"{field}: {describe(stated)} differs from table "
+                          f"{setup.table!r}'s chain ({describe(family[family_key])}): its "
+                          "answers would be for another instrument", kind="invalid-input",
+                          field=field)
 
 
 def resolve(svc: Service, setup_id: str | None, field: str = "setup") -> Setup | None:

@@ -52,7 +52,8 @@ def _job(client: TestClient, job: dict[str, Any]) -> dict[str, Any]:
 
 
 def test_revisions_are_kept_and_a_measurement_names_the_one_it_used(client: TestClient) -> None:
-    r = client.post("/v1/setups", json=RIG)
+    r = client.post("/v1/setups", json={**RIG, "chain": {"n_particles": 20, "sensor_index": 7,
+                                                         "material": "steel_440c"}})
     assert r.status_code == 201 and r.json()["revision"] == 1
     assert r.headers["location"] == RIG_URL
     assert client.post("/v1/setups", json=RIG).status_code == 409
@@ -85,6 +86,9 @@ def test_revisions_are_kept_and_a_measurement_names_the_one_it_used(client: Test
     ({**RIG, "id": "a\tb"}, "id", "control character"),
     ({**RIG, "colour": "red"}, "colour", "unknown field"),
     ({**RIG, "sphere_diameters_m": [19.05e-3 * 3]}, "sphere_diameters_m[0]", "table"),
+    ({**RIG, "chain": {"n_particles": 25}}, "chain.n_particles", "25 differs from table"),
+    ({**RIG, "chain": {"material": "steel_304"}}, "chain.material", "differs from table"),
+    ({**RIG, "chain": {"material": "unobtainium"}}, "chain.material", "unknown material"),
 ])
 def test_a_bad_setup_is_refused_naming_the_field(client: TestClient, body: dict[str, Any],
                                                  field: str, words: str) -> None:
