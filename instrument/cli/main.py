@@ -52,6 +52,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "store": ("cmd_store", "Back up, check, migrate and reanalyze a measurement store."),
     "setup": ("cmd_setup", "Instrument set-ups kept by a service: create, show, list, "
                            "calibrate."),
+    "report": ("cmd_report", "Inspection reports: build one (PDF, HTML or its JSON) and verify "
+                             "one against the stored data."),
 }
 """Every command: the module that registers it and its one-line help, in the order listed."""
 

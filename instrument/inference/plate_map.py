@@ -127,6 +127,7 @@ def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,
                                                ("map", "median", "ci68", "ci95", "status")}
     entry["reason"] = reason if estimate is None else estimate.get("reason")
     entry["readings"] = list((estimate or {}).get("readings") or [])
+    entry["warnings"] = list((estimate or {}).get("warnings") or [])
     return entry
 
 

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from solitonde.instrument.inference import measured_shots
+from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.measured_shots import ShotInputError
 from solitonde.instrument.inference.pipeline import SizeSummary
@@ -231,7 +232,8 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
 
 
 def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
-               setup: Setup | None = None) -> dict[str, Any]:
+               setup: Setup | None = None,
+               calibration: Calibration | None = None) -> dict[str, Any]:
     """What a result was computed with: the software version, the feature extractor and its
     settings (the defaults, and the chain's options each stated sphere size added), the table
     (id and SHA-256 of its file) or None, the set-up revision and its chain calibration (or
@@ -259,18 +261,22 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
                               if shot_options(d)}},
             "table": table,
             "setup": None if setup is None else setup.reference(),
-            "chain_calibration": None if setup is None else setup.chain_calibration,
+            "chain_calibration": (setup.chain_calibration if setup is not None
+                                  else None if calibration is None else calibration.to_dict()),
             "computed_at": time.time()}
 
 
 def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
-                   chosen: Any = ..., setup: Setup | None = None
+                   chosen: Any = ..., setup: Setup | None = None,
+                   calibration: Calibration | None = None
                    ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Features of every shot (as the API shows them) and the measurement's result: aggregates,
     estimate (or why none), the table, the location, the provenance. ``chosen``: the table a
     caller already chose (:func:`choose_table`) and checked the metadata against; ``setup``:
     the set-up the shots were completed with (:func:`apply_setup`), whose chain calibration
-    the estimate applies."""
+    the estimate applies; ``calibration``: a chain calibration of no set-up (a file's, offline)."""
+    if setup is not None:
+        calibration = setup.calibration()
     if chosen is ...:
         chosen = choose_table(waveforms, tables, prefix)
         check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)
@@ -278,8 +284,7 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
     estimate, reason = None, tables.reason
     if chosen is not None:
         try:
-            estimate = estimate_from(tables, summaries,
-                                     None if setup is None else setup.calibration(),
+            estimate = estimate_from(tables, summaries, calibration,
                                      table=chosen,
                                      plate_material=waveforms[0].metadata.get(
                                          "plate_material")).to_dict()
@@ -296,7 +301,7 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export
         result["location"] = coordinates
-    result["provenance"] = provenance(chosen, waveforms, setup)
+    result["provenance"] = provenance(chosen, waveforms, setup, calibration)
     return shots, result
 
 
@@ -304,7 +309,8 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
                       source: str, prefix: str,
                       idempotency: tuple[str, str] | None = None,
                       allow_duplicate: bool = False,
-                      setup: Setup | None = None) -> dict[str, Any]:
+                      setup: Setup | None = None,
+                      calibration: Calibration | None = None) -> dict[str, Any]:
     """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict.
 
     Shots whose samples are, in order, a stored measurement's are not stored again (unless
@@ -322,7 +328,7 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
         if record is not None:
             return {**measurement_dict(record), "duplicate_of": record.id,
                     "metadata_differences": metadata_differences(waveforms, record)}
-    shots, result = compute_result(waveforms, tables, prefix, chosen, setup)
+    shots, result = compute_result(waveforms, tables, prefix, chosen, setup, calibration)
     records = [ShotRecord(t0=wf.t0, dt=wf.dt, samples=wf.samples, units=wf.units,
                           calibration=wf.calibration, metadata=s["metadata"],
                           features=s["features"], shot_index=i)

@@ -163,3 +163,62 @@ async def get_map_png(request: Request, svc: ServiceDep, plate_id: str = PlateId
     data = await run_in_threadpool(_map, svc, plate_id, query.options)
     png = await run_for_client(request, svc.plot_lane, map_png, data)
     return Response(png, media_type="image/png")
+
+
+REPORT_MEDIA = {"pdf": "application/pdf", "html": "text/html; charset=utf-8",
+                "json": "application/json"}
+
+
+@router.get("/plates/{plate_id:path}/digest", responses={**ERRORS, 404: PROBLEM_RESPONSE},
+            summary="The plate's data digest as stored now (what `report verify` compares)")
+async def get_digest(svc: ServiceDep, plate_id: str = PlateId) -> dict[str, Any]:
+    """Per measurement its digest entry (id, position, shot sample hashes, stored result) and
+    its digest, and the plate's data digest: what a report of the plate printed, if nothing
+    changed since."""
+    from solitonde.instrument.reports import digest
+    from solitonde.instrument.service import plate_report
+
+    items = await run_in_threadpool(plate_report.entries, svc.store, plate_id)
+    if not items:
+        raise Problem(404, f"plate_id: no measurement of plate {plate_id!r}", kind="not-found",
+                      field="plate_id")
+    return {"plate_id": plate_id, "measurements": items,
+            "digest": {"algorithm": digest.ALGORITHM, "value": digest.data_digest(
+                [{k: v for k, v in e.items() if k != "digest"} for e in items])}}
+
+
+@router.get("/plates/{plate_id:path}/report.{fmt}",
+            responses={**ERRORS, 404: PROBLEM_RESPONSE,
+                       200: {"content": {"application/pdf": {}, "text/html": {},
+                                         "application/json": {}}}},
+            operation_id="plate_report", response_class=Response,
+            summary="The plate's inspection report: PDF, HTML, or the data they show (JSON)")
+async def get_report(request: Request, svc: ServiceDep, plate_id: str = PlateId,
+                     fmt: Literal["pdf", "html", "json"] = Path(..., description="pdf, html "
+                                                                "or json"),
+                     joint: bool = Query(True, description="invert the scan jointly (three "
+                                         "positions with coordinates or more)"),
+                     suggest: int | None = Query(None, ge=0, le=20, description="the next "
+                                                 "positions suggested (default 3 up to 50 "
+                                                 "positions, none beyond)")) -> Response:
+    """A report a reviewer signs: the title block (set-up labels), the maps, the positions'
+    answers with their intervals, status, warnings and readings, each position's shots and a
+    trace, the chain calibration, the table and software, the data digest (``report verify``
+    recomputes it) and a signature block."""
+    from solitonde.instrument.service import plate_report
+
+    source = {"server": str(request.base_url).rstrip("/"), "plate_id": plate_id}
+
+    def make() -> bytes:
+        try:
+            report, traces = plate_report.build(svc.store, svc.tables, plate_id, source,
+                                                joint=joint, suggest=suggest)
+        except plate_report.NoSuchPlate:
+            raise Problem(404, f"plate_id: no measurement of plate {plate_id!r}",
+                          kind="not-found", field="plate_id") from None
+        return plate_report.render_report(report, traces, fmt)
+
+    data = await run_for_client(request, svc.plot_lane, make)
+    safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in plate_id)[:80]
+    return Response(data, media_type=REPORT_MEDIA[fmt], headers={
+        "Content-Disposition": f'inline; filename="report_{safe}.{fmt}"'})

@@ -183,6 +183,8 @@ class ShotRecord:
     features: dict[str, Any]
     shot_index: int = 0
     n_samples: int = -1
+    sha256: str | None = None
+    """The SHA-256 of the samples as stored (:func:`samples_digest`); set on reading."""
 
     def __post_init__(self) -> None:
         if self.n_samples < 0:
@@ -570,8 +572,8 @@ class Store:
                 (plate_id, limit)).fetchall()
             shots = self._conn.execute(
                 "SELECT s.measurement_id, s.shot_index, s.t0, s.dt, s.units, s.calibration, "
-                "s.metadata, s.features, s.n_samples FROM shots s JOIN measurements m ON "
-                "m.id = s.measurement_id WHERE m.plate_id = ? ORDER BY s.measurement_id, "
+                "s.metadata, s.features, s.n_samples, s.sha256 FROM shots s JOIN measurements m "
+                "ON m.id = s.measurement_id WHERE m.plate_id = ? ORDER BY s.measurement_id, "
                 "s.shot_index", (plate_id,)).fetchall()
         records = {r[0]: _measurement(r) for r in rows}
         for s in shots:
@@ -579,7 +581,7 @@ class Store:
                 records[s[0]].shots.append(ShotRecord(
                     t0=s[2], dt=s[3], samples=np.empty(0), units=s[4], calibration=s[5],
                     metadata=json.loads(s[6]), features=json.loads(s[7]), shot_index=s[1],
-                    n_samples=s[8]))
+                    n_samples=s[8], sha256=s[9]))
         return list(records.values())
 
     def count(self) -> int:
@@ -594,21 +596,22 @@ class Store:
                 "FROM measurements WHERE id = ?", (measurement_id,)).fetchone()
             if row is None:
                 return None
-            columns = "shot_index, t0, dt, units, calibration, metadata, features, n_samples"
+            columns = ("shot_index, t0, dt, units, calibration, metadata, features, n_samples, "
+                       "sha256")
             if with_samples:
-                columns += ", dtype, sha256, samples, codec"
+                columns += ", dtype, samples, codec"
             shot_rows = self._conn.execute(
                 f"SELECT {columns} FROM shots WHERE measurement_id = ? ORDER BY shot_index",
                 (measurement_id,)).fetchall()
         record = _measurement(row)
         record.earlier = self.earlier_results(measurement_id)
         for s in shot_rows:
-            samples = (decode_samples(s[8], s[10], s[7], s[9], s[11]) if with_samples
+            samples = (decode_samples(s[9], s[10], s[7], s[8], s[11]) if with_samples
                        else np.empty(0))
             record.shots.append(ShotRecord(
                 t0=s[1], dt=s[2], samples=samples, units=s[3], calibration=s[4],
                 metadata=json.loads(s[5]), features=json.loads(s[6]), shot_index=s[0],
-                n_samples=s[7]))
+                n_samples=s[7], sha256=s[8]))
         return record
 
     def get_shot(self, measurement_id: int, shot_index: int) -> ShotRecord | None:
@@ -623,7 +626,7 @@ class Store:
         return ShotRecord(t0=s[1], dt=s[2],
                           samples=decode_samples(s[8], s[10], s[7], s[9], s[11]),
                           units=s[3], calibration=s[4], metadata=json.loads(s[5]),
-                          features=json.loads(s[6]), shot_index=s[0])
+                          features=json.loads(s[6]), shot_index=s[0], sha256=s[9])
 
     def list(self, plate_id: str | None = None, after_id: int = 0,
              limit: int = 50) -> list[MeasurementRecord]:

@@ -1,0 +1,119 @@
+"""A plate's inspection report from a measurement store: its data (report.json), HTML and PDF.
+
+The service's routes (``GET /v1/plates/{id}/report.pdf`` ...) and ``solitonde report build``
+(from a store, or from recordings through a temporary store filled by the upload's own road) all
+come here, so every report of the same stored data holds the same numbers and digest.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from importlib import metadata
+from typing import Any
+
+from solitonde.instrument.inference.table_set import TableSet
+from solitonde.instrument.reports import content, render
+from solitonde.instrument.reports.content import Trace
+from solitonde.instrument.service import setup_book
+from solitonde.instrument.service.store import Store
+
+log = logging.getLogger("solitonde.instrument")
+
+POSITIONS_MAX = 5_000
+"""Measurements one report reads (as a map does)."""
+SUGGEST_UP_TO = 50
+"""Suggestions are added to a report of at most this many scan positions by default (a
+suggestion's search grows with the scan; a long plate's report leaves them out)."""
+SUGGESTIONS = 3
+
+
+class NoSuchPlate(LookupError):
+    """The store holds no measurement of the plate."""
+
+
+def version() -> str:
+    """This software's version."""
+    try:
+        return metadata.version("solitonde")
+    except metadata.PackageNotFoundError:  # pragma: no cover - a bare checkout
+        return "unknown"
+
+
+def entries(store: Store, plate_id: str) -> list[dict[str, Any]]:
+    """The plate's digest entries as the store holds them now (what ``report verify``
+    compares a report's with)."""
+    return content.entries(store.all_of_plate(plate_id, POSITIONS_MAX + 1))
+
+
+def build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any], *,
+          joint: bool = True, suggest: int | None = None,
+          progress: Callable[[str], None] | None = None) -> tuple[dict[str, Any], list[Trace]]:
+    """report.json of ``plate_id`` and the traces to draw; ``suggest`` None: three suggestions
+    up to :data:`SUGGEST_UP_TO` scan positions, none beyond. NoSuchPlate for a plate without
+    measurements."""
+    from solitonde.instrument.inference import plate_map
+    from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
+    from solitonde.instrument.inference.table_set import TableChoiceError
+
+    say = progress or (lambda _: None)
+    records = store.all_of_plate(plate_id, POSITIONS_MAX + 1)
+    if not records:
+        raise NoSuchPlate(plate_id)
+    if len(records) > POSITIONS_MAX:
+        raise ValueError(f"more than {POSITIONS_MAX:,} measurements of plate {plate_id!r}")
+    say(f"{len(records)} measurements: estimating each position")
+    result = plate_map.build(plate_id, plate_map.from_records(records, tables),
+                             tables.plate_size())
+    n_scan = result["n_scan_positions"]
+    wanted = (SUGGESTIONS if n_scan <= SUGGEST_UP_TO else 0) if suggest is None else suggest
+    if (joint or wanted) and n_scan >= 3:
+        say(f"inverting the scan of {n_scan} positions jointly"
+            + (f", {wanted} suggestions" if wanted else ""))
+        scan, table_ids = plate_map.scan_from_records(records)
+        try:
+            result = plate_map.with_joint(result, scan, table_ids, tables, plate_map.JointOptions(
+                joint, wanted, "edge", "free", DEFAULT_SPREAD))
+        except (JointMapError, TableChoiceError) as exc:
+            result["joint_reason"] = str(exc)
+    setups = {}
+    for r in records:
+        ref = (r.result.get("provenance") or {}).get("setup")
+        if ref and (ref["id"], ref["revision"]) not in setups:
+            found = setup_book.revision(store, ref["id"], ref["revision"])
+            if found is not None:
+                setups[(ref["id"], ref["revision"])] = found.to_dict()
+
+    def trace(record: Any) -> Trace | None:
+        if not record.shots:
+            return None
+        shot = store.get_shot(record.id, record.shots[0].shot_index)
+        if shot is None:
+            return None
+        return Trace(record.id, shot.shot_index, shot.t0, shot.dt, shot.samples, shot.features)
+
+    return content.build(plate_id, records, result, tables=tables, setups=setups,
+                         software_version=version(), source=source, traces=trace)
+
+
+def render_report(report: dict[str, Any], traces: list[Trace], fmt: str,
+                  progress: Callable[[str], None] | None = None) -> bytes:
+    """The report as ``html`` or ``pdf`` bytes (``json``: report.json)."""
+    from solitonde.instrument.plotting import map_png, trace_strips
+
+    if fmt == "json":
+        return render.report_json(report).encode()
+    say = progress or (lambda _: None)
+    started = time.perf_counter()
+    say(f"drawing the maps and {len(traces)} traces")
+    picture = map_png({**report["map"], "positions": report["positions"]})
+    strips = trace_strips([(t.t0, t.dt, t.samples, t.features) for t in traces])
+    document = render.html(report, picture, traces, strips)
+    if fmt == "html":
+        return document.encode()
+    say("laying out the PDF")
+    out = render.pdf(document, report)
+    log.info("report of plate %s: %d positions, %.1f s", report["plate_id"],
+             len(report["positions"]), time.perf_counter() - started)
+    return out
