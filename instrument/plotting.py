@@ -189,6 +189,11 @@ _MAP_PARAMETERS = (("thickness_m", "plate thickness", "thickness", "viridis"),
                    ("distance_m", "distance to the nearest support", "distance", "plasma"))
 
 
+LABELLED_POSITIONS_MAX = 40
+"""A map of more positions names none of them beside its marker (they would cover each other;
+the positions' table names them)."""
+
+
 def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
                height_px: int = 560) -> Figure:
     """Thickness and distance-to-support maps of a plate (``instrument.plate_map.build``).
@@ -276,7 +281,8 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
                         xytext=(8, -12), fontsize=7, color="black", zorder=6)
         labels = [ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
                               xytext=(7, 7), fontsize=7, color="0.25")
-                  for p, x, y in zip(positions, xs, ys, strict=True) if p.get("position")]
+                  for p, x, y in zip(positions, xs, ys, strict=True) if p.get("position")
+                  and len(positions) <= LABELLED_POSITIONS_MAX]
         ax.set_xlim(*xlim)
         ax.set_ylim(*ylim)
         ax.set_aspect("equal", adjustable="box")

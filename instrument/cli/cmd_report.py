@@ -32,8 +32,16 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+_STARTED = [0.0]
+
+
 def _say(text: str) -> None:
-    typer.echo(f"report: {text}", err=True)
+    """A step's progress on stderr, with the seconds since the command started."""
+    import time
+
+    if not _STARTED[0]:
+        _STARTED[0] = time.perf_counter()
+    typer.echo(f"report: {time.perf_counter() - _STARTED[0]:5.1f} s  {text}", err=True)
 
 
 SERVER = typer.Option(None, "--server", help="the service's base URL")
@@ -164,7 +172,7 @@ def build(
     if source != "--manifest" and (table or setup or calibration_file or plate_material):
         _fail("--table, --setup, --calibration-file and --plate-material go with --manifest "
               "(a service or a store holds its own)")
-    started = time.perf_counter()
+    started = _STARTED[0] = time.perf_counter()
     if server is not None:
         query = f"joint={'true' if joint else 'false'}"
         if suggest is not None:
@@ -205,9 +213,10 @@ def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | No
             tables = table_set(None)
             source = {"store": str(store_path)}
         try:
-            report, traces = plate_report.build(store, tables, plate_id, source, joint=joint,
-                                                suggest=suggest, progress=_say)
-            return plate_report.render_report(report, traces, fmt, progress=_say)
+            data = plate_report.report_bytes(store, tables, plate_id, source, fmt,
+                                             joint=joint, suggest=suggest, progress=_say)
+            _say("done")
+            return data
         except plate_report.NoSuchPlate:
             plates = [p["plate_id"] for p in store.plates()]
             _fail(f"--plate-id: no plate {plate_id!r} (plates: {', '.join(plates) or 'none'})",
@@ -229,8 +238,12 @@ def read_report(path: Path) -> dict[str, Any]:
         import io
 
         from pypdf import PdfReader
+        from pypdf.errors import PyPdfError
 
-        attached = PdfReader(io.BytesIO(raw)).attachments.get(ATTACHMENT)
+        try:
+            attached = PdfReader(io.BytesIO(raw)).attachments.get(ATTACHMENT)
+        except PyPdfError as exc:
+            raise ValueError(f"{path.name} is not a readable PDF ({exc})") from None
         if not attached:
             raise ValueError(f"{path.name} is a PDF without an attached {ATTACHMENT}: not a "
                              "solitonde report")

@@ -93,20 +93,36 @@ def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any
     groups = by_position(records)
     out = []
     for (name, x, y), members in groups.items():
-        given = position_inputs(members)
-        estimate, reason = None, None
-        try:
-            estimate = estimate_from(tables, given.summaries, given.calibration,
-                                     table=given.table,
-                                     plate_material=given.plate_material).to_dict()
-        except EstimateUnavailable as exc:
-            reason = str(exc)
-        except Exception as exc:  # an inversion refusing these features: say why, go on
-            reason = f"inversion failed: {exc}"
+        estimate, reason = _stored(members, tables), None
+        if estimate is None:
+            given = position_inputs(members)
+            try:
+                estimate = estimate_from(tables, given.summaries, given.calibration,
+                                         table=given.table,
+                                         plate_material=given.plate_material).to_dict()
+            except EstimateUnavailable as exc:
+                reason = str(exc)
+            except Exception as exc:  # an inversion refusing these features: say why, go on
+                reason = f"inversion failed: {exc}"
         out.append(position_entry(name, x, y, sum(m.n_shots for m in members), estimate, reason,
                                   [m.id for m in members],
                                   max(m.created_at for m in members)))
     return out
+
+
+def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:
+    """A position of one measurement: its stored estimate, where the table it names is loaded
+    with the same content (its SHA-256). That is what pooling its shots again would give, to
+    the last bit, without the inversion's time; None otherwise (estimate again)."""
+    if len(members) != 1:
+        return None
+    result = members[0].result
+    table = (result.get("provenance") or {}).get("table") or {}
+    loaded = tables.by_id.get(table.get("id")) if tables.loaded else None
+    if (result.get("estimate") is None or loaded is None
+            or loaded.table.content_sha256 != table.get("sha256")):
+        return None
+    return dict(result["estimate"])
 
 
 def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,

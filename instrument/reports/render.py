@@ -22,6 +22,9 @@ from solitonde.instrument.reports.content import Trace
 
 ATTACHMENT = "report.json"
 """The name of the report's data attached to the PDF."""
+DIGESTS_PRINTED = 60
+"""Each measurement's digest is printed for up to this many measurements; a longer plate's
+are in the attachment only (the overall digest is always printed)."""
 
 
 def _mm(value: Any, digits: int = 2) -> str:
@@ -88,7 +91,7 @@ def html(report: Mapping[str, Any], map_png: bytes, traces: Sequence[Trace],
     said = [p.get("warnings") or [] for p in report["positions"]]
     common = [w for w in said[0] if all(w in other for other in said[1:])] if len(said) > 1 \
         else []
-    return template.render(common_warnings=common,
+    return template.render(common_warnings=common, digests_printed=DIGESTS_PRINTED,
         r=report, css=css, map_png=_png_uri(map_png), data_json=Markup(data),
         traces={(t.measurement_id, t.shot_index): _png_uri(png)
                 for t, png in zip(traces, trace_pngs, strict=True)},

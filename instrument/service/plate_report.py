@@ -53,16 +53,62 @@ def build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
     """report.json of ``plate_id`` and the traces to draw; ``suggest`` None: three suggestions
     up to :data:`SUGGEST_UP_TO` scan positions, none beyond. NoSuchPlate for a plate without
     measurements."""
-    from solitonde.instrument.inference import plate_map
-    from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
-    from solitonde.instrument.inference.table_set import TableChoiceError
+    records, traces = _records_and_traces(store, plate_id)
+    return _build(store, tables, plate_id, source, records, traces, joint, suggest,
+                  progress or (lambda _: None))
 
+
+def report_bytes(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
+                 fmt: str, *, joint: bool = True, suggest: int | None = None,
+                 progress: Callable[[str], None] | None = None) -> bytes:
+    """The report as ``pdf``, ``html`` or ``json``. NoSuchPlate for a plate without
+    measurements.
+
+    The steps run one after the other: drawing the traces beside the joint inversion (a thread,
+    or a process on the second core) measured slower on 2 cores than in turn, both contending
+    for the interpreter and the cores."""
     say = progress or (lambda _: None)
+    started = time.perf_counter()
+    records, traces = _records_and_traces(store, plate_id)
+    report, shown = _build(store, tables, plate_id, source, records, traces, joint, suggest,
+                           say)
+    if fmt != "json":
+        say(f"drawing the maps and {len(shown)} traces")
+    out = render_report(report, shown, fmt, progress=say)
+    log.info("report of plate %s: %d positions, %s, %.1f s", plate_id,
+             len(report["positions"]), fmt, time.perf_counter() - started)
+    return out
+
+
+def _records_and_traces(store: Store, plate_id: str) -> tuple[list[Any], dict[Any, Trace]]:
+    """The plate's measurements (with their shots) and, per position, its newest
+    measurement's first shot with its samples."""
+    from solitonde.instrument.inference import plate_map
+
     records = store.all_of_plate(plate_id, POSITIONS_MAX + 1)
     if not records:
         raise NoSuchPlate(plate_id)
     if len(records) > POSITIONS_MAX:
         raise ValueError(f"more than {POSITIONS_MAX:,} measurements of plate {plate_id!r}")
+    traces = {}
+    for members in plate_map.by_position(records).values():
+        newest = members[-1]
+        if not newest.shots:
+            continue
+        shot = store.get_shot(newest.id, newest.shots[0].shot_index)
+        if shot is not None:
+            traces[newest.id] = Trace(newest.id, shot.shot_index, shot.t0, shot.dt,
+                                      shot.samples, shot.features)
+    return records, traces
+
+
+def _build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
+           records: list[Any], traces: dict[Any, Trace], joint: bool, suggest: int | None,
+           say: Callable[[str], None]) -> tuple[dict[str, Any], list[Trace]]:
+    from solitonde.instrument.inference import plate_map
+    from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
+    from solitonde.instrument.inference.table_set import TableChoiceError
+
     say(f"{len(records)} measurements: estimating each position")
     result = plate_map.build(plate_id, plate_map.from_records(records, tables),
                              tables.plate_size())
@@ -84,36 +130,26 @@ def build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
             found = setup_book.revision(store, ref["id"], ref["revision"])
             if found is not None:
                 setups[(ref["id"], ref["revision"])] = found.to_dict()
-
-    def trace(record: Any) -> Trace | None:
-        if not record.shots:
-            return None
-        shot = store.get_shot(record.id, record.shots[0].shot_index)
-        if shot is None:
-            return None
-        return Trace(record.id, shot.shot_index, shot.t0, shot.dt, shot.samples, shot.features)
-
     return content.build(plate_id, records, result, tables=tables, setups=setups,
-                         software_version=version(), source=source, traces=trace)
+                         software_version=version(), source=source,
+                         traces=lambda record: traces.get(record.id))
 
 
 def render_report(report: dict[str, Any], traces: list[Trace], fmt: str,
+                  strips: list[bytes] | None = None,
                   progress: Callable[[str], None] | None = None) -> bytes:
-    """The report as ``html`` or ``pdf`` bytes (``json``: report.json)."""
+    """The report as ``html`` or ``pdf`` bytes (``json``: report.json); ``strips``: the traces
+    already drawn (else drawn here)."""
     from solitonde.instrument.plotting import map_png, trace_strips
 
     if fmt == "json":
         return render.report_json(report).encode()
-    say = progress or (lambda _: None)
-    started = time.perf_counter()
-    say(f"drawing the maps and {len(traces)} traces")
     picture = map_png({**report["map"], "positions": report["positions"]})
-    strips = trace_strips([(t.t0, t.dt, t.samples, t.features) for t in traces])
+    if strips is None:
+        strips = trace_strips([(t.t0, t.dt, t.samples, t.features) for t in traces])
     document = render.html(report, picture, traces, strips)
     if fmt == "html":
         return document.encode()
-    say("laying out the PDF")
-    out = render.pdf(document, report)
-    log.info("report of plate %s: %d positions, %.1f s", report["plate_id"],
-             len(report["positions"]), time.perf_counter() - started)
-    return out
+    if progress is not None:
+        progress("laying out the PDF")
+    return render.pdf(document, report)

@@ -211,12 +211,11 @@ async def get_report(request: Request, svc: ServiceDep, plate_id: str = PlateId,
 
     def make() -> bytes:
         try:
-            report, traces = plate_report.build(svc.store, svc.tables, plate_id, source,
-                                                joint=joint, suggest=suggest)
+            return plate_report.report_bytes(svc.store, svc.tables, plate_id, source, fmt,
+                                             joint=joint, suggest=suggest)
         except plate_report.NoSuchPlate:
             raise Problem(404, f"plate_id: no measurement of plate {plate_id!r}",
                           kind="not-found", field="plate_id") from None
-        return plate_report.render_report(report, traces, fmt)
 
     data = await run_for_client(request, svc.plot_lane, make)
     safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in plate_id)[:80]

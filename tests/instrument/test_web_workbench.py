@@ -319,6 +319,13 @@ def test_the_page_lists_setups_and_measures_with_the_one_picked(server, tmp_path
             assert any(line.startswith("Warning: the plate material is given by its properties")
                        for line in lines), lines
             assert not any(" mm" in line and "- mm" in line for line in lines), lines
+            # the plate's inspection report, one link per format
+            for fmt in ("pdf", "html", "json"):
+                href = page.get_attribute(f"#dl-report-{fmt}", "href")
+                assert href == f"/v1/plates/WEB-RIG/report.{fmt}", href
+            r = httpx.get(f"{server}/v1/plates/WEB-RIG/report.json?joint=false", timeout=120)
+            assert r.status_code == 200 and r.json()["setups"][0]["labels"] == {
+                "operator": "kim"}
             figures = os.environ.get("SOLITONDE_FIGURES")
             if figures:
                 Path(figures).mkdir(parents=True, exist_ok=True)

@@ -245,6 +245,11 @@ function downloads(plateId) {
       a.download = `${plateId}-${kind}.${format}`;
     }
   }
+  for (const format of ["pdf", "html", "json"]) {
+    const a = $(`dl-report-${format}`);
+    a.href = `/v1/plates/${id}/report.${format}`;
+    a.download = `${plateId}-report.${format}`;
+  }
 }
 
 async function showPlate(plateId) {
