@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 HOST ?= 127.0.0.1
 PORT ?= 8000
 
-.PHONY: run test lint bench clean
+.PHONY: run test lint bench report-figures clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -32,6 +32,14 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m pytest -q -m bench -s
+
+# The bundled scan's inspection report (PDF, HTML) and its first pages as images, beside the
+# other figures: built from the recordings, as `report build --manifest` builds any.
+FIGURES := data_samples/figures
+report-figures: $(STAMP)
+	$(BIN)/solitonde report build --manifest data_samples/scan/campaign.csv --plate-id SCAN-A --out $(FIGURES)/scan_report.pdf
+	$(BIN)/solitonde report build --manifest data_samples/scan/campaign.csv --plate-id SCAN-A --out $(FIGURES)/scan_report.html
+	$(BIN)/python -c "import pypdfium2 as p; d = p.PdfDocument('$(FIGURES)/scan_report.pdf'); [d[i].render(scale=1.5).to_pil().save(f'$(FIGURES)/scan_report_page{i + 1}.png') for i in range(2)]"
 
 clean:
 	rm -rf $(VENV) build *.egg-info
