@@ -54,6 +54,10 @@ EXAMPLES: dict[str, Callable[[type], BaseException]] = {
     "ShotInputError": lambda c: c("shots.0.metadata.sphere_diameter", "'abc' is not a sphere "
                                   "diameter", "a number of metres, 0 < D <= 1"),
     "ShotLimitError": lambda c: c("metadata.plate_id", "201 characters; at most 200"),
+    "NoSuchPlate": lambda c: c("no measurement of plate 'P7'"),
+    "SetupConflict": lambda c: c("set-up 'rig' has revision 3 now; this change was based on "
+                                 "revision 2"),
+    "SetupGone": lambda c: c("set-up 'rig' revision 2 is no longer stored"),
     "SetupError": lambda c: c("shots.0.metadata.sphere_diameter", "0.01905 m contradicts "
                               "setup 'rig' (revision 2)", "one of the set-up's sizes"),
     "Problem": lambda c: c(422, "shots[0].dt: must be > 0", kind="invalid-input",

@@ -101,16 +101,32 @@ def _manifest_store(manifest: Path, folder: Path, tables_given: list[Path],
     except (SetupError, CalibrationError, TableError, campaign.ManifestError,
             ValueError) as exc:
         _fail(str(exc))
+    from solitonde.instrument.service import setup_book
+
     store = Store(folder / "recordings.sqlite", background_checkpoint=False)
+    if setup is not None:
+        setup_book.keep(store, setup)
     for path, row in files:
+        named = row.metadata.get("setup")
+        if named is not None and (setup is None or named != setup.id):
+            _fail(f"--manifest: {row.where}: setup {named!r}: give that set-up's file with "
+                  "--setup" + ("" if setup is None else f" (--setup is {setup.id!r})"))
+        try:
+            row_material = row.metadata.get("plate_material")
+            stated = {**row.metadata, "plate_material": parse_material(str(row_material))
+                      } if row_material is not None else dict(row.metadata)
+            stated.pop("setup", None)
+        except ValueError as exc:
+            _fail(f"--manifest: {row.where}: plate_material: {exc}")
         try:
             waves, _ = measured_shots.read_shots(path, None, {}, accepted_only=True,
                                                  fallback_calibration=row.calibration)
             waves, _ = signal_channels.select(waves, None, None, path.name)
-            metas = [measured_shots.located(w.metadata, [(row.where, row.metadata)], path.name)
+            metas = [measured_shots.located(w.metadata, [(row.where, stated)], path.name)
                      for w in waves]
-            if material is not None:
-                metas = [{**m, "plate_material": material} for m in metas]
+            if material is not None:  # the command line's, where the row and file say none
+                metas = [{"plate_material": material, **m} if m.get("plate_material") is None
+                         else m for m in metas]
             waves = [w.with_metadata(**{**m, "source": path.name}) for w, m in
                      zip(waves, metas, strict=True)]
             measure_and_store(waves, store, tables, f"file:{path.name}", "file.shots",
@@ -285,7 +301,11 @@ def verify(
     except (ValueError, KeyError, TypeError) as exc:
         _fail(f"REPORT: {exc}")
         return
-    tampered = content.verify_entries(report)
+    try:
+        tampered = content.verify_entries(report)
+    except (KeyError, TypeError, ValueError) as exc:
+        _fail(f"REPORT: not a solitonde report's data ({type(exc).__name__}: {exc})")
+        return
     if tampered is not None:
         typer.echo(f"{report_file.name}: does not match: {tampered}")
         raise typer.Exit(1)
@@ -297,19 +317,40 @@ def verify(
         current = _local_entries(plate_id, store, manifest, table, setup, calibration_file,
                                  plate_material)
     current = [{k: v for k, v in e.items() if k != "digest"} for e in current]
+    found: list[str] = []
     if manifest is not None:
-        # offline, the recordings are what is verified: today's version may read them anew
-        for e, now in zip(current, [_by_id(reported, e["id"]) for e in current], strict=True):
-            if now is not None:
-                e["result"] = now["result"]
-    found = digest.changes(reported, current)
+        # offline, the recordings, the table and the chain calibration are verified; today's
+        # version may read the recordings anew, so the results themselves are not compared
+        for e in current:
+            then = _by_id(reported, e["id"])
+            if then is None:
+                continue
+            found += [f"measurement {e['id']}: {what} differs from the report's"
+                      for what in _made_with(then["result"], e["result"])]
+            e["result"] = then["result"]
+    found += digest.changes(reported, current)
     if found:
         typer.echo(f"{report_file.name}: does not match plate {plate_id!r} as it is now:")
         for line in found:
             typer.echo(f"  {line}")
         raise typer.Exit(1)
-    typer.echo(f"{report_file.name}: matches plate {plate_id!r} ({len(current)} measurements, "
-               f"data digest {report['digest']['value']})")
+    what = ("the recordings, their positions, the table and the chain calibration are the "
+            "report's (results not recomputed); " if manifest is not None else "")
+    typer.echo(f"{report_file.name}: matches plate {plate_id!r} ({what}{len(current)} "
+               f"measurements, data digest {report['digest']['value']})")
+
+
+def _made_with(then: dict[str, Any], now: dict[str, Any]) -> list[str]:
+    """What a result was made with that differs between two results of the same recordings:
+    the table (its SHA-256), the set-up revision, the chain calibration."""
+    a, b = then.get("provenance") or {}, now.get("provenance") or {}
+    out = []
+    if (a.get("table") or {}).get("sha256") != (b.get("table") or {}).get("sha256"):
+        out.append("the table")
+    for key, name in (("setup", "the set-up"), ("chain_calibration", "the chain calibration")):
+        if a.get(key) != b.get(key):
+            out.append(name)
+    return out
 
 
 def _by_id(entries: list[dict[str, Any]], key: Any) -> dict[str, Any] | None:

@@ -104,10 +104,27 @@ def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any
                 reason = str(exc)
             except Exception as exc:  # an inversion refusing these features: say why, go on
                 reason = f"inversion failed: {exc}"
+            mixed = _mixed_calibrations(members)
+            if estimate is not None and mixed:
+                estimate["warnings"] = [*estimate.get("warnings", []), mixed]
         out.append(position_entry(name, x, y, sum(m.n_shots for m in members), estimate, reason,
                                   [m.id for m in members],
                                   max(m.created_at for m in members)))
     return out
+
+
+MIXED_CALIBRATIONS = ("this position's measurements were estimated with different set-ups or "
+                      "chain calibrations; their shots are pooled and read with the newest "
+                      "one's")
+
+
+def _mixed_calibrations(members: Sequence[Any]) -> str | None:
+    """:data:`MIXED_CALIBRATIONS` where a position's measurements name more than one set-up
+    revision or chain calibration, else None."""
+    seen = {json.dumps([(m.result.get("provenance") or {}).get(k)
+                        for k in ("setup", "chain_calibration")], sort_keys=True)
+            for m in members}
+    return MIXED_CALIBRATIONS if len(seen) > 1 else None
 
 
 def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,6 +58,19 @@ def _identifier(value: Any, name: str) -> str:
                          else f"{value!r} is not an id",
                          f"printable text, not blank, at most {SETUP_ID_MAX} characters")
     return value
+
+
+ROUTE_SUFFIXES = re.compile(r"(^|/)(calibration|revisions/\d+|revisions)$")
+"""The ends of a set-up id that its routes would read as a route (``/calibration``,
+``/revisions/2``): refused, since a ``/`` in a URL cannot be told from one in the id."""
+
+
+def _setup_id(value: Any) -> str:
+    text = _identifier(value, "id")
+    if ROUTE_SUFFIXES.search(text):
+        raise SetupError("id", f"{text!r} ends as a route of the set-up API does",
+                         "an id not ending in /calibration, /revisions or /revisions/N")
+    return text
 
 
 def _sizes(value: Any, name: str) -> tuple[float, ...]:
@@ -149,7 +163,7 @@ class Setup:
                     raise SetupError(f"labels.{key}", f"{value!r} is not a label",
                                      "text or a number")
         return cls(
-            id=_identifier(data["id"], "id"),
+            id=_setup_id(data["id"]),
             sphere_diameters_m=_sizes(data["sphere_diameters_m"], "sphere_diameters_m"),
             table=_identifier(data["table"], "table"),
             revision=revision,

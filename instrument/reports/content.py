@@ -123,7 +123,18 @@ def build(plate_id: str, records: Sequence[Any], plate_map: Mapping[str, Any], *
                    "value": digest.data_digest(
                        [{k: v for k, v in e.items() if k != "digest"} for e in items])},
     }
+    report["content_digest"] = {"algorithm": digest.ALGORITHM, "value": content_digest(report)}
     return report, drawn
+
+
+def content_digest(report: Mapping[str, Any]) -> str:
+    """The SHA-256 of everything report.json holds but this digest itself (the positions'
+    answers, the map, the set-ups, the calibrations, the table, the date): an edited report
+    no longer matches it. Unlike the data digest, it is the report's own, not the store's."""
+    import hashlib
+
+    body = {k: v for k, v in report.items() if k != "content_digest"}
+    return hashlib.sha256(digest.canonical(body)).hexdigest()
 
 
 def _calibrations(records: Sequence[Any]) -> list[dict[str, Any]]:
@@ -145,4 +156,7 @@ def verify_entries(report: Mapping[str, Any]) -> str | None:
             return f"measurement {e['id']}'s data differ from its digest in the report"
     if digest.data_digest(items) != report["digest"]["value"]:
         return "the report's data differ from its digest"
+    if content_digest(report) != (report.get("content_digest") or {}).get("value"):
+        return ("the report's content (answers, map, set-up, calibration, table) differs from "
+                "its content digest")
     return None

@@ -86,7 +86,7 @@ def html(report: Mapping[str, Any], map_png: bytes, traces: Sequence[Trace],
     """The report as one standalone HTML document."""
     css = resources.files("solitonde.instrument.reports").joinpath(
         "templates/report.css").read_text(encoding="utf-8")
-    data = json.dumps(report, allow_nan=False).replace("</", "<\\/")
+    data = json.dumps(report, allow_nan=False).replace("<", "\\u003c")  # no tag can close it
     template = _environment().get_template("report.html.j2")
     said = [p.get("warnings") or [] for p in report["positions"]]
     common = [w for w in said[0] if all(w in other for other in said[1:])] if len(said) > 1 \

@@ -261,8 +261,7 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
                               if shot_options(d)}},
             "table": table,
             "setup": None if setup is None else setup.reference(),
-            "chain_calibration": (setup.chain_calibration if setup is not None
-                                  else None if calibration is None else calibration.to_dict()),
+            "chain_calibration": None if calibration is None else calibration.to_dict(),
             "computed_at": time.time()}
 
 
@@ -275,8 +274,8 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
     caller already chose (:func:`choose_table`) and checked the metadata against; ``setup``:
     the set-up the shots were completed with (:func:`apply_setup`), whose chain calibration
     the estimate applies; ``calibration``: a chain calibration of no set-up (a file's, offline)."""
-    if setup is not None:
-        calibration = setup.calibration()
+    if setup is not None and setup.chain_calibration is not None:
+        calibration = setup.calibration()  # one calibration: callers refuse a second one
     if chosen is ...:
         chosen = choose_table(waveforms, tables, prefix)
         check_metadata(waveforms, prefix, chosen.plate_size() if chosen else None)

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from importlib import metadata
 from typing import Any
 
+from solitonde.instrument.errors import MessageError
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.instrument.reports import content, render
 from solitonde.instrument.reports.content import Trace
@@ -29,8 +30,10 @@ suggestion's search grows with the scan; a long plate's report leaves them out).
 SUGGESTIONS = 3
 
 
-class NoSuchPlate(LookupError):
+class NoSuchPlate(MessageError, LookupError):
     """The store holds no measurement of the plate."""
+
+    subject = "plate_id"
 
 
 def version() -> str:
@@ -87,7 +90,7 @@ def _records_and_traces(store: Store, plate_id: str) -> tuple[list[Any], dict[An
 
     records = store.all_of_plate(plate_id, POSITIONS_MAX + 1)
     if not records:
-        raise NoSuchPlate(plate_id)
+        raise NoSuchPlate(f"no measurement of plate {plate_id!r}")
     if len(records) > POSITIONS_MAX:
         raise ValueError(f"more than {POSITIONS_MAX:,} measurements of plate {plate_id!r}")
     traces = {}

@@ -54,7 +54,7 @@ from solitonde.instrument.service.ingest import (
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
 from solitonde.instrument.service.routes_setups import resolve as resolve_setup
 from solitonde.instrument.service.state import Service
-from solitonde.instrument.service.store import KeyTaken, StoreFull
+from solitonde.instrument.service.store import KeyTaken, SetupGone, StoreFull
 from solitonde.instrument.service.uploads import (
     FORMATS,
     check_self_contained,
@@ -276,6 +276,8 @@ async def _post(request: Request, svc: Service, media: str) -> JSONResponse:
         log.warning("store full: %s", exc)
         raise Problem(507, f"store: {exc}", kind="insufficient-storage", field="store",
                       headers={"Retry-After": str(FULL_RETRY_AFTER_S)}) from None
+    except SetupGone as exc:  # deleted between the request's check and its write
+        raise Problem(409, f"setup: {exc.message}", kind="conflict", field="setup") from None
     except KeyTaken:  # the same request, retried while the first was being stored
         replay = await _replay(svc, key or "", None)
         if replay is None:

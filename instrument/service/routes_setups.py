@@ -190,11 +190,8 @@ def _new_setup(svc: Service, body: SetupIn, setup_id: str | None = None) -> Setu
 async def create_setup(request: Request, svc: ServiceDep) -> Any:
     """``{"id", "sphere_diameters_m", "table", "plate_material"?, "chain"?, "striker"?,
     "labels"?}``: 201 with revision 1; 409 when the id exists (``PUT`` revises it)."""
-    setup = _new_setup(svc, await _body(request, SetupIn))
-    if await run_in_threadpool(setup_book.revision, svc.store, setup.id) is not None:
-        raise Problem(409, f"id: set-up {setup.id!r} exists; PUT /v1/setups/{{id}} makes a "
-                      "new revision", kind="conflict", field="id")
-    stored = await run_in_threadpool(setup_book.add_revision, svc.store, setup)
+    setup = await run_in_threadpool(_new_setup, svc, await _body(request, SetupIn))
+    stored = await run_in_threadpool(_add, svc, setup, 0)
     out = await run_in_threadpool(setup_out, svc, stored)
     return JSONResponse(out, status_code=201, headers={"Location": out["links"]["self"]})
 
@@ -206,7 +203,7 @@ async def put_calibration(request: Request, svc: ServiceDep,
                           setup_id: str = SetupIdPath) -> dict[str, Any]:
     """The calibration file as it is: a new revision holding it, and a job re-estimating the
     set-up's measurements with it."""
-    current = _existing(svc, setup_id)
+    current = await run_in_threadpool(_existing, svc, setup_id)
     try:
         data = json.loads(await request.body())
         calibration = Calibration.from_any(data)
@@ -214,7 +211,11 @@ async def put_calibration(request: Request, svc: ServiceDep,
         raise Problem(422, f"body: not JSON ({exc})", kind="invalid-input", field="body") from None
     except CalibrationError as exc:
         raise _invalid(exc, "chain_calibration.") from None
-    assert calibration is not None
+    except UnicodeDecodeError:
+        raise Problem(422, "body: not UTF-8 JSON", kind="invalid-input", field="body") from None
+    if calibration is None:
+        raise Problem(422, "body: null; send the calibration file `solitonde calibrate` wrote",
+                      kind="invalid-input", field="body")
     _sizes_match(current, calibration)
     return await run_in_threadpool(_calibrate, svc, current, calibration,
                                    {"kind": "file", "reference": calibration.reference})
@@ -233,6 +234,18 @@ async def post_calibration(request: Request, svc: ServiceDep,
     current = _existing(svc, setup_id)
     body = await _body(request, CalibrationIn)
     return await run_in_threadpool(_fit_and_calibrate, svc, current, body)
+
+
+def _add(svc: Service, setup: Setup, based_on: int) -> Setup:
+    """The next revision stored, or a 409 where another change came first (a revision or a
+    calibration sent at the same time: resend on the newest)."""
+    from solitonde.instrument.service.store import SetupConflict
+
+    try:
+        return setup_book.add_revision(svc.store, setup, based_on)
+    except SetupConflict as exc:
+        raise Problem(409, f"{'id' if based_on == 0 else 'setup_id'}: {exc.message}",
+                      kind="conflict", field="id" if based_on == 0 else "setup_id") from None
 
 
 def _existing(svc: Service, setup_id: str) -> Setup:
@@ -257,15 +270,27 @@ def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> dict[
     from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
     from solitonde.instrument.inference.inversion import InversionError
     from solitonde.instrument.inference.loaded_table import EstimateUnavailable
+    from solitonde.instrument.inference.table_set import TableChoiceError
     from solitonde.instrument.service.ingest import (
         apply_setup,
         measure_shots,
         waveforms_from_records,
     )
 
-    chosen = svc.tables.choose(setup.sphere_diameters_m, setup.table, setup.plate_material)
+    try:
+        chosen = svc.tables.choose(setup.sphere_diameters_m, setup.table, setup.plate_material)
+    except TableChoiceError as exc:
+        raise Problem(422, f"{exc.field}: {exc.message}", kind="invalid-input",
+                      field=exc.field) from None
+    seen: set[int] = set()
     references = []
     for i, ref in enumerate(body.references):
+        for j, mid in enumerate(ref.measurement_ids):
+            if mid in seen:
+                field = f"references.{i}.measurement_ids.{j}"
+                raise Problem(422, f"{field}: measurement {mid} is named twice (its shots "
+                              "would count twice)", kind="invalid-input", field=field)
+            seen.add(mid)
         waveforms = []
         for j, mid in enumerate(ref.measurement_ids):
             record = svc.store.get(mid, with_samples=True)
@@ -288,7 +313,7 @@ def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> dict[
     try:
         calibration = fit_calibration(chosen.table, references)
     except (CalibrationError, InversionError) as exc:
-        field = f"references.{exc.field}"
+        field = exc.field if exc.field.startswith("references") else f"references.{exc.field}"
         raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
                       field=field) from None
     source = {"kind": "references",
@@ -305,18 +330,29 @@ def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
     revised = Setup.from_dict({**setup.to_dict(), "chain_calibration": calibration.to_dict(),
                                "calibration_source": source})
     check_against_tables(svc, revised)
-    stored = setup_book.add_revision(svc.store, revised)
-    ids = [m for m, _ in setup_book.users(svc.store, setup.id)]
+    stored = _add(svc, revised, setup.revision)
+
+    def older() -> list[int]:
+        return [m for m, r in setup_book.users(svc.store, setup.id) if r < stored.revision]
+
+    ids = older()
 
     def work(progress: jobs.Progress) -> dict[str, Any]:
         failed: list[dict[str, Any]] = []
-        for n, mid in enumerate(ids, start=1):
-            try:
-                recompute(svc.store, svc.tables, mid, stored)
-            except Exception as exc:  # that measurement keeps its result; the job says why
-                failed.append({"id": mid, "reason": getattr(exc, "detail", None) or str(exc)})
-            progress({"done": n, "failed": failed})
-        return {"done": len(ids), "failed": failed}
+        done, tried = 0, set()
+        todo = ids
+        while todo:  # and those an upload named the older revision in while this ran
+            for mid in todo:
+                tried.add(mid)
+                try:
+                    recompute(svc.store, svc.tables, mid, stored)
+                except Exception as exc:  # that measurement keeps its result; the job says why
+                    failed.append({"id": mid,
+                                   "reason": getattr(exc, "detail", None) or str(exc)})
+                done += 1
+                progress({"done": done, "total": max(done, len(ids)), "failed": failed})
+            todo = [m for m in older() if m not in tried]
+        return {"done": done, "total": done, "failed": failed}
 
     job = jobs.start(svc.store, "recalibration", len(ids),
                      {"setup": stored.reference()}, work)
@@ -350,8 +386,8 @@ async def revise_setup(request: Request, svc: ServiceDep,
     revised = Setup.from_dict({**setup.to_dict(),
                                "chain_calibration": current.chain_calibration,
                                "calibration_source": current.calibration_source})
-    check_against_tables(svc, revised)
-    stored = await run_in_threadpool(setup_book.add_revision, svc.store, revised)
+    await run_in_threadpool(check_against_tables, svc, revised)
+    stored = await run_in_threadpool(_add, svc, revised, current.revision)
     return await run_in_threadpool(setup_out, svc, stored)
 
 

@@ -13,19 +13,39 @@ import time
 from typing import Any
 
 from solitonde.instrument.inference.setups import Setup
-from solitonde.instrument.service.store import Store
+from solitonde.instrument.service.store import SetupConflict, Store
 
 
-def add_revision(store: Store, setup: Setup) -> Setup:
-    """Store ``setup`` as the next revision of its id (1 for a new id); the stored revision."""
+def add_revision(store: Store, setup: Setup, based_on: int | None = None) -> Setup:
+    """Store ``setup`` as the next revision of its id (1 for a new id); the stored revision.
+
+    ``based_on``: the revision the change was made from (0: a new set-up). Where another
+    revision came first meanwhile, SetupConflict and nothing is written: a calibration and a
+    revision sent at once never drop one another's change."""
     with store.transaction() as c:
         row = c.execute("SELECT MAX(revision) FROM setups WHERE id = ?", (setup.id,)).fetchone()
-        revision = int(row[0] or 0) + 1
+        newest = int(row[0] or 0)
+        if based_on is not None and newest != based_on:
+            raise SetupConflict(
+                f"set-up {setup.id!r} exists (revision {newest}); PUT /v1/setups/{{id}} makes a "
+                "new revision" if based_on == 0 else
+                f"set-up {setup.id!r} has revision {newest} now; this change was based on "
+                f"revision {based_on}: read it again and resend")
+        revision = newest + 1
         stored = Setup.from_dict({**setup.to_dict(), "revision": revision,
                                   "created_at": time.time()})
         c.execute("INSERT INTO setups (id, revision, created_at, body) VALUES (?, ?, ?, ?)",
                   (stored.id, revision, stored.created_at, json.dumps(stored.to_dict())))
     return stored
+
+
+def keep(store: Store, setup: Setup) -> None:
+    """Store ``setup`` under its own revision number, as read from a file (a report's
+    temporary store of an offline analysis, so that it names the lab's set-up as it is)."""
+    with store.transaction() as c:
+        c.execute("INSERT OR REPLACE INTO setups (id, revision, created_at, body) VALUES "
+                  "(?, ?, ?, ?)", (setup.id, setup.revision, setup.created_at or 0.0,
+                                   json.dumps(setup.to_dict())))
 
 
 def revision(store: Store, setup_id: str, number: int | None = None) -> Setup | None:

@@ -163,6 +163,20 @@ class SchemaTooOld(StoreError):
     """A store of an earlier schema: ``solitonde store migrate`` brings it up."""
 
 
+class SetupGone(StoreError):
+    """A measurement names a set-up revision the store no longer holds (deleted meanwhile):
+    nothing was written."""
+
+    subject = "setup"
+
+
+class SetupConflict(StoreError):
+    """A change based on a set-up revision that is no longer the newest (another change came
+    first), or a result of an older revision over a newer one: nothing was written."""
+
+    subject = "setup"
+
+
 class KeyTaken(MessageError, RuntimeError):
     """An ``Idempotency-Key`` another request stored first (a concurrent retry): nothing was
     written; the caller answers with that request's measurement. The message is the key."""
@@ -437,6 +451,10 @@ class Store:
                     c.execute("INSERT INTO idempotency (key, digest, measurement_id, created_at) "
                               "VALUES (?, ?, ?, ?)", (*idempotency, new_id, now))
                 if setup is not None:
+                    if c.execute("SELECT 1 FROM setups WHERE id = ? AND revision = ?",
+                                 setup).fetchone() is None:
+                        raise SetupGone(f"set-up {setup[0]!r} revision {setup[1]} is no longer "
+                                        "stored (deleted meanwhile); nothing was written")
                     c.execute("INSERT INTO setup_uses (measurement_id, setup_id, revision) "
                               "VALUES (?, ?, ?)", (new_id, *setup))
                 c.execute("COMMIT")
@@ -484,6 +502,12 @@ class Store:
                               "shot_index = ?", [(json.dumps(f), measurement_id, i)
                                                  for i, f in enumerate(shot_features)])
                 if setup is not None:
+                    used = c.execute("SELECT revision FROM setup_uses WHERE measurement_id = ? "
+                                     "AND setup_id = ?", (measurement_id, setup[0])).fetchone()
+                    if used is not None and used[0] > setup[1]:
+                        raise SetupConflict(f"measurement {measurement_id} was estimated with "
+                                            f"set-up {setup[0]!r} revision {used[0]}, newer than "
+                                            f"{setup[1]}; its result is kept")
                     c.execute("UPDATE setup_uses SET revision = ? WHERE measurement_id = ? AND "
                               "setup_id = ?", (setup[1], measurement_id, setup[0]))
                 c.execute("COMMIT")
@@ -565,16 +589,12 @@ class Store:
     def all_of_plate(self, plate_id: str, limit: int) -> list[MeasurementRecord]:
         """Every measurement of ``plate_id`` in id order, at most ``limit``, each with its shots
         (their metadata and features; no samples)."""
-        with self._lock:
-            rows = self._conn.execute(
-                "SELECT id, created_at, plate_id, position, n_shots, source, result "
-                "FROM measurements WHERE plate_id = ? ORDER BY id LIMIT ?",
-                (plate_id, limit)).fetchall()
-            shots = self._conn.execute(
-                "SELECT s.measurement_id, s.shot_index, s.t0, s.dt, s.units, s.calibration, "
-                "s.metadata, s.features, s.n_samples, s.sha256 FROM shots s JOIN measurements m "
-                "ON m.id = s.measurement_id WHERE m.plate_id = ? ORDER BY s.measurement_id, "
-                "s.shot_index", (plate_id,)).fetchall()
+        with self._lock:  # one read transaction: the measurements and shots of one moment
+            self._conn.execute("BEGIN")
+            try:
+                rows, shots = self._plate_rows(plate_id, limit)
+            finally:
+                self._conn.execute("COMMIT")
         records = {r[0]: _measurement(r) for r in rows}
         for s in shots:
             if s[0] in records:
@@ -583,6 +603,18 @@ class Store:
                     metadata=json.loads(s[6]), features=json.loads(s[7]), shot_index=s[1],
                     n_samples=s[8], sha256=s[9]))
         return list(records.values())
+
+    def _plate_rows(self, plate_id: str, limit: int) -> tuple[list[Any], list[Any]]:
+        rows = self._conn.execute(
+            "SELECT id, created_at, plate_id, position, n_shots, source, result "
+            "FROM measurements WHERE plate_id = ? ORDER BY id LIMIT ?",
+            (plate_id, limit)).fetchall()
+        shots = self._conn.execute(
+            "SELECT s.measurement_id, s.shot_index, s.t0, s.dt, s.units, s.calibration, "
+            "s.metadata, s.features, s.n_samples, s.sha256 FROM shots s JOIN measurements m "
+            "ON m.id = s.measurement_id WHERE m.plate_id = ? ORDER BY s.measurement_id, "
+            "s.shot_index", (plate_id,)).fetchall()
+        return rows, shots
 
     def count(self) -> int:
         with self._lock:

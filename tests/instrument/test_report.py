@@ -158,7 +158,16 @@ def test_verify_finds_a_measurement_added_deleted_or_reanalysed(service: Any,
     assert client.delete("/v1/measurements/3").status_code == 204
     gone = _verify(str(report), "--store", str(store))
     assert gone.exit_code == 1 and "measurement 3 deleted since (position 'P01')" in gone.output
-    # an edited report: its data no longer hash to the digest it prints
+    # an edited answer: the report's content no longer hashes to its content digest
+    original = json.loads(report.read_text())
+    answer = json.loads(report.read_text())
+    answer["positions"][0]["thickness_m"] = {**answer["positions"][0]["thickness_m"],
+                                             "median": 4.2e-3}
+    report.write_text(json.dumps(answer))
+    edited_answer = _verify(str(report), "--store", str(store))
+    assert edited_answer.exit_code == 1 and "content digest" in edited_answer.output
+    report.write_text(json.dumps(original))
+    # an edited measurement: its data no longer hash to the digest it prints
     edited = json.loads(report.read_text())
     edited["measurements"][0]["result"]["estimate"]["thickness_m"]["median"] = 9e-3
     report.write_text(json.dumps(edited))

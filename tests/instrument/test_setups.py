@@ -223,3 +223,63 @@ def test_a_setup_record_checks_its_fields() -> None:
         two.apply([{}], lambda i, k: k)
     assert two.apply([{"sphere_diameter": 19.05e-3}], lambda i, k: k)[0]["table"] == \
         "default_table"
+
+
+def test_a_change_based_on_an_older_revision_is_refused(client: TestClient) -> None:
+    """Two changes sent at once: the second, based on a revision that is no longer the
+    newest, is a 409 and writes nothing (a calibration never drops a revision, nor the
+    reverse)."""
+    from solitonde.instrument.service import setup_book
+    from solitonde.instrument.service.store import SetupConflict
+
+    assert client.post("/v1/setups", json=RIG).status_code == 201
+    store = client.app.state.service.store
+    first = Setup.from_dict(RIG)
+    setup_book.add_revision(store, first, based_on=1)  # another client's change: revision 2
+    with pytest.raises(SetupConflict, match="has revision 2 now; this change was based on "
+                                            "revision 1"):
+        setup_book.add_revision(store, first, based_on=1)
+    with pytest.raises(SetupConflict, match="exists"):
+        setup_book.add_revision(store, first, based_on=0)
+    assert [v["revision"] for v in client.get(RIG_URL).json()["revisions"]] == [1, 2]
+
+
+def test_ids_a_route_would_read_and_stale_writes_are_refused(client: TestClient,
+                                                             tmp_path: Path) -> None:
+    for bad in ("lab/calibration", "a/revisions/2", "calibration"):
+        r = client.post("/v1/setups", json={**RIG, "id": bad})
+        assert r.status_code == 422 and r.json()["field"] == "id", (bad, r.text)
+    from solitonde.instrument.service.store import SetupConflict, SetupGone, ShotRecord
+    from solitonde.signal import io as signal_io
+
+    store = client.app.state.service.store
+    wave = signal_io.read(SAMPLE)[0]
+    shot = ShotRecord(wave.t0, wave.dt, wave.samples, "N", None, {}, {})
+    with pytest.raises(SetupGone, match="no longer stored"):
+        store.add([shot], {}, "test", setup=("nobody", 1))
+    assert client.get("/v1/measurements").json()["items"] == []
+    assert client.post("/v1/setups", json=RIG).status_code == 201
+    client.put(RIG_URL, json=RIG)  # revision 2
+    new_id, _ = store.add([shot], {"n": 2}, "test", setup=("lab/rig 1", 2))
+    with pytest.raises(SetupConflict, match="newer than 1"):
+        store.replace_result(new_id, {"n": 1}, [{}], setup=("lab/rig 1", 1))
+    assert store.get(new_id).result == {"n": 2} and store.earlier_results(new_id) == []
+
+
+def test_a_setup_without_calibration_keeps_a_files_calibration() -> None:
+    """Offline (a report from recordings), a set-up without a chain calibration and a
+    calibration file: the file's is applied, and the provenance names it."""
+    from solitonde.instrument.inference.calibration import Calibration
+    from solitonde.instrument.inference.table_set import TableSet
+    from solitonde.instrument.service.ingest import apply_setup, compute_result
+    from solitonde.signal import io as signal_io
+
+    tables = TableSet([TABLE], warm_up=False)
+    setup = Setup.from_dict(RIG)
+    waves = apply_setup(signal_io.read(SAMPLE), setup, "shots")
+    cal = Calibration.from_any(CALIBRATION)
+    _, with_file = compute_result(waves, tables, "shots", setup=setup, calibration=cal)
+    _, without = compute_result(waves, tables, "shots", setup=setup)
+    assert with_file["provenance"]["chain_calibration"]["arr_factor"] == 0.97
+    assert without["provenance"]["chain_calibration"] is None
+    assert with_file["estimate"]["thickness_m"] != without["estimate"]["thickness_m"]
