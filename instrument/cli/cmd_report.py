@@ -166,7 +166,8 @@ def build(
     server: str | None = SERVER,
     store: Path | None = STORE,
     manifest: Path | None = MANIFEST,
-    table: list[Path] = TABLES,
+    table: list[Path] = typer.Option([], "--table", help="model table (or folder) for "
+                                     "--store or --manifest (default: the bundled); repeat"),
     setup: Path | None = SETUP,
     calibration_file: Path | None = CALIBRATION,
     plate_material: str | None = MATERIAL,
@@ -185,9 +186,11 @@ def build(
     if out.is_dir():
         _fail(f"--out: {str(out)!r} is a folder; give the report's file name")
     source = _one_source(server, store, manifest)
-    if source != "--manifest" and (table or setup or calibration_file or plate_material):
-        _fail("--table, --setup, --calibration-file and --plate-material go with --manifest "
-              "(a service or a store holds its own)")
+    if source != "--manifest" and (setup or calibration_file or plate_material):
+        _fail("--setup, --calibration-file and --plate-material go with --manifest (a service "
+              "or a store holds its own)")
+    if server is not None and table:
+        _fail("--table goes with --store or --manifest (a service has its own tables)")
     started = _STARTED[0] = time.perf_counter()
     if server is not None:
         query = f"joint={'true' if joint else 'false'}"
@@ -226,7 +229,7 @@ def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | No
                 store = Store(store_path, background_checkpoint=False)
             except StoreError as exc:
                 _fail(f"--store: {exc}")
-            tables = table_set(None)
+            tables = table_set(tables_given or None)
             source = {"store": str(store_path)}
         try:
             data = plate_report.report_bytes(store, tables, plate_id, source, fmt,

@@ -68,6 +68,7 @@ def _table(records: Sequence[Any], tables: Any) -> dict[str, Any] | None:
             if loaded is not None:
                 info["family"] = loaded.table.family
                 info["reading_version"] = loaded.table.reading_version
+                info["loaded_sha256"] = loaded.table.content_sha256
             return info
     return None
 

@@ -556,7 +556,9 @@ def _export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     from solitonde.instrument.inference.estimate_rows import iso_utc, neutralised
 
     limit = svc.settings.export_rows_max
-    rows = list(svc.store.shot_rows(plate_id, limit + 1))
+    from solitonde.instrument.service.export_rows import EXPORT_COLUMNS, shot_rows
+
+    rows = list(shot_rows(svc.store, plate_id, limit + 1))
     if len(rows) > limit:  # never a silently cut export
         raise Problem(422, f"export: more than {limit:,} shots match; export at most {limit:,} "
                       "rows at a time (ask for one plate_id)", kind="limit", field="plate_id")
@@ -564,7 +566,7 @@ def _export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
     if not rows:  # still the columns, so a script reading an empty export finds them
         from solitonde.signal.features import Features
 
-        frame = pd.DataFrame(columns=[*svc.store.EXPORT_COLUMNS,
+        frame = pd.DataFrame(columns=[*EXPORT_COLUMNS,
                                       *(f.name for f in dataclasses.fields(Features)),
                                       "baseline"])
     frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")

@@ -9,13 +9,12 @@ returns, so it survives the death of the process; ``FULL`` adds an fsync per com
 Traces are stored losslessly and compressed: float32 when that represents every sample exactly
 (any ADC of up to 24 bits), else float64; compressed with zstd (pyarrow's codec: a third of
 zlib's time at the same ratio on quantised traces); a SHA-256 of the raw samples is stored and
-checked on every read.
+checked on every read (:mod:`.trace_codec`). Its errors live in :mod:`.store_errors`.
 """
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import sqlite3
@@ -27,11 +26,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
-from solitonde.instrument.errors import MessageError
-
-CODEC = "zstd"
+from solitonde.instrument.service.store_errors import (
+    KeyTaken,
+    SchemaTooOld,
+    SetupConflict,
+    SetupGone,
+    StoreError,
+    StoreFull,
+)
+from solitonde.instrument.service.trace_codec import (
+    CODEC,
+    decode_samples,
+    encode_samples,
+)
+from solitonde.instrument.service.trace_codec import samples_digest as samples_digest
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS measurements (
@@ -148,42 +157,6 @@ def _journal_mode_wal(conn: sqlite3.Connection, timeout_s: float) -> str:
             time.sleep(0.05)
 
 
-class StoreError(MessageError, RuntimeError):
-    """The store cannot be opened, or a stored record fails its integrity check."""
-
-    subject = "store"
-
-
-class StoreFull(StoreError):
-    """The store's disk (or the process's file-size limit) has no room for a write; nothing of
-    that write was kept, reads go on, and writes succeed again once there is room."""
-
-
-class SchemaTooOld(StoreError):
-    """A store of an earlier schema: ``solitonde store migrate`` brings it up."""
-
-
-class SetupGone(StoreError):
-    """A measurement names a set-up revision the store no longer holds (deleted meanwhile):
-    nothing was written."""
-
-    subject = "setup"
-
-
-class SetupConflict(StoreError):
-    """A change based on a set-up revision that is no longer the newest (another change came
-    first), or a result of an older revision over a newer one: nothing was written."""
-
-    subject = "setup"
-
-
-class KeyTaken(MessageError, RuntimeError):
-    """An ``Idempotency-Key`` another request stored first (a concurrent retry): nothing was
-    written; the caller answers with that request's measurement. The message is the key."""
-
-    subject = "Idempotency-Key"
-
-
 @dataclass
 class ShotRecord:
     """One shot as stored: the trace and what was measured on it."""
@@ -219,44 +192,6 @@ class MeasurementRecord:
     shots: list[ShotRecord] = field(default_factory=list)
     earlier: list[dict[str, Any]] = field(default_factory=list)
     """Results a reanalysis replaced (:meth:`Store.earlier_results`); :meth:`Store.get` fills it."""
-
-
-def _stored_form(samples: np.ndarray) -> np.ndarray:
-    """The samples as stored: float32 where that is exact, else float64 (little-endian)."""
-    x = np.ascontiguousarray(samples, dtype="<f8")
-    x32 = x.astype("<f4")
-    return x32 if np.array_equal(x32.astype("<f8"), x) else x
-
-
-def samples_digest(samples: np.ndarray) -> str:
-    """The SHA-256 of a trace's samples as stored (what ``shots.sha256`` holds)."""
-    return hashlib.sha256(_stored_form(samples).tobytes()).hexdigest()
-
-
-def encode_samples(samples: np.ndarray) -> tuple[str, str, bytes]:
-    """Compress a trace losslessly; returns (dtype, sha256 of the raw samples, blob)."""
-    raw = _stored_form(samples)
-    data = raw.tobytes()
-    digest = hashlib.sha256(data).hexdigest()
-    return raw.dtype.str, digest, pa.compress(data, codec="zstd", asbytes=True)
-
-
-def decode_samples(dtype: str, blob: bytes, n_samples: int,
-                   sha256: str | None = None, codec: str = CODEC) -> np.ndarray:
-    """Inverse of :func:`encode_samples`; checks the length and the digest."""
-    dt = np.dtype(dtype)
-    size = n_samples * dt.itemsize
-    if codec != CODEC:
-        raise StoreError(f"stored trace uses unknown codec {codec!r}")
-    try:
-        data = pa.decompress(blob, decompressed_size=size, codec="zstd", asbytes=True)
-    except (OSError, ValueError, pa.ArrowException) as exc:
-        raise StoreError(f"stored trace cannot be decompressed: {exc}") from None
-    if len(data) != size:
-        raise StoreError(f"stored trace has {len(data)} bytes, expected {size}")
-    if sha256 is not None and hashlib.sha256(data).hexdigest() != sha256:
-        raise StoreError("stored trace fails its SHA-256 check")
-    return np.frombuffer(data, dtype=dt).astype(np.float64)
 
 
 class Store:
@@ -675,35 +610,6 @@ class Store:
             rows = self._conn.execute(sql, args).fetchall()
         return [_measurement(r) for r in rows]
 
-    EXPORT_COLUMNS = ("measurement_id", "created_at", "plate_id", "position", "shot_index",
-                      "shot", "sphere_diameter", "t0_s", "dt_s", "units", "calibration",
-                      "n_samples")
-    """The columns :meth:`shot_rows` puts before each shot's features."""
-
-    def shot_rows(self, plate_id: str | None = None,
-                  limit: int = 200_000) -> Iterator[dict[str, Any]]:
-        """Flat rows (one per shot, features spread into columns) for export."""
-        sql = ("SELECT m.id, m.created_at, m.plate_id, m.position, s.shot_index, s.t0, s.dt, "
-               "s.units, s.calibration, s.n_samples, s.metadata, s.features "
-               "FROM shots s JOIN measurements m ON m.id = s.measurement_id")
-        args: list[Any] = []
-        if plate_id is not None:
-            sql += " WHERE m.plate_id = ?"
-            args.append(plate_id)
-        sql += " ORDER BY m.id, s.shot_index LIMIT ?"
-        args.append(limit)
-        with self._lock:
-            rows = self._conn.execute(sql, args).fetchall()
-        for r in rows:
-            meta = json.loads(r[10])
-            feats = json.loads(r[11])
-            yield {
-                "measurement_id": r[0], "created_at": r[1], "plate_id": r[2], "position": r[3],
-                "shot_index": r[4], "shot": meta.get("shot"),
-                "sphere_diameter": meta.get("sphere_diameter"), "t0_s": r[5], "dt_s": r[6],
-                "units": r[7], "calibration": r[8], "n_samples": r[9], **_flat(feats),
-            }
-
 
 def _rollback(conn: sqlite3.Connection) -> None:
     """Roll back if a transaction is still open (SQLite rolls back by itself after some I/O
@@ -732,16 +638,3 @@ def _open_writer_lock(path: Path) -> int | None:
 def _measurement(row: Sequence[Any]) -> MeasurementRecord:
     return MeasurementRecord(id=row[0], created_at=row[1], plate_id=row[2], position=row[3],
                              n_shots=row[4], source=row[5], result=json.loads(row[6]))
-
-
-def _flat(features: dict[str, Any]) -> dict[str, Any]:
-    """Scalar features as columns; lists joined so CSV and Parquet hold one value per cell."""
-    out: dict[str, Any] = {}
-    for key, value in features.items():
-        if isinstance(value, list | tuple):
-            out[key] = ";".join(str(v) for v in value)
-        elif isinstance(value, dict):
-            out[key] = json.dumps(value)
-        else:
-            out[key] = value
-    return out
