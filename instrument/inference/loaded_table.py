@@ -56,15 +56,23 @@ class LoadedTable:
 
     def _warm_up(self) -> None:
         """Build the inversion's fine grids now, not in the first request that needs them."""
-        for i in range(len(self.table.axes["diameter_m"])):
+        for i in range(len(self.model.axes["diameter_m"])):
             try:
-                fine_grid(self.table, i)
+                fine_grid(self.model, i)
             except Exception as exc:  # a sphere size the inversion cannot use: say so, go on
                 log.warning("model table: no inversion grid for diameter index %d: %s", i, exc)
 
     @property
     def loaded(self) -> bool:
         return self.table is not None
+
+    @property
+    def model(self) -> ModelTable:
+        """The table itself; only for a LoadedTable that :attr:`loaded` (a TableSet holds no
+        other)."""
+        if self.table is None:
+            raise EstimateUnavailable(self.reason or "no model table loaded")
+        return self.table
 
     def plate_size(self) -> list[float] | None:
         """The plate size (m) of the table's scenes, or None without a table."""

@@ -180,6 +180,6 @@ def estimate(
 
     chosen = (table if isinstance(table, LoadedTable)
               else tables.choose([i.diameter_m for i in inputs], table, plate_material))
-    result = invert(chosen.table, inputs, calibration, return_posterior=posterior,
-                    material_spread=spread_of(chosen.table, plate_material))
-    return TableEstimate(result, chosen.table.table_id, left_out)
+    result = invert(chosen.model, inputs, calibration, return_posterior=posterior,
+                    material_spread=spread_of(chosen.model, plate_material))
+    return TableEstimate(result, chosen.model.table_id, left_out)

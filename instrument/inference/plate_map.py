@@ -137,7 +137,7 @@ def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:
     table = (result.get("provenance") or {}).get("table") or {}
     loaded = tables.by_id.get(table.get("id")) if tables.loaded else None
     if (result.get("estimate") is None or loaded is None
-            or loaded.table.content_sha256 != table.get("sha256")):
+            or loaded.model.content_sha256 != table.get("sha256")):
         return None
     return dict(result["estimate"])
 
@@ -341,7 +341,7 @@ def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
     diameters = sorted({i.diameter_m for p in scan for i in p.inputs})
     chosen = tables.choose(diameters, next(iter(named), None))
     prior = ThicknessPrior(options.thickness_prior, options.thickness_spread)
-    post = joint_posterior(chosen.table, scan, prior)
+    post = joint_posterior(chosen.model, scan, prior)
     plate_map = dict(plate_map)
     plate_map["joint"] = options.joint
     if options.joint:
@@ -363,7 +363,7 @@ def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
         plate_map.update(positions=positions, support=answer["support"], support_reason=None,
                          fit=answer["fit"], warnings=answer["warnings"],
                          thickness_prior=answer["thickness_prior"], edges=answer["edges"],
-                         table=chosen.table.table_id)
+                         table=chosen.model.table_id)
     if options.suggest:
         found = suggest_positions(post, options.suggest, objective=options.suggest_for,
                                   plate_size_m=plate_map.get("plate_size_m"))

@@ -45,7 +45,7 @@ class TableSet:
             if not est.loaded:
                 self.problems.append(est.reason or f"model table {str(f)!r} not loaded")
                 continue
-            tid = est.table.table_id
+            tid = est.model.table_id
             if tid in self.by_id:
                 self.problems.append(f"model table {str(f)!r} has the id {tid!r} of "
                                      f"{str(self.by_id[tid].path)!r}; give it another "
@@ -86,7 +86,7 @@ class TableSet:
         """Every table's id, family, sphere sizes and axes' ranges (``GET /v1/tables``)."""
         out = []
         for tid, est in self.by_id.items():
-            t = est.table
+            t = est.model
             out.append({"id": tid, "path": str(est.path), "family": t.family,
                         "diameters_m": t.axes["diameter_m"].tolist(),
                         "thickness_range_m": [float(t.axes["thickness_m"][0]),
@@ -123,7 +123,7 @@ class TableSet:
             return est
         sizes = [float(d) for d in diameters]
         candidates = [e for e in self.by_id.values() if _covers(e, sizes)
-                      and not (stated and e.table.family and differences(stated, e.table.family))]
+                      and not (stated and e.model.family and differences(stated, e.model.family))]
         if len(candidates) == 1:
             return candidates[0]
         if not candidates and not stated and len(self.by_id) == 1:
@@ -134,25 +134,25 @@ class TableSet:
             raise TableChoiceError("plate_material" if stated else "table",
                                    f"no table serves {what} (tables: {ids})")
         raise TableChoiceError("table", "more than one table could serve this measurement: "
-                               f"{', '.join(e.table.table_id for e in candidates)}; name one "
+                               f"{', '.join(e.model.table_id for e in candidates)}; name one "
                                "as table (a shot's metadata.table, an upload's or the raw "
                                "route's table field, post's --table), or give plate_material")
 
     @staticmethod
     def _check_family(est: LoadedTable, stated: Mapping[str, Any]) -> None:
-        family = est.table.family
+        family = est.model.family
         if not stated or family is None:
             return
         keys = differences(stated, family)
         if keys:
             detail = "; ".join(f"{k}: measurement {describe(stated[k])}, table "
                                f"{describe(family[k])}" for k in keys)
-            raise TableChoiceError(keys[0], f"table {est.table.table_id!r} was built for "
+            raise TableChoiceError(keys[0], f"table {est.model.table_id!r} was built for "
                                    f"another plate family ({detail}); it is not inverted")
 
 
 def _covers(est: LoadedTable, diameters: Sequence[float]) -> bool:
     """Whether the table has every sphere size (within 1 % of its own size, the rule of
     :meth:`ModelTable.diameter_index`), or any when none is known."""
-    have = est.table.axes["diameter_m"]
+    have = est.model.axes["diameter_m"]
     return all(any(abs(h - d) <= 0.01 * h for h in have) for d in diameters)

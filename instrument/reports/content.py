@@ -66,9 +66,9 @@ def _table(records: Sequence[Any], tables: Any) -> dict[str, Any] | None:
             info = {"id": table["id"], "sha256": table.get("sha256"), "family": None,
                     "reading_version": None}
             if loaded is not None:
-                info["family"] = loaded.table.family
-                info["reading_version"] = loaded.table.reading_version
-                info["loaded_sha256"] = loaded.table.content_sha256
+                info["family"] = loaded.model.family
+                info["reading_version"] = loaded.model.reading_version
+                info["loaded_sha256"] = loaded.model.content_sha256
             return info
     return None
 

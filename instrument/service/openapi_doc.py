@@ -106,10 +106,10 @@ def narrow_to_tables(components: dict[str, Any], tables: TableSet) -> None:
         return
     ids = list(tables.by_id)
     diameters = sorted({float(d) for est in tables.by_id.values()
-                        for d in est.table.axes["diameter_m"]})
+                        for d in est.model.axes["diameter_m"]})
     materials = [name for name in sorted(MATERIALS) if any(
-        est.table.family is None
-        or not differences({"plate_material": properties_from(name)}, est.table.family)
+        est.model.family is None
+        or not differences({"plate_material": properties_from(name)}, est.model.family)
         for est in tables.by_id.values())]
     for model in ("InvertIn", "ShotMetadata", "MeasurementUpload"):
         props = components.get(model, {}).get("properties", {})

@@ -102,16 +102,16 @@ def check_against_tables(svc: Service, setup: Setup) -> None:
                       field=exc.field) from None
     from solitonde.instrument.tables.table import TableError
 
-    _chain_matches(setup, chosen.table.family)
+    _chain_matches(setup, chosen.model.family)
     for i, d in enumerate(setup.sphere_diameters_m):
         try:
-            chosen.table.diameter_index(d)
+            chosen.model.diameter_index(d)
         except TableError as exc:
             raise Problem(422, f"sphere_diameters_m[{i}]: {exc.full_message} (table "
                           f"{setup.table!r})", kind="invalid-input",
                           field=f"sphere_diameters_m[{i}]") from None
     try:
-        calibrated_table(chosen.table, setup.calibration())
+        calibrated_table(chosen.model, setup.calibration())
     except CalibrationError as exc:
         raise _invalid(exc, "chain_calibration.") from None
 
@@ -311,7 +311,7 @@ def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> dict[
                               "no reflection; a reference needs one", kind="invalid-input",
                               field=f"references.{i}")
     try:
-        calibration = fit_calibration(chosen.table, references)
+        calibration = fit_calibration(chosen.model, references)
     except (CalibrationError, InversionError) as exc:
         field = exc.field if exc.field.startswith("references") else f"references.{exc.field}"
         raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
