@@ -1,12 +1,17 @@
-"""The store's shots as flat rows, one per shot with its features spread into columns: what
-``GET /v1/measurements/export?kind=shots`` writes as CSV or Parquet."""
+"""The measurements export: the store's shots as flat rows, one per shot with its features
+spread into columns (``GET /v1/measurements/export?kind=shots``), or one row per measurement
+with its estimate (``kind=estimates``), as CSV or Parquet."""
 
 from __future__ import annotations
 
+import dataclasses
+import io
 import json
 from collections.abc import Iterator
 from typing import Any
 
+from solitonde.instrument.service.problems import Problem
+from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.store import Store
 
 EXPORT_COLUMNS = ("measurement_id", "created_at", "plate_id", "position", "shot_index",
@@ -49,3 +54,81 @@ def _flat(features: dict[str, Any]) -> dict[str, Any]:
         else:
             out[key] = value
     return out
+
+
+MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
+"""The export formats and their media types."""
+
+
+def shots_export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+    """One row per stored shot (:func:`shot_rows`) as CSV or Parquet bytes, with the media type;
+    a 422 rather than a silently cut export above the service's row limit."""
+    import pandas as pd
+
+    from solitonde.instrument.inference.estimate_rows import iso_utc, neutralised
+
+    limit = svc.settings.export_rows_max
+    rows = list(shot_rows(svc.store, plate_id, limit + 1))
+    if len(rows) > limit:  # never a silently cut export
+        raise Problem(422, f"export: more than {limit:,} shots match; export at most {limit:,} "
+                      "rows at a time (ask for one plate_id)", kind="limit", field="plate_id")
+    frame = pd.DataFrame(rows)
+    if not rows:  # still the columns, so a script reading an empty export finds them
+        from solitonde.signal.features import Features
+
+        frame = pd.DataFrame(columns=[*EXPORT_COLUMNS,
+                                      *(f.name for f in dataclasses.fields(Features)),
+                                      "baseline"])
+    frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")
+    for col in ("measurement_id", "shot_index", "shot", "n_samples"):
+        numbers = pd.to_numeric(frame[col], errors="coerce")
+        if numbers.notna().sum() == frame[col].notna().sum():  # a file's text shot labels stay
+            frame[col] = numbers.astype("Int64")
+    if fmt == "parquet":
+        buf = io.BytesIO()
+        frame.to_parquet(buf, index=False)
+        return buf.getvalue(), MEDIA[fmt]
+    return neutralised(frame).to_csv(index=False).encode(), MEDIA[fmt]
+
+
+def estimates_export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
+    """One row per stored measurement: where, from what, and its estimate's columns."""
+    from solitonde.instrument.inference.estimate_rows import (
+        ESTIMATE_COLUMNS,
+        estimate_row,
+        iso_utc,
+        to_bytes,
+    )
+
+    limit = svc.settings.export_rows_max
+    rows: list[dict[str, Any]] = []
+    after = 0
+    while True:
+        page = svc.store.list(plate_id, after, 1000)
+        for r in page:
+            diameters = _estimated_sizes(r.result)
+            location = {"plate_id": r.plate_id, "position": r.position,
+                        **(r.result.get("location") or {})}
+            rows.append({"measurement_id": r.id, "created_at": iso_utc(r.created_at),
+                         **estimate_row(location, diameters, r.n_shots, r.result.get("estimate"),
+                                        r.result.get("estimate_reason"))})
+        if len(rows) > limit:
+            raise Problem(422, f"export: more than {limit:,} measurements match; export at most "
+                          f"{limit:,} rows at a time (ask for one plate_id)", kind="limit",
+                          field="plate_id")
+        if len(page) < 1000:
+            break
+        after = page[-1].id
+    columns = ("measurement_id", "created_at", *ESTIMATE_COLUMNS)
+    return to_bytes(rows, fmt, columns), MEDIA[fmt]
+
+
+def _estimated_sizes(result: dict[str, Any]) -> list[float]:
+    """The sphere sizes an estimate was made from (the inversion's inputs, less any it left
+    out); without an estimate, every size measured."""
+    estimate = result.get("estimate")
+    if estimate and estimate.get("inputs"):
+        excluded = set(estimate.get("excluded_diameters_m") or [])
+        return [i["diameter_m"] for i in estimate["inputs"] if i["diameter_m"] not in excluded]
+    return [a["sphere_diameter"] for a in result.get("aggregates", [])
+            if a.get("sphere_diameter") is not None]

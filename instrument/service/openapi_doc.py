@@ -41,7 +41,7 @@ def install(app: FastAPI, models: Iterable[type[BaseModel]]) -> None:
     """Give ``app`` an ``openapi()`` that adds ``models`` and, once the service has started,
     the loaded tables' sphere sizes, ids and plate materials."""
     from solitonde.instrument.service.authentication import SECURITY_SCHEMES
-    from solitonde.instrument.service.routes_measurements import upload_schema
+    from solitonde.instrument.service.measurement_forms import upload_schema
 
     models = tuple(models)
 

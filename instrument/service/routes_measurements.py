@@ -4,17 +4,15 @@ The POST route reads the raw body and validates it with pydantic's JSON parser d
 pass, no intermediate Python objects), which is what keeps a 10,000-sample shot in the low
 milliseconds; the request schemas are added to the OpenAPI document by the app factory. A shot
 can also come as its raw samples (``application/octet-stream``, float32 or float64, with ``dt``
-and the metadata in the query), which skips text parsing altogether.
+and the metadata in the query), which skips text parsing altogether. The upload's form fields
+and the raw route's query are declared in :mod:`.measurement_forms`, the export's rows in
+:mod:`.export_rows`.
 """
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 import errno
 import hashlib
-import io
-import json
 import logging
 from functools import partial
 from typing import Annotated, Any
@@ -24,25 +22,18 @@ import numpy as np
 from fastapi import APIRouter, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
-from pydantic import ConfigDict, Field, ValidationError, create_model
-from pydantic.fields import FieldInfo
+from pydantic import ValidationError
 
 from solitonde.instrument.service.api_models import (
-    ALLOW_DUPLICATE_HELP,
     BINARY_DTYPES,
     BINARY_MEDIA_TYPE,
-    SETUP_HELP,
     BinaryShotParams,
-    MaterialName,
     MeasurementOut,
     MeasurementPage,
-    SetupName,
-    ShotBase,
-    ShotMetadata,
-    Strict,
 )
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep, media_type
+from solitonde.instrument.service.export_rows import estimates_export, shots_export
 from solitonde.instrument.service.ingest import (
     check_counts,
     measure_and_store,
@@ -51,12 +42,16 @@ from solitonde.instrument.service.ingest import (
     waveform_error,
     waveforms_from_shots,
 )
+from solitonde.instrument.service.measurement_forms import (
+    UploadFields,
+    binary_parameters,
+    material_text,
+)
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
 from solitonde.instrument.service.routes_setups import resolve as resolve_setup
 from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.store import KeyTaken, SetupGone, StoreFull
 from solitonde.instrument.service.uploads import (
-    FORMATS,
     check_self_contained,
     declared_values,
     pick_format,
@@ -70,69 +65,9 @@ from solitonde.signal.waveform import Waveform
 router = APIRouter(tags=["measurements"], dependencies=[AUTH])
 
 
-def material_text(text: str) -> Any:
-    """A form's or query's ``plate_material``: a library name, or its properties as JSON (a
-    mapping, as a JSON body states it); 422 naming the field for JSON that is not one."""
-    if not text.lstrip().startswith("{"):
-        return text
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise Problem(422, f"plate_material: not a JSON object ({exc.msg}); give a library "
-                      "name or {\"youngs_modulus\", \"poisson_ratio\", \"density\"}",
-                      kind="invalid-input", field="plate_material") from None
-    if not isinstance(value, dict):
-        raise Problem(422, "plate_material: expected a JSON object", kind="invalid-input",
-                      field="plate_material")
-    return value
 log = logging.getLogger("solitonde.instrument")
 IDEMPOTENCY_KEY_MAX = 200
 
-
-
-def _optional(model: type[Strict], name: str) -> tuple[Any, FieldInfo]:
-    """``model``'s field ``name``, with its limits and description, as an optional field."""
-    info = copy.copy(model.model_fields[name])
-    info.default = None
-    annotation: Any = info.annotation
-    return annotation | None, info
-
-
-_METADATA_FORM_KEYS = ("plate_id", "position", "sphere_diameter", "x_m", "y_m", "table")
-
-
-class _FormFields(Strict):
-    # Form values arrive as text: numbers are parsed from it (still no NaN, no unknown fields).
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
-
-
-UploadFields = create_model(
-    "UploadFields",
-    __base__=_FormFields,
-    __doc__="Form fields that come with an uploaded file (all optional): the JSON shot's "
-            "metadata and sampling, with the same limits, and the reader's options.",
-    format=(str | None, Field(None, description=f"one of {', '.join(FORMATS)}; default: from "
-                              "the file name's suffix")),
-    **{k: _optional(ShotMetadata, k) for k in _METADATA_FORM_KEYS},
-    plate_material=(MaterialName | None, Field(None, description="the plate's material: a "
-                                               "library name, or its properties as JSON; the "
-                                               "table of that family is used")),
-    units=(str | None, Field(None, description="N or V, for files that do not say")),
-    calibration=_optional(ShotBase, "calibration"),
-    sample_rate=(float | None, Field(None, gt=0, le=1e10,
-                                     description="Hz, for files without a time column")),
-    **{k: _optional(ShotBase, k) for k in ("dt", "t0")},
-    group=(str | None, Field(None, max_length=200, description="TDMS group: only its channels")),
-    channel=(str | None, Field(None, max_length=200, description="the channel to analyse: a "
-                               "column name, or a TDMS channel as group/channel or channel; "
-                               "default: the file's channels that are sensor traces (a trigger "
-                               "step or a flat line is skipped, and listed)")),
-    dataset=(str | None, Field(None, max_length=200, description="HDF5 dataset")),
-    allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
-    setup=(SetupName | None, Field(None, description=SETUP_HELP)),
-)
-"""Form fields that come with an uploaded file; the metadata's and the sampling's limits are
-:class:`ShotMetadata`'s and :class:`ShotBase`'s own (one declaration)."""
 
 
 MeasurementId = Annotated[int, Path(ge=1, le=2**62, description="measurement id")]
@@ -140,27 +75,6 @@ ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 
 
 # the readers' options, from the format registry; group and channel select after reading
 _READER_OPTIONS = tuple(k for k in all_reader_options() if k not in ("group", "channel"))
-
-
-def binary_parameters() -> list[dict[str, Any]]:
-    """OpenAPI query parameters of ``POST /v1/measurements/raw`` (``dtype`` and ``dt`` required)."""
-    schema = BinaryShotParams.model_json_schema()
-    required = set(schema.get("required", []))
-    return [{"name": name, "in": "query", "required": name in required,
-             "description": prop.get("description", name),
-             "schema": {k: v for k, v in prop.items() if k not in ("title", "description")}}
-            for name, prop in schema["properties"].items()]
-
-
-def upload_schema() -> dict[str, Any]:
-    """OpenAPI schema of the multipart body: a file plus :class:`UploadFields`."""
-    schema = UploadFields.model_json_schema(ref_template="#/components/schemas/{model}")
-    schema["title"] = "MeasurementUpload"
-    schema["properties"] = {"file": {"type": "string", "format": "binary",
-                                     "description": "CSV, NPY, NPZ, HDF5 or TDMS"},
-                            **schema["properties"]}
-    schema["required"] = ["file"]
-    return schema
 
 
 _POST_LINKS = {201: {"description": "the stored measurement", "links": {
@@ -539,89 +453,12 @@ async def export_measurements(
 ) -> Response:
     """Stored measurements, oldest first; timestamps in ISO 8601 UTC."""
 
-    exporter = _export if kind == "shots" else _export_estimates
+    exporter = shots_export if kind == "shots" else estimates_export
     data, media = await run_in_threadpool(exporter, svc, format, plate_id)
     suffix = "parquet" if format == "parquet" else "csv"
     name = f"{'measurements' if kind == 'shots' else 'estimates'}.{suffix}"
     return Response(data, media_type=media,
                     headers={"Content-Disposition": f'attachment; filename="{name}"'})
-
-
-_MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
-
-
-def _export(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
-    import pandas as pd
-
-    from solitonde.instrument.inference.estimate_rows import iso_utc, neutralised
-
-    limit = svc.settings.export_rows_max
-    from solitonde.instrument.service.export_rows import EXPORT_COLUMNS, shot_rows
-
-    rows = list(shot_rows(svc.store, plate_id, limit + 1))
-    if len(rows) > limit:  # never a silently cut export
-        raise Problem(422, f"export: more than {limit:,} shots match; export at most {limit:,} "
-                      "rows at a time (ask for one plate_id)", kind="limit", field="plate_id")
-    frame = pd.DataFrame(rows)
-    if not rows:  # still the columns, so a script reading an empty export finds them
-        from solitonde.signal.features import Features
-
-        frame = pd.DataFrame(columns=[*EXPORT_COLUMNS,
-                                      *(f.name for f in dataclasses.fields(Features)),
-                                      "baseline"])
-    frame["created_at"] = frame["created_at"].map(iso_utc).astype("string")
-    for col in ("measurement_id", "shot_index", "shot", "n_samples"):
-        numbers = pd.to_numeric(frame[col], errors="coerce")
-        if numbers.notna().sum() == frame[col].notna().sum():  # a file's text shot labels stay
-            frame[col] = numbers.astype("Int64")
-    if fmt == "parquet":
-        buf = io.BytesIO()
-        frame.to_parquet(buf, index=False)
-        return buf.getvalue(), _MEDIA[fmt]
-    return neutralised(frame).to_csv(index=False).encode(), _MEDIA[fmt]
-
-
-def _export_estimates(svc: Service, fmt: str, plate_id: str | None) -> tuple[bytes, str]:
-    """One row per stored measurement: where, from what, and its estimate's columns."""
-    from solitonde.instrument.inference.estimate_rows import (
-        ESTIMATE_COLUMNS,
-        estimate_row,
-        iso_utc,
-        to_bytes,
-    )
-
-    limit = svc.settings.export_rows_max
-    rows: list[dict[str, Any]] = []
-    after = 0
-    while True:
-        page = svc.store.list(plate_id, after, 1000)
-        for r in page:
-            diameters = _estimated_sizes(r.result)
-            location = {"plate_id": r.plate_id, "position": r.position,
-                        **(r.result.get("location") or {})}
-            rows.append({"measurement_id": r.id, "created_at": iso_utc(r.created_at),
-                         **estimate_row(location, diameters, r.n_shots, r.result.get("estimate"),
-                                        r.result.get("estimate_reason"))})
-        if len(rows) > limit:
-            raise Problem(422, f"export: more than {limit:,} measurements match; export at most "
-                          f"{limit:,} rows at a time (ask for one plate_id)", kind="limit",
-                          field="plate_id")
-        if len(page) < 1000:
-            break
-        after = page[-1].id
-    columns = ("measurement_id", "created_at", *ESTIMATE_COLUMNS)
-    return to_bytes(rows, fmt, columns), _MEDIA[fmt]
-
-
-def _estimated_sizes(result: dict[str, Any]) -> list[float]:
-    """The sphere sizes an estimate was made from (the inversion's inputs, less any it left
-    out); without an estimate, every size measured."""
-    estimate = result.get("estimate")
-    if estimate and estimate.get("inputs"):
-        excluded = set(estimate.get("excluded_diameters_m") or [])
-        return [i["diameter_m"] for i in estimate["inputs"] if i["diameter_m"] not in excluded]
-    return [a["sphere_diameter"] for a in result.get("aggregates", [])
-            if a.get("sphere_diameter") is not None]
 
 
 def _missing(measurement_id: int) -> Problem:
