@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -101,6 +101,18 @@ class Plan:
         # 'paper' is the paper's single-node load on the same element grid: 4-7x cheaper, but its
         # ARR has no mesh limit and its far-field TOF scatters on the thin plate.
         return {"preset": self.preset, "elements": list(self.elements), "order": list(self.order)}
+
+
+def groups(frame: pd.DataFrame, by: str) -> Iterator[tuple[float, pd.DataFrame]]:
+    """``frame.groupby(by)`` with each key as a float (the sweep's axes are numbers)."""
+    for key, g in frame.groupby(by):
+        yield float(key), g  # type: ignore[arg-type]
+
+
+def pairs(frame: pd.DataFrame, by: list[str]) -> Iterator[tuple[tuple[float, float], pd.DataFrame]]:
+    """``frame.groupby(by)`` over two columns, each key a pair of floats."""
+    for (a, b), g in frame.groupby(by):
+        yield (float(a), float(b)), g  # type: ignore[arg-type]
 
 
 def make_plan(quick: bool, preset: str = "resolved") -> Plan:
@@ -329,7 +341,7 @@ def check_collapse(collapse: pd.DataFrame) -> dict[str, Any]:
 def check_near_support(sweep: pd.DataFrame) -> dict[str, Any]:
     """ARR at the first distance > 0 against the centre, for every swept (D, t)."""
     cases = []
-    for (d, t), g in sweep.groupby(["diameter_m", "thickness_m"]):
+    for (d, t), g in pairs(sweep, ["diameter_m", "thickness_m"]):
         g = g.sort_values("distance_m")
         near = g[g["distance_m"] > 0].iloc[0]
         centre = g.iloc[-1]
@@ -342,7 +354,7 @@ def check_near_support(sweep: pd.DataFrame) -> dict[str, Any]:
 def critical_distances(sweep: pd.DataFrame) -> pd.DataFrame:
     """Simulated critical distance per swept (D, t) (:func:`settled_distance`)."""
     rows = []
-    for (d, t), g in sweep.groupby(["diameter_m", "thickness_m"]):
+    for (d, t), g in pairs(sweep, ["diameter_m", "thickness_m"]):
         rows.append({"diameter_m": d, "thickness_m": t,
                      "critical_distance_m": settled_distance(g["distance_m"], g["tof_s"]),
                      "tolerance": SETTLE_TOLERANCE})
@@ -359,7 +371,7 @@ def check_critical_distance(crit: pd.DataFrame) -> dict[str, Any]:
     and does not count; the check needs at least one size that does.
     """
     per_d = {}
-    for d, g in crit.groupby("diameter_m"):
+    for d, g in groups(crit, "diameter_m"):
         g = g.sort_values("thickness_m")
         scored = g[d / g["thickness_m"] <= REFLECTION_D_OVER_T]
         lc = scored["critical_distance_m"].to_numpy()
@@ -441,10 +453,10 @@ def fig5(out: Path, curve: pd.DataFrame, grid_inf: pd.DataFrame, centre: pd.Data
     """ARR against D/t: analytic line, chain on Zener's dashpot, chain on the SEM plate (centre)."""
     fig, ax = new_figure()
     ax.plot(curve["d_over_t"], curve["arr"], "k-", label="Zener theory (Eq. 9)")
-    for d, g in grid_inf.groupby("diameter_m"):
+    for d, g in groups(grid_inf, "diameter_m"):
         ax.plot(g["d_over_t"], _arr_or_bound(g), DIAMETER_MARKERS.get(d, "o"), mfc="none",
                 color="tab:blue", label=f"chain + dashpot, D = {d * 1e3:.2f} mm")
-    for d, g in centre.groupby("diameter_m"):
+    for d, g in groups(centre, "diameter_m"):
         ax.plot(g["d_over_t"], _arr_or_bound(g), DIAMETER_MARKERS.get(d, "o"), color="tab:red",
                 label=f"chain + SEM plate (centre), D = {d * 1e3:.2f} mm")
     ax.axvline(5.0, color="0.7", ls=":")
@@ -470,13 +482,13 @@ def fig6(out: Path, curves: pd.DataFrame, grid_inf: pd.DataFrame, centre: pd.Dat
     b.plot(one["d_over_t"], one["tof_over_d_s_per_m"], "k-", lw=1, label="theory (Eq. 16)")
     for source, frame, colour in (("dashpot", grid_inf, "tab:blue"), ("SEM centre", centre,
                                                                       "tab:red")):
-        for d, g in frame.groupby("diameter_m"):
+        for d, g in groups(frame, "diameter_m"):
             mk = DIAMETER_MARKERS.get(d, "o")
             a.plot(g["d_over_t"], g["tof_s"] * 1e3, mk, color=colour, mfc="none" if
                    source == "dashpot" else colour, label=f"{source}, D = {d * 1e3:.2f} mm")
             b.plot(g["d_over_t"], g["tof_s"] / g["diameter_m"], mk, color=colour,
                    mfc="none" if source == "dashpot" else colour)
-    for d, g in collapse[collapse["gravity"]].groupby("diameter_m"):
+    for d, g in groups(collapse[collapse["gravity"]], "diameter_m"):
         b.plot(g["d_over_t"], g["tof_s"] / g["diameter_m"], "x", color="0.3", ms=5,
                label="dashpot, equal D/t" if d == DIAMETERS_M[0] else None)
     a.set_xlabel("D/t (-)")
@@ -507,7 +519,7 @@ def fig7_8(out: Path, sweep: pd.DataFrame, grid_theory: pd.DataFrame) -> None:
         fig, axes = new_figure(len(shown))
         axes = np.atleast_1d(axes)
         for ax, d in zip(axes, shown, strict=True):
-            for t, g in sweep[np.isclose(sweep["diameter_m"], d)].groupby("thickness_m"):
+            for t, g in groups(sweep[np.isclose(sweep["diameter_m"], d)], "thickness_m"):
                 g = g.sort_values("distance_m")
                 colour = PLATE_COLOURS.get(t, None)
                 ax.plot(g["distance_m"] * 1e3, g[column] * scale, "o-", ms=3, color=colour,
@@ -566,7 +578,7 @@ def fig10(out: Path, crit: pd.DataFrame) -> pd.DataFrame:
     mm = diameters * 1e3
     ax.plot(mm, lines["critical_distance_k057_m"] * 1e3, "k-", label="Eq. 18, k = 0.57")
     ax.plot(mm, lines["critical_distance_k02_m"] * 1e3, "k--", label="Eq. 18, k = 0.2")
-    for t, g in crit.groupby("thickness_m"):
+    for t, g in groups(crit, "thickness_m"):
         ax.plot(g["diameter_m"] * 1e3, g["critical_distance_m"] * 1e3, "o", ms=6,
                 color=PLATE_COLOURS.get(t), label=f"simulated, t = {t * 1e3:.2f} mm")
     ax.set_xlabel("sphere diameter D (mm)")
@@ -706,7 +718,7 @@ def paper_statements(trace_info: dict[str, Any], sweep: pd.DataFrame,
                      crit: pd.DataFrame) -> dict[str, Any]:
     """Our numbers for each statement of the paper's Secs. 4 and 5."""
     near: dict[str, Any] = {}
-    for d, g in sweep.groupby("diameter_m"):
+    for d, g in groups(sweep, "diameter_m"):
         g = g.sort_values(["thickness_m", "distance_m"])  # each list below in thickness_m order
         first = g[g["distance_m"] > 0]["distance_m"].min()
         at0 = g[g["distance_m"] == 0]
