@@ -1,4 +1,4 @@
-"""mypy passes on model/ and signal/ with the configuration in pyproject.toml (issue 30).
+"""mypy passes on model/, signal/ and instrument/ with the configuration in pyproject.toml.
 
 Run on the folders laid out as one package (``tests/support/package_tree.py``); about 10-30 s.
 """
@@ -30,6 +30,13 @@ def tree(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_model_and_signal_type_check(tree: Path) -> None:
     out = _mypy(tree, "solitonde.model", "solitonde.signal")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "Success: no issues found" in out.stdout
+
+
+def test_instrument_type_check(tree: Path) -> None:
+    """The application too: its CLI, service, inference, reports, tables and studies."""
+    out = _mypy(tree, "solitonde.instrument")
     assert out.returncode == 0, out.stdout + out.stderr
     assert "Success: no issues found" in out.stdout
 

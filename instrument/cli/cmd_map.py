@@ -40,7 +40,8 @@ def _from_estimates(path: Path, plate_id: str) -> tuple[list[dict[str, Any]], An
     if missing:
         _fail(f"ESTIMATES: {path.name} lacks the column(s) {', '.join(missing)}; give the file "
               "`solitonde analyze --estimates-out` writes")
-    rows = frame[frame["plate_id"].astype(str) == plate_id].to_dict("records")
+    rows = [{str(k): v for k, v in r.items()}
+            for r in frame[frame["plate_id"].astype(str) == plate_id].to_dict("records")]
     if not rows:
         plates = sorted({str(p) for p in frame["plate_id"].dropna()})
         _fail(f"--plate-id: no plate {plate_id!r} in {path.name} (plates: "
@@ -65,6 +66,11 @@ def _from_store(path: Path, plate_id: str, estimator: Any) -> tuple[list[dict[st
         _fail(f"--plate-id: no plate {plate_id!r} in {path.name} (plates: "
               f"{', '.join(plates) or 'none'})")
     return from_records(records, estimator), lambda: scan_from_records(records)
+
+
+def _mm(value: Any) -> str:
+    """A length in mm, or "-" where there is none."""
+    return "-" if value is None else f"{float(value) * 1e3:.2f}"
 
 
 FLAG_OF = {"suggest": "--suggest", "suggest_for": "--suggest-for",
@@ -213,13 +219,13 @@ def _print_joint(plate_map: dict[str, Any]) -> None:
     def mm(p: dict[str, Any] | None) -> str:
         if not p:
             return "-"
-        lo, hi = p.get("ci95") or (None, None)
+        lo, hi = (_mm(v) for v in p.get("ci95") or (None, None))
         if p.get("status") in ("constrained", "inconsistent") and p.get("median") is not None:
-            return f"{p['median'] * 1e3:.2f} ({lo * 1e3:.2f}..{hi * 1e3:.2f})"
+            return f"{_mm(p['median'])} ({lo}..{hi})"
         if p.get("status") == "lower_bound_only":
-            return f">= {lo * 1e3:.2f}"
+            return f">= {lo}"
         if p.get("status") == "upper_bound_only":
-            return f"<= {hi * 1e3:.2f}"
+            return f"<= {hi}"
         return str(p.get("status"))
 
     prior = plate_map.get("thickness_prior") or {}

@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 from urllib.parse import quote
 
 import typer
@@ -27,7 +27,7 @@ report_app = typer.Typer(help="Inspection reports: build one (PDF, HTML or its J
 FORMATS = {".pdf": "pdf", ".html": "html", ".htm": "html", ".json": "json"}
 
 
-def _fail(message: str, code: int = 2) -> None:
+def _fail(message: str, code: int = 2) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code)
 

@@ -140,7 +140,8 @@ class Watcher:
             old.size, old.mtime_ns = version
             self.queue.save()
             return
-        row = manifest_row_for(self.rows, self.base, path) if self.rows else None
+        row = (manifest_row_for(self.rows, self.base, path)
+               if self.rows and self.base is not None else None)
         entry = Entry(*version, sha, {}, self.queue.next_seq())
         if self.rows and row is None:
             entry.state, entry.error = FAILED, "no row of --manifest matches it"

@@ -91,7 +91,7 @@ def _conventional_labels() -> None:
             return _LABELS.get(inner, inner.upper())
 
         display_type._solitonde = True  # type: ignore[attr-defined]
-        cls.display_type = display_type  # type: ignore[method-assign]
+        cls.display_type = display_type  # type: ignore[method-assign,assignment]
 
 
 def _version(value: bool) -> None:

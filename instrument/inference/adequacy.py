@@ -161,6 +161,7 @@ def _interval_mm(ci: Any) -> str:
     if lo is None and hi is None:
         return "unbounded"
     if hi is None:
+        assert lo is not None
         return f"at least {lo * 1e3:.3g} mm"
     if lo is None:
         return f"at most {hi * 1e3:.3g} mm"

@@ -199,6 +199,7 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
                                      "factor can be fitted there; use a thicker or closer "
                                      "reference")
             s_tof, s_arr = s.sigmas()
+            assert s.tof_s is not None and s.arr is not None  # sigmas() refuses a hidden one
             # the reference's own error: its shots, and the table's interpolation error there
             f = s.arr / arr_m
             sf = math.hypot(s_arr, f * arr_sd) / arr_m

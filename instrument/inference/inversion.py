@@ -190,11 +190,12 @@ class FeatureSummary:
         check("diameter_m", self.diameter_m, size_problem(self.diameter_m) is None,
               f"0 < D <= {SPHERE_DIAMETER_MAX:g} m; " + (size_problem(self.diameter_m) or ""))
         if hidden:
-            check("arr_upper_bound", self.arr_upper_bound, 0 < self.arr_upper_bound <= 1.5,
+            bound = self.arr_upper_bound
+            check("arr_upper_bound", bound, bound is not None and 0 < bound <= 1.5,
                   "0 < bound <= 1.5")
         else:
-            check("tof_s", self.tof_s, self.tof_s > 0, "> 0 s")
-            check("arr", self.arr, self.arr >= 0, ">= 0")
+            check("tof_s", self.tof_s, self.tof_s is not None and self.tof_s > 0, "> 0 s")
+            check("arr", self.arr, self.arr is not None and self.arr >= 0, ">= 0")
             check("arr_upper_bound", self.arr_upper_bound, self.arr_upper_bound is None,
                   "null when TOF and ARR are given")
         for name in ("tof_std_s", "arr_std"):
@@ -243,6 +244,7 @@ class FeatureSummary:
         """Standard errors of the mean TOF (s) and mean ARR, before the model error."""
         if self.hidden:
             raise InversionError("tof_s", "a size without a reflection has no TOF")
+        assert self.tof_s is not None  # not hidden
         s_tof = self.tof_std_s if self.tof_std_s is not None else DEFAULT_TOF_REL_STD * self.tof_s
         s_arr = self.arr_std if self.arr_std is not None else DEFAULT_ARR_STD
         root = math.sqrt(self.n_shots)
@@ -743,8 +745,8 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         logdet += np.log(det)
     b_sh = np.array([e[3] for e in shared]).reshape(len(shared), *shape)
     q_sh = np.zeros((len(shared), len(shared), *shape))
-    for n_e, e in enumerate(shared):
-        q_sh[n_e, n_e] = e[4]
+    for n_e, err in enumerate(shared):
+        q_sh[n_e, n_e] = err[4]
     if m_sum is not None and ur_sum is not None:
         # Woodbury: C = D + U U^T  ->  chi^2 -= b^T M^-1 b, log det C += log det M, with
         # M = I + U^T D^-1 U and b = U^T D^-1 r (2 x 2 per cell, solved in closed form)
@@ -753,10 +755,10 @@ def _invert_items(table: ModelTable, items: list[FeatureSummary], cal: Calibrati
         misfit[ok] -= quad[ok]
         logdet[ok] += logdet_m[ok]
         # the shared errors' coefficients through the same C^-1 (D^-1 - D^-1 U M^-1 U^T D^-1)
-        for n_e, e in enumerate(shared):
-            b_sh[n_e] -= _bilinear2(m_sum, e[5], ur_sum)
+        for n_e, err in enumerate(shared):
+            b_sh[n_e] -= _bilinear2(m_sum, err[5], ur_sum)
             for n_f, f in enumerate(shared):
-                q_sh[n_e, n_f] -= _bilinear2(m_sum, e[5], f[5])
+                q_sh[n_e, n_f] -= _bilinear2(m_sum, err[5], f[5])
     n_terms = 2 * len(seen) + len(hidden)
     chi2 = misfit + logdet + penalty + bound_terms
     if keep is not None:  # the cells' likelihood itself, for a plate's joint map

@@ -146,10 +146,18 @@ class EdgeModel:
     """The separation of the two opposite edges (``opposite_edges``)."""
     table_max_m: float = math.inf
 
+    @property
+    def width(self) -> float:
+        """The separation of the opposite edges, for an ``opposite_edges`` model (ValueError
+        for another)."""
+        if self.width_m is None:
+            raise ValueError(f"a {self.kind} model has no width")
+        return self.width_m
+
     def distance(self, d: np.ndarray) -> np.ndarray:
         """Distance to the nearer support of positions at signed distance ``d`` from the edge."""
         if self.kind == "opposite_edges":
-            return np.minimum(d, self.width_m - d)
+            return np.minimum(d, self.width - d)
         return d
 
     def on_plate(self, d: np.ndarray) -> np.ndarray:
@@ -569,7 +577,7 @@ def _evaluate(theta: np.ndarray, c: np.ndarray, xy: np.ndarray, anchor: np.ndarr
 
 def _c_range(model: EdgeModel, xy: np.ndarray, anchor: np.ndarray) -> tuple[float, float]:
     if model.kind == "opposite_edges":
-        return 0.0, 0.5 * model.width_m
+        return 0.0, 0.5 * model.width
     spread = float(np.max(np.hypot(*(xy - anchor).T))) if len(xy) else 0.0
     return 0.0, float(min(model.table_max_m, 10.0)) + spread
 
@@ -801,8 +809,9 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], int, float]:
             best_l = (dev[node][None, :, :] + z2[:, :, None]).min(axis=1)  # (hyper, L)
             total[node] += it(best_l)
     total += post.node_z2[:, None, None]
-    node, _, k = np.unravel_index(int(np.argmin(total)), total.shape)
-    z_node = float(post.node_z2[node])
+    at = np.unravel_index(int(np.argmin(total)), total.shape)
+    best_node, k = int(at[0]), int(at[2])
+    z_node = float(post.node_z2[best_node])
     cells = cand.take(np.array([k]))
     columns = []
     for lk in post.likes:
@@ -811,9 +820,10 @@ def _best_fit(post: JointPosterior) -> tuple[list[float], int, float]:
         dist = float(np.clip(post.model.distance(d)[0, 0], lk.distance_m[0], lk.distance_m[-1]))
         it = _Interp.on(lk.distance_m, np.array([dist]))
         j, f = int(it.idx[0]), float(it.frac[0])
-        mis_all = lk.misfit(node)
+        mis_all = lk.misfit(best_node)
         with np.errstate(invalid="ignore"):
-            dev = (1 - f) * lk.deviance[node][:, j] + f * lk.deviance[node][:, j + 1]
+            dev = ((1 - f) * lk.deviance[best_node][:, j]
+                   + f * lk.deviance[best_node][:, j + 1])
             mis = (1 - f) * mis_all[:, j] + f * mis_all[:, j + 1]
         columns.append((np.where(np.isfinite(dev), dev, np.inf), mis))
     n_terms = sum(lk.n_terms for lk in post.likes) + len(post.keys)
@@ -918,7 +928,7 @@ def summary(post: JointPosterior) -> dict[str, Any]:
         named = ", ".join(f"{n} (chi^2 {e:+.3g} over its own best)" for n, e in worst[:5])
         warnings.append(
             "inconsistent: the positions do not agree with one straight clamped edge"
-            + (f" and the plate's length {post.model.width_m * 1e3:.0f} mm"
+            + (f" and the plate's length {post.model.width * 1e3:.0f} mm"
                if post.model.kind == "opposite_edges" else "")
             + f" (chi^2 {chi2:.3g} for {dof:.3g} degrees of freedom, p = {p_value:.2g} < "
             f"{P_INCONSISTENT:g})" + (f"; disagreeing most: {named}" if named else "")
@@ -939,9 +949,9 @@ def summary(post: JointPosterior) -> dict[str, Any]:
     line_n = np.array([math.cos(theta_line), math.sin(theta_line)])
     to_line = [float(post.model.distance(np.array([lk.position.x_m, lk.position.y_m]) @ line_n
                                          - offset_line)) for lk in post.likes]
-    residuals = [d - lk.estimate.distance_m.median
-                 for lk, d in zip(post.likes, to_line, strict=True)
-                 if lk.estimate.distance_m.status == "constrained"]
+    residuals = [d - median for lk, d in zip(post.likes, to_line, strict=True)
+                 if lk.estimate.distance_m.status == "constrained"
+                 and (median := lk.estimate.distance_m.median) is not None]
     support = {
         "normal_angle_deg": normal,
         "offset_m": offset_line,
@@ -950,7 +960,7 @@ def summary(post: JointPosterior) -> dict[str, Any]:
         "residual_m": float(np.sqrt(np.mean(np.square(residuals)))) if residuals else None,
         "ci95_normal_angle_deg": [(normal + a_lo) % 360.0, (normal + a_hi) % 360.0],
         "model": post.model.kind,
-        "second_offset_m": (offset_line + post.model.width_m
+        "second_offset_m": (offset_line + post.model.width
                             if post.model.kind == "opposite_edges" else None),
         "status": "inconsistent" if inconsistent else "located",
     }

@@ -97,12 +97,15 @@ class SizeSummary:
         reason = self.skip_reason()
         if reason is not None:
             raise EstimateUnavailable(reason)
+        assert self.diameter_m is not None  # skip_reason() says so otherwise
         if self.hidden:
+            assert self.aggregate.arr_upper_bound is not None  # likewise
             return FeatureSummary(float(self.diameter_m), None, None,
                                   n_shots=max(int(self.aggregate.n_shots), 1),
                                   arr_upper_bound=float(self.aggregate.arr_upper_bound),
                                   tof_window_s=self.aggregate.reflection_window_s)
         tof, arr = self.aggregate["tof_s"], self.aggregate["arr"]
+        assert tof.mean is not None and arr.mean is not None  # not hidden
         return FeatureSummary(float(self.diameter_m), float(tof.mean), float(arr.mean),
                               tof.std, arr.std, max(int(tof.count), 1))
 

@@ -135,7 +135,7 @@ def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:
         return None
     result = members[0].result
     table = (result.get("provenance") or {}).get("table") or {}
-    loaded = tables.by_id.get(table.get("id")) if tables.loaded else None
+    loaded = tables.by_id.get(str(table.get("id"))) if tables.loaded else None
     if (result.get("estimate") is None or loaded is None
             or loaded.model.content_sha256 != table.get("sha256")):
         return None

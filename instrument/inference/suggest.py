@@ -105,7 +105,7 @@ def _typical(post: JointPosterior, answers: Sequence[Any]) -> _Measurement:
     for lk in post.likes:
         for s in lk.position.inputs:
             by_size.setdefault(s.diameter_m, []).append(s)
-            if s.hidden:
+            if s.hidden and s.arr_upper_bound is not None:
                 bounds.setdefault(s.diameter_m, []).append(float(s.arr_upper_bound))
     sizes = []
     for d, items in sorted(by_size.items()):
@@ -268,8 +268,8 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
     s_vals = np.linspace(s_lo, s_hi, ALONG_STEPS + 2)[1:-1]
     u_vals = list(CANDIDATE_DISTANCES_M)
     if post.model.kind == "opposite_edges":
-        u_vals += [post.model.width_m - u for u in CANDIDATE_DISTANCES_M
-                   if u < 0.5 * post.model.width_m]
+        u_vals += [post.model.width - u for u in CANDIDATE_DISTANCES_M
+                   if u < 0.5 * post.model.width]
     u_vals = [u for u in u_vals if u <= (post.model.width_m or math.inf)]
     ss, uu = np.meshgrid(s_vals, np.array(u_vals), indexing="ij")
     pts = (offset_b * normal)[None, :] + ss.ravel()[:, None] * along + uu.ravel()[:, None] * normal

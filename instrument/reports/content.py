@@ -88,7 +88,7 @@ def build(plate_id: str, records: Sequence[Any], plate_map: Mapping[str, Any], *
     manifest), for ``report verify``; ``traces(measurement)``: its first shot, or None."""
     items = entries(records)
     setups = dict(setups or {})
-    named = []
+    named: list[dict[str, Any]] = []
     for r in records:
         ref = (r.result.get("provenance") or {}).get("setup")
         if ref and (ref["id"], ref["revision"]) not in [(s["id"], s["revision"]) for s in named]:

@@ -56,6 +56,7 @@ def changes(reported: Sequence[Mapping[str, Any]],
     for key in sorted(set(before) | set(now), key=lambda k: k.zfill(20)):
         old, new = before.get(key), now.get(key)
         if old is None:
+            assert new is not None
             out.append(f"measurement {key} added since (position {new['position']!r})")
         elif new is None:
             out.append(f"measurement {key} deleted since (position {old['position']!r})")

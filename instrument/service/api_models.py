@@ -142,7 +142,7 @@ SetupName = Annotated[str, StringConstraints(min_length=1, max_length=128)]
 _SHOT_QUERY_KEYS = ("dt", "t0", "units", "calibration")
 _METADATA_QUERY_KEYS = ("plate_id", "position", "sphere_diameter", "shot")
 
-BinaryShotParams = create_model(
+BinaryShotParams: Any = create_model(  # type: ignore[call-overload]  # fields from dicts
     "BinaryShotParams",
     __base__=_QueryParams,
     __doc__="Query parameters of a binary shot: the body is the samples, these say what they "
@@ -180,7 +180,7 @@ def request_models(max_shots: int, max_samples: int) -> tuple[type[Strict], type
         __doc__=(f"One or more shots taken at one position (at most {max_shots} shots, each of at "
                  f"most {max_samples:,} samples). All shots share plate_id and position. "
                  "Top-level metadata applies to every shot unless a shot sets the key itself."),
-        shots=(list[shot], Field(..., min_length=1, max_length=max_shots)),  # type: ignore[valid-type]
+        shots=(list[shot], Field(..., min_length=1, max_length=max_shots)),
         metadata=(ShotMetadata | None, Field(None, description="metadata shared by all shots")),
         allow_duplicate=(bool, Field(False, description=ALLOW_DUPLICATE_HELP)),
         setup=(SetupName | None, Field(None, description=SETUP_HELP)),

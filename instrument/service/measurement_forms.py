@@ -58,7 +58,7 @@ class _FormFields(Strict):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
 
 
-UploadFields = create_model(
+UploadFields: Any = create_model(  # type: ignore[call-overload]  # fields from dicts
     "UploadFields",
     __base__=_FormFields,
     __doc__="Form fields that come with an uploaded file (all optional): the JSON shot's "

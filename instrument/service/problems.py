@@ -72,7 +72,7 @@ class Problem(InstrumentError):
         self.status = status
         self.detail = detail
         self.kind = kind or _slug(_TITLES.get(status, "error"))
-        self.field = field
+        self.field = field or ""  # "" where the problem is about no one field
         self.errors = list(errors) if errors else ([{"field": field, "message": detail}]
                                                     if field else [])
         self.headers = dict(headers or {})

@@ -77,7 +77,9 @@ ShotIndex = Annotated[int, Path(ge=0, le=100_000, description="shot index, from 
 _READER_OPTIONS = tuple(k for k in all_reader_options() if k not in ("group", "channel"))
 
 
-_POST_LINKS = {201: {"description": "the stored measurement", "links": {
+Responses = dict[int | str, dict[str, Any]]
+"""OpenAPI responses by status."""
+_POST_LINKS: Responses = {201: {"description": "the stored measurement", "links": {
     name: {"operationId": op, "parameters": {"measurement_id": "$response.body#/id", **extra}}
     for name, op, extra in (("GetMeasurement", "get_measurement", {}),
                             ("GetShot", "get_shot", {"shot_index": 0}),
@@ -88,7 +90,7 @@ _POST_LINKS[200] = {"description": "these shots' samples are a stored measuremen
                     "metadata_differences (unless allow_duplicate)",
                     "content": {"application/json": {"schema": {
                         "$ref": "#/components/schemas/MeasurementOut"}}}}
-_FULL = {507: {**PROBLEM_RESPONSE, "description": "the store (or the upload's temporary "
+_FULL: Responses = {507: {**PROBLEM_RESPONSE, "description": "the store (or the upload's temporary "
                 "folder) has no room: nothing was written; retry later (Retry-After)"}}
 FULL_RETRY_AFTER_S = 60
 """What a 507 suggests to wait: room comes back when someone frees it, not in milliseconds."""
@@ -258,8 +260,8 @@ def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None)
     if body.count(b",") > limit + JSON_VALUES_SLACK:
         raise Problem(413, f"body: more than {limit:,} values; at most {limit:,} samples per "
                       "request", kind="content-too-large", field="body")
-    try:
-        request = svc.measurement_model.model_validate_json(body)
+    try:  # a model made at start with the service's limits: its fields are the JSON shot's
+        request: Any = svc.measurement_model.model_validate_json(body)
     except ValidationError as exc:
         raise from_pydantic(exc, svc.measurement_model) from None
     waveforms = waveforms_from_shots(request.shots, request.metadata)
@@ -277,7 +279,7 @@ def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
             raise Problem(422, f"{name}: given more than once", kind="invalid-input", field=name)
         seen.add(name)
     try:
-        params = BinaryShotParams.model_validate(dict(query))
+        params: Any = BinaryShotParams.model_validate(dict(query))
     except ValidationError as exc:
         raise from_pydantic(exc, BinaryShotParams) from None
     dtype = np.dtype(BINARY_DTYPES[params.dtype])
@@ -332,7 +334,8 @@ async def _ingest_upload(svc: Service, request: Request, key: str | None = None)
             raise Problem(422, "file: only one file per request", kind="invalid-input",
                           field="file")
         try:
-            opts = UploadFields.model_validate({k: v for k, v in fields.items() if v != ""})
+            opts: Any = UploadFields.model_validate(
+                {k: v for k, v in fields.items() if v != ""})
         except ValidationError as exc:
             raise from_pydantic(exc, UploadFields) from None
         fmt = pick_format(opts.format, upload.filename)
@@ -429,7 +432,7 @@ async def list_measurements(
     if more and records:
         from urllib.parse import urlencode
 
-        query = {"after": records[-1].id, "limit": limit}
+        query: dict[str, Any] = {"after": records[-1].id, "limit": limit}
         if plate_id is not None:
             query["plate_id"] = plate_id
         next_url = f"/v1/measurements?{urlencode(query)}"

@@ -233,8 +233,9 @@ class Store:
                 self._write_schema()
         except (OSError, sqlite3.Error, StoreError) as exc:
             self._conn.close()
-            if getattr(self, "_writer_fd", None) is not None:
-                os.close(self._writer_fd)
+            fd = getattr(self, "_writer_fd", None)
+            if fd is not None:
+                os.close(fd)
             if isinstance(exc, StoreError):
                 raise
             raise StoreError(f"cannot use the store at {str(self.path)!r}: {exc} (not a "
@@ -376,6 +377,7 @@ class Store:
                     "INSERT INTO measurements (created_at, plate_id, position, n_shots, source, "
                     "result) VALUES (?, ?, ?, ?, ?, ?)",
                     (now, plate_id, position, len(rows), source, result_text))
+                assert cur.lastrowid is not None  # an INSERT's row
                 new_id = int(cur.lastrowid)
                 c.executemany(
                     "INSERT INTO shots (measurement_id, shot_index, t0, dt, units, calibration, "

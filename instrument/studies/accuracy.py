@@ -267,7 +267,8 @@ def recommend(frame: pd.DataFrame, ref_cfg: Config) -> dict[str, Any]:
     out: dict[str, Any] = {}
     budget = BUDGETS["rest_simulate"]
     rest: dict[str, Any] = {"budget": budget}
-    for scene, g in frame.groupby("scene"):
+    for key, g in frame.groupby("scene"):
+        scene = str(key)
         ok = g[_within(g, budget)].sort_values("wall_s")
         if ok.empty:
             rest[scene] = None
@@ -308,7 +309,8 @@ def write_outputs(result: dict[str, Any], out: Path) -> None:
     labelled: list[tuple[Any, list[Any]]] = []
     for ax, scene in zip(axes, SCENES_M, strict=True):
         g = frame[frame["scene"] == scene]
-        for tier, h in g.groupby("tier"):
+        for key, h in g.groupby("tier"):
+            tier = str(key)
             ax.plot(h["wall_s"], h["error"].clip(lower=1e-5), "o", color=colours.get(tier),
                     label=f"{tier}" + (" (cold)" if tier in CONVOLVED_PLATE_MODELS else ""))
             if tier in CONVOLVED_PLATE_MODELS:
@@ -319,11 +321,13 @@ def write_outputs(result: dict[str, Any], out: Path) -> None:
         ax.plot(front["cost"], front["error"].clip(lower=1e-5), "k:", lw=1, label="Pareto front")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        labels = [ax.annotate(row.config.replace("sem ", "").replace("greens ", "")
+        ordered = g.sort_values("error")
+        labels = [ax.annotate(str(config).replace("sem ", "").replace("greens ", "")
                               .replace("resolved ", "").replace("mindlin_", "M")
-                              .replace("mindlin ", "M "), (row.wall_s, max(row.error, 1e-5)),
+                              .replace("mindlin ", "M "), (float(wall), max(float(error), 1e-5)),
                               textcoords="offset points", xytext=(4, 2), fontsize=6, alpha=0.8)
-                  for row in g.sort_values("error").itertuples()]
+                  for config, wall, error in zip(ordered["config"], ordered["wall_s"],
+                                                 ordered["error"], strict=True)]
         labelled.append((ax, labels))
         ax.set_xlabel("wall time per shot (s)")
         ax.set_ylabel("max(TOF, ARR) relative error (-)")

@@ -324,10 +324,10 @@ def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibratio
     row: dict[str, Any] = {"seed": scan.seed, "thickness_m": scan.thickness_m,
                            "normal_angle_deg": math.degrees(scan.theta),
                            "offset_m": scan.offset_m, "n_positions": scan.n_positions}
-    alone = []
+    alone: list[dict[str, Any] | None] = []
     for p in positions:
-        est = invert(table, p.inputs, cal) if p.inputs else None
-        alone.append(None if est is None else est.to_dict())
+        found = invert(table, p.inputs, cal) if p.inputs else None
+        alone.append(None if found is None else found.to_dict())
     joint: dict[str, Any] = {}
     at_scan: dict[str, Any] = {}
     for kind in ("free", "common"):
@@ -576,7 +576,7 @@ def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
     cal_exact = Calibration.from_any(exact)
     no_material = dict.fromkeys(("youngs_modulus_rel_sd", "poisson_ratio_sd",
                                  "density_rel_sd"), 0.0)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for k in range(n_scans):
         scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
         for p in _scan_positions(scan, scan.random_positions[:scan.n_positions], measure, cal):

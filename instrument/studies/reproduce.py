@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from numpy.typing import ArrayLike
 
 from solitonde.instrument.studies.figures import (
     DIAMETER_MARKERS,
@@ -113,6 +114,11 @@ def pairs(frame: pd.DataFrame, by: list[str]) -> Iterator[tuple[tuple[float, flo
     """``frame.groupby(by)`` over two columns, each key a pair of floats."""
     for (a, b), g in frame.groupby(by):
         yield (float(a), float(b)), g  # type: ignore[arg-type]
+
+
+def _floats(column: pd.Series) -> list[float]:
+    """A numeric column as floats."""
+    return [float(v) for v in column.to_numpy(dtype=float)]
 
 
 def make_plan(quick: bool, preset: str = "resolved") -> Plan:
@@ -224,13 +230,13 @@ def _use_cache(cache_folder: str | None) -> None:
 # --- theory curves ------------------------------------------------------------------------------
 
 
-def theory_curve(diameter: float, thicknesses: Sequence[float]) -> pd.DataFrame:
+def theory_curve(diameter: float, thicknesses: ArrayLike) -> pd.DataFrame:
     """Zener theory (infinite plate) for one sphere over many thicknesses: D/t, lambda, e, ARR, TOF.
 
     The same formulas as :func:`solitonde.model.zener.predict` (Eq. 9, 14-15), with the restitution
     from the tabulated fast path so a curve of hundreds of points costs milliseconds.
     """
-    scenes = [scene_for(diameter, t) for t in thicknesses]
+    scenes = [scene_for(diameter, float(t)) for t in np.ravel(np.asarray(thicknesses, float))]
     lams = np.array([zener.inelasticity(s) for s in scenes])
     e, tau_c = zener.restitution_and_contact_time_many(lams)
     rows = []
@@ -250,7 +256,7 @@ def theory_curve(diameter: float, thicknesses: Sequence[float]) -> pd.DataFrame:
 # --- checks -------------------------------------------------------------------------------------
 
 
-def settled_distance(distances: Sequence[float], tof: Sequence[float],
+def settled_distance(distances: ArrayLike, tof: ArrayLike,
                      tolerance: float = SETTLE_TOLERANCE) -> float:
     """Simulated critical distance: the smallest L beyond which TOF stays within ``tolerance``.
 
@@ -276,7 +282,7 @@ def settled_distance(distances: Sequence[float], tof: Sequence[float],
     return float(x[i] + (d0 - tolerance) / (d0 - d1) * (x[i + 1] - x[i]))
 
 
-def spearman(x: Sequence[float], y: Sequence[float]) -> float:
+def spearman(x: ArrayLike, y: ArrayLike) -> float:
     """Spearman rank correlation (average ranks for ties)."""
     rx = pd.Series(np.asarray(x, dtype=float)).rank().to_numpy()
     ry = pd.Series(np.asarray(y, dtype=float)).rank().to_numpy()
@@ -374,14 +380,15 @@ def check_critical_distance(crit: pd.DataFrame) -> dict[str, Any]:
     for d, g in groups(crit, "diameter_m"):
         g = g.sort_values("thickness_m")
         scored = g[d / g["thickness_m"] <= REFLECTION_D_OVER_T]
+        unscored = g[d / g["thickness_m"] > REFLECTION_D_OVER_T]
         lc = scored["critical_distance_m"].to_numpy()
         ordered = bool(np.all(np.isfinite(lc)) and np.all(np.diff(lc) < 0))
         per_d[f"{d * 1e3:.2f} mm"] = {
             "thickness_m": scored["thickness_m"].tolist(), "critical_distance_m": lc.tolist(),
             "not_scored": [
-                {"thickness_m": float(r.thickness_m), "d_over_t": float(d / r.thickness_m),
-                 "critical_distance_m": float(r.critical_distance_m)}
-                for r in g[d / g["thickness_m"] > REFLECTION_D_OVER_T].itertuples()],
+                {"thickness_m": t, "d_over_t": d / t, "critical_distance_m": lc_t}
+                for t, lc_t in zip(_floats(unscored["thickness_m"]),
+                                   _floats(unscored["critical_distance_m"]), strict=True)],
             "passed": ordered if lc.size >= 2 else None,
         }
     tested = [v["passed"] for v in per_d.values() if v["passed"] is not None]
@@ -729,8 +736,9 @@ def paper_statements(trace_info: dict[str, Any], sweep: pd.DataFrame,
             f"arr_at_{first * 1e3:g}mm": at1["arr"].tolist(),
             "thickness_m": at0["thickness_m"].tolist(),
         }
-    settle = {f"{r.diameter_m * 1e3:.2f} mm, t = {r.thickness_m * 1e3:.2f} mm":
-              r.critical_distance_m for r in crit.itertuples()}
+    settle = {f"{d * 1e3:.2f} mm, t = {t * 1e3:.2f} mm": lc
+              for d, t, lc in zip(_floats(crit["diameter_m"]), _floats(crit["thickness_m"]),
+                                  _floats(crit["critical_distance_m"]), strict=True)}
     return {
         "incident_time_s (paper: about 0.15 ms, D = 9.53 mm)": {
             k: v["incident_time_s"] for k, v in trace_info.items()},

@@ -334,7 +334,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     spread = spread_of(table) if draw_material and wrong_family is None else None
     materials = (draw_plate_materials(table, spread, n, np.random.default_rng([seed, 3]))
                  if spread is not None else [None] * n)
-    tasks = [(reference_base, diameters, t_ref, l_ref, int(seeds[0]))]
+    # the reference's task, then each plate's (with its shot count)
+    tasks: list[tuple[Any, ...]] = [(reference_base, diameters, t_ref, l_ref, int(seeds[0]))]
     tasks += [(base if mat is None else apply_overrides(dict(base), {"plate.material": mat}),
                diameters, t, length, int(s), shots)
               for (t, length), s, mat in zip(draws, seeds[1:], materials, strict=True)]
@@ -426,6 +427,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
             exp_ts = exp_tp = {"upper_bound_only"}
             exp_ls = exp_lp = set(STATUSES)
         exp_t, exp_l = exp_ts | exp_tp, exp_ls | exp_lp
+        two = _two_sided(t_est) if answered else None
         row.update(
             expected_thickness_status=sorted(exp_t), expected_distance_status=sorted(exp_l),
             status_ok=t_est.status in exp_t and l_est.status in exp_l,
@@ -436,11 +438,8 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
             # every answer with its bounds: a one-sided one covers when its bound holds
             thickness_covered=(reading_covered if ambiguous else _covered(t_est.ci95, true_t))
             if answered else None,
-            thickness_covered_two_sided=(
-                t_est.ci95[0] <= true_t <= t_est.ci95[1]
-                if answered and t_est.status == "constrained" else None),
-            thickness_width=((t_est.ci95[1] - t_est.ci95[0]) / true_t
-                             if answered and t_est.status == "constrained" else None),
+            thickness_covered_two_sided=two[0] <= true_t <= two[1] if two else None,
+            thickness_width=(two[1] - two[0]) / true_t if two else None,
             distance_covered=_covered(l_est.ci95, true_l) if not flagged else None,
         )
         rows.append(row)
@@ -450,7 +449,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
               if r.get("thickness_covered_two_sided") is not None]
     widths = [r["thickness_width"] for r in rows if r.get("thickness_width") is not None]
     l_cov = [r["distance_covered"] for r in rows if r.get("distance_covered") is not None]
-    flagged = [bool(r.get("flagged")) for r in rows]
+    flags = [bool(r.get("flagged")) for r in rows]
     # a wrong family is handled when the answer is flagged or covers the truth anyway
     handled = [bool(r.get("flagged")) or bool(r.get("thickness_covered")) for r in rows]
     missed = [_missed_unflagged(r) for r in rows]
@@ -467,7 +466,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
         "coverage_95_two_sided": float(np.mean(t_cov2)) if t_cov2 else None,
         "answered": float(np.mean([bool(r.get("answered")) for r in rows])) if rows else None,
         "interval_width_median": float(np.median(widths)) if widths else None,
-        "inconsistent_rate": float(np.mean(flagged)) if rows else None,
+        "inconsistent_rate": float(np.mean(flags)) if rows else None,
         "flagged_or_covered": float(np.mean(handled)) if rows else None,
         "missed_unflagged": float(np.mean(missed)) if rows else None,
         "missed_unwarned": float(np.mean(unwarned)) if rows else None,
@@ -577,6 +576,14 @@ def by_distance(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
                     "missed_unflagged": float(np.mean([_missed_unflagged(r) for r in inside])),
                     "ambiguous_rate": float(np.mean([bool(r.get("ambiguous")) for r in inside]))})
     return out
+
+
+def _two_sided(p: Any) -> tuple[float, float] | None:
+    """A constrained answer's 95 % interval, or None for any other."""
+    ci = p.ci95
+    if p.status != "constrained" or ci is None or ci[0] is None or ci[1] is None:
+        return None
+    return float(ci[0]), float(ci[1])
 
 
 def _covered(ci: Any, truth: float) -> bool | None:

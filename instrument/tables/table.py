@@ -161,7 +161,7 @@ class ModelTable:
     model_variance: dict[str, np.ndarray] | None = None
     """Per-node variance of ``tof_s`` and ``arr`` the inversion adds to the table's
     interpolation error (a table read at a fitted damping: :func:`.dissipation.damped`)."""
-    _cache: dict[str, Any] = field(default_factory=dict, repr=False)
+    _cache: dict[Any, Any] = field(default_factory=dict, repr=False)
 
     @property
     def shape(self) -> tuple[int, ...]:
