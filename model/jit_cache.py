@@ -26,8 +26,10 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
-from importlib import metadata, util
+from importlib import util
 from pathlib import Path
+
+from solitonde.model.version import package_version
 
 PREFIX = "solitonde-"
 """Leaf folders start with this; an inherited ``NUMBA_CACHE_DIR`` with it is one of ours."""
@@ -49,14 +51,6 @@ def source_digest(packages: tuple[str, ...] = KERNEL_PACKAGES) -> str:
                 h.update(path.read_bytes())
                 h.update(b"\0")
     return h.hexdigest()[:16]
-
-
-def package_version() -> str:
-    """The installed distribution's version (``0+unknown`` when not installed)."""
-    try:
-        return metadata.version("solitonde")
-    except metadata.PackageNotFoundError:
-        return "0+unknown"
 
 
 def default_root(environ: dict[str, str] | os._Environ[str] | None = None) -> Path:

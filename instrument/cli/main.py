@@ -96,12 +96,10 @@ def _conventional_labels() -> None:
 
 def _version(value: bool) -> None:
     if value:
-        from importlib.metadata import PackageNotFoundError, version
+        from solitonde.model.version import UNKNOWN, package_version
 
-        try:
-            typer.echo(f"solitonde {version('solitonde')}")
-        except PackageNotFoundError:
-            typer.echo("solitonde (not installed)")
+        found = package_version()
+        typer.echo("solitonde (not installed)" if found == UNKNOWN else f"solitonde {found}")
         raise typer.Exit()
 
 

@@ -240,15 +240,12 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
     None), and when."""
     import dataclasses
     import time
-    from importlib import metadata
 
     from solitonde.instrument.inference.chain_geometry import shot_options
+    from solitonde.model.version import package_version
     from solitonde.signal.pulses import DetectOptions
 
-    try:
-        version = metadata.version("solitonde")
-    except metadata.PackageNotFoundError:  # pragma: no cover - running from a bare checkout
-        version = "unknown"
+    version = package_version()
     table = None
     if chosen is not None:
         table = {"id": chosen.table.table_id, "sha256": chosen.table.content_sha256}

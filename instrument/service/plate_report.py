@@ -10,7 +10,6 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
-from importlib import metadata
 from typing import Any
 
 from solitonde.instrument.errors import MessageError
@@ -38,10 +37,9 @@ class NoSuchPlate(MessageError, LookupError):
 
 def version() -> str:
     """This software's version."""
-    try:
-        return metadata.version("solitonde")
-    except metadata.PackageNotFoundError:  # pragma: no cover - a bare checkout
-        return "unknown"
+    from solitonde.model.version import package_version
+
+    return package_version()
 
 
 def entries(store: Store, plate_id: str) -> list[dict[str, Any]]:

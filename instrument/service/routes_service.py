@@ -3,7 +3,6 @@ model tables (``/v1/tables``, ``/v1/table``, behind the API key as every ``/v1``
 
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from fastapi import APIRouter
@@ -12,11 +11,9 @@ from solitonde.instrument.service.api_models import Health, Ready, TableOut
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep
 from solitonde.instrument.service.problems import PROBLEM_RESPONSE, Problem
+from solitonde.model.version import package_version
 
-try:
-    __version__ = version("solitonde")
-except PackageNotFoundError:  # running from a source tree without an install
-    __version__ = "0+unknown"
+__version__ = package_version()
 
 router = APIRouter(tags=["service"])
 

@@ -17,7 +17,6 @@ their ``done`` mask, so an interrupted build resumes where it stopped. The file 
 from __future__ import annotations
 
 import copy
-import importlib.metadata
 import json
 import math
 import os
@@ -302,10 +301,10 @@ def git_revision() -> str | None:
 
 
 def solitonde_version() -> str:
-    try:
-        return importlib.metadata.version("solitonde")
-    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - not installed
-        return "unknown"
+    """This software's version (:func:`solitonde.model.version.package_version`)."""
+    from solitonde.model.version import package_version
+
+    return package_version()
 
 
 def _provenance(fh: h5py.File, sweep: Sweep, runner: str, command: str | None,
