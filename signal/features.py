@@ -31,7 +31,7 @@ from .kernels import TRUNC_SPAN
 from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
-READING_VERSION = 2
+EXTRACTOR_VERSION = 2
 """How the extractor reads a shot, as a number a model table records (``reading_version``): a
 table's features compare with shots read the same way only. 2: the incident and the reflection
 read on the slow trend of the record cut 2.5 FWHM after the reflection (the same reading however

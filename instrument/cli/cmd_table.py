@@ -41,7 +41,7 @@ from solitonde.instrument.tables.table_build import (
 )
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import apply_overrides, load_scene_file, scene_from_dict
-from solitonde.signal.features import READING_VERSION
+from solitonde.signal.features import EXTRACTOR_VERSION
 
 DEFAULT_TABLE_PATH = DEFAULT_TABLE
 
@@ -230,8 +230,8 @@ def info_command(
     typer.echo(f"  plate material spread: {describe_spread(spread)}, "
                + SPREAD_SOURCES[spread["source"]])
     reading = data["reading_version"]
-    typer.echo(f"  reading: {reading}" + ("" if reading == READING_VERSION else
-                                           f" (shots are read with {READING_VERSION}: rebuild "
+    typer.echo(f"  reading: {reading}" + ("" if reading == EXTRACTOR_VERSION else
+                                           f" (shots are read with {EXTRACTOR_VERSION}: rebuild "
                                            "the table before inverting with it)"))
     prov = data["provenance"]
     if prov:

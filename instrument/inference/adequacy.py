@@ -43,7 +43,7 @@ from typing import Any
 from scipy.stats import chi2 as chi2_dist
 
 from solitonde.instrument.inference.calibration import answer_distance
-from solitonde.signal.features import READING_VERSION
+from solitonde.signal.features import EXTRACTOR_VERSION
 
 # The inversion calls this module on every estimate, so this module does not import it back:
 # an estimate (``Estimate``) and its parameters are used through their attributes, and the
@@ -81,11 +81,11 @@ def _dof(est: Any) -> float:
 
 def reading_mismatch(table_version: int) -> str | None:
     """The warning for a table whose points were read another way than shots are now
-    (:data:`solitonde.signal.features.READING_VERSION`), or None."""
-    if table_version == READING_VERSION:
+    (:data:`solitonde.signal.features.EXTRACTOR_VERSION`), or None."""
+    if table_version == EXTRACTOR_VERSION:
         return None
     return (f"the table's points were read with the extractor's reading {table_version}, shots "
-            f"are read with reading {READING_VERSION} (the trend under the reflection now ends "
+            f"are read with reading {EXTRACTOR_VERSION} (the trend under the reflection now ends "
             "2.5 FWHM after it, so a record reads the same however long it runs on): on the "
             "bundled table's points the two differ in ARR by up to 0.3 % where the reflection "
             "is clear (ARR above 0.3) and by percents where it is weak beyond D/t 5; rebuild "

@@ -62,7 +62,7 @@ from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides
 from solitonde.signal.atomic import write_text
-from solitonde.signal.features import READING_VERSION
+from solitonde.signal.features import EXTRACTOR_VERSION
 
 TILT_DEG = 5.0
 INSET_M = 0.03
@@ -205,10 +205,10 @@ class Measurer:
                                       f"simulated on another scene (its sem.plate_theory "
                                       f"{_plate_theory(stored or {})!r}, this study's "
                                       f"{_plate_theory(self.base)!r}); give another file")
-            if reading != READING_VERSION:
+            if reading != EXTRACTOR_VERSION:
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions read "
                                       f"with the extractor's reading {reading}, this solitonde "
-                                      f"reads with {READING_VERSION}; give another file")
+                                      f"reads with {EXTRACTOR_VERSION}; give another file")
         self.simulated = 0
         self.wall_s = 0.0
 
@@ -244,7 +244,7 @@ class Measurer:
         if self.path is None:
             return
         write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache,
-                                          "reading_version": READING_VERSION}))
+                                          "reading_version": EXTRACTOR_VERSION}))
 
 
 def _plate_theory(scene: Mapping[str, Any]) -> str:

@@ -84,7 +84,7 @@ from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.atomic import write_text
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import READING_VERSION, aggregate
+from solitonde.signal.features import EXTRACTOR_VERSION, aggregate
 from solitonde.signal.synth import degrade
 
 DAMPING_S = 1e-7
@@ -349,7 +349,7 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
            "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
            "damping_s": DAMPING_S, "shots": shots, "snr_db": SNR_DB,
            "wrong_family": wrong_family, "material_spread_drawn": spread,
-           "reading_version": READING_VERSION}
+           "reading_version": EXTRACTOR_VERSION}
     if near_support_m is not None:  # absent from the default draw's key: its files stay valid
         key["near_support_m"] = l_far
     stored = _load_measurements(measurements, key)

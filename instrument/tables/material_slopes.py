@@ -36,7 +36,7 @@ from solitonde.instrument.tables.table import (
     require_complete,
 )
 from solitonde.instrument.tables.table_build import Sweep, simulate_slopes, write_slopes
-from solitonde.signal.features import READING_VERSION
+from solitonde.signal.features import EXTRACTOR_VERSION
 
 
 def add_to_table(path: str | Path) -> dict[str, np.ndarray]:
@@ -44,10 +44,10 @@ def add_to_table(path: str | Path) -> dict[str, np.ndarray]:
     onto the file only once written, so an interrupted run leaves the table as it was."""
     require_complete(path)
     table = ModelTable.load(path)
-    if table.reading_version != READING_VERSION:
+    if table.reading_version != EXTRACTOR_VERSION:
         raise TableError("reading_version", f"the table's points were read with the extractor's "
                          f"reading {table.reading_version}, slopes now would be read with "
-                         f"{READING_VERSION}: rebuild the table (`table build`, which simulates "
+                         f"{EXTRACTOR_VERSION}: rebuild the table (`table build`, which simulates "
                          "its slopes)")
     slopes = simulate_slopes(Sweep.from_dict(table.sweep))
     add_to_file(path, ".slopes", lambda fh: write_slopes(fh, slopes),

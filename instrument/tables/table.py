@@ -156,7 +156,7 @@ class ModelTable:
     """The features simulated with contact damping (:mod:`.dissipation`), or None for a table
     without that layer."""
     reading_version: int = 1
-    """How the table's points were read (:data:`solitonde.signal.features.READING_VERSION` of the
+    """How the table's points were read (:data:`solitonde.signal.features.EXTRACTOR_VERSION` of the
     build; 1 for a table that does not say)."""
     model_variance: dict[str, np.ndarray] | None = None
     """Per-node variance of ``tof_s`` and ``arr`` the inversion adds to the table's

@@ -58,7 +58,7 @@ from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
 from solitonde.model.simulate import SimulationResult, simulate
 from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import READING_VERSION, Features, extract
+from solitonde.signal.features import EXTRACTOR_VERSION, Features, extract
 from solitonde.signal.pulses import FLAGS
 
 #: Environment of Dask worker processes: one compute thread each (the cores are the workers).
@@ -220,7 +220,7 @@ def _create(fh: h5py.File, sweep: Sweep) -> None:
     shape = sweep.shape
     fh.attrs["format"] = FORMAT
     fh.attrs["format_version"] = FORMAT_VERSION
-    fh.attrs["reading_version"] = READING_VERSION
+    fh.attrs["reading_version"] = EXTRACTOR_VERSION
     fh.attrs["sweep"] = json.dumps(sweep.to_dict(), sort_keys=True)
     # The chain's options every point was measured with (the reflection's travel gate, the
     # solitary wave's width law), per sphere size: what a measured shot of that size gets too.
@@ -526,7 +526,7 @@ def build_table(
             with h5py.File(part, "r") as fh:
                 ours = fh.attrs.get("format") == FORMAT and "done" in fh
                 stored = json.loads(fh.attrs.get("sweep", "null")) if ours else None
-                reading = reading_version_of(fh) if ours else READING_VERSION
+                reading = reading_version_of(fh) if ours else EXTRACTOR_VERSION
         except (OSError, ValueError) as exc:  # not HDF5 (empty, garbage, truncated); bad JSON
             raise TableError("partial", not_ours.format(exc)) from None
         if not ours:
@@ -535,9 +535,9 @@ def build_table(
         if stored != json.loads(json.dumps(spec, sort_keys=True)):
             raise TableError("sweep", f"{str(part)!r} holds an interrupted build of another sweep; "
                              "rerun with the same grid and scene to resume, or delete it")
-        if reading != READING_VERSION:
+        if reading != EXTRACTOR_VERSION:
             raise TableError("partial", f"{str(part)!r} holds points read with the extractor's "
-                             f"reading {reading}, this solitonde reads with {READING_VERSION}: "
+                             f"reading {reading}, this solitonde reads with {EXTRACTOR_VERSION}: "
                              "one table holds one reading; delete it to start the build afresh")
     else:
         with h5py.File(part, "w") as fh:

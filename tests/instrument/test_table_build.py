@@ -27,7 +27,7 @@ from solitonde.instrument.tables.table_build import (
 )
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
-from solitonde.signal.features import READING_VERSION, extract
+from solitonde.signal.features import EXTRACTOR_VERSION, extract
 
 # A coarse spectral-element plate keeps a Green's function to a fraction of a second.
 FAST = {"sem": {"elements": [6, 6, 1], "order": [2, 2, 2]}}
@@ -75,7 +75,7 @@ def test_reference_table_is_complete_and_sane(reference: Path) -> None:
                 "machine", "git_revision"):
         assert key in prov
     json.dumps(s)  # JSON-ready for the service
-    assert t.reading_version == s["reading_version"] == READING_VERSION
+    assert t.reading_version == s["reading_version"] == EXTRACTOR_VERSION
     # at the support the plate barely moves: ARR close to 1 for both sizes, far from it lower
     assert (t.features["arr"][:, :, 0] > 0.9).all()
     assert (t.features["arr"][:, :, 2] < t.features["arr"][:, :, 0]).all()
@@ -132,9 +132,9 @@ def test_partial_read_another_way_is_refused(tmp_path: Path) -> None:
     out = tmp_path / "t.h5"
     build_table(tiny_sweep(), out, workers=1, max_plates=1)
     with h5py.File(partial_path(out), "r+") as fh:
-        fh.attrs["reading_version"] = READING_VERSION - 1
-    with pytest.raises(TableError, match=f"reading {READING_VERSION - 1}, this solitonde reads "
-                                         f"with {READING_VERSION}") as info:
+        fh.attrs["reading_version"] = EXTRACTOR_VERSION - 1
+    with pytest.raises(TableError, match=f"reading {EXTRACTOR_VERSION - 1}, this solitonde reads "
+                                         f"with {EXTRACTOR_VERSION}") as info:
         build_table(tiny_sweep(), out, workers=1)
     assert info.value.field == "partial" and partial_path(out).exists()
 
