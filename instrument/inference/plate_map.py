@@ -2,9 +2,10 @@
 
 The service and `solitonde map` build the same JSON: per position (a plate's measurements that
 share a position name and coordinates) the coordinates, shot count and estimate, then the support
-the positions' distance answers imply (instrument.support) or null with the reason. In the
-service the shots of every measurement at a position are pooled per sphere size and inverted
-once; from an estimates file each row is already one position.
+the positions' distance answers imply (instrument.inference.edge_fit) or null with the reason.
+In the service the shots of every measurement at a position are summarised together and
+inverted once (a position of one measurement keeps its stored answer); from an estimates file
+each row is already one position.
 
 Asked for (:class:`JointOptions`), the scan is also inverted as one unknown
 (instrument.inference.joint_map: the plate's edges and every position's thickness from each
@@ -22,6 +23,7 @@ from typing import Any
 
 from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.calibration import Calibration
+from solitonde.instrument.inference.edge_fit import locate
 from solitonde.instrument.inference.inversion import FeatureSummary
 from solitonde.instrument.inference.joint_map import (
     DEFAULT_SPREAD,
@@ -40,7 +42,6 @@ from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.suggest import check_request
 from solitonde.instrument.inference.suggest import describe as describe_gain
 from solitonde.instrument.inference.suggest import suggest as suggest_positions
-from solitonde.instrument.inference.support import locate
 from solitonde.instrument.inference.table_set import TableSet
 
 PARAMETERS = ("thickness_m", "distance_m")

@@ -25,7 +25,7 @@ Scored per scan with 3-10 positions (:data:`POSITIONS`):
   in :mod:`.validate`), joint (thickness free per position; and tied with a common mean, 5 %
   spread) against position by position;
 * the edge offset's 95 % coverage: the joint posterior's against the per-position fit of
-  :mod:`~solitonde.instrument.inference.support`, with its binomial standard error and each
+  :mod:`~solitonde.instrument.inference.edge_fit`, with its binomial standard error and each
   miss in the sds its interval states (:func:`_z`; the angle's and the edge's at the scan too):
   30 scans tell a coverage of 0.967 from 1.000 and nothing finer;
 * the width of the thickness interval at positions within :data:`NEAR_EDGE_M` of the edge (an
@@ -55,8 +55,8 @@ from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference import joint_map, suggest
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
+from solitonde.instrument.inference.edge_fit import locate
 from solitonde.instrument.inference.inversion import FeatureSummary, invert
-from solitonde.instrument.inference.support import locate
 from solitonde.instrument.studies import validate as single
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import run_tasks

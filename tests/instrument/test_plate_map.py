@@ -20,7 +20,7 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
-from solitonde.instrument.inference.support import locate
+from solitonde.instrument.inference.edge_fit import locate
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 
