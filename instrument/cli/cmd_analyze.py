@@ -137,7 +137,7 @@ def estimates_for_locations(groups: Sequence[PositionShots], table_files: Sequen
 
     Raises TableError/CalibrationError when a table or the calibration cannot be read.
     """
-    from solitonde.instrument.cli.cmd_invert import choice_error, setup_tables, table_set
+    from solitonde.instrument.cli.common import choice_error, setup_tables, table_set
     from solitonde.instrument.inference.calibration import Calibration
     from solitonde.instrument.inference.inversion import InversionError
     from solitonde.instrument.inference.pipeline import MISSING_SIZE, estimate
@@ -188,7 +188,7 @@ def _chosen_for(sizes: Sequence[PositionShots], setup: Setup | None,
     """The table and plate material a position is estimated with: its manifest row's, else the
     set-up's, else the command line's material; ``error`` where a row names another set-up
     than ``--setup``, or a table that contradicts it."""
-    from solitonde.instrument.cli.cmd_invert import parse_material
+    from solitonde.instrument.cli.common import parse_material
 
     loc = sizes[0].location
     named = loc.get("setup")
@@ -373,7 +373,7 @@ def analyze(
         usage(f"--units: {units!r} is not N or V")
     material: Any = None
     if plate_material is not None:
-        from solitonde.instrument.cli.cmd_invert import parse_material
+        from solitonde.instrument.cli.common import parse_material
 
         try:
             material = parse_material(plate_material)
@@ -444,7 +444,7 @@ def analyze(
     aggs = aggregates(groups)
     estimates = None
     if invert:
-        from solitonde.instrument.cli.cmd_invert import table_path
+        from solitonde.instrument.cli.common import table_path
         from solitonde.instrument.inference.calibration import CalibrationError
         from solitonde.instrument.inference.pipeline import (
             ALL_EARLY,
@@ -463,7 +463,7 @@ def analyze(
         except (TableError, ValueError, OSError) as exc:  # table unreadable
             errors.append({"source": ", ".join(map(str, table)) or str(table_path(None)),
                            "error": str(exc)})
-        from solitonde.instrument.cli.cmd_invert import where_estimated
+        from solitonde.instrument.cli.estimate_text import where_estimated
 
         for est in estimates or []:
             where = where_estimated(est)
@@ -506,7 +506,7 @@ def analyze(
     else:
         _print(console, rows, aggs, skipped, errors)
         if estimates is not None:
-            from solitonde.instrument.cli.cmd_invert import describe_row
+            from solitonde.instrument.cli.estimate_text import describe_row
 
             for est in estimates:
                 console.print(describe_row(est), highlight=False)

@@ -23,8 +23,7 @@ from pathlib import Path
 
 import typer
 
-from solitonde.instrument.cli.cmd_invert import table_path
-from solitonde.instrument.cli.common import sphere_sizes
+from solitonde.instrument.cli.common import sphere_sizes, table_path
 from solitonde.instrument.inference.calibration import CalibrationError
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.inversion import FeatureSummary, InversionError

@@ -140,7 +140,7 @@ def map_command(
                                                 "(1 sd; default 0.05)."),
 ) -> None:
     """Map a plate: thickness and distance to support at each position, the support located."""
-    from solitonde.instrument.cli.cmd_invert import table_path
+    from solitonde.instrument.cli.common import table_path
     from solitonde.instrument.inference.plate_map import build
     from solitonde.instrument.inference.table_set import TableSet
 

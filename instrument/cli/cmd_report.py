@@ -73,7 +73,7 @@ def _manifest_store(manifest: Path, folder: Path, tables_given: list[Path],
     measured and estimated by the upload's road (the set-up's or the file's chain
     calibration applied); and the tables."""
     from solitonde.instrument.cli import manifest as campaign
-    from solitonde.instrument.cli.cmd_invert import parse_material, setup_tables, table_set
+    from solitonde.instrument.cli.common import parse_material, setup_tables, table_set
     from solitonde.instrument.inference import measured_shots
     from solitonde.instrument.inference.calibration import Calibration, CalibrationError
     from solitonde.instrument.inference.setups import Setup, SetupError
@@ -211,7 +211,7 @@ def build(
 def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | None,
            tables_given: list[Path], setup: Path | None, calibration_file: Path | None,
            plate_material: str | None, joint: bool, suggest: int | None) -> bytes:
-    from solitonde.instrument.cli.cmd_invert import table_set
+    from solitonde.instrument.cli.common import table_set
     from solitonde.instrument.service import plate_report
     from solitonde.instrument.service.store import Store, StoreError
 

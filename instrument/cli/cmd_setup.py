@@ -90,7 +90,7 @@ def create(
     as_json: bool = typer.Option(False, "--json", help="print the stored set-up as JSON"),
 ) -> None:
     """Create a set-up on the server (revision 1), or with --revise a new revision."""
-    from solitonde.instrument.cli.cmd_invert import parse_material
+    from solitonde.instrument.cli.common import parse_material
 
     labels: dict[str, str] = {}
     for item in label:

@@ -125,7 +125,7 @@ def reanalyze_cmd(
 ) -> None:
     """Recompute features and estimates of stored measurements with this version and these
     tables; each earlier result is kept beside the new one (the API serves the newest)."""
-    from solitonde.instrument.cli.cmd_invert import table_set
+    from solitonde.instrument.cli.common import table_set
     from solitonde.instrument.service.reanalysis import reanalyze
     from solitonde.instrument.service.store import Store, StoreError
     from solitonde.instrument.tables.table import TableError

@@ -9,7 +9,7 @@ from typing import NoReturn
 
 import typer
 
-from solitonde.instrument.cli.cmd_invert import table_path
+from solitonde.instrument.cli.common import table_path
 from solitonde.instrument.studies.validate import SHOTS, ValidationInputError, validate
 from solitonde.instrument.tables.table import ModelTable, TableError
 from solitonde.instrument.tables.table_build import default_workers

@@ -11,7 +11,7 @@ from typing import Any, NoReturn
 
 import typer
 
-from solitonde.instrument.cli.cmd_invert import table_path
+from solitonde.instrument.cli.common import table_path
 
 
 def _fail(message: str, code: int = 1) -> NoReturn:
