@@ -74,17 +74,19 @@ def _line(s: dict[str, Any]) -> str:
 @setup_app.command("create")
 def create(
     setup_id: str = typer.Argument(..., metavar="ID", help="the set-up's id"),
-    sphere_diameter: list[float] = typer.Option(..., "--sphere-diameter", callback=sphere_sizes,
+    sphere_diameter: list[float] = typer.Option([], "--sphere-diameter", callback=sphere_sizes,
                                                 help="m, a sphere size the chain mounts (repeat "
-                                                "for several)"),
-    table: str = typer.Option(..., "--table", help="the server's table id (GET /v1/tables)"),
+                                                "for several; needed to create)"),
+    table: str | None = typer.Option(None, "--table", help="the server's table id (GET "
+                                     "/v1/tables; needed to create)"),
     plate_material: str | None = typer.Option(None, "--plate-material", help="the plate "
                                               "family's material: a library name or its "
                                               "properties as JSON"),
     label: list[str] = typer.Option([], "--label", help="KEY=VALUE (operator, instrument ...; "
                                     "repeat)"),
     revise: bool = typer.Option(False, "--revise", help="make a new revision of an existing "
-                                "set-up (its chain calibration carries over)"),
+                                "set-up: what is given replaces the newest revision's, labels "
+                                "are merged, the rest and the chain calibration carry over"),
     server: str = SERVER,
     api_key_env: str = API_KEY_ENV,
     as_json: bool = typer.Option(False, "--json", help="print the stored set-up as JSON"),
@@ -98,8 +100,20 @@ def create(
         if not sep or not key.strip():
             _fail(f"--label: {item!r} is not KEY=VALUE")
         labels[key.strip()] = value.strip()
-    body: dict[str, Any] = {"id": setup_id, "sphere_diameters_m": sphere_diameter,
-                            "table": table}
+    body: dict[str, Any] = {"id": setup_id}
+    if revise:  # the newest revision, what this call states replacing it
+        from solitonde.instrument.inference.setups import INPUT_FIELDS
+
+        current = _request(server, api_key_env, "GET", _path(setup_id))
+        body = {k: current[k] for k in INPUT_FIELDS if current.get(k) is not None}
+        labels = {**(current.get("labels") or {}), **labels}
+    elif not sphere_diameter or table is None:
+        _fail("--sphere-diameter and --table are needed to create a set-up (--revise takes "
+              "them from its newest revision)")
+    if sphere_diameter:
+        body["sphere_diameters_m"] = sphere_diameter
+    if table is not None:
+        body["table"] = table
     if plate_material is not None:
         try:
             body["plate_material"] = parse_material(plate_material)

@@ -218,10 +218,18 @@ def test_setup_commands_create_list_show_and_calibrate(server: Any, tmp_path: Pa
     assert run.returncode == 0, run.stderr
     assert "cli-rig  revision 2" in run.stdout and "damping 9e-08 s" in run.stdout
     assert "job " in run.stdout and ": done, 0 of 0 measurements re-estimated" in run.stdout
+    # a revision states only what changes: the labels merge, the rest carries over
+    run = _cli("setup", "create", "cli-rig", "--revise", "--label", "instrument=HNSW-3",
+               "--server", url, "--json", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    revised = json.loads(run.stdout)
+    assert revised["revision"] == 3 and revised["labels"] == {"operator": "kim",
+                                                              "instrument": "HNSW-3"}
+    assert revised["sphere_diameters_m"] == [D] and revised["chain_calibration"] is not None
     listed = _cli("setup", "list", "--server", url, cwd=tmp_path)
-    assert any(line.startswith("cli-rig  revision 2") for line in listed.stdout.splitlines())
+    assert any(line.startswith("cli-rig  revision 3") for line in listed.stdout.splitlines())
     run = _cli("setup", "show", "cli-rig", "--server", url, "--out", "rig.json", cwd=tmp_path)
-    assert run.returncode == 0 and "revision 2" in run.stdout
+    assert run.returncode == 0 and "revision 3" in run.stdout
     saved = json.loads((tmp_path / "rig.json").read_text())
     assert saved["chain_calibration"]["per_diameter"][0]["damping_s"] == 9.0e-8
     missing = _cli("setup", "show", "no-such-rig", "--server", url, cwd=tmp_path)
