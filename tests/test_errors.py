@@ -54,6 +54,7 @@ EXAMPLES: dict[str, Callable[[type], BaseException]] = {
     "ShotInputError": lambda c: c("shots.0.metadata.sphere_diameter", "'abc' is not a sphere "
                                   "diameter", "a number of metres, 0 < D <= 1"),
     "ShotLimitError": lambda c: c("metadata.plate_id", "201 characters; at most 200"),
+    "ServerError": lambda c: c("404: setup_id: no set-up 'rig'"),
     "NoSuchPlate": lambda c: c("no measurement of plate 'P7'"),
     "SetupConflict": lambda c: c("set-up 'rig' has revision 3 now; this change was based on "
                                  "revision 2"),

@@ -139,24 +139,13 @@ def _manifest_store(manifest: Path, folder: Path, tables_given: list[Path],
 
 
 def _fetch(server: str, path: str, api_key_env: str) -> bytes:
-    import httpx
+    """A GET's body; the server's refusal or absence exits 1 in one line."""
+    from solitonde.instrument.cli.uploader import ServerError, call
 
-    from solitonde.instrument.cli.uploader import api_key_from
-
-    key = api_key_from(api_key_env)
     try:
-        r = httpx.get(server.rstrip("/") + path, timeout=600.0,
-                      headers={"X-API-Key": key} if key else {})
-    except httpx.HTTPError as exc:
-        _fail(f"{server}: {type(exc).__name__}: {exc}", 1)
-        raise AssertionError from exc
-    if r.status_code >= 400:
-        try:
-            detail = r.json().get("detail", r.text)
-        except ValueError:
-            detail = r.text[:300]
-        _fail(f"{r.status_code}: {detail}", 1)
-    return r.content
+        return call(server, api_key_env, "GET", path, timeout_s=600.0).content
+    except ServerError as exc:
+        _fail(exc.message, 1)
 
 
 @report_app.command("build")
@@ -208,12 +197,23 @@ def build(
     typer.echo(f"wrote {out} ({len(data) / 1e3:.0f} kB, {time.perf_counter() - started:.1f} s)")
 
 
+def _open_store(path: Path) -> Any:
+    """The measurement store ``--store`` names (exit 2 naming the flag where it is none)."""
+    from solitonde.instrument.service.store import Store, StoreError
+
+    if not path.is_file():
+        _fail(f"--store: no such file: {path}")
+    try:
+        return Store(path, background_checkpoint=False)
+    except StoreError as exc:
+        _fail(f"--store: {exc}")
+
+
 def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | None,
            tables_given: list[Path], setup: Path | None, calibration_file: Path | None,
            plate_material: str | None, joint: bool, suggest: int | None) -> bytes:
     from solitonde.instrument.cli.common import table_set
     from solitonde.instrument.service import plate_report
-    from solitonde.instrument.service.store import Store, StoreError
 
     with tempfile.TemporaryDirectory(prefix="solitonde-report-") as folder:
         if manifest is not None:
@@ -223,12 +223,7 @@ def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | No
             source = {"manifest": str(manifest)}
         else:
             assert store_path is not None
-            if not store_path.is_file():
-                _fail(f"--store: no such file: {store_path}")
-            try:
-                store = Store(store_path, background_checkpoint=False)
-            except StoreError as exc:
-                _fail(f"--store: {exc}")
+            store = _open_store(store_path)
             tables = table_set(tables_given or None)
             source = {"store": str(store_path)}
         try:
@@ -240,7 +235,6 @@ def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | No
             plates = [p["plate_id"] for p in store.plates()]
             _fail(f"--plate-id: no plate {plate_id!r} (plates: {', '.join(plates) or 'none'})",
                   1)
-            raise AssertionError from None
         finally:
             store.close()
 
@@ -364,7 +358,6 @@ def _local_entries(plate_id: str, store_path: Path | None, manifest: Path | None
                    tables_given: list[Path], setup: Path | None, calibration_file: Path | None,
                    plate_material: str | None) -> list[dict[str, Any]]:
     from solitonde.instrument.service import plate_report
-    from solitonde.instrument.service.store import Store, StoreError
 
     with tempfile.TemporaryDirectory(prefix="solitonde-verify-") as folder:
         if manifest is not None:
@@ -372,12 +365,7 @@ def _local_entries(plate_id: str, store_path: Path | None, manifest: Path | None
                                        calibration_file, plate_material)
         else:
             assert store_path is not None
-            if not store_path.is_file():
-                _fail(f"--store: no such file: {store_path}")
-            try:
-                store = Store(store_path, background_checkpoint=False)
-            except StoreError as exc:
-                _fail(f"--store: {exc}")
+            store = _open_store(store_path)
         try:
             return plate_report.entries(store, plate_id)
         finally:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 from urllib.parse import quote
 
 import typer
@@ -22,7 +22,7 @@ setup_app = typer.Typer(help="Instrument set-ups kept by a service: create, show
                         "calibrate.", no_args_is_help=True)
 
 
-def _fail(message: str, code: int = 2) -> None:
+def _fail(message: str, code: int = 2) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code)
 
@@ -31,23 +31,12 @@ def _request(server: str, api_key_env: str, method: str, path: str,
              body: Any = None) -> dict[str, Any]:
     """One JSON request; the server's problem detail (exit 1) or an unreachable server (exit
     1) is said in one line."""
-    import httpx
+    from solitonde.instrument.cli.uploader import ServerError, call
 
-    from solitonde.instrument.cli.uploader import api_key_from
-
-    key = api_key_from(api_key_env)
     try:
-        r = httpx.request(method, server.rstrip("/") + path, json=body, timeout=300.0,
-                          headers={"X-API-Key": key} if key else {})
-    except httpx.HTTPError as exc:
-        _fail(f"{server}: {type(exc).__name__}: {exc}", 1)
-        raise AssertionError from exc  # unreachable: _fail exits
-    if r.status_code >= 400:
-        try:
-            detail = r.json().get("detail", r.text)
-        except ValueError:
-            detail = r.text[:300]
-        _fail(f"{r.status_code}: {detail}", 1)
+        r = call(server, api_key_env, method, path, body)
+    except ServerError as exc:
+        _fail(exc.message, 1)
     return r.json() if r.content else {}
 
 

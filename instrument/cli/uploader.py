@@ -23,6 +23,8 @@ from typing import Any
 
 import httpx
 
+from solitonde.instrument.errors import MessageError
+
 FIELD_FLAGS: dict[str, str] = {
     "plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
     "sphere_diameter": "--sphere-diameter", "calibration": "--calibration", "units": "--units",
@@ -157,6 +159,28 @@ def _problem_text(r: httpx.Response) -> str:
     if not isinstance(detail, str):
         detail = r.text[:300].strip() or r.reason_phrase
     return f"{r.status_code}: {detail}"
+
+
+class ServerError(MessageError):
+    """A server that cannot be reached, or that refused a request; the message says which
+    (the server's problem detail with its status)."""
+
+    subject = "--server"
+
+
+def call(server: str, api_key_env: str, method: str, path: str, body: Any = None,
+         timeout_s: float = 300.0) -> httpx.Response:
+    """One request to ``server`` with the key in ``$api_key_env`` (a JSON ``body`` if given);
+    ServerError for an unreachable server or a status of 400 and up."""
+    key = api_key_from(api_key_env)
+    try:
+        r = httpx.request(method, server.rstrip("/") + path, json=body, timeout=timeout_s,
+                          headers={"X-API-Key": key} if key else {})
+    except httpx.HTTPError as exc:
+        raise ServerError(f"{server}: {type(exc).__name__}: {exc}") from None
+    if r.status_code >= 400:
+        raise ServerError(_problem_text(r))
+    return r
 
 
 def api_key_from(env_var: str) -> str | None:

@@ -368,11 +368,9 @@ class Store:
                          json.dumps(shot.metadata), int(np.size(shot.samples)), dtype, CODEC,
                          digest, blob, json.dumps(shot.features)))
         result_text = json.dumps(result)
-        with self._writer():
-            now = time.time()
-            c = self._conn
-            c.execute("BEGIN IMMEDIATE")
-            try:
+        try:
+            with self.transaction() as c:
+                now = time.time()
                 cur = c.execute(
                     "INSERT INTO measurements (created_at, plate_id, position, n_shots, source, "
                     "result) VALUES (?, ?, ?, ?, ?, ?)",
@@ -394,19 +392,8 @@ class Store:
                                         "stored (deleted meanwhile); nothing was written")
                     c.execute("INSERT INTO setup_uses (measurement_id, setup_id, revision) "
                               "VALUES (?, ?, ?)", (new_id, *setup))
-                c.execute("COMMIT")
-            except sqlite3.IntegrityError:
-                _rollback(c)
-                raise KeyTaken(idempotency[0] if idempotency else "") from None
-            except sqlite3.OperationalError as exc:
-                _rollback(c)
-                if _out_of_space(exc):
-                    raise StoreFull(f"the store at {str(self.path)!r} cannot grow ({exc}): "
-                                    "nothing was written; retry when there is room") from None
-                raise
-            except BaseException:
-                _rollback(c)
-                raise
+        except sqlite3.IntegrityError:  # the key another request stored first
+            raise KeyTaken(idempotency[0] if idempotency else "") from None
         return new_id, now
 
     def replace_result(self, measurement_id: int, result: dict[str, Any],
@@ -415,48 +402,35 @@ class Store:
         """Make ``result`` (and each shot's ``shot_features``) the measurement's newest, keeping
         the one it replaces in ``earlier_results``; one transaction. Returns the time.
         ``setup`` (id, revision): the set-up revision the new result used."""
-        with self._writer():
-            c = self._conn
+        with self.transaction() as c:
             now = time.time()
-            c.execute("BEGIN IMMEDIATE")
-            try:
-                row = c.execute("SELECT result FROM measurements WHERE id = ?",
-                                (measurement_id,)).fetchone()
-                if row is None:
-                    raise StoreError(f"no measurement {measurement_id}")
-                old = [r[0] for r in c.execute(
-                    "SELECT features FROM shots WHERE measurement_id = ? ORDER BY shot_index",
-                    (measurement_id,))]
-                if len(old) != len(shot_features):
-                    raise StoreError(f"measurement {measurement_id} has {len(old)} shots, "
-                                     f"got features for {len(shot_features)}")
-                c.execute("INSERT INTO earlier_results (measurement_id, superseded_at, result, "
-                          "shot_features) VALUES (?, ?, ?, ?)",
-                          (measurement_id, now, row[0], "[" + ",".join(old) + "]"))
-                c.execute("UPDATE measurements SET result = ? WHERE id = ?",
-                          (json.dumps(result), measurement_id))
-                c.executemany("UPDATE shots SET features = ? WHERE measurement_id = ? AND "
-                              "shot_index = ?", [(json.dumps(f), measurement_id, i)
-                                                 for i, f in enumerate(shot_features)])
-                if setup is not None:
-                    used = c.execute("SELECT revision FROM setup_uses WHERE measurement_id = ? "
-                                     "AND setup_id = ?", (measurement_id, setup[0])).fetchone()
-                    if used is not None and used[0] > setup[1]:
-                        raise SetupConflict(f"measurement {measurement_id} was estimated with "
-                                            f"set-up {setup[0]!r} revision {used[0]}, newer than "
-                                            f"{setup[1]}; its result is kept")
-                    c.execute("UPDATE setup_uses SET revision = ? WHERE measurement_id = ? AND "
-                              "setup_id = ?", (setup[1], measurement_id, setup[0]))
-                c.execute("COMMIT")
-            except sqlite3.OperationalError as exc:
-                _rollback(c)
-                if _out_of_space(exc):
-                    raise StoreFull(f"the store at {str(self.path)!r} cannot grow ({exc})") \
-                        from None
-                raise
-            except BaseException:
-                _rollback(c)
-                raise
+            row = c.execute("SELECT result FROM measurements WHERE id = ?",
+                            (measurement_id,)).fetchone()
+            if row is None:
+                raise StoreError(f"no measurement {measurement_id}")
+            old = [r[0] for r in c.execute(
+                "SELECT features FROM shots WHERE measurement_id = ? ORDER BY shot_index",
+                (measurement_id,))]
+            if len(old) != len(shot_features):
+                raise StoreError(f"measurement {measurement_id} has {len(old)} shots, "
+                                 f"got features for {len(shot_features)}")
+            c.execute("INSERT INTO earlier_results (measurement_id, superseded_at, result, "
+                      "shot_features) VALUES (?, ?, ?, ?)",
+                      (measurement_id, now, row[0], "[" + ",".join(old) + "]"))
+            c.execute("UPDATE measurements SET result = ? WHERE id = ?",
+                      (json.dumps(result), measurement_id))
+            c.executemany("UPDATE shots SET features = ? WHERE measurement_id = ? AND "
+                          "shot_index = ?", [(json.dumps(f), measurement_id, i)
+                                             for i, f in enumerate(shot_features)])
+            if setup is not None:
+                used = c.execute("SELECT revision FROM setup_uses WHERE measurement_id = ? "
+                                 "AND setup_id = ?", (measurement_id, setup[0])).fetchone()
+                if used is not None and used[0] > setup[1]:
+                    raise SetupConflict(f"measurement {measurement_id} was estimated with "
+                                        f"set-up {setup[0]!r} revision {used[0]}, newer than "
+                                        f"{setup[1]}; its result is kept")
+                c.execute("UPDATE setup_uses SET revision = ? WHERE measurement_id = ? AND "
+                          "setup_id = ?", (setup[1], measurement_id, setup[0]))
         return now
 
     def earlier_results(self, measurement_id: int) -> list[dict[str, Any]]:
@@ -496,19 +470,11 @@ class Store:
 
     def delete(self, measurement_id: int) -> bool:
         """Remove one measurement and its shots in one transaction; False when there was none."""
-        with self._writer():
-            c = self._conn
-            c.execute("BEGIN IMMEDIATE")
-            try:
-                c.execute("DELETE FROM shots WHERE measurement_id = ?", (measurement_id,))
-                c.execute("DELETE FROM idempotency WHERE measurement_id = ?", (measurement_id,))
-                c.execute("DELETE FROM setup_uses WHERE measurement_id = ?", (measurement_id,))
-                gone = c.execute("DELETE FROM measurements WHERE id = ?",
-                                 (measurement_id,)).rowcount
-                c.execute("COMMIT")
-            except BaseException:
-                _rollback(c)
-                raise
+        with self.transaction() as c:
+            c.execute("DELETE FROM shots WHERE measurement_id = ?", (measurement_id,))
+            c.execute("DELETE FROM idempotency WHERE measurement_id = ?", (measurement_id,))
+            c.execute("DELETE FROM setup_uses WHERE measurement_id = ?", (measurement_id,))
+            gone = c.execute("DELETE FROM measurements WHERE id = ?", (measurement_id,)).rowcount
         return gone > 0
 
     # Reading ------------------------------------------------------------------------------
