@@ -323,6 +323,18 @@ def scan_from_rows(rows: Sequence[Mapping[str, Any]]
     return out, tables
 
 
+def of_records(plate_id: str, records: Sequence[Any], tables: TableSet,
+               options: JointOptions | None = None) -> dict[str, Any]:
+    """The map of a plate's stored measurements (:func:`from_records`, :func:`build`), with the
+    joint answer and suggestions ``options`` asks for. Raises JointMapError, TableChoiceError
+    (with the position by position map left for the caller to keep, if it wants)."""
+    result = build(plate_id, from_records(records, tables), tables.plate_size())
+    if options is None or not options.wanted:
+        return result
+    scan, table_ids = scan_from_records(records)
+    return with_joint(result, scan, table_ids, tables, options)
+
+
 def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
                table_ids: Sequence[str | None], tables: TableSet,
                options: JointOptions) -> dict[str, Any]:

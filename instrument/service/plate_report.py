@@ -111,8 +111,7 @@ def _build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any]
     from solitonde.instrument.inference.table_set import TableChoiceError
 
     say(f"{len(records)} measurements: estimating each position")
-    result = plate_map.build(plate_id, plate_map.from_records(records, tables),
-                             tables.plate_size())
+    result = plate_map.of_records(plate_id, records, tables)
     n_scan = result["n_scan_positions"]
     wanted = (SUGGESTIONS if n_scan <= SUGGEST_UP_TO else 0) if suggest is None else suggest
     if (joint or wanted) and n_scan >= 3:

@@ -113,16 +113,10 @@ def _map(svc: Service, plate_id: str, options: JointOptions | None = None) -> di
         if key in _kept:
             _kept.move_to_end(key)
             return _kept[key]
-    positions = plate_map.from_records(records, svc.tables)
-    result = plate_map.build(plate_id, positions, svc.tables.plate_size())
-    if options is not None and options.wanted:
-        scan, tables = plate_map.scan_from_records(records)
-        try:
-            result = plate_map.with_joint(result, scan, tables, svc.tables, options)
-        except JointMapError as exc:
-            raise Problem(422, str(exc), field=exc.field) from None
-        except TableChoiceError as exc:
-            raise Problem(422, str(exc), field=exc.field) from None
+    try:
+        result = plate_map.of_records(plate_id, records, svc.tables, options)
+    except (JointMapError, TableChoiceError) as exc:
+        raise Problem(422, str(exc), field=exc.field) from None
     with _kept_lock:
         _kept[key] = result
         while len(_kept) > MAPS_KEPT:
