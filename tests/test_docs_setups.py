@@ -1,4 +1,4 @@
-"""docs/setups.md's walk, run as written: a plate by its properties, its own table, a damped
+"""docs/how-to/setups.md's walk, run as written: a plate by its properties, its own table, a damped
 chain, a set-up calibrated through the service on two references, measurements through `post
 --setup` and `watch --setup`, and `analyze --setup` offline (about 4 minutes on 2 cores: marked
 slow, `pytest -m slow tests/test_docs_setups.py`). The printed lines and the table's figures are
@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOC = ROOT / "docs" / "setups.md"
+DOC = ROOT / "docs" / "how-to" / "setups.md"
 
 
 def _section() -> str:

@@ -1,5 +1,6 @@
-"""The README's "Your plate" walk, run as written: describe, build the table, calibrate, analyze,
-map (about 2 minutes on 2 cores: marked slow, `pytest -m slow tests/test_readme_your_plate.py`)."""
+"""The tutorial's walk (docs/tutorial.md), run as written: describe, build the table, calibrate,
+analyze, map, report and verify (a few minutes on 2 cores: marked slow,
+`pytest -m slow tests/test_readme_your_plate.py`)."""
 
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def walk_script() -> str:
-    """The first bash block of the README's "Your plate" section."""
-    body = (ROOT / "README.md").read_text().split("## Your plate\n", 1)[1].split("\n## ", 1)[0]
+    """The tutorial's first bash block."""
+    body = (ROOT / "docs" / "tutorial.md").read_text()
     return re.search(r"```bash\n(.*?)```", body, flags=re.S).group(1)
 
 
@@ -38,3 +39,5 @@ def test_the_your_plate_walk_runs_as_written(tmp_path):
     assert float(far["thickness_m_ci95_low"]) <= 3.2e-3 <= float(far["thickness_m_ci95_high"])
     assert "support: x cos" in out, out[-2000:]
     assert (tmp_path / "my_plate" / "my_map.png").stat().st_size > 10_000
+    assert (tmp_path / "my_plate" / "my_report.pdf").read_bytes().startswith(b"%PDF")
+    assert "matches plate 'MY-1'" in out, out[-2000:]

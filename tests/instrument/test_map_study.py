@@ -1,6 +1,6 @@
 """The map study (instrument.studies.map_study, `solitonde validate-map`): its random scans are
 what it says they are, its scores count what they say; the study itself runs on demand
-(`pytest -m slow`), the full one in docs/joint-map.md."""
+(`pytest -m slow`), the full one in docs/explanation/joint-map.md."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Baseline drift and offset under noise (issue 27, item 2; docs/waveforms.md, Drift).
+"""Baseline drift and offset under noise (docs/explanation/extractor.md, Drift).
 
 Traces of the independent solve (``tests/support/scipy_chain.py``), 100 draws of white noise with
 and without a drift added to the same draws: a DC offset, a 2 % ramp (of the incident's peak over
@@ -9,7 +9,7 @@ pre-trigger and on the gap less the chain's relaxation, which this project's mod
 for comparison, by the extractor alone (the pre-trigger's baseline). Asserted: an offset moves
 nothing, no drift moves TOF by more than 0.01 us or the mean ARR by more than 0.5 %, and the
 gap's fit costs at most 1.5 times the pre-trigger baseline's ARR scatter. ``-m slow -s`` prints
-the table of docs/waveforms.md.
+the table of docs/explanation/extractor.md.
 """
 
 from __future__ import annotations
