@@ -1,5 +1,5 @@
-"""Every shown output of README.md and docs/ is what running it prints (tests/support/doc_examples.py
-says how a block is read). A change that moves a shown number fails here until the text follows."""
+"""Every shown output of README.md and docs/ is what running it prints (how a block is read:
+tests/support/doc_examples.py). A change that moves a shown number fails until the text follows."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from doc_examples import (
     console_script,
     console_steps,
     figure_paragraphs,
-    load_figures,
+    figure_values,
     markdown_files,
     mismatch,
     run_pycon,
@@ -99,13 +99,14 @@ def test_a_python_session_prints_what_it_shows(block: Block, monkeypatch) -> Non
     assert report is None, report
 
 
-@pytest.mark.parametrize("path,line,figures,paragraph", FIGURES,
+@pytest.mark.parametrize("path,line,files,paragraph", FIGURES,
                          ids=[f"{p.relative_to(ROOT)}:{n}" for p, n, _, _ in FIGURES])
-def test_a_studys_figures_are_its_files(path: Path, line: int, figures: Path,
+def test_a_studys_figures_are_its_files(path: Path, line: int, files: tuple[Path, ...],
                                         paragraph: str) -> None:
     """The text shows the figures its study wrote (the study reruns under -m slow)."""
-    missing = unbacked_numbers(paragraph, load_figures(figures))
-    assert not missing, f"{path.name}:{line}: {missing} are not in {figures.name}"
+    values = [v for f in files for v in figure_values(f)]
+    missing = unbacked_numbers(paragraph, values)
+    assert not missing, f"{path.name}:{line}: {missing} are in none of {[f.name for f in files]}"
 
 
 def test_the_docs_show_outputs_to_check() -> None:
@@ -118,7 +119,8 @@ def test_the_docs_show_outputs_to_check() -> None:
 
 def test_a_changed_digit_fails_and_the_shown_text_passes() -> None:
     """The comparison is digit for digit where the text shows digits, loose only at ``...``."""
-    printed = "thickness: 4.867 mm (MAP 4.859; 68 % 4.189..5.143; 95 % 3.502..5.422 mm)\nfit: p = 0.92"
+    printed = ("thickness: 4.867 mm (MAP 4.859; 68 % 4.189..5.143; 95 % 3.502..5.422 mm)\n"
+               "fit: p = 0.92")
     assert mismatch(["thickness: 4.867 mm (MAP ...)", "fit: p = 0.92"], printed) is None
     assert mismatch(["thickness: 4.868 mm (MAP ...)", "fit: p = 0.92"], printed) is not None
     assert mismatch(["thickness: 4.867 mm (MAP ...)", "fit: p = 0.93"], printed) is not None

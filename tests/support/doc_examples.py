@@ -8,10 +8,12 @@ Three kinds of example are checked:
   repository's. The shown text must match the printed text line for line, except that ``...``
   stands for any text and runs of spaces for any spaces: every digit shown is compared.
 * a ```` ```pycon ```` block: a doctest (the standard library's), with ``...`` as its ellipsis.
-* a ``<!-- doc-figures: docs/figures/NAME.json -->`` comment before a paragraph, table or list:
-  a slow study wrote that file; every decimal number of the paragraph must be one of the file's
-  values shown to that many decimals (also read as a percentage, or in milli- or micro-units).
-  The file's ``command`` is the study that regenerates it (under the slow marker).
+* a ``<!-- doc-figures: FILE [FILE...] -->`` comment before a paragraph, table or list: a
+  command too slow for the default run (a study, a table build) wrote those files (JSON, or a
+  CSV of numbers); every decimal number of the paragraph must be one of their values shown to
+  that many decimals (also read as a percentage, or in milli- or micro-units). A figures file
+  under docs/figures/ is ``{"command": ..., "figures": ...}``: the slow test runs its command
+  again and the text must still hold.
 
 A ``<!-- doc-test: OPTION -->`` comment right before a block sets how it runs: ``server`` (a
 uvicorn process with the bundled table answers at the address the block names), ``slow`` (only
@@ -20,6 +22,7 @@ under ``-m slow``), ``skip REASON`` (not run: the reason is printed).
 
 from __future__ import annotations
 
+import csv
 import doctest
 import json
 import math
@@ -31,8 +34,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```", re.S | re.M)
 OPTION = re.compile(r"<!--\s*doc-test:\s*(.*?)\s*-->\s*$")
-FIGURES = re.compile(r"<!--\s*doc-figures:\s*(\S+)\s*-->")
-DECIMAL = re.compile(r"(?<![\w.])-?\d+\.\d+(?![\w.])")
+FIGURES = re.compile(r"<!--\s*doc-figures:\s*(.*?)\s*-->")
+NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+DECIMAL = re.compile(r"(?<![\w.])\d+\.\d+(?:e-?\d+)?(?![\w.])")
 
 
 @dataclass(frozen=True)
@@ -144,13 +148,14 @@ def run_pycon(block: Block, globs: dict[str, object]) -> str | None:
     return "".join(out) if runner.failures else None
 
 
-def figure_paragraphs(path: Path) -> Iterator[tuple[int, Path, str]]:
-    """(line, figures file, text) for every paragraph marked with a doc-figures comment."""
+def figure_paragraphs(path: Path) -> Iterator[tuple[int, tuple[Path, ...], str]]:
+    """(line, figures files, text) for every paragraph marked with a doc-figures comment."""
     text = path.read_text()
     for match in FIGURES.finditer(text):
         rest = text[match.end():].lstrip("\n")
         paragraph = rest.split("\n\n", 1)[0]
-        yield text.count("\n", 0, match.start()) + 1, ROOT / match.group(1), paragraph
+        files = tuple(ROOT / name for name in match.group(1).split())
+        yield text.count("\n", 0, match.start()) + 1, files, paragraph
 
 
 def json_numbers(value: object) -> list[float]:
@@ -169,22 +174,30 @@ def json_numbers(value: object) -> list[float]:
 SCALES = (1.0, 100.0, 1e3, 1e6)
 
 
-def unbacked_numbers(paragraph: str, figures: dict[str, object]) -> list[str]:
-    """The decimal numbers of a paragraph that no value of the figures file shows."""
-    values = json_numbers(figures.get("figures", figures))
-    missing = []
-    for token in DECIMAL.findall(paragraph):
-        decimals = len(token.split(".")[1])
-        shown = float(token)
-        if not any(math.isfinite(v) and f"{v * s:.{decimals}f}" == f"{shown:.{decimals}f}"
-                   for v in values for s in SCALES):
-            missing.append(token)
-    return missing
+def shows(value: float, token: str) -> bool:
+    """Whether ``value`` (or its size) written with the token's digits is the token."""
+    mantissa, _, exponent = token.partition("e")
+    decimals = len(mantissa.split(".")[1])
+    if exponent:
+        return float(f"{abs(value):.{decimals}e}") == float(token)
+    return f"{abs(value):.{decimals}f}" == token
 
 
-def load_figures(path: Path) -> dict[str, object]:
-    """A figures file: ``{"command": ..., "figures": {...}}``."""
+def unbacked_numbers(paragraph: str, values: list[float]) -> list[str]:
+    """The decimal numbers of a paragraph (signs and range hyphens aside) that no value shows."""
+    finite = [v * s for v in values if math.isfinite(v) for s in SCALES]
+    return [token for token in DECIMAL.findall(paragraph)
+            if not any(shows(v, token) for v in finite)]
+
+
+def figure_values(path: Path) -> list[float]:
+    """Every number of a figures file: a JSON document, or the numeric cells of a CSV."""
+    if path.suffix == ".csv":
+        with path.open(newline="") as f:
+            cells = [c for row in csv.reader(f) for c in row]
+        return [float(c) for c in cells if NUMBER.fullmatch(c.strip())]
     data = json.loads(path.read_text())
-    if not isinstance(data, dict) or "command" not in data or "figures" not in data:
-        raise ValueError(f"{path}: a figures file holds 'command' and 'figures'")
-    return data
+    if path.parent == ROOT / "docs" / "figures" and not (
+            isinstance(data, dict) and {"command", "figures"} <= data.keys()):
+        raise ValueError(f"{path}: a figures file of docs/ holds 'command' and 'figures'")
+    return json_numbers(data)
