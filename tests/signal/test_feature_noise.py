@@ -81,9 +81,9 @@ def test_tof_and_arr_means_do_not_move_with_noise(traces: dict[str, ChainTrace],
 
 @pytest.mark.slow
 def test_the_docs_table_of_errors_against_snr_rate_and_gravity() -> None:
-    """docs/explanation/extractor.md's table: D 9.53 mm on a 4.83 mm plate, gravity off and on, sampled at 1,
-    2 and 10 MHz, 200 draws at 20-60 dB each; the same criteria as the grid above. Run with
-    ``-m slow -s``."""
+    """docs/explanation/extractor.md's table: D 9.53 mm on a 4.83 mm plate, gravity off and on,
+    sampled at 1, 2 and 10 MHz, 200 draws at 20-60 dB each; the same criteria as the grid
+    above. Run with ``-m slow -s``."""
     print("\n| gravity | MHz | SNR dB | TOF mean error us | TOF sd us (bound) | ARR mean error % "
           "| ARR sd % (bound) |")
     print("|---|---|---|---|---|---|---|")
