@@ -34,10 +34,10 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, Required, TypedDict, cast
 
 import numpy as np
 
@@ -86,9 +86,59 @@ def _count(name: str, value: Any) -> int:
     return int(value)
 
 
+class DistanceRow(TypedDict, total=False):
+    """A sphere size's ARR factor and TOF offset at one reference distance (``by_distance``)."""
+
+    distance_m: Required[float]
+    arr_factor: Required[float]
+    tof_offset_s: Required[float]
+    arr_factor_std: float
+    tof_offset_std_s: float
+    n_references: int
+
+
+class DiameterEntry(TypedDict, total=False):
+    """One sphere size's calibration: its ARR factor and TOF offset over all its references,
+    their uncertainties (``*_transfer_*``: the part from the references' disagreement), the
+    chain's fitted damping, and the rows per reference distance."""
+
+    arr_factor: Required[float]
+    tof_offset_s: Required[float]
+    arr_factor_std: float
+    arr_factor_transfer_std: float
+    tof_offset_std_s: float
+    tof_offset_transfer_std_s: float
+    n_references: int
+    damping_s: float
+    damping_std_s: float
+    by_distance: list[DistanceRow]
+
+
+class DiameterRecord(DiameterEntry, total=False):
+    """A per-diameter entry as the calibration file lists it, its sphere size first."""
+
+    diameter_m: Required[float]
+
+
+class CalibrationDict(TypedDict):
+    """A calibration as its JSON file holds it (:meth:`Calibration.to_dict`)."""
+
+    arr_factor: float
+    tof_offset_s: float
+    per_diameter: list[DiameterRecord]
+    reference: dict[str, Any] | None
+    """Where the calibration came from, kept as the file states it (free-form)."""
+
+
+DistanceKey = Literal["arr_factor", "tof_offset_s", "arr_factor_std", "tof_offset_std_s"]
+"""What :func:`interpolate_by_distance` reads between a size's reference distances."""
+
+Check = Callable[[str, Any], float]
+"""A value's check: its field name and the value in, the number out (CalibrationError)."""
+
 # what a per-diameter entry may hold (as fit_calibration writes it), each with its check;
 # "by_distance" besides, checked by _by_distance
-_PER_DIAMETER_KEYS: dict[str, Any] = {
+_PER_DIAMETER_KEYS: dict[str, Check] = {
     "arr_factor": _positive,
     "arr_factor_std": _nonnegative,
     "arr_factor_transfer_std": _nonnegative,
@@ -101,7 +151,7 @@ _PER_DIAMETER_KEYS: dict[str, Any] = {
 }
 
 # what a by_distance row may hold; distance_m, arr_factor and tof_offset_s are required
-_BY_DISTANCE_KEYS: dict[str, Any] = {
+_BY_DISTANCE_KEYS: dict[str, Check] = {
     "distance_m": _nonnegative,
     "arr_factor": _positive,
     "tof_offset_s": _finite,
@@ -117,7 +167,7 @@ linear in 1/L, which must stay finite; a chain of spheres a few millimetres acro
 closer to the clamp than about this in any sense the table resolves."""
 
 
-def _by_distance(where: str, rows: Any) -> list[dict[str, float]]:
+def _by_distance(where: str, rows: Any) -> list[DistanceRow]:
     """A per-diameter entry's ``by_distance`` rows, checked: a list of at least two mappings,
     each with ``distance_m``, ``arr_factor``, ``tof_offset_s`` (stds and ``n_references``
     optional), sorted by distance, no two at the same distance once read at
@@ -127,7 +177,7 @@ def _by_distance(where: str, rows: Any) -> list[dict[str, float]]:
     if len(rows) < 2:
         raise CalibrationError(where, f"needs at least two rows (one per reference distance), "
                                f"got {len(rows)}; leave by_distance out for one distance")
-    out: list[dict[str, float]] = []
+    out: list[DistanceRow] = []
     for j, row in enumerate(rows):
         at = f"{where}[{j}]"
         if not isinstance(row, Mapping):
@@ -139,9 +189,10 @@ def _by_distance(where: str, rows: Any) -> list[dict[str, float]]:
         for key in _BY_DISTANCE_REQUIRED:
             if row.get(key) is None:
                 raise CalibrationError(f"{at}.{key}", "missing")
-        checked: dict[str, float] = {key: check(f"{at}.{key}", row[key])
+        # every key checked against _BY_DISTANCE_KEYS above, the required ones present
+        checked = cast(DistanceRow, {key: check(f"{at}.{key}", row[key])
                                      for key, check in _BY_DISTANCE_KEYS.items()
-                                     if row.get(key) is not None}
+                                     if row.get(key) is not None})
         if out and max(checked["distance_m"], MIN_DISTANCE_M) <= max(out[-1]["distance_m"],
                                                                       MIN_DISTANCE_M):
             raise CalibrationError(f"{at}.distance_m", f"{checked['distance_m']!r} m does not "
@@ -152,7 +203,7 @@ def _by_distance(where: str, rows: Any) -> list[dict[str, float]]:
     return out
 
 
-def interpolate_by_distance(rows: Sequence[Mapping[str, float]], key: str,
+def interpolate_by_distance(rows: Sequence[DistanceRow], key: DistanceKey,
                             distance_m: Any) -> np.ndarray:
     """``rows[*][key]`` (0 where a row does not state it) at ``distance_m``: piecewise linear in
     1/L between the rows' distances, constant below the first and beyond the last.
@@ -180,16 +231,17 @@ class Calibration:
 
     arr_factor: float = 1.0
     tof_offset_s: float = 0.0
-    per_diameter: dict[float, dict[str, Any]] = field(default_factory=dict)
+    per_diameter: dict[float, DiameterEntry] = field(default_factory=dict)
     reference: dict[str, Any] | None = None
+    """Where the calibration came from (the references fitted, the table), kept as stated."""
 
-    def _entry(self, diameter_m: float) -> dict[str, Any] | None:
+    def _entry(self, diameter_m: float) -> DiameterEntry | None:
         for d, entry in self.per_diameter.items():
             if abs(d - diameter_m) <= 0.01 * d:
                 return entry
         return None
 
-    def by_distance(self, diameter_m: float) -> list[dict[str, float]] | None:
+    def by_distance(self, diameter_m: float) -> list[DistanceRow] | None:
         """A sphere size's rows per reference distance, or None where it has one set of values
         for every distance."""
         entry = self._entry(diameter_m)
@@ -211,8 +263,9 @@ class Calibration:
         rows = self.by_distance(diameter_m)
         if rows is None:
             return (*self.for_diameter(diameter_m), *self.uncertainty_for(diameter_m))
-        f, o, f_sd, o_sd = (interpolate_by_distance(rows, key, distance_m) for key in (
-            "arr_factor", "tof_offset_s", "arr_factor_std", "tof_offset_std_s"))
+        keys: tuple[DistanceKey, ...] = ("arr_factor", "tof_offset_s", "arr_factor_std",
+                                         "tof_offset_std_s")
+        f, o, f_sd, o_sd = (interpolate_by_distance(rows, key, distance_m) for key in keys)
         return f, o, f_sd, o_sd
 
     def for_diameter(self, diameter_m: float) -> tuple[float, float]:
@@ -245,14 +298,11 @@ class Calibration:
     def has_damping(self) -> bool:
         return any("damping_s" in e for e in self.per_diameter.values())
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> CalibrationDict:
         return {
             "arr_factor": self.arr_factor,
             "tof_offset_s": self.tof_offset_s,
-            "per_diameter": [
-                {"diameter_m": d, **e, **({"by_distance": [dict(r) for r in e["by_distance"]]}
-                                          if "by_distance" in e else {})}
-                for d, e in sorted(self.per_diameter.items())],
+            "per_diameter": [_record(d, e) for d, e in sorted(self.per_diameter.items())],
             "reference": self.reference,
         }
 
@@ -268,7 +318,7 @@ class Calibration:
         extra = set(data) - known
         if extra:
             raise CalibrationError(sorted(extra)[0], f"unknown key (allowed: {sorted(known)})")
-        per: dict[float, dict[str, float]] = {}
+        per: dict[float, DiameterEntry] = {}
         entries = data.get("per_diameter") or []
         if not isinstance(entries, Sequence) or isinstance(entries, str):
             raise CalibrationError("per_diameter", f"expected a list of entries, got "
@@ -282,9 +332,10 @@ class Calibration:
                 if key not in ("diameter_m", "by_distance") and key not in _PER_DIAMETER_KEYS:
                     allowed = ["diameter_m", *_PER_DIAMETER_KEYS, "by_distance"]
                     raise CalibrationError(f"{where}.{key}", f"unknown key (allowed: {allowed})")
-            rest: dict[str, Any] = {
+            # every key checked against _PER_DIAMETER_KEYS above; the two required ones below
+            rest = cast(DiameterEntry, {
                 key: check(f"{where}.{key}", entry[key])
-                for key, check in _PER_DIAMETER_KEYS.items() if entry.get(key) is not None}
+                for key, check in _PER_DIAMETER_KEYS.items() if entry.get(key) is not None})
             rest.setdefault("arr_factor", 1.0)
             rest.setdefault("tof_offset_s", 0.0)
             if entry.get("by_distance") is not None:
@@ -339,6 +390,14 @@ class Calibration:
         cal = cls.from_any(data)
         assert cal is not None
         return cal
+
+
+def _record(diameter_m: float, entry: DiameterEntry) -> DiameterRecord:
+    """``entry`` as the file lists it: its size first, its rows per distance copied."""
+    record: DiameterRecord = {"diameter_m": diameter_m, **entry}
+    if "by_distance" in entry:
+        record["by_distance"] = [row.copy() for row in entry["by_distance"]]
+    return record
 
 
 def calibration_along(calibration: Calibration | None, diameter_m: float, distance_m: Any

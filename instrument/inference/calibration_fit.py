@@ -10,12 +10,17 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from solitonde.instrument.inference.calibration import Calibration, CalibrationError
-from solitonde.instrument.inference.inversion import FeatureSummary, InversionError, predict
+from solitonde.instrument.inference.calibration import (
+    Calibration,
+    CalibrationError,
+    DiameterEntry,
+    DistanceRow,
+)
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
 from solitonde.instrument.tables.dissipation import damped, slice_reads
 from solitonde.instrument.tables.table import ModelTable
 
@@ -74,10 +79,6 @@ def _fit_damping(table: ModelTable, d: float, refs: Sequence[Reference]) -> tupl
     return float(taus[best]), float(sd)
 
 
-_BY_DISTANCE_FIELDS = ("arr_factor", "tof_offset_s", "arr_factor_std", "tof_offset_std_s",
-                       "n_references")
-"""What a ``by_distance`` row keeps of a distance's fit, beside its distance."""
-
 DISTINCT_DISTANCE_M = 1e-3
 """References of a size whose distances to the support differ by more than this stand at
 different distances: with two or more such distances the factor and offset are fitted per
@@ -98,7 +99,7 @@ def _distance_groups(distances: Sequence[float]) -> list[list[int]]:
 
 
 def _factor_offset(d: float, rows: Sequence[tuple[float, float, float, float]],
-                   arrs: Sequence[float], damped_fit: bool) -> dict[str, float]:
+                   arrs: Sequence[float], damped_fit: bool) -> DiameterEntry:
     """The ARR factor and TOF offset of a size's references ``(f, sf, o, so)`` (measured ARR
     ``arrs``) with their stated uncertainties (:func:`_combine`: statistical and transfer
     parts). ``damped_fit``: the references' ARR fitted the damping, whose sd holds their
@@ -126,6 +127,13 @@ def _factor_offset(d: float, rows: Sequence[tuple[float, float, float, float]],
         "tof_offset_transfer_std_s": o_transfer,
         "n_references": len(rows),
     }
+
+
+def _distance_row(distance_m: float, fit: DiameterEntry) -> DistanceRow:
+    """What a ``by_distance`` row keeps of the fit at one distance, beside the distance."""
+    return {"distance_m": distance_m, "arr_factor": fit["arr_factor"],
+            "tof_offset_s": fit["tof_offset_s"], "arr_factor_std": fit["arr_factor_std"],
+            "tof_offset_std_s": fit["tof_offset_std_s"], "n_references": fit["n_references"]}
 
 
 @dataclass(frozen=True)
@@ -205,7 +213,7 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
             sf = math.hypot(s_arr, f * arr_sd) / arr_m
             by_d.setdefault(d, []).append((f, sf, s.tof_s - tof_m, math.hypot(s_tof, tof_sd)))
             measured.setdefault(d, []).append(s.arr)
-    per: dict[float, dict[str, Any]] = {}
+    per: dict[float, DiameterEntry] = {}
     for d, rows in by_d.items():
         per[d] = _factor_offset(d, rows, measured[d], d in dampings)
         if d in dampings:
@@ -215,13 +223,11 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
         distances = [ref.distance_m for ref in groups[d]]
         near_far = _distance_groups(distances)
         if len(near_far) >= 2:
-            per[d]["by_distance"] = []
-            for idx in near_far:
-                at = _factor_offset(d, [rows[i] for i in idx], [measured[d][i] for i in idx],
-                                    d in dampings)
-                per[d]["by_distance"].append(
-                    {"distance_m": sum(distances[i] for i in idx) / len(idx),
-                     **{k: at[k] for k in _BY_DISTANCE_FIELDS}})
+            per[d]["by_distance"] = [
+                _distance_row(sum(distances[i] for i in idx) / len(idx),
+                              _factor_offset(d, [rows[i] for i in idx],
+                                             [measured[d][i] for i in idx], d in dampings))
+                for idx in near_far]
     n = len(per)
     reference = {
         "references": [{"thickness_m": r.thickness_m, "distance_m": r.distance_m,

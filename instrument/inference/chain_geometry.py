@@ -9,8 +9,9 @@ extractor uses them (:class:`~solitonde.signal.pulses.DetectOptions` ``travel_ti
 launched before it, and to flag ``implausible_units`` when the width and the amplitude disagree.
 With gravity the chain also has a level of its own between the pulses (the spheres above the
 sensor let go of part of their weight and settle back): :func:`relaxation` simulates it, and
-:func:`measure_shot` hands it to the extractor so that a drifting baseline is measured on the
-gap as well as on the pre-trigger (``relaxation_N``, :mod:`solitonde.signal.gap_drift`).
+:func:`~.shot_measure.measure_shot` hands it to the extractor so that a drifting baseline is
+measured on the gap as well as on the pre-trigger (``relaxation_N``,
+:mod:`solitonde.signal.gap_drift`).
 The chain is the paper's (440C spheres, 20 of them, the sensor 7th from the top) at the stated
 sphere size, or a model table's family.
 """
@@ -26,10 +27,8 @@ from typing import Any
 import numpy as np
 
 from solitonde.model import zener
-from solitonde.model.errors import ModelError
 from solitonde.model.scene import Scene, scene_from_dict
-from solitonde.signal.features import Features, extract
-from solitonde.signal.waveform import Waveform
+from solitonde.signal.features import Features
 
 from ..tables.measured import detect_options
 
@@ -58,7 +57,7 @@ def _paper_chain_json(diameter: float) -> str:
     return _paper_chain(diameter).model_dump_json()
 
 
-def _size(diameter: Any) -> float | None:
+def sphere_size(diameter: Any) -> float | None:
     """``diameter`` as a sphere size in metres, or None where it is not one."""
     try:
         d = float(diameter)
@@ -70,7 +69,7 @@ def _size(diameter: Any) -> float | None:
 def shot_options(diameter: Any, family: Scene | None = None) -> dict[str, float]:
     """:func:`detect_options` for a measured shot whose sphere size is ``diameter`` (m); none
     where the size is not a positive number (the shot is then measured without them)."""
-    d = _size(diameter)
+    d = sphere_size(diameter)
     return {} if d is None else detect_options(chain_scene(d, family))
 
 
@@ -210,41 +209,9 @@ def _relaxation(scene_json: str, force_key: int, dt: float) -> np.ndarray:
     return level
 
 
-BASELINES = ("gap", "pre-trigger")
-"""What a measured shot's baseline is measured on (metadata key ``baseline``, ``analyze
---baseline``): ``gap``, the pre-trigger and the gap before the reflection less the chain's
-relaxation (the default where the sphere size is stated), or ``pre-trigger`` alone, for a chain
-unlike the model's (another sensor position or chain length, a horizontal chain)."""
-
-
-def measure_shot(waveform: Waveform, diameter: Any, family: Scene | None = None,
-                 baseline: str = "gap") -> Features:
-    """The features of a measured shot (:func:`measure_shot_baseline`, its first value)."""
-    return measure_shot_baseline(waveform, diameter, family, baseline)[0]
-
-
-def measure_shot_baseline(waveform: Waveform, diameter: Any, family: Scene | None = None,
-                          baseline: str = "gap") -> tuple[Features, str]:
-    """The features of a measured shot, with what its chain tells where ``diameter`` is known,
-    and the baseline they were measured on (:data:`BASELINES`).
-
-    With a size (a positive number of metres): the travel gate and the width check
-    (:func:`shot_options`), and, unless ``baseline`` is ``pre-trigger``, the drift measured on
-    the gap against the chain's own relaxation (:func:`relaxation`; a second pass once the
-    incident's force is read). Without a size, without a reflection to bound the gap, or for a
-    chain the model cannot run: the pre-trigger's baseline."""
-    if baseline not in BASELINES:
-        raise ValueError(f"baseline must be one of {BASELINES}, got {baseline!r}")
-    d = _size(diameter)
-    scene = None if d is None else chain_scene(d, family)  # built once for both uses
-    options = {} if scene is None else detect_options(scene)
-    features = extract(waveform, **options)
-    if (d is None or scene is None or baseline == "pre-trigger" or features.tof_s is None
-            or not features.incident_peak_N > 0):
-        return features, "pre-trigger"
-    scene_json = _paper_chain_json(d) if family is None else scene.model_dump_json()
-    try:
-        relax = _relaxation(scene_json, _force_key(features.incident_peak_N), float(waveform.dt))
-    except ModelError:  # a chain the model cannot run: the row says which baseline it got
-        return features, "pre-trigger"
-    return extract(waveform, **options, relaxation_N=relax), "gap"
+def chain_relaxation(diameter: float, scene: Scene, family: Scene | None,
+                     incident_peak_N: float, dt: float) -> np.ndarray:
+    """:func:`relaxation` of ``scene``, the chain of ``diameter`` spheres already built from
+    ``family`` (None: the paper's chain, whose JSON is kept per size)."""
+    scene_json = _paper_chain_json(diameter) if family is None else scene.model_dump_json()
+    return _relaxation(scene_json, _force_key(incident_peak_N), float(dt))

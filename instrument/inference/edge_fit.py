@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 from scipy import optimize
@@ -47,6 +47,16 @@ class Answer:
     above: float  # deviation when farther
 
 
+class SupportFitDict(TypedDict):
+    """A located edge as JSON (:meth:`SupportFit.to_dict`)."""
+
+    normal_angle_deg: float
+    offset_m: float
+    ci95_offset_m: list[float]
+    n_positions: int
+    residual_m: float
+
+
 @dataclass(frozen=True)
 class SupportFit:
     """The located edge: ``x cos(theta) + y sin(theta) = offset`` with theta in degrees."""
@@ -63,7 +73,7 @@ class SupportFit:
         t = math.radians(self.normal_angle_deg)
         return x * math.cos(t) + y * math.sin(t) - self.offset_m
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> SupportFitDict:
         return {"normal_angle_deg": self.normal_angle_deg, "offset_m": self.offset_m,
                 "ci95_offset_m": list(self.ci95_offset_m), "n_positions": self.n_positions,
                 "residual_m": self.residual_m}

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from solitonde.instrument.errors import MessageError
-from solitonde.instrument.inference.inversion import fine_grid
+from solitonde.instrument.inference.fine_grid import fine_grid
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.json_ready import json_ready
 

@@ -10,9 +10,9 @@ likelihood-ratio bound, not a quantile.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -25,6 +25,16 @@ answer, the levels of a likelihood-ratio interval for one parameter (chi^2_1 of 
 bound then follows the data, not how far the table extends."""
 
 
+class ParameterDict(TypedDict):
+    """A parameter's answer as JSON (:meth:`ParameterEstimate.to_dict`)."""
+
+    map: float | None
+    median: float | None
+    ci68: list[float | None] | None
+    ci95: list[float | None] | None
+    status: str
+
+
 @dataclass
 class ParameterEstimate:
     """One parameter's answer. Numbers the data do not support are None."""
@@ -35,7 +45,7 @@ class ParameterEstimate:
     ci95: tuple[float | None, float | None] | None
     status: str
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> ParameterDict:
         return {"map": self.map, "median": self.median,
                 "ci68": None if self.ci68 is None else list(self.ci68),
                 "ci95": None if self.ci95 is None else list(self.ci95), "status": self.status}
@@ -67,8 +77,9 @@ def _crossing(x: np.ndarray, density: np.ndarray, level: float, from_left: bool)
     return float(x[-1] if from_left else x[0])
 
 
-def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physical: bool,
-               transform: Any = None, profile: np.ndarray | None = None) -> ParameterEstimate:
+def summarise_marginal(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
+                       lower_physical: bool, transform: Callable[[float], float] | None = None,
+                       profile: np.ndarray | None = None) -> ParameterEstimate:
     """MAP, median, intervals and status of a marginal posterior given as the mass of each point
     of ``x`` (cells of ``widths``); ``transform`` maps x back to the parameter (exp for log t)."""
     est = _summarise_x(x, mass, widths, lower_physical, profile)
@@ -88,7 +99,7 @@ def _summarise(x: np.ndarray, mass: np.ndarray, widths: np.ndarray, lower_physic
 
 def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
                  lower_physical: bool, profile: np.ndarray | None = None) -> ParameterEstimate:
-    """The summary of :func:`_summarise` on the grid's own axis.
+    """The summary of :func:`summarise_marginal` on the grid's own axis.
 
     A side is open (the data do not bound the parameter there) when the density at the table's end
     is at least :data:`EDGE_FRACTION` of its peak, or when the profile likelihood there (the best
@@ -124,5 +135,3 @@ def _summarise_x(x: np.ndarray, mass: np.ndarray, widths: np.ndarray,
     return ParameterEstimate(float(x[int(np.argmax(density))]), q[2], (q[1], q[3]), (q[0], q[4]),
                              "constrained")
 
-
-summarise = _summarise

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -74,7 +74,16 @@ def _contact_time(table: ModelTable, diameter_m: float, thickness_m: np.ndarray)
     return np.asarray(tau_c) * zener.time_scale(scene.sphere_mass, scene.a_p, v_in)
 
 
-def exchange_rates(plate: Mapping[str, Any], sphere: Mapping[str, Any]) -> dict[str, Any]:
+class ExchangeRates(TypedDict):
+    """What a plate material change does (:func:`exchange_rates`); each pair is per
+    ``(d ln E', d ln rho)``."""
+
+    contact_share: float
+    d_ln_lambda: tuple[float, float]
+    d_ln_c: tuple[float, float]
+
+
+def exchange_rates(plate: Mapping[str, Any], sphere: Mapping[str, Any]) -> ExchangeRates:
     """How a plate material change ``(d ln E', d ln rho)`` moves Zener's inelasticity
     (``d_ln_lambda``) and the guided waves' speed (``d_ln_c``), and the plate's share ``w`` of
     the contact compliance (``d ln A_p = w d ln E'``); E' = E / (1 - nu^2)."""

@@ -28,17 +28,17 @@ import numbers
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Required, TypedDict, TypeVar, cast
 
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference import chain_geometry
+from solitonde.instrument.inference import chain_geometry, shot_measure
 from solitonde.instrument.inference.sizes import SPHERE_DIAMETER_MAX, size_problem
 from solitonde.signal import channels as signal_channels
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import FEATURES
+from solitonde.signal.features import FEATURES, Features
 from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
 
@@ -87,6 +87,69 @@ PEAK_READING = ("tof_peak_s", "arr_peak")
 trace's own two peaks and their heights' ratio, the paper's definition (a hand reading of the
 scope)."""
 
+class MissingSource(TypedDict):
+    """A path given that holds no file to read, and why."""
+
+    source: str
+    error: str
+
+
+class ShotRow(TypedDict, total=False):
+    """One shot of a file as :func:`measure_file` lists it.
+
+    A channel left out holds ``source``, ``channel`` and ``skipped`` (why) only. Every other
+    row holds where the shot was taken (:data:`LOCATION_KEYS`, as its metadata states them),
+    what it is estimated with (:data:`CHOICE_KEYS`, where stated) and ``baseline``; then either
+    ``error`` (the extractor could not read it), or its numbers (the features'
+    :data:`~solitonde.signal.features.FEATURES` and :data:`PEAK_READING`, ``flags``,
+    ``arr_upper_bound``) and, measured, its ``features`` and ``waveform`` (a shot whose pulses
+    fit no standard chain has ``error`` instead)."""
+
+    source: Required[str]
+    channel: Required[str | None]
+    skipped: str
+    shot: Any  # the metadata's values are as the file or its sources state them
+    plate_id: Any
+    position: Any
+    x_m: Any
+    y_m: Any
+    sphere_diameter: Any
+    setup: Any
+    table: Any
+    plate_material: Any
+    baseline: str
+    error: str
+    tof_s: float | None
+    arr: float | None
+    incident_time_s: float | None
+    reflected_time_s: float | None
+    incident_peak_N: float | None
+    reflected_peak_N: float | None
+    snr_db: float | None
+    tof_peak_s: float | None
+    arr_peak: float | None
+    flags: list[str]
+    arr_upper_bound: float | None
+    features: Features
+    waveform: Waveform
+
+
+class ShotLocation(TypedDict, total=False):
+    """Where the shots of one summary were taken (:data:`LOCATION_KEYS`, as their metadata
+    states them), what they are estimated with (:data:`CHOICE_KEYS`, where stated), and
+    ``source``: their file where it names neither plate nor position, else None."""
+
+    plate_id: Required[Any]
+    position: Required[Any]
+    x_m: Required[Any]
+    y_m: Required[Any]
+    sphere_diameter: Required[Any]
+    setup: Any
+    table: Any
+    plate_material: Any
+    source: Required[str | None]
+
+
 FieldOf = Callable[[int, str], str]
 """The field name of metadata key ``key`` of shot ``i``, for errors."""
 
@@ -103,7 +166,7 @@ def shot_fields(prefix: str) -> FieldOf:
 # -- read ---------------------------------------------------------------------------------------
 
 def collect(paths: Iterable[Path], fmt: str | None = None
-            ) -> tuple[list[Path], list[dict[str, Any]]]:
+            ) -> tuple[list[Path], list[MissingSource]]:
     """Files to read, each once, and the paths that gave none (missing, or a folder with no
     files).
 
@@ -111,7 +174,7 @@ def collect(paths: Iterable[Path], fmt: str | None = None
     regular file whose name does not start with a dot.
     """
     files: list[Path] = []
-    missing: list[dict[str, Any]] = []
+    missing: list[MissingSource] = []
     for p in paths:
         if p.is_dir():
             found = sorted(f for f in p.rglob("*") if f.is_file() and (
@@ -219,7 +282,7 @@ def check_metadata(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf,
     so it must be a diameter in metres (0 < D <= :data:`SPHERE_DIAMETER_MAX`); ``x_m`` and
     ``y_m`` place the position on the plate: finite metres, within ``plate_size`` when the
     caller knows the plate (its table's); ``baseline`` is one of
-    :data:`~.chain_geometry.BASELINES`. ShotInputError naming the field (``field_of``).
+    :data:`~.shot_measure.BASELINES`. ShotInputError naming the field (``field_of``).
     """
     for i, meta in enumerate(metadata):
         check_sizes(meta, functools.partial(field_of, i))
@@ -229,9 +292,9 @@ def check_metadata(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf,
             raise ShotInputError(field_of(i, "sphere_diameter"), str(why), f"a number of "
                                  f"metres, 0 < D <= {SPHERE_DIAMETER_MAX:g}")
         b = meta.get("baseline")
-        if b is not None and b not in chain_geometry.BASELINES:
+        if b is not None and b not in shot_measure.BASELINES:
             raise ShotInputError(field_of(i, "baseline"), f"{b!r} is not a baseline",
-                                 " or ".join(chain_geometry.BASELINES))
+                                 " or ".join(shot_measure.BASELINES))
         for axis, key in enumerate(("x_m", "y_m")):
             v = meta.get(key)
             if v is None:
@@ -283,7 +346,7 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
                  fallback_calibration: float | None = None, channels: Sequence[str] = (),
                  group: str | None = None,
                  stated: Sequence[tuple[str, Mapping[str, Any]]] = ()
-                 ) -> tuple[list[dict[str, Any]], bool]:
+                 ) -> tuple[list[ShotRow], bool]:
     """One row per shot of ``path`` and whether ``fallback_calibration`` was used.
 
     The shots are the file's channels named by ``channels``/``group``, or else those that are
@@ -299,16 +362,16 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
     waves, used = read_shots(path, fmt, options, fallback_calibration=fallback_calibration,
                              accepted_only=True)
     waves, skipped = signal_channels.select(waves, list(channels) or None, group, path.name)
-    rows: list[dict[str, Any]] = [{"source": str(path), "channel": s["channel"],
-                                   "skipped": s["reason"]} for s in skipped]
+    rows: list[ShotRow] = [{"source": str(path), "channel": s["channel"],
+                            "skipped": s["reason"]} for s in skipped]
     metas = [located(w.metadata, stated, path.name) for w in waves]
     check_metadata(metas, lambda i, key: f"metadata.{key}")
     for w, meta in zip(waves, metas, strict=True):
-        row: dict[str, Any] = {"source": str(path), "shot": meta.get("shot"),
-                               "channel": signal_channels.channel_name(w)
-                               if meta.get("channel") is not None else None,
-                               **{k: meta.get(k) for k in LOCATION_KEYS},
-                               **{k: meta[k] for k in CHOICE_KEYS if meta.get(k) is not None}}
+        row = cast(ShotRow, {"source": str(path), "shot": meta.get("shot"),
+                             "channel": signal_channels.channel_name(w)
+                             if meta.get("channel") is not None else None,
+                             **{k: meta.get(k) for k in LOCATION_KEYS},
+                             **{k: meta[k] for k in CHOICE_KEYS if meta.get(k) is not None}})
         diameter = _number(meta.get("sphere_diameter"))
         try:
             feat, row["baseline"] = measure_waveform(w, meta)
@@ -317,7 +380,7 @@ def measure_file(path: Path, fmt: str | None, options: Mapping[str, Any], *,
             rows.append(row)
             continue
         d = feat.to_dict()
-        row.update({k: json_ready(d[k]) for k in (*FEATURES, *PEAK_READING)})
+        row.update(cast(ShotRow, {k: json_ready(d[k]) for k in (*FEATURES, *PEAK_READING)}))
         row["flags"] = d["flags"]
         row["arr_upper_bound"] = json_ready(d["arr_upper_bound"])
         if "implausible_units" in feat.flags:  # listed with its numbers, never summarised
@@ -340,7 +403,7 @@ def measure_waveform(waveform: Waveform, meta: Mapping[str, Any] | None = None
     ``implausible_units``. WaveformError where the extractor cannot read the shot."""
     meta = waveform.metadata if meta is None else meta
     diameter = _number(meta.get("sphere_diameter"))
-    feat, baseline = chain_geometry.measure_shot_baseline(
+    feat, baseline = shot_measure.measure_shot_baseline(
         waveform, diameter, baseline=meta.get("baseline") or "gap")
     if diameter is None and not chain_geometry.fits_some_chain(
             feat, chain_geometry.STANDARD_DIAMETERS):
@@ -394,12 +457,12 @@ def one_position(metadata: Sequence[Mapping[str, Any]], field_of: FieldOf
 class PositionShots:
     """The measured shots of one sphere size at one position and their summary."""
 
-    location: dict[str, Any]  # LOCATION_KEYS and ``source`` (set for files that name nothing)
+    location: ShotLocation
     summary: SizeSummary
-    rows: list[dict[str, Any]]
+    rows: list[ShotRow]
 
 
-def summarise_positions(rows: Sequence[dict[str, Any]]) -> list[PositionShots]:
+def summarise_positions(rows: Sequence[ShotRow]) -> list[PositionShots]:
     """Per (plate_id, position, x_m, y_m, sphere_diameter) the summary of its measured shots
     (rows from :func:`measure_file` that hold ``features``; instrument.inference.pipeline), in
     the order the groups first appear.
@@ -409,7 +472,7 @@ def summarise_positions(rows: Sequence[dict[str, Any]]) -> list[PositionShots]:
     """
     from solitonde.instrument.inference.pipeline import summarise
 
-    def key(r: dict[str, Any]) -> tuple[Any, ...]:
+    def key(r: ShotRow) -> tuple[Any, ...]:
         named = r.get("plate_id") is not None or r.get("position") is not None
         return (*position_key(r), _number(r.get("sphere_diameter")),
                 None if named else r["source"])
@@ -417,9 +480,10 @@ def summarise_positions(rows: Sequence[dict[str, Any]]) -> list[PositionShots]:
     out = []
     for members in by_position((r for r in rows if "features" in r), key).values():
         first = members[0]
-        location = {**{k: first.get(k) for k in LOCATION_KEYS},
-                    **{k: first[k] for k in CHOICE_KEYS if first.get(k) is not None},
-                    "source": key(first)[-1]}
+        location = cast(ShotLocation, {
+            **{k: first.get(k) for k in LOCATION_KEYS},
+            **{k: first.get(k) for k in CHOICE_KEYS if first.get(k) is not None},
+            "source": key(first)[-1]})
         (summary,) = summarise([_number(location["sphere_diameter"])] * len(members),
                                [m["features"] for m in members])
         out.append(PositionShots(location, summary, members))

@@ -15,10 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict, cast
 
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, invert
+from solitonde.instrument.inference.estimate import Estimate
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable, LoadedTable
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.signal.features import (
@@ -124,15 +126,25 @@ def summarise(diameters: Sequence[float | None],
     return [SizeSummary(d, aggregate(members)) for d, members in groups.items()]
 
 
+class SkippedSize(TypedDict):
+    """A sphere size an estimate leaves out, and why."""
+
+    sphere_diameter: float | None
+    reason: str
+
+
 @dataclass
 class TableEstimate:
     """An inversion's estimate, the table it used and the sphere sizes left out (and why)."""
 
     estimate: Estimate
     table_id: str
-    skipped: list[dict[str, Any]] = field(default_factory=list)
+    skipped: list[SkippedSize] = field(default_factory=list)
 
     def to_dict(self, posterior: bool = False) -> dict[str, Any]:
+        """The estimate's JSON form (:class:`~.estimate.EstimateDict`) with ``table`` and
+        ``skipped``, JSON-ready; kept as plain JSON where answers and stored results pass it
+        through."""
         return json_ready({**self.estimate.to_dict(posterior=posterior), "table": self.table_id,
                            "skipped": self.skipped})
 
@@ -168,7 +180,7 @@ def estimate(
     if not tables.loaded:
         raise EstimateUnavailable(tables.reason or "no model table loaded")
     inputs: list[FeatureSummary] = []
-    left_out = [dict(s) for s in skipped]
+    left_out = [cast(SkippedSize, dict(s)) for s in skipped]  # as the docstring says
     for s in summaries:
         if isinstance(s, FeatureSummary):
             inputs.append(s)

@@ -30,16 +30,17 @@ nothing changes.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
 from solitonde.instrument.inference.marginals import (
     LR_LEVELS,
+    ParameterDict,
     ParameterEstimate,
     _crossing,
     _quantiles,
-    _summarise,
+    summarise_marginal,
 )
 
 Span = tuple[int, int]
@@ -57,6 +58,14 @@ SEPARATE_LEVEL = float(np.exp(-0.5 * 6.634896601021214))
 two runs of its 95 % set for them to be separate readings."""
 
 
+class ReadingDict(TypedDict):
+    """A reading as JSON (:meth:`Reading.to_dict`)."""
+
+    thickness_m: ParameterDict
+    distance_m: ParameterDict
+    weight: float
+
+
 @dataclass
 class Reading:
     """One of several readings of an ``ambiguous`` answer: where on the ridge, and how much of
@@ -66,7 +75,7 @@ class Reading:
     distance_m: ParameterEstimate
     weight: float
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> ReadingDict:
         return {"thickness_m": self.thickness_m.to_dict(), "distance_m": self.distance_m.to_dict(),
                 "weight": self.weight}
 
@@ -246,7 +255,7 @@ def _reading(span: Span, bounds: tuple[float, float], answer: ParameterEstimate,
         t_est = ParameterEstimate(peak, q50, (q16, q84), (lo95, hi95), "constrained")
     mass_l = sub.sum(axis=0)
     profile_l = like[a:b + 1].max(axis=0)
-    d_est = (_summarise(distance_m, mass_l, weight_l, lower_physical, profile=profile_l)
+    d_est = (summarise_marginal(distance_m, mass_l, weight_l, lower_physical, profile=profile_l)
              if mass_l.sum() > 0 else ParameterEstimate(None, None, None, None, "unconstrained"))
     return Reading(t_est, d_est, weight)
 

@@ -22,12 +22,16 @@ import json
 import math
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference.calibration import Calibration, CalibrationError
+from solitonde.instrument.inference.calibration import (
+    Calibration,
+    CalibrationDict,
+    CalibrationError,
+)
 from solitonde.instrument.inference.sizes import size_problem
 
 SETUP_ID_MAX = 128
@@ -41,6 +45,29 @@ FIELDS = ("id", "revision", "created_at", "sphere_diameters_m", "table", "plate_
 INPUT_FIELDS = ("id", "sphere_diameters_m", "table", "plate_material", "chain", "striker",
                 "labels")
 """What a client states when it creates or revises a set-up (the rest the service sets)."""
+
+
+class SetupReference(TypedDict):
+    """What a measurement's provenance names of its set-up."""
+
+    id: str
+    revision: int
+
+
+class SetupDict(TypedDict):
+    """A set-up revision's JSON form (:meth:`Setup.to_dict`), the keys of :data:`FIELDS`."""
+
+    id: str
+    revision: int
+    created_at: float | None
+    sphere_diameters_m: list[float]
+    table: str
+    plate_material: Any  # a library name or a property mapping, as stated
+    chain: dict[str, Any] | None  # kept as the client states it
+    striker: dict[str, Any] | None  # likewise
+    labels: dict[str, str | float] | None
+    chain_calibration: CalibrationDict | None
+    calibration_source: dict[str, Any] | None  # provenance, kept as stored
 
 
 class SetupError(InstrumentError):
@@ -89,6 +116,7 @@ def _sizes(value: Any, name: str) -> tuple[float, ...]:
 
 
 def _mapping(value: Any, name: str) -> dict[str, Any] | None:
+    """A free-form JSON object a set-up keeps as stated (``chain``, ``striker``, ...)."""
     if value is None:
         return None
     if not isinstance(value, Mapping):
@@ -98,6 +126,26 @@ def _mapping(value: Any, name: str) -> dict[str, Any] | None:
     except (TypeError, ValueError) as exc:
         raise SetupError(name, f"not JSON: {exc}") from None
     return dict(value)
+
+
+def _labels(value: Any) -> dict[str, str | float] | None:
+    """``labels``: a JSON object whose values are text or numbers."""
+    labels = _mapping(value, "labels")
+    if labels is not None:
+        for key, label in labels.items():
+            if not isinstance(label, str | int | float) or isinstance(label, bool):
+                raise SetupError(f"labels.{key}", f"{label!r} is not a label",
+                                 "text or a number")
+    return labels
+
+
+def _chain_calibration(value: Any) -> CalibrationDict | None:
+    """``chain_calibration`` checked and written back in the calibration file's form."""
+    try:
+        calibration = Calibration.from_any(value)
+    except CalibrationError as exc:
+        raise SetupError(f"chain_calibration.{exc.field}", exc.full_message) from None
+    return None if calibration is None else calibration.to_dict()
 
 
 @dataclass(frozen=True)
@@ -114,14 +162,16 @@ class Setup:
     """The plate family's material (a library name or its properties), for the material
     spread; None: the table's."""
     chain: dict[str, Any] | None = None
+    """The chain as mounted (material, n_particles, sensor_index ...), kept as stated."""
     striker: dict[str, Any] | None = None
-    labels: dict[str, Any] | None = None
+    """The striker (drop_height ...), kept as stated."""
+    labels: dict[str, str | float] | None = None
     """Operator, instrument serial, lab: what a report's title block names."""
-    chain_calibration: dict[str, Any] | None = None
+    chain_calibration: CalibrationDict | None = None
     """The chain calibration (:class:`~.calibration.Calibration`'s dict), or None."""
     calibration_source: dict[str, Any] | None = None
-    """Where the calibration came from: the reference measurements, or an uploaded file."""
-    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+    """Where the calibration came from: the reference measurements, or an uploaded file (its
+    own provenance), kept as stored."""
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, inputs_only: bool = False) -> Setup:
@@ -143,12 +193,7 @@ class Setup:
                     "id": "the set-up's name, e.g. \"lab-a-chain-1\"",
                     "sphere_diameters_m": "the sphere diameters in metres, e.g. [9.53e-3]",
                     "table": "the id of the table its plates are read against"}[key])
-        calibration = data.get("chain_calibration")
-        if calibration is not None:
-            try:
-                calibration = Calibration.from_any(calibration).to_dict()  # type: ignore[union-attr]
-            except CalibrationError as exc:
-                raise SetupError(f"chain_calibration.{exc.field}", exc.full_message) from None
+        calibration = _chain_calibration(data.get("chain_calibration"))
         revision = data.get("revision", 0)
         if isinstance(revision, bool) or not isinstance(revision, int) or revision < 0:
             raise SetupError("revision", f"{revision!r} is not a revision number")
@@ -156,12 +201,7 @@ class Setup:
         if created is not None and not (isinstance(created, int | float)
                                         and math.isfinite(created)):
             raise SetupError("created_at", f"{created!r} is not a time (Unix seconds)")
-        labels = _mapping(data.get("labels"), "labels")
-        if labels is not None:
-            for key, value in labels.items():
-                if not isinstance(value, str | int | float) or isinstance(value, bool):
-                    raise SetupError(f"labels.{key}", f"{value!r} is not a label",
-                                     "text or a number")
+        labels = _labels(data.get("labels"))
         return cls(
             id=_setup_id(data["id"]),
             sphere_diameters_m=_sizes(data["sphere_diameters_m"], "sphere_diameters_m"),
@@ -192,7 +232,7 @@ class Setup:
             raise SetupError(f"setup.{exc.field}", f"{exc.full_message} (in {path.name})") \
                 from None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> SetupDict:
         """The JSON form, every field of :data:`FIELDS` in order."""
         return {"id": self.id, "revision": self.revision, "created_at": self.created_at,
                 "sphere_diameters_m": list(self.sphere_diameters_m), "table": self.table,
@@ -201,7 +241,7 @@ class Setup:
                 "chain_calibration": self.chain_calibration,
                 "calibration_source": self.calibration_source}
 
-    def reference(self) -> dict[str, Any]:
+    def reference(self) -> SetupReference:
         """What a measurement's provenance names: ``{"id", "revision"}``."""
         return {"id": self.id, "revision": self.revision}
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.loaded_table import LoadedTable
@@ -31,6 +31,18 @@ def table_files(paths: Iterable[Path]) -> list[Path]:
     for p in paths:
         out.extend(sorted(p.glob("*.h5")) if p.is_dir() else [p])
     return out
+
+
+class TableListing(TypedDict):
+    """One loaded table as ``GET /v1/tables`` lists it."""
+
+    id: str
+    path: str
+    family: dict[str, Any] | None  # the table's own family record (ModelTable.family)
+    diameters_m: list[float]
+    thickness_range_m: list[float]
+    distance_range_m: list[float]
+    complete: bool
 
 
 class TableSet:
@@ -82,9 +94,9 @@ class TableSet:
         sizes = {tuple(e.plate_size() or ()) for e in self.by_id.values()}
         return list(sizes.pop()) if len(sizes) == 1 and () not in sizes else None
 
-    def listing(self) -> list[dict[str, Any]]:
+    def listing(self) -> list[TableListing]:
         """Every table's id, family, sphere sizes and axes' ranges (``GET /v1/tables``)."""
-        out = []
+        out: list[TableListing] = []
         for tid, est in self.by_id.items():
             t = est.model
             out.append({"id": tid, "path": str(est.path), "family": t.family,
@@ -108,7 +120,7 @@ class TableSet:
 
         if not self.loaded:
             raise TableChoiceError("table", self.reason or "no model table loaded")
-        stated: dict[str, Any] = {}
+        stated: dict[str, dict[str, object]] = {}  # what the measurement says of its family
         if plate_material is not None:
             try:
                 stated["plate_material"] = properties_from(plate_material)

@@ -18,9 +18,12 @@ import numpy as np
 import pytest
 
 from solitonde.instrument.cli.cmd_table import DEFAULT_TABLE_PATH
-from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
+from solitonde.instrument.inference.fine_grid import fine_grid
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
+from solitonde.instrument.parallel import default_workers
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.instrument.tables.table_build import Sweep, build_table, default_workers
+from solitonde.instrument.tables.table_build import Sweep, build_table
 
 pytestmark = pytest.mark.bench
 
@@ -97,7 +100,7 @@ def test_bench_build_rate(tmp_path: Path) -> None:
     cluster (one process per core, started beforehand so its start-up is not counted)."""
     from dask.distributed import LocalCluster
 
-    from solitonde.instrument.tables.table_build import WORKER_ENV
+    from solitonde.instrument.parallel import WORKER_ENV
 
     sweep = _sweep()
     build_table(Sweep([4.76e-3], [3e-3], [0.01], scene=FAST), tmp_path / "warm.h5", workers=1)

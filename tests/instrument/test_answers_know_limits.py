@@ -24,7 +24,8 @@ from recordings import STEEL, STEEL_TABLE, post_recording, steel_shots
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
-from solitonde.instrument.inference.inversion import FeatureSummary, invert
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.tables.table import ModelTable

@@ -31,7 +31,7 @@ OTHER_WAVEFORMS = {
     "cli/cmd_samples.py": "cuts already measured shots to one time axis; a scan file named nothing",
 }
 # Modules that extract features from recorded shots, not simulations.
-RECORDED_EXTRACTS = {"inference/chain_geometry.py"}  # measure_shot: every recorded shot
+RECORDED_EXTRACTS = {"inference/shot_measure.py"}  # measure_shot: every recorded shot
 MEASURED_CALLS = {"as_measured", "to_waveform"}  # to_waveform: cmd_simulate's call of as_measured
 
 

@@ -19,7 +19,7 @@ import pytest
 from independent_chain import recorded_for
 from recordings import STEEL, analyze_inverted, edit_shots, steel_shots
 
-from solitonde.instrument.inference import chain_geometry
+from solitonde.instrument.inference import chain_geometry, shot_measure
 from solitonde.instrument.tables.measured import detect_options
 from solitonde.signal import io as signal_io
 from solitonde.signal.batch import extract_batch
@@ -43,7 +43,7 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_a_step_between_the_pulses_is_refused(folder: Path) -> None:
     path = _recording(folder, 2.0)
-    features = [chain_geometry.measure_shot(w, 9.53e-3) for w in signal_io.read(path)]
+    features = [shot_measure.measure_shot(w, 9.53e-3) for w in signal_io.read(path)]
     assert all("unsteady_baseline" in f.flags for f in features)
     code, out = analyze_inverted(path)
     assert code == 1

@@ -28,12 +28,10 @@ from solitonde.instrument.inference.calibration import (
     CalibrationError,
 )
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
-from solitonde.instrument.inference.inversion import (
-    FeatureSummary,
-    cell_likelihood,
-    invert,
-    predict,
-)
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
+from solitonde.instrument.inference.likelihood import cell_likelihood
 from solitonde.instrument.tables import bundled
 from solitonde.instrument.tables.dissipation import damped
 from solitonde.instrument.tables.table import ModelTable

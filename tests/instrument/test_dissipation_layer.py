@@ -30,7 +30,8 @@ from solitonde.instrument.inference.calibration import (
     calibrated_table,
 )
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
-from solitonde.instrument.inference.inversion import FeatureSummary, predict
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.tables import bundled
 from solitonde.instrument.tables.dissipation import (
     DEFAULT_DAMPINGS_S,

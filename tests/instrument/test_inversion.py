@@ -9,14 +9,10 @@ import pytest
 
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
-from solitonde.instrument.inference.inversion import (
-    FLOOR_ARR_MAX,
-    FeatureSummary,
-    InversionError,
-    fine_grid,
-    invert,
-    predict,
-)
+from solitonde.instrument.inference.fine_grid import fine_grid, predict
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
+from solitonde.instrument.inference.model_error import FLOOR_ARR_MAX
 from solitonde.instrument.tables.table import (
     STATUS_NO_REFLECTION,
     STATUS_OK,
@@ -267,7 +263,7 @@ def test_noise_free_table_nodes_are_inside_their_intervals() -> None:
     one size alone is scored from 35 mm."""
     from pathlib import Path
 
-    from solitonde.instrument.inference.inversion import predict
+    from solitonde.instrument.inference.fine_grid import predict
 
     table = ModelTable.load(Path(__file__).resolve().parents[2] / "data_samples"
                             / "default_table.h5")

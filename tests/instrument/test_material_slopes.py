@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from independent_chain import features_of
 
-from solitonde.instrument.inference.inversion import fine_grid
+from solitonde.instrument.inference.fine_grid import fine_grid
 from solitonde.instrument.inference.material_spread import sensitivity
 from solitonde.instrument.tables.material_slopes import add_to_table
 from solitonde.instrument.tables.table import MATERIAL_SLOPES, ModelTable, TableError

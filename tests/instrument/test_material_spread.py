@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from solitonde.instrument.inference.inversion import FeatureSummary, _solve2, invert
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.material_spread import exchange_rates, spread_of
+from solitonde.instrument.inference.woodbury import solve2 as _solve2
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.model import zener
 from solitonde.model.materials import (

@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 
 from solitonde.instrument.inference import ridge
-from solitonde.instrument.inference.inversion import FeatureSummary, invert
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.marginals import LR_LEVELS, ParameterEstimate
 from solitonde.instrument.tables.table import ModelTable
 

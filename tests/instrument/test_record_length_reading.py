@@ -20,7 +20,7 @@ import pytest
 from independent_chain import sensor_trace
 from recordings import STEEL
 
-from solitonde.instrument.inference.chain_geometry import measure_shot
+from solitonde.instrument.inference.shot_measure import measure_shot
 from solitonde.signal.features import Features
 from solitonde.signal.waveform import Waveform
 

@@ -79,7 +79,7 @@ def test_the_window_reaches_the_service_and_is_checked(tmp_path: Path) -> None:
     name."""
     from fastapi.testclient import TestClient
 
-    from solitonde.instrument.inference.inversion import FeatureSummary, InversionError
+    from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
     from solitonde.instrument.service.app import build_app as build_service
     from solitonde.instrument.service.settings import Settings
 

@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
-from solitonde.instrument.inference.inversion import predict
+from solitonde.instrument.inference.fine_grid import predict
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings

@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 from table_points import simulated_at
 
-from solitonde.instrument.inference.inversion import predict
+from solitonde.instrument.inference.fine_grid import predict
 from solitonde.instrument.tables import bundled
 from solitonde.instrument.tables.table import ModelTable
 

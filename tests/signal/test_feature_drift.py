@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from scipy_chain import ChainTrace, solve
 
-from solitonde.instrument.inference.chain_geometry import measure_shot
+from solitonde.instrument.inference.shot_measure import measure_shot
 from solitonde.model.scene import scene_from_dict
 from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform

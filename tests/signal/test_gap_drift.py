@@ -14,12 +14,8 @@ import numpy as np
 import pytest
 from scipy_chain import solve
 
-from solitonde.instrument.inference.chain_geometry import (
-    chain_scene,
-    measure_shot,
-    relaxation,
-    shot_options,
-)
+from solitonde.instrument.inference.chain_geometry import chain_scene, relaxation, shot_options
+from solitonde.instrument.inference.shot_measure import measure_shot
 from solitonde.model.scene import scene_from_dict
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import extract

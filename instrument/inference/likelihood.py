@@ -1,0 +1,296 @@
+"""The inversion's likelihood over the fine (t, L) grid, for exactly the sphere sizes given.
+
+Per cell, -2 log likelihood = chi^2 + log det C (+ the hidden sizes' bound terms), with C the
+terms' covariance: diagonal (shot scatter, the table's interpolation error, the calibration) plus,
+when the plate material has a spread, the rank-2 covariance ``U U^T`` it induces across every
+term (instrument.inference.material_spread), applied with Woodbury's identity (:mod:`.woodbury`).
+
+With a shared calibration (:func:`cell_likelihood`'s ``shared_calibration``) the calibration's
+stated TOF offset uncertainty is left out of C and kept instead as the exact dependence of the
+deviance on the offsets' errors ``eta`` (an error adds to the model TOF: the residual moves
+linearly), ``chi^2(eta) = chi^2(0) - 2 b.eta + eta^T Q eta`` per cell, so that a plate's joint map
+can draw one offset error for all its positions (instrument.inference.joint_map). The ARR
+factor's uncertainty stays in C, per position.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypedDict
+
+import numpy as np
+from scipy.special import ndtr
+
+from solitonde.instrument.inference.calibration import (
+    Calibration,
+    calibrated_table,
+    calibration_along,
+)
+from solitonde.instrument.inference.fine_grid import FineGrid, fine_grid
+from solitonde.instrument.inference.inversion_inputs import MIN_TOF_STD_S, FeatureSummary
+from solitonde.instrument.inference.model_error import FLOOR_ARR_MAX, REFLECTION_D_OVER_T
+from solitonde.instrument.inference.woodbury import UPPER, bilinear2, solve2
+from solitonde.instrument.tables.table import ModelTable
+
+LOG_BATCH = 8
+"""Variances multiplied before one log. A variance lies between about 1e-19 s^2 (the TOF floor
+over 1e5 shots) and 1e2 (an ARR scatter of 10, the most an input may state): a product of 8
+stays between 1e-152 and 1e16, far from underflow and overflow."""
+
+
+class CellLikelihood(TypedDict):
+    """The likelihood on every fine cell (:func:`cell_likelihood`)."""
+
+    deviance: np.ndarray
+    n_terms: int
+    grid: FineGrid
+    misfit: np.ndarray
+    shared: list[tuple[float, str, float]]
+    shared_b: np.ndarray
+    shared_q: np.ndarray
+
+
+@dataclass
+class SharedError:
+    """A calibration error kept out of C: its size's diameter, what it offsets, its sd, and per
+    cell the linear (``b``) and quadratic (``q``) coefficients of the deviance in it, before the
+    material's correction (``u_e``: ``U^T D^-1 e``, None without a material spread)."""
+
+    diameter_m: float
+    kind: str
+    sd: float
+    b: np.ndarray
+    q: np.ndarray
+    u_e: np.ndarray | None
+
+
+@dataclass
+class Deviance:
+    """The likelihood's parts per cell, summed term by term over the sphere sizes.
+
+    The log-variances are kept as one log of a running product, taken every :data:`LOG_BATCH`
+    terms (a log over the grid costs as much as the rest of a term)."""
+
+    grids: list[FineGrid]
+    n_terms: int
+    misfit: np.ndarray
+    bound_terms: np.ndarray
+    logdet: np.ndarray
+    det: np.ndarray
+    penalty: np.ndarray
+    bound_list: list[np.ndarray] = field(default_factory=list)
+    terms: int = 0
+    ur_sum: np.ndarray | None = None
+    m_sum: np.ndarray | None = None
+    """The three distinct entries of ``U^T D^-1 U`` (:data:`.woodbury.UPPER`) and ``U^T D^-1 r``,
+    where the material has a spread."""
+    shared: list[SharedError] = field(default_factory=list)
+    shared_b: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    shared_q: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @classmethod
+    def empty(cls, grids: list[FineGrid], n_terms: int) -> Deviance:
+        shape = grids[0].tof_s.shape
+        return cls(grids, n_terms, misfit=np.zeros(shape), bound_terms=np.zeros(shape),
+                   logdet=np.zeros(shape), det=np.ones(shape), penalty=np.zeros(shape))
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.misfit.shape
+
+    def add_bound(self, term: np.ndarray) -> None:
+        """A hidden size's bound term."""
+        self.bound_terms += term
+        self.bound_list.append(term)
+
+    def add_term(self, r: np.ndarray, var: np.ndarray) -> None:
+        """One Gaussian term: residual ``r`` (squared in place) over variance ``var``."""
+        r *= r
+        r /= var
+        self.misfit += r
+        self.det *= var
+        self.terms += 1
+        if self.terms % LOG_BATCH == 0:
+            self.logdet += np.log(self.det)
+            self.det.fill(1.0)
+
+    def add_material(self, u: np.ndarray, var: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """One term's share of ``U^T D^-1 r`` and ``U^T D^-1 U``; returns ``U^T D^-1`` (per
+        component) for the shared errors."""
+        u_over = u / var
+        ur = u_over * r
+        self.ur_sum = ur if self.ur_sum is None else self.ur_sum + ur
+        if self.m_sum is None:
+            self.m_sum = np.zeros((3, *self.shape))
+        for n_e, (a, b) in enumerate(UPPER):
+            self.m_sum[n_e] += u_over[a] * u[b]
+        return u_over
+
+    def close_logs(self) -> None:
+        """The log of the product left over from the last batch."""
+        if self.terms % LOG_BATCH:
+            self.logdet += np.log(self.det)
+
+    def total(self) -> np.ndarray:
+        """-2 log L per cell: misfit, log-determinant, the cells without features (inf), and the
+        hidden sizes' bounds."""
+        return self.misfit + self.logdet + self.penalty + self.bound_terms
+
+    def bound_misfit(self, at: tuple[Any, ...] | None = None) -> Any:
+        """The hidden sizes' misfit: -2 log of each one's likelihood against an ARR at the bound
+        itself (1/2), about z^2 once the model's reflection clearly exceeds the bound, 0 below it;
+        over the grid, or at the cell ``at``."""
+        if at is None:
+            return sum((np.maximum(b - 2.0 * math.log(2.0), 0.0) for b in self.bound_list),
+                       np.zeros(self.shape))
+        return sum(max(0.0, float(b[at]) - 2.0 * math.log(2.0)) for b in self.bound_list)
+
+
+def _hidden_term(item: FeatureSummary, g: FineGrid, cal: Calibration | None) -> np.ndarray:
+    """-2 log likelihood of a size without a reflection: the model's ARR (where it has a
+    reflection) must lie under the bound; cells where the model itself detects none agree."""
+    factor, offset, f_std, o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])
+    sd = np.sqrt(item.bound_sigma() ** 2 + factor**2 * g.model_arr_var
+                 + (f_std * g.arr_reflecting) ** 2)
+    z = (item.arr_upper_bound - factor * g.arr_reflecting) / sd
+    under = ndtr(z)
+    if item.tof_window_s is not None:
+        # a reflection later than the records' window would not have been seen: the bound holds
+        # only with the probability that the model's arrives within it
+        tof_sd = np.sqrt(g.model_tof_var + o_std**2 + MIN_TOF_STD_S**2)
+        p_in = ndtr((item.tof_window_s - offset - np.nan_to_num(g.tof_s)) / tof_sd)
+        under = p_in * under + (1.0 - p_in)
+    like = (1.0 - g.reflect_weight) + g.reflect_weight * under
+    return -2.0 * np.log(np.maximum(like, 1e-300))
+
+
+def _variance_residual(model: np.ndarray, obs: Any, scale: Any, s2: Any, model_var: np.ndarray,
+                       rel2: Any, var: np.ndarray, r: np.ndarray) -> bool:
+    """A term's variance and residual, into ``var`` and ``r``: the calibration's own uncertainty
+    with them (the offset adds, the factor scales the model ARR). Whether the model is unscaled."""
+    unscaled = bool(np.ndim(scale) == 0 and scale == 1.0)
+    if unscaled:
+        np.add(model_var, s2, out=var)
+        np.subtract(obs, model, out=r)
+    else:
+        np.multiply(model_var, scale * scale, out=var)
+        var += s2
+        np.multiply(model, -scale, out=r)
+        r += obs
+    if np.any(rel2):
+        rel = np.multiply(model, model)
+        rel *= rel2
+        var += rel
+    return unscaled
+
+
+def _shared_offset(g: FineGrid, o_std: Any, r: np.ndarray, var: np.ndarray,
+                   u_over: np.ndarray | None) -> SharedError:
+    """The TOF offset's error kept out of C: the TOF residual moves by -1 per unit error (where
+    the offset's sd follows distance: one error, scaled to each distance's sd)."""
+    shape = r.shape
+    sd = float(np.max(o_std))
+    e = np.ones(shape) if np.ndim(o_std) == 0 else np.broadcast_to(o_std / sd, shape)
+    return SharedError(g.diameter_m, "tof_offset_s", sd, e * r / var, e * e / var,
+                       None if u_over is None else u_over * e)
+
+
+def _add_seen(dev: Deviance, table: ModelTable, item: FeatureSummary, g: FineGrid,
+              cal: Calibration | None, spread: Mapping[str, float] | None, share: bool,
+              var: np.ndarray, r: np.ndarray) -> None:
+    """A size's TOF and ARR terms (``var`` and ``r``: scratch arrays of the grid's shape)."""
+    from solitonde.instrument.inference.material_spread import sensitivity
+
+    # numbers, or rows over the grid's distance axis where the calibration follows distance
+    factor, offset, f_std, o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])
+    s_tof, s_arr = item.sigmas()
+    u_pair = (sensitivity(table, g, spread, (REFLECTION_D_OVER_T, FLOOR_ARR_MAX)) if spread
+              else None)
+    for k, (model, obs, scale, s2, model_var, rel2) in enumerate((
+        (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + (0.0 if share else o_std**2),
+         g.model_tof_var, 0.0),
+        (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
+    )):
+        unscaled = _variance_residual(model, obs, scale, s2, model_var, rel2, var, r)
+        u_over = None
+        if u_pair is not None:
+            u_over = dev.add_material(u_pair[k] if unscaled else u_pair[k] * scale, var, r)
+        if share and k == 0 and np.any(o_std > 0):
+            dev.shared.append(_shared_offset(g, o_std, r, var, u_over))
+        dev.add_term(r, var)
+    dev.penalty += g.penalty
+
+
+def _apply_woodbury(dev: Deviance) -> None:
+    """The material's rank-2 covariance and the shared errors' coefficients.
+
+    Woodbury: C = D + U U^T  ->  chi^2 -= b^T M^-1 b, log det C += log det M, with
+    M = I + U^T D^-1 U and b = U^T D^-1 r (2 x 2 per cell, solved in closed form); the shared
+    errors' coefficients go through the same C^-1 (D^-1 - D^-1 U M^-1 U^T D^-1)."""
+    shared = dev.shared
+    dev.shared_b = np.array([e.b for e in shared]).reshape(len(shared), *dev.shape)
+    dev.shared_q = np.zeros((len(shared), len(shared), *dev.shape))
+    for n_e, err in enumerate(shared):
+        dev.shared_q[n_e, n_e] = err.q
+    if dev.m_sum is None or dev.ur_sum is None:
+        return
+    quad, logdet_m = solve2(dev.m_sum, dev.ur_sum)
+    ok = np.isfinite(dev.penalty)
+    dev.misfit[ok] -= quad[ok]
+    dev.logdet[ok] += logdet_m[ok]
+    u_es = [e.u_e for e in shared]  # every term carries the material's columns here
+    for n_e, u_e in enumerate(u_es):
+        assert u_e is not None
+        dev.shared_b[n_e] -= bilinear2(dev.m_sum, u_e, dev.ur_sum)
+        for n_f, u_f in enumerate(u_es):
+            assert u_f is not None
+            dev.shared_q[n_e, n_f] -= bilinear2(dev.m_sum, u_e, u_f)
+
+
+def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | None,
+             spread: Mapping[str, float] | None, shared_calibration: bool = False) -> Deviance:
+    """The likelihood's parts on the fine grid of the table read at the chain's calibration
+    (its fitted damping, if it has one), for exactly ``items``."""
+    table = calibrated_table(table, cal)
+    grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
+    n_terms = 2 * sum(not i.hidden for i in items) + sum(i.hidden for i in items)
+    dev = Deviance.empty(grids, n_terms)
+    var = np.empty(dev.shape)
+    r = np.empty(dev.shape)
+    for item, g in zip(items, grids, strict=True):
+        if item.hidden:
+            dev.add_bound(_hidden_term(item, g, cal))
+        else:
+            _add_seen(dev, table, item, g, cal, spread, shared_calibration, var, r)
+    dev.close_logs()
+    _apply_woodbury(dev)
+    return dev
+
+
+def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary | Mapping[str, Any]],
+                    calibration: Calibration | Mapping[str, Any] | None = None, *,
+                    material_spread: Mapping[str, float] | None = None,
+                    shared_calibration: bool = False) -> CellLikelihood:
+    """The likelihood :func:`~.inversion.invert` puts on every fine (t, L) cell for exactly these
+    sphere sizes (no size left out), for a plate's joint map (instrument.inference.joint_map): one
+    likelihood, not a second one. ``deviance`` is -2 log L (inf where the model has no
+    reflection), ``misfit`` the chi^2 that ``fit`` reports, ``grid`` the first size's
+    :class:`~.fine_grid.FineGrid` (axes and prior weights), ``n_terms`` the terms counted.
+
+    ``shared_calibration``: the TOF offsets' uncertainty is not in ``deviance`` and ``misfit``
+    (they hold at the stated offsets); instead ``shared`` lists the errors
+    ``(diameter_m, "tof_offset_s", sd)`` with a stated sd, and
+    ``shared_b`` (errors, t, L) and ``shared_q`` (errors, errors, t, L) give the deviance at
+    errors ``eta``: ``deviance - 2 b.eta + eta^T Q eta`` (likewise ``misfit``)."""
+    from solitonde.instrument.inference.material_spread import spread_of
+
+    spread = dict(spread_of(table) if material_spread is None else material_spread)
+    dev = deviance(table, [FeatureSummary.from_any(i) for i in inputs],
+                   Calibration.from_any(calibration), spread, shared_calibration)
+    return CellLikelihood(
+        deviance=dev.total(), n_terms=dev.n_terms, grid=dev.grids[0],
+        misfit=dev.misfit + dev.bound_misfit(),
+        shared=[(float(e.diameter_m), str(e.kind), float(e.sd)) for e in dev.shared],
+        shared_b=dev.shared_b, shared_q=dev.shared_q)
