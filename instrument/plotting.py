@@ -204,11 +204,8 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
     support is drawn as a dashed line (with a joint map's opposite edge), the plate's outline
     when its size is known, the suggested next positions as numbered stars.
     """
-    from matplotlib.lines import Line2D
-
     positions = [p for p in plate_map.get("positions", [])
                  if p.get("x_m") is not None and p.get("y_m") is not None]
-    size = plate_map.get("plate_size_m")
     support = plate_map.get("support")
     suggestions = plate_map.get("suggestions") or []
     fig = Figure(figsize=(width_px / 100, height_px / 100), dpi=100)
@@ -216,80 +213,133 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
     axes = fig.subplots(1, 2)
     xs = [p["x_m"] * 1e3 for p in positions]
     ys = [p["y_m"] * 1e3 for p in positions]
-    if size:  # a margin, so that an edge and positions on it stay in sight
-        mx, my = 0.04 * size[0] * 1e3, 0.04 * size[1] * 1e3
-        xlim, ylim = (-mx, size[0] * 1e3 + mx), (-my, size[1] * 1e3 + my)
-    elif positions:
-        pad = max(20.0, 0.1 * max(np.ptp(xs), np.ptp(ys)))
-        xlim = (min(xs) - pad, max(xs) + pad)
-        ylim = (min(ys) - pad, max(ys) + pad)
-    else:
-        xlim = ylim = (0.0, 1.0)
-    labels_of: list[tuple[Any, list[Any]]] = []
-    for ax, (key, label, short, cmap) in zip(axes, _MAP_PARAMETERS, strict=True):
-        values = []
-        for p in positions:
-            est = p.get(key) or {}
-            status = est.get("status")
-            if status == "constrained":
-                values.append(est["median"] * 1e3)
-            elif status == "lower_bound_only" and est.get("ci95"):
-                values.append(est["ci95"][0] * 1e3)
-            elif status == "upper_bound_only" and est.get("ci95"):
-                values.append(est["ci95"][1] * 1e3)
-            else:
-                values.append(np.nan)
-        finite = [v for v in values if np.isfinite(v)]
-        vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
-        if vmax - vmin < 1e-9:
-            vmin, vmax = vmin - 0.5, vmax + 0.5
-        from matplotlib import colormaps
-        from matplotlib.cm import ScalarMappable
-        from matplotlib.colors import Normalize
+    view = _MapView(positions, xs, ys, plate_map.get("plate_size_m"), support, suggestions)
+    labels_of = [(ax, _map_panel(fig, ax, parameter, view))
+                 for ax, parameter in zip(axes, _MAP_PARAMETERS, strict=True)]
+    _map_legend(fig, support, suggestions)
+    lines = _fitted_title(fig, _map_title(plate_map, len(positions), support), width_px)
+    top = 0.88 - (len(lines) - 1) * 15.0 / height_px
+    fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=top, wspace=0.25)
+    for ax, labels in labels_of:  # after the layout, which moves the axes
+        spread_labels(ax, labels)
+    return fig
 
-        mappable = ScalarMappable(Normalize(vmin, vmax), colormaps[cmap])
-        for p, v, x, y in zip(positions, values, xs, ys, strict=True):
-            status = (p.get(key) or {}).get("status")
-            if not np.isfinite(v):
-                ax.plot(x, y, "x", color="0.5", ms=9, mew=2)
-                continue
-            colour = mappable.to_rgba(v)
-            if status == "constrained":
-                ax.scatter([x], [y], color=[colour], marker="o", s=160, edgecolors="black",
-                           linewidths=1.0, zorder=3)
-            else:  # hollow: the colour is the edge's, over a dark outline that a pale
-                # colour (the map's light end) still stands out against
-                marker = "^" if status == "lower_bound_only" else "v"
-                ax.scatter([x], [y], marker=marker, s=170, facecolors="none",
-                           edgecolors="black", linewidths=4.0, zorder=3)
-                ax.scatter([x], [y], marker=marker, s=170, facecolors="none",
-                           edgecolors=[colour], linewidths=2.2, zorder=4)
-        if finite:
-            bar = fig.colorbar(mappable, ax=ax)
-            bar.set_label(f"{short}, mm")
-        if size:
-            ax.add_patch(_outline(size))
-        if support:
-            _draw_support(ax, support, xlim, ylim)
-            if support.get("second_offset_m") is not None:  # the opposite clamped edge
-                _draw_support(ax, {**support, "offset_m": support["second_offset_m"]}, xlim,
-                              ylim)
-        for k, s in enumerate(suggestions, start=1):
-            ax.scatter([s["x_m"] * 1e3], [s["y_m"] * 1e3], marker="*", s=320, color="gold",
-                       edgecolors="black", linewidths=1.2, zorder=5)
-            ax.annotate(f"next {k}", (s["x_m"] * 1e3, s["y_m"] * 1e3), textcoords="offset points",
-                        xytext=(8, -12), fontsize=7, color="black", zorder=6)
-        labels = [ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
-                              xytext=(7, 7), fontsize=7, color="0.25")
-                  for p, x, y in zip(positions, xs, ys, strict=True) if p.get("position")
-                  and len(positions) <= LABELLED_POSITIONS_MAX]
-        ax.set_xlim(*xlim)
-        ax.set_ylim(*ylim)
-        ax.set_aspect("equal", adjustable="box")
-        labels_of.append((ax, labels))
-        ax.set_xlabel("x on the plate, mm")
-        ax.set_ylabel("y on the plate, mm")
-        ax.set_title(label)
+
+class _MapView:
+    """What both panels of a plate's map draw: the positions with coordinates (mm), the
+    plate's size, the located support, the suggestions, and the axes' limits."""
+
+    def __init__(self, positions: Sequence[Mapping[str, Any]], xs: Sequence[float],
+                 ys: Sequence[float], size: Sequence[float] | None,
+                 support: Mapping[str, Any] | None,
+                 suggestions: Sequence[Mapping[str, Any]]) -> None:
+        self.positions, self.xs, self.ys = positions, xs, ys
+        self.size, self.support, self.suggestions = size, support, suggestions
+        xlim: tuple[float, float]
+        ylim: tuple[float, float]
+        if size:  # a margin, so that an edge and positions on it stay in sight
+            mx, my = 0.04 * size[0] * 1e3, 0.04 * size[1] * 1e3
+            xlim, ylim = (-mx, size[0] * 1e3 + mx), (-my, size[1] * 1e3 + my)
+        elif positions:
+            pad = max(20.0, 0.1 * max(np.ptp(xs), np.ptp(ys)))
+            xlim = (min(xs) - pad, max(xs) + pad)
+            ylim = (min(ys) - pad, max(ys) + pad)
+        else:
+            xlim = ylim = (0.0, 1.0)
+        self.xlim, self.ylim = xlim, ylim
+
+
+def _shown_values(positions: Sequence[Mapping[str, Any]], key: str) -> list[float]:
+    """Each position's value of ``key`` in mm as its marker shows it: the median when
+    constrained, the 95 % bound when one-sided, NaN when there is no answer."""
+    values = []
+    for p in positions:
+        est = p.get(key) or {}
+        status = est.get("status")
+        if status == "constrained":
+            values.append(est["median"] * 1e3)
+        elif status == "lower_bound_only" and est.get("ci95"):
+            values.append(est["ci95"][0] * 1e3)
+        elif status == "upper_bound_only" and est.get("ci95"):
+            values.append(est["ci95"][1] * 1e3)
+        else:
+            values.append(np.nan)
+    return values
+
+
+def _map_markers(ax: Any, view: _MapView, key: str, values: Sequence[float],
+                 mappable: Any) -> None:
+    """The positions' markers: filled when constrained, hollow triangles for a bound, a grey
+    cross for no answer."""
+    for p, v, x, y in zip(view.positions, values, view.xs, view.ys, strict=True):
+        status = (p.get(key) or {}).get("status")
+        if not np.isfinite(v):
+            ax.plot(x, y, "x", color="0.5", ms=9, mew=2)
+            continue
+        colour = mappable.to_rgba(v)
+        if status == "constrained":
+            ax.scatter([x], [y], color=[colour], marker="o", s=160, edgecolors="black",
+                       linewidths=1.0, zorder=3)
+        else:  # hollow: the colour is the edge's, over a dark outline that a pale
+            # colour (the map's light end) still stands out against
+            marker = "^" if status == "lower_bound_only" else "v"
+            ax.scatter([x], [y], marker=marker, s=170, facecolors="none",
+                       edgecolors="black", linewidths=4.0, zorder=3)
+            ax.scatter([x], [y], marker=marker, s=170, facecolors="none",
+                       edgecolors=[colour], linewidths=2.2, zorder=4)
+
+
+def _map_panel(fig: Figure, ax: Any, parameter: tuple[str, str, str, str],
+               view: _MapView) -> list[Any]:
+    """One panel of a plate's map (its markers, colour bar, outline, support, suggestions);
+    returns the positions' labels, to be spread once the figure is laid out."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    key, label, short, cmap = parameter
+    values = _shown_values(view.positions, key)
+    finite = [v for v in values if np.isfinite(v)]
+    vmin, vmax = (min(finite), max(finite)) if finite else (0.0, 1.0)
+    if vmax - vmin < 1e-9:
+        vmin, vmax = vmin - 0.5, vmax + 0.5
+    mappable = ScalarMappable(Normalize(vmin, vmax), colormaps[cmap])
+    _map_markers(ax, view, key, values, mappable)
+    if finite:
+        bar = fig.colorbar(mappable, ax=ax)
+        bar.set_label(f"{short}, mm")
+    if view.size:
+        ax.add_patch(_outline(view.size))
+    support = view.support
+    if support:
+        _draw_support(ax, support, view.xlim, view.ylim)
+        if support.get("second_offset_m") is not None:  # the opposite clamped edge
+            _draw_support(ax, {**support, "offset_m": support["second_offset_m"]}, view.xlim,
+                          view.ylim)
+    for k, s in enumerate(view.suggestions, start=1):
+        ax.scatter([s["x_m"] * 1e3], [s["y_m"] * 1e3], marker="*", s=320, color="gold",
+                   edgecolors="black", linewidths=1.2, zorder=5)
+        ax.annotate(f"next {k}", (s["x_m"] * 1e3, s["y_m"] * 1e3), textcoords="offset points",
+                    xytext=(8, -12), fontsize=7, color="black", zorder=6)
+    positions = view.positions
+    labels = [ax.annotate(str(p["position"])[:12], (x, y), textcoords="offset points",
+                          xytext=(7, 7), fontsize=7, color="0.25")
+              for p, x, y in zip(positions, view.xs, view.ys, strict=True) if p.get("position")
+              and len(positions) <= LABELLED_POSITIONS_MAX]
+    ax.set_xlim(*view.xlim)
+    ax.set_ylim(*view.ylim)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x on the plate, mm")
+    ax.set_ylabel("y on the plate, mm")
+    ax.set_title(label)
+    return labels
+
+
+def _map_legend(fig: Figure, support: Mapping[str, Any] | None,
+                suggestions: Sequence[Mapping[str, Any]]) -> None:
+    """The markers' legend under both panels."""
+    from matplotlib.lines import Line2D
+
     handles = [Line2D([], [], marker="o", ls="", color="0.3", label="median (constrained)"),
                Line2D([], [], marker="^", ls="", mfc="none", color="0.3",
                       label="at least (95 % bound)"),
@@ -303,7 +353,12 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
                               label="measure next"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False,
                fontsize=8)
-    title = f"plate {plate_map.get('plate_id')}: {len(positions)} positions"
+
+
+def _map_title(plate_map: Mapping[str, Any], n_positions: int,
+               support: Mapping[str, Any] | None) -> str:
+    """The map's title: the plate, its positions, and the support located (or why not)."""
+    title = f"plate {plate_map.get('plate_id')}: {n_positions} positions"
     if plate_map.get("joint"):
         title += ", inverted jointly"
     if support:
@@ -312,12 +367,7 @@ def map_figure(plate_map: Mapping[str, Any], *, width_px: int = 1200,
                   f"{support['offset_m'] * 1e3:.1f} mm (95 % {_mm(lo)}..{_mm(hi)} mm)")
     elif plate_map.get("support_reason"):
         title += f"; support not located: {plate_map['support_reason']}"
-    lines = _fitted_title(fig, title, width_px)
-    top = 0.88 - (len(lines) - 1) * 15.0 / height_px
-    fig.subplots_adjust(left=0.06, right=0.97, bottom=0.16, top=top, wspace=0.25)
-    for ax, labels in labels_of:  # after the layout, which moves the axes
-        spread_labels(ax, labels)
-    return fig
+    return title
 
 
 def _fitted_title(fig: Any, title: str, width_px: int) -> list[str]:

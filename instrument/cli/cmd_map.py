@@ -12,21 +12,31 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
+
+if TYPE_CHECKING:
+    from solitonde.instrument.inference.joint_map import ScanPosition
+    from solitonde.instrument.inference.marginals import ParameterDict
+    from solitonde.instrument.inference.plate_map import JointOptions, MapPosition
+    from solitonde.instrument.inference.table_set import TableSet
+
+    ScanReader = Callable[[], tuple[list[ScanPosition], list[str | None]]]
+    """Reads a plate's positions as a scan, for the joint map (only when it is asked for)."""
 
 STORE_SUFFIXES = (".sqlite", ".sqlite3", ".db")
 ESTIMATE_SUFFIXES = (".csv", ".parquet")
 
 
-def _fail(message: str, code: int = 2) -> None:
+def _fail(message: str, code: int = 2) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code)
 
 
-def _from_estimates(path: Path, plate_id: str) -> tuple[list[dict[str, Any]], Any]:
+def _from_estimates(path: Path, plate_id: str) -> tuple[list[MapPosition], ScanReader]:
     import pandas as pd
 
     from solitonde.instrument.inference.plate_map import from_estimate_rows, scan_from_rows
@@ -49,7 +59,8 @@ def _from_estimates(path: Path, plate_id: str) -> tuple[list[dict[str, Any]], An
     return from_estimate_rows(rows), lambda: scan_from_rows(rows)
 
 
-def _from_store(path: Path, plate_id: str, estimator: Any) -> tuple[list[dict[str, Any]], Any]:
+def _from_store(path: Path, plate_id: str, estimator: TableSet
+                ) -> tuple[list[MapPosition], ScanReader]:
     from solitonde.instrument.inference.plate_map import from_records, scan_from_records
     from solitonde.instrument.service.store import Store, StoreError
 
@@ -82,7 +93,7 @@ FLAG_OF = {"suggest": "--suggest", "suggest_for": "--suggest-for",
 
 
 def _options(joint: bool, suggest: str | None, suggest_for: str, thickness_prior: str,
-             thickness_spread: str | None) -> Any:
+             thickness_spread: str | None) -> JointOptions:
     """The joint map's options from the flags, each checked (exit 1 naming the flag)."""
     from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
     from solitonde.instrument.inference.plate_map import JointOptions
@@ -197,7 +208,8 @@ def map_command(
         typer.echo(f"wrote {out}")
 
 
-def _joint(plate_map: dict[str, Any], scan: Any, estimator: Any, options: Any) -> dict[str, Any]:
+def _joint(plate_map: dict[str, Any], scan: ScanReader, estimator: TableSet,
+           options: JointOptions) -> dict[str, Any]:
     from solitonde.instrument.inference.joint_map import JointMapError
     from solitonde.instrument.inference.plate_map import with_joint
     from solitonde.instrument.inference.table_set import TableChoiceError
@@ -216,7 +228,7 @@ def _joint(plate_map: dict[str, Any], scan: Any, estimator: Any, options: Any) -
 
 def _print_joint(plate_map: dict[str, Any]) -> None:
     """The joint answer, a line per position, then its fit and warnings."""
-    def mm(p: dict[str, Any] | None) -> str:
+    def mm(p: ParameterDict | None) -> str:
         if not p:
             return "-"
         lo, hi = (_mm(v) for v in p.get("ci95") or (None, None))

@@ -19,12 +19,12 @@ import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.edge_fit import locate
-from solitonde.instrument.inference.inversion import FeatureSummary
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.joint_map import (
     DEFAULT_SPREAD,
     JointMapError,
@@ -34,6 +34,7 @@ from solitonde.instrument.inference.joint_map import (
 from solitonde.instrument.inference.joint_map import posterior as joint_posterior
 from solitonde.instrument.inference.joint_map import summary as joint_summary
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
+from solitonde.instrument.inference.marginals import ParameterDict
 from solitonde.instrument.inference.pipeline import (
     SizeSummary,
     summarise,
@@ -44,7 +45,41 @@ from solitonde.instrument.inference.suggest import describe as describe_gain
 from solitonde.instrument.inference.suggest import suggest as suggest_positions
 from solitonde.instrument.inference.table_set import TableSet
 
-PARAMETERS = ("thickness_m", "distance_m")
+Parameter = Literal["thickness_m", "distance_m"]
+PARAMETERS: tuple[Parameter, ...] = ("thickness_m", "distance_m")
+
+
+class _PlacedPosition(TypedDict):
+    position: str | None
+    x_m: float | None
+    y_m: float | None
+    n_shots: int
+
+
+class MapPosition(_PlacedPosition, total=False):
+    """One position of the map (:func:`position_entry`): its place and shot count, then, in
+    this order as the entry is built, the measurements it pools, its estimate reduced to what
+    a map shows (its ``reason`` where there is none), its readings and warnings; a map adds
+    where the located edge puts it and, jointly, its own answer and why it was left out."""
+
+    measurement_ids: list[int]
+    last_activity: str | None
+    thickness_m: ParameterDict | None
+    distance_m: ParameterDict | None
+    reason: str | None
+    readings: list[Any]
+    warnings: list[str]
+    distance_to_located_support_m: float
+    per_position: dict[str, ParameterDict | None]
+    joint_reason: str
+
+
+class _RowEstimate(TypedDict, total=False):
+    """An estimates file's row read back as an estimate (:func:`from_estimate_rows`)."""
+
+    thickness_m: ParameterDict
+    distance_m: ParameterDict
+    readings: list[Any]
 
 
 def by_position(records: Sequence[Any]) -> dict[tuple[Any, Any, Any], list[Any]]:
@@ -87,7 +122,7 @@ def position_inputs(members: Sequence[Any]) -> PositionInputs:
     return PositionInputs(summaries, table, calibration, material)
 
 
-def from_records(records: Sequence[Any], tables: TableSet) -> list[dict[str, Any]]:
+def from_records(records: Sequence[Any], tables: TableSet) -> list[MapPosition]:
     """One entry per position of a plate's stored measurements (oldest first, each with its
     shots), their shots summarised and inverted against ``tables`` through the one estimate
     path, as a measurement of all of them would be."""
@@ -146,9 +181,9 @@ def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:
 def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,
                    estimate: Mapping[str, Any] | None, reason: str | None,
                    measurement_ids: Sequence[int] = (), last: float | None = None
-                   ) -> dict[str, Any]:
+                   ) -> MapPosition:
     """One position of the map, its estimate reduced to what a map shows."""
-    entry: dict[str, Any] = {"position": name, "x_m": x, "y_m": y, "n_shots": int(n_shots)}
+    entry: MapPosition = {"position": name, "x_m": x, "y_m": y, "n_shots": int(n_shots)}
     if measurement_ids:
         entry["measurement_ids"] = list(measurement_ids)
     if last is not None:
@@ -157,19 +192,20 @@ def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,
         entry["last_activity"] = iso_utc(last)
     for p in PARAMETERS:
         value = (estimate or {}).get(p)
-        entry[p] = None if value is None else {k: value.get(k) for k in
-                                               ("map", "median", "ci68", "ci95", "status")}
+        entry[p] = None if value is None else {
+            "map": value.get("map"), "median": value.get("median"), "ci68": value.get("ci68"),
+            "ci95": value.get("ci95"), "status": value.get("status")}
     entry["reason"] = reason if estimate is None else estimate.get("reason")
     entry["readings"] = list((estimate or {}).get("readings") or [])
     entry["warnings"] = list((estimate or {}).get("warnings") or [])
     return entry
 
 
-def from_estimate_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def from_estimate_rows(rows: Sequence[Mapping[str, Any]]) -> list[MapPosition]:
     """Map positions from the flat rows an estimates file holds (instrument.estimate_rows)."""
     out = []
     for row in rows:
-        estimate: dict[str, Any] = {}
+        estimate: _RowEstimate = {}
         for p in PARAMETERS:
             status = _text(row.get(f"{p}_status"))
             if status is None:
@@ -203,30 +239,33 @@ def _text(value: Any) -> str | None:
     return text if text and text != "<NA>" else None
 
 
-def build(plate_id: str, positions: list[dict[str, Any]],
+def build(plate_id: str, positions: list[MapPosition],
           plate_size_m: Sequence[float] | None = None) -> dict[str, Any]:
     """The map JSON: the positions, the located support (or null and why), the plate's size."""
-    scan = [p for p in positions if p["x_m"] is not None and p["y_m"] is not None]
+    placed = [(p, x, y) for p in positions
+              if (x := p["x_m"]) is not None and (y := p["y_m"]) is not None]
+    scan = [p for p, _, _ in placed]
     fit, reason = locate([_open_sides_filled(p) for p in scan])
     support = None
     if fit is not None:
         support = fit.to_dict()
-        for p in scan:  # where the located edge puts each position, beside its own answer
-            p["distance_to_located_support_m"] = fit.distance(p["x_m"], p["y_m"])
+        for p, x, y in placed:  # where the located edge puts each position, beside its answer
+            p["distance_to_located_support_m"] = fit.distance(x, y)
     return {"plate_id": plate_id, "plate_size_m": list(plate_size_m) if plate_size_m else None,
             "n_positions": len(positions), "n_scan_positions": len(scan),
             "positions": positions, "support": support,
             "support_reason": None if fit is not None else reason}
 
 
-def _open_sides_filled(position: Mapping[str, Any]) -> dict[str, Any]:
+def _open_sides_filled(position: MapPosition) -> MapPosition:
     """A position whose one-sided answer left its open bound empty (an estimates file) as
     :func:`~.support.answers` reads it: the open side is never used."""
-    out = dict(position)
+    out = position.copy()
     d = position.get("distance_m")
-    if d and d.get("status") in ("lower_bound_only", "upper_bound_only"):
-        lo68, hi68 = d["ci68"]
-        lo95, hi95 = d["ci95"]
+    if (d and d.get("status") in ("lower_bound_only", "upper_bound_only")
+            and (ci68 := d["ci68"]) is not None and (ci95 := d["ci95"]) is not None):
+        lo68, hi68 = ci68
+        lo95, hi95 = ci95
         out["distance_m"] = {**d, "ci68": [lo68 if lo68 is not None else -math.inf,
                                            hi68 if hi68 is not None else math.inf],
                              "ci95": [lo95 if lo95 is not None else -math.inf,
@@ -380,7 +419,8 @@ def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
     if options.suggest:
         found = suggest_positions(post, options.suggest, objective=options.suggest_for,
                                   plate_size_m=plate_map.get("plate_size_m"))
-        plate_map["suggestions"] = found.pop("suggestions")
-        plate_map["suggestions_basis"] = {**found, "expected_gain": describe_gain(
-            options.suggest_for)}
+        plate_map["suggestions"] = found["suggestions"]
+        plate_map["suggestions_basis"] = {
+            **{k: v for k, v in found.items() if k != "suggestions"},
+            "expected_gain": describe_gain(options.suggest_for)}
     return plate_map

@@ -42,18 +42,18 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
 from solitonde.instrument.inference.calibration import calibrated_table, calibration_along
-from solitonde.instrument.inference.inversion import (
-    FeatureSummary,
-    InversionError,
-    cell_likelihood,
-    predict,
-)
-from solitonde.instrument.inference.joint_map import JointMapError, JointPosterior, position_answer
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
+from solitonde.instrument.inference.joint_answers import PositionAnswer, position_answer
+from solitonde.instrument.inference.joint_model import JointMapError
+from solitonde.instrument.inference.joint_posterior import JointPosterior
+from solitonde.instrument.inference.likelihood import cell_likelihood
+from solitonde.instrument.tables.table import ModelTable
 
 PARTICLES = 256
 TRUTHS = 48
@@ -99,7 +99,7 @@ class _Measurement:
     thickness_m: float
 
 
-def _typical(post: JointPosterior, answers: Sequence[Any]) -> _Measurement:
+def _typical(post: JointPosterior, answers: Sequence[PositionAnswer]) -> _Measurement:
     by_size: dict[float, list[FeatureSummary]] = {}
     bounds: dict[float, list[float]] = {}
     for lk in post.likes:
@@ -183,7 +183,7 @@ def _curves(post: JointPosterior, meas: _Measurement) -> np.ndarray:
     return out
 
 
-def _table_bound(table: Any, diameter_m: float) -> float:
+def _table_bound(table: ModelTable, diameter_m: float) -> float:
     i = table.diameter_index(diameter_m)
     bounds = np.asarray(table.features["arr_upper_bound"][i], dtype=float)
     return float(np.nanmedian(bounds)) if np.isfinite(bounds).any() else 0.02
@@ -228,51 +228,69 @@ def _signed(post: JointPosterior, parts: _Particles, x: np.ndarray, y: np.ndarra
             + parts.c[None, :])
 
 
-def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
-            region: Sequence[float] | None = None,
-            plate_size_m: Sequence[float] | None = None) -> dict[str, Any]:
-    """N next positions ``{x_m, y_m, expected_gain, distance_m}`` and what the gain measures
-    (see the module doc). ``region`` is ``(x_min, x_max, y_min, y_max)``; by default
-    :func:`region_of`."""
-    n, objective = check_request(n, objective)
-    out: dict[str, Any] = {"objective": objective, "suggestions": []}
-    if n == 0:
-        return out
-    rng = np.random.default_rng(SEED)
-    answers = [position_answer(post, i) for i in range(len(post.likes))]
-    meas = _typical(post, answers)
-    curves = _curves(post, meas)
-    grid = post.distance_grid
-    x0, x1, y0, y1 = region if region is not None else region_of(post, plate_size_m)
-    parts = _particles(post, rng)
-    b = post.best
-    theta_b = float(post.cells.theta[b])
-    normal = np.array([math.cos(theta_b), math.sin(theta_b)])
-    along = np.array([-normal[1], normal[0]])
-    offset_b = float(post.offsets()[b])
-    corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
-    s_lo, s_hi = float((corners @ along).min()), float((corners @ along).max())
-    ends = np.array([offset_b * normal + s * along for s in (s_lo, s_hi)])
-    # what is measured: the edge's two ends, or the positions' thicknesses
-    z_ends = _signed(post, parts, ends[:, 0], ends[:, 1])  # (2, particles)
-    if objective == "thickness":
-        xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in post.likes])
-        dist = np.clip(post.model.distance(_signed(post, parts, xy[:, 0], xy[:, 1])),
-                       grid[0], grid[-1])
-        mean_l = np.array([np.interp(dist[i], grid, a.conditional[0])
-                           for i, a in enumerate(answers)])
-        var_l = np.array([np.interp(dist[i], grid, a.conditional[1])
-                          for i, a in enumerate(answers)])
-        scale = np.array([math.exp(float(np.mean(m))) for m in mean_l])  # t, to turn log into m
-    # candidates along lines parallel to the located edge
-    s_vals = np.linspace(s_lo, s_hi, ALONG_STEPS + 2)[1:-1]
+class Suggestion(TypedDict):
+    """A next position, what it is expected to gain and its distance from the located edge."""
+
+    x_m: float
+    y_m: float
+    expected_gain: float
+    distance_m: float
+
+
+class Suggestions(TypedDict):
+    """What :func:`suggest` answers: the positions, and the 95 % interval before and after
+    (or why there is none)."""
+
+    objective: str
+    suggestions: list[Suggestion]
+    reason: NotRequired[str]
+    interval_95_m: NotRequired[float]
+    expected_interval_95_m: NotRequired[float]
+    thickness_m: NotRequired[float]
+
+
+@dataclass
+class _Frame:
+    """The located edge (the joint posterior's best cell) and the region's extent along it."""
+
+    normal: np.ndarray
+    along: np.ndarray
+    offset_m: float
+    s_lo: float
+    s_hi: float
+
+    @classmethod
+    def of(cls, post: JointPosterior, region: Sequence[float]) -> _Frame:
+        x0, x1, y0, y1 = region
+        theta_b = float(post.cells.theta[post.best])
+        normal = np.array([math.cos(theta_b), math.sin(theta_b)])
+        along = np.array([-normal[1], normal[0]])
+        corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]])
+        return cls(normal, along, float(post.offsets()[post.best]),
+                   float((corners @ along).min()), float((corners @ along).max()))
+
+    @property
+    def ends(self) -> np.ndarray:
+        """The located edge's two ends in the region."""
+        return np.array([self.offset_m * self.normal + s * self.along
+                         for s in (self.s_lo, self.s_hi)])
+
+
+def _candidates(post: JointPosterior, parts: _Particles, frame: _Frame,
+                region: Sequence[float]) -> np.ndarray:
+    """The candidate points (see the module doc): on lines parallel to the located edge and
+    on a grid over the region, kept where most likely edges leave them on the plate, clear of
+    the clamp and of the positions already measured."""
+    x0, x1, y0, y1 = region
+    s_vals = np.linspace(frame.s_lo, frame.s_hi, ALONG_STEPS + 2)[1:-1]
     u_vals = list(CANDIDATE_DISTANCES_M)
     if post.model.kind == "opposite_edges":
         u_vals += [post.model.width - u for u in CANDIDATE_DISTANCES_M
                    if u < 0.5 * post.model.width]
     u_vals = [u for u in u_vals if u <= (post.model.width_m or math.inf)]
     ss, uu = np.meshgrid(s_vals, np.array(u_vals), indexing="ij")
-    pts = (offset_b * normal)[None, :] + ss.ravel()[:, None] * along + uu.ravel()[:, None] * normal
+    pts = ((frame.offset_m * frame.normal)[None, :] + ss.ravel()[:, None] * frame.along
+           + uu.ravel()[:, None] * frame.normal)
     # and a grid over the whole region: where the located edge may be the wrong one (few
     # positions, a mirror image), points that tell the likely edges apart
     gx, gy = np.meshgrid(np.linspace(x0, x1, GRID_STEPS + 2)[1:-1],
@@ -290,34 +308,65 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
         xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in post.likes])
         gap = np.hypot(pts[:, None, 0] - xy[None, :, 0], pts[:, None, 1] - xy[None, :, 1])
         pts = pts[gap.min(axis=1) >= MIN_SPACING_M]
-    if not pts.size:
-        out["reason"] = "no point of the region lies on the plate under most likely edges"
-        return out
-    d_c = _signed(post, parts, pts[:, 0], pts[:, 1])
-    # where a likely edge puts a candidate off the plate, the chain would stand on the clamp:
-    # as at the clamped edge itself (L = 0)
-    l_c = np.clip(post.model.distance(d_c), grid[0], grid[-1])  # (candidates, particles)
-    truths = np.arange(min(TRUTHS, PARTICLES))
-    draws = rng.integers(0, NOISE_DRAWS, truths.size)
+    return pts
 
-    def width(logw: np.ndarray) -> np.ndarray:
+
+@dataclass
+class _Objective:
+    """What a measurement is to shrink: the spread of the located edge's two ends over the
+    particles (``edge``), or the positions' thickness intervals (``thickness``: each
+    position's conditional moments of log t at its distance under every particle)."""
+
+    kind: str
+    z_ends: np.ndarray
+    """(2, particles): the ends' signed distance from each particle's edge."""
+    mean_l: np.ndarray | None = None
+    var_l: np.ndarray | None = None
+    scale: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, kind: str, post: JointPosterior, parts: _Particles, frame: _Frame,
+           answers: Sequence[PositionAnswer]) -> _Objective:
+        ends = frame.ends
+        z_ends = _signed(post, parts, ends[:, 0], ends[:, 1])  # (2, particles)
+        if kind != "thickness":
+            return cls(kind, z_ends)
+        grid = post.distance_grid
+        xy = np.array([[lk.position.x_m, lk.position.y_m] for lk in post.likes])
+        dist = np.clip(post.model.distance(_signed(post, parts, xy[:, 0], xy[:, 1])),
+                       grid[0], grid[-1])
+        mean_l = np.array([np.interp(dist[i], grid, a.conditional[0])
+                           for i, a in enumerate(answers)])
+        var_l = np.array([np.interp(dist[i], grid, a.conditional[1])
+                          for i, a in enumerate(answers)])
+        scale = np.array([math.exp(float(np.mean(m))) for m in mean_l])  # t, to turn log into m
+        return cls(kind, z_ends, mean_l, var_l, scale)
+
+    def width(self, logw: np.ndarray) -> np.ndarray:
         """Expected 95 % interval over the truths, for weights (..., truths, particles)."""
         w = np.exp(logw - logw.max(axis=-1, keepdims=True))
         w /= w.sum(axis=-1, keepdims=True)
-        if objective == "edge":
-            m1 = w @ z_ends.T  # (..., truths, 2)
-            m2 = w @ (z_ends**2).T
+        if self.mean_l is None or self.var_l is None or self.scale is None:
+            m1 = w @ self.z_ends.T  # (..., truths, 2)
+            m2 = w @ (self.z_ends**2).T
             var = np.maximum(m2 - m1**2, 0.0).mean(axis=-1)
             return Z95 * np.sqrt(var).mean(axis=-1)
         total = np.zeros(w.shape[:-1])
-        for i in range(len(answers)):
-            e1 = w @ mean_l[i]
-            e2 = w @ (var_l[i] + mean_l[i] ** 2)
-            total += Z95 * scale[i] * np.sqrt(np.maximum(e2 - e1**2, 0.0))
-        return (total / len(answers)).mean(axis=-1)
+        for i in range(len(self.mean_l)):
+            e1 = w @ self.mean_l[i]
+            e2 = w @ (self.var_l[i] + self.mean_l[i] ** 2)
+            total += Z95 * self.scale[i] * np.sqrt(np.maximum(e2 - e1**2, 0.0))
+        return (total / len(self.mean_l)).mean(axis=-1)
+
+
+def _log_weights(curves: np.ndarray, grid: np.ndarray, l_c: np.ndarray, truths: np.ndarray,
+                 draws: np.ndarray) -> np.ndarray:
+    """Log weights (candidates, truths, particles) of a measurement at every candidate: each
+    truth puts the candidate at its distance ``L0``, and the measurement simulated there
+    weighs each particle by how likely it makes the particle's distance of the candidate."""
+    last = curves.shape[-1] - 1
 
     def logw_of(rows: np.ndarray) -> np.ndarray:
-        """Log weights (candidates, truths, particles) of a measurement at each candidate."""
         l0 = l_c[rows][:, truths]  # (B, truths): where each truth puts the candidate
         e = np.clip(np.searchsorted(grid, l0) - 1, 0, grid.size - 2)
         e = np.where(np.abs(grid[e + 1] - l0) < np.abs(grid[e] - l0), e + 1, e)
@@ -331,16 +380,22 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
         hi = np.take_along_axis(rows_c, j + 1, axis=-1)
         return lo + (hi - lo) * f
 
-    last = curves.shape[-1] - 1
     # every candidate's log weights once (float32: they are compared, not accumulated far)
-    lw_all = np.concatenate([logw_of(np.arange(k, min(k + CHUNK, len(pts)))).astype(np.float32)
-                             for k in range(0, len(pts), CHUNK)])
-    acc = np.zeros((truths.size, PARTICLES), dtype=np.float32)
-    now = float(width(acc[None])[0])
+    n = l_c.shape[0]
+    return np.concatenate([logw_of(np.arange(k, min(k + CHUNK, n))).astype(np.float32)
+                           for k in range(0, n, CHUNK)])
+
+
+def _greedy(post: JointPosterior, n: int, pts: np.ndarray, lw_all: np.ndarray,
+            objective: _Objective, frame: _Frame, out: Suggestions) -> None:
+    """Choose ``n`` positions one at a time, each the best given the earlier ones, into
+    ``out`` with the interval before and after."""
+    acc = np.zeros(lw_all.shape[1:], dtype=np.float32)
+    now = float(objective.width(acc[None])[0])
     out["interval_95_m"] = now
     chosen: list[int] = []
     for _ in range(n):
-        vals = np.concatenate([width(lw_all[k:k + CHUNK] + acc[None])
+        vals = np.concatenate([objective.width(lw_all[k:k + CHUNK] + acc[None])
                                for k in range(0, len(pts), CHUNK)])
         vals[chosen] = math.inf
         best_row = int(np.argmin(vals))
@@ -349,13 +404,47 @@ def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
         best_val = float(vals[best_row])
         chosen.append(best_row)
         acc = acc + lw_all[best_row]
-        d_map = float(post.model.distance(np.array([float(pts[best_row] @ normal) - offset_b]))[0])
+        d_map = float(post.model.distance(
+            np.array([float(pts[best_row] @ frame.normal) - frame.offset_m]))[0])
         out["suggestions"].append({"x_m": float(pts[best_row, 0]),
                                    "y_m": float(pts[best_row, 1]),
                                    "expected_gain": max(now - best_val, 0.0),
                                    "distance_m": d_map})
         now = best_val
     out["expected_interval_95_m"] = now
+
+
+def suggest(post: JointPosterior, n: int, *, objective: str = "edge",
+            region: Sequence[float] | None = None,
+            plate_size_m: Sequence[float] | None = None) -> Suggestions:
+    """N next positions ``{x_m, y_m, expected_gain, distance_m}`` and what the gain measures
+    (see the module doc). ``region`` is ``(x_min, x_max, y_min, y_max)``; by default
+    :func:`region_of`."""
+    n, objective = check_request(n, objective)
+    out: Suggestions = {"objective": objective, "suggestions": []}
+    if n == 0:
+        return out
+    rng = np.random.default_rng(SEED)
+    answers = [position_answer(post, i) for i in range(len(post.likes))]
+    meas = _typical(post, answers)
+    curves = _curves(post, meas)
+    grid = post.distance_grid
+    bounds = tuple(region) if region is not None else region_of(post, plate_size_m)
+    parts = _particles(post, rng)
+    frame = _Frame.of(post, bounds)
+    aim = _Objective.of(objective, post, parts, frame, answers)
+    pts = _candidates(post, parts, frame, bounds)
+    if not pts.size:
+        out["reason"] = "no point of the region lies on the plate under most likely edges"
+        return out
+    d_c = _signed(post, parts, pts[:, 0], pts[:, 1])
+    # where a likely edge puts a candidate off the plate, the chain would stand on the clamp:
+    # as at the clamped edge itself (L = 0)
+    l_c = np.clip(post.model.distance(d_c), grid[0], grid[-1])  # (candidates, particles)
+    truths = np.arange(min(TRUTHS, PARTICLES))
+    draws = rng.integers(0, NOISE_DRAWS, truths.size)
+    lw_all = _log_weights(curves, grid, l_c, truths, draws)
+    _greedy(post, n, pts, lw_all, aim, frame, out)
     out["thickness_m"] = meas.thickness_m
     return out
 

@@ -11,7 +11,7 @@ rectangle's sides (which side at random), tilted by up to :data:`TILT_DEG` and s
 :data:`DISTANCE_RANGE_M` (an operator looking for the support measures near it, some further
 away) and anywhere along it inside the rectangle. Its chain stands off those recorded
 coordinates by the joint map's stated coordinate error (a normal draw of
-:data:`~solitonde.instrument.inference.joint_map.POSITION_SD_M` per coordinate; off with
+:data:`~solitonde.instrument.inference.joint_likelihood.POSITION_SD_M` per coordinate; off with
 ``exact_positions``), and there every position is simulated, measured and
 calibrated exactly as :func:`.validate.measure_plate` does (the tier ``auto`` picks, or the 3-D
 plate where it would pick the 2-D one with ``truth_plate_theory="3d"``, a
@@ -42,7 +42,6 @@ Scored per scan with 3-10 positions (:data:`POSITIONS`):
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -51,24 +50,44 @@ from typing import Any
 
 import numpy as np
 
-from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference import joint_map, suggest
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
 from solitonde.instrument.inference.edge_fit import locate
-from solitonde.instrument.inference.inversion import FeatureSummary, invert
-from solitonde.instrument.studies import validate as single
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
+from solitonde.instrument.inference.joint_likelihood import POSITION_SD_M
+from solitonde.instrument.inference.joint_summary import WIDE_ANGLE_DEG, JointAnswer
+from solitonde.instrument.studies import validate as single  # noqa: F401 (measures the positions)
+from solitonde.instrument.studies.map_measurer import (
+    Measurer,
+    StudyInputError,
+    reference_calibration,
+    references,
+)
+from solitonde.instrument.studies.map_rows import (
+    ANSWER_KINDS,
+    AnswerKind,
+    EdgeAtScan,
+    EdgeScore,
+    PositionScore,
+    ScanRow,
+    SequenceScore,
+    SplitRow,
+    StudyResult,
+    ThicknessScore,
+)
+from solitonde.instrument.studies.map_scan import (
+    DISTANCE_RANGE_M,
+    MAX_POSITIONS,
+    POSITIONS,
+    TILT_DEG,
+    Scan,
+    stood,
+)
+from solitonde.instrument.studies.validate_scores import ANSWERS
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides
-from solitonde.signal.atomic import write_text
-from solitonde.signal.features import EXTRACTOR_VERSION
 
-TILT_DEG = 5.0
-INSET_M = 0.03
-DISTANCE_RANGE_M = (0.003, 0.2)
-POSITIONS = (3, 10)
-MAX_POSITIONS = 10
 START_POSITIONS = 3
 NEAR_EDGE_M = 0.03
 TARGET_ERROR_M = 0.005
@@ -81,17 +100,13 @@ TRUTH_PLATE_THEORIES = ("auto", "3d", "mindlin")
 """``sem.plate_theory`` of the simulated plates (:func:`run`)."""
 
 
-class StudyInputError(InstrumentError, ValueError):
-    """A study request that cannot be run; ``field`` names what is wrong."""
-
-
 def _covered(ci: Sequence[float | None] | None, truth: float) -> bool:
     lo, hi = ci or (None, None)
     return (lo is None or lo <= truth) and (hi is None or truth <= hi)
 
 
 def _answered(p: Mapping[str, Any]) -> bool:
-    return p.get("status") in single.ANSWERS
+    return p.get("status") in ANSWERS
 
 
 def _width(p: Mapping[str, Any], t_range: tuple[float, float]) -> float:
@@ -100,204 +115,10 @@ def _width(p: Mapping[str, Any], t_range: tuple[float, float]) -> float:
     return (hi if hi is not None else t_range[1]) - (lo if lo is not None else t_range[0])
 
 
-class Scan:
-    """One random plate and the positions one may measure on it."""
-
-    def __init__(self, table: ModelTable, seed: int, diameter_m: float,
-                 coordinate_sd_m: float = 0.0) -> None:
-        family = table.family or {}
-        size = family.get("plate_size_m") or [0.914, 0.914]
-        self.a, self.b = float(size[0]), float(size[1])
-        self.rng = np.random.default_rng(seed)
-        t_axis = table.axes["thickness_m"]
-        lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
-        self.thickness_m = float(math.exp(self.rng.uniform(lo, hi)))
-        self.diameter_m = diameter_m
-        side = int(self.rng.integers(4))
-        tilt = math.radians(self.rng.uniform(-TILT_DEG, TILT_DEG))
-        inset = float(self.rng.uniform(0.0, INSET_M))
-        # the side's midpoint and inward normal in the rectangle [0, a] x [0, b]
-        mids = [((0.0, self.b / 2), 0.0), ((self.a, self.b / 2), math.pi),
-                ((self.a / 2, 0.0), math.pi / 2), ((self.a / 2, self.b), -math.pi / 2)]
-        (mx, my), phi = mids[side]
-        self.theta = (phi + tilt) % (2 * math.pi)
-        self.normal = np.array([math.cos(self.theta), math.sin(self.theta)])
-        self.along = np.array([-self.normal[1], self.normal[0]])
-        self.offset_m = float(np.array([mx, my]) @ self.normal + inset)
-        # the true edge's span inside the rectangle (for the edge's error)
-        self.ends = self._span()
-        self.n_positions = int(self.rng.integers(POSITIONS[0], POSITIONS[1] + 1))
-        self.random_positions = [self.draw() for _ in range(MAX_POSITIONS)]
-        self.plate_positions = [(float(self.rng.uniform(0.0, self.a)),
-                                 float(self.rng.uniform(0.0, self.b)))
-                                for _ in range(MAX_POSITIONS)]
-        self.seed = seed
-        self.coordinate_sd_m = coordinate_sd_m
-        """How far (1 sd, per coordinate) the chain stood from its recorded coordinates: the
-        recorded (x, y) are a position's; its features are simulated where the chain stood."""
-
-    def _span(self) -> np.ndarray:
-        base = self.offset_m * self.normal
-        s = np.linspace(-2.0, 2.0, 4001)
-        pts = base[None, :] + s[:, None] * self.along
-        inside = ((pts[:, 0] >= 0) & (pts[:, 0] <= self.a) & (pts[:, 1] >= 0)
-                  & (pts[:, 1] <= self.b))
-        return pts[inside][[0, -1]]
-
-    def distance(self, x: float, y: float) -> float:
-        """Distance of (x, y) from the nearer clamped edge."""
-        d = float(np.array([x, y]) @ self.normal - self.offset_m)
-        return min(d, self.a - d)
-
-    def draw(self) -> tuple[float, float]:
-        """A random position: log-uniform distance from the edge, anywhere along it, inside
-        the rectangle."""
-        lo, hi = (math.log(v) for v in DISTANCE_RANGE_M)
-        for _ in range(1000):
-            u = math.exp(self.rng.uniform(lo, hi))
-            s = self.rng.uniform(0.0, 1.0)
-            p = self.ends[0] + s * (self.ends[1] - self.ends[0]) + u * self.normal
-            if 0 <= p[0] <= self.a and 0 <= p[1] <= self.b:
-                return float(p[0]), float(p[1])
-        raise RuntimeError("no position inside the rectangle")  # not reached for sane sizes
-
-    def edge_error(self, theta: float, offset: float) -> float:
-        """Largest distance of the true edge's span from the line at (theta, offset). The two
-        clamped edges are alike: a line reported from the opposite side (its normal pointing
-        the other way) is compared with the opposite edge."""
-        n = np.array([math.cos(theta), math.sin(theta)])
-        if n @ self.normal < 0:
-            return float(np.max(np.abs((self.ends + self.a * self.normal) @ n - offset)))
-        return float(np.max(np.abs(self.ends @ n - offset)))
-
-    def true_offset(self, theta: float) -> float:
-        """The true offset of the clamped edge a line at angle ``theta`` stands for (the near
-        one, or the opposite one seen from the other side)."""
-        if math.cos(theta - self.theta) < 0:
-            return -(self.offset_m + self.a)
-        return self.offset_m
-
-
-class Measurer:
-    """Simulated positions, measured as :func:`.validate.measure_plate` measures them; kept
-    in a file (optional) so that a study can be re-scored without simulating again. The file
-    records the scene its positions were simulated on (the truths' plate theory among it) and
-    the extractor's reading they were read with: a file of another scene or reading is refused,
-    not mixed in."""
-
-    def __init__(self, base: Mapping[str, Any], path: str | Path | None) -> None:
-        self.base = dict(base)
-        self.path = Path(path) if path is not None else None
-        self.cache: dict[str, Any] = {}
-        if self.path is not None and self.path.is_file():
-            try:
-                data = json.loads(self.path.read_text(encoding="utf-8"))
-                self.cache = data["positions"]
-                # files written before the scene was recorded hold the table's own tiers
-                stored = data.get("scene")
-                reading = int(data.get("reading_version", 1))
-            except (OSError, ValueError, KeyError, TypeError) as exc:
-                raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
-                                      f"study wrote ({exc}); delete it or give another") from None
-            if (stored is None and _plate_theory(self.base) != "auto") or (
-                    stored is not None and stored != json.loads(json.dumps(self.base))):
-                raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
-                                      f"simulated on another scene (its sem.plate_theory "
-                                      f"{_plate_theory(stored or {})!r}, this study's "
-                                      f"{_plate_theory(self.base)!r}); give another file")
-            if reading != EXTRACTOR_VERSION:
-                raise StudyInputError("measurements", f"{str(self.path)!r} holds positions read "
-                                      f"with the extractor's reading {reading}, this solitonde "
-                                      f"reads with {EXTRACTOR_VERSION}; give another file")
-        self.simulated = 0
-        self.wall_s = 0.0
-
-    @staticmethod
-    def key(d: float, t: float, length: float, seed: int) -> str:
-        return f"{d:.6e}|{t:.9e}|{length:.9e}|{seed}"
-
-    def prefetch(self, requests: Sequence[tuple[float, float, float, int]], workers: int,
-                 progress: Callable[[str, int, int], None] | None = None) -> None:
-        """Simulate the requested ``(d, t, length, seed)`` not yet kept, ``workers`` at a time
-        (a study's positions are independent runs)."""
-        todo = {self.key(*r): r for r in requests if self.key(*r) not in self.cache}
-        if not todo:
-            return
-        started = time.perf_counter()
-        tasks = [(self.base, [d], t, max(length, 0.0), seed, k)
-                 for k, (d, t, length, seed) in todo.items()]
-        for done, (key, m) in enumerate(run_tasks(_measure_keyed, tasks, workers, None), 1):
-            self.cache[key] = {str(k): v for k, v in m["summaries"].items()}
-            self.simulated += 1
-            if progress is not None:
-                progress("positions simulated", done, len(tasks))
-        self.wall_s += time.perf_counter() - started
-
-    def __call__(self, d: float, t: float, length: float, seed: int) -> list[FeatureSummary]:
-        key = self.key(d, t, length, seed)
-        self.prefetch([(d, t, length, seed)], 1)
-        return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"],
-                               s["arr_std"], int(s["n_shots"]), s.get("arr_upper_bound"))
-                for s in self.cache[key].values() if s is not None]
-
-    def save(self) -> None:
-        if self.path is None:
-            return
-        write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache,
-                                          "reading_version": EXTRACTOR_VERSION}))
-
-
-def _plate_theory(scene: Mapping[str, Any]) -> str:
-    return str((scene.get("sem") or {}).get("plate_theory", "auto"))
-
-
-def _measure_keyed(base: Mapping[str, Any], diameters: Sequence[float], t: float,
-                   length: float, seed: int, key: str) -> tuple[str, dict[str, Any]]:
-    """:func:`.validate.measure_plate` with the key it is kept under (results come back in the
-    order they finish)."""
-    return key, single.measure_plate(base, diameters, t, length, seed)
-
-
-def _references(table: ModelTable, d: float, seed: int
-                ) -> list[tuple[float, float, float, int]]:
-    """The two reference plates' ``(d, t, length, seed)``: far from the supports, as
-    :mod:`.validate` places them."""
-    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
-    l_ref = float(np.clip(single.REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
-    return [(d, float(np.clip(t_ref, t_axis[0], t_axis[-1])), l_ref, seed + k)
-            for k, t_ref in enumerate((single.REFERENCE_THICKNESS_M,
-                                       single.REFERENCE2_THICKNESS_M))]
-
-
-def _calibration(table: ModelTable, measure: Measurer, d: float, seed: int) -> Calibration:
-    """The chain's damping, an ARR factor and TOF offset fitted on two reference plates, as
-    :mod:`.validate` does."""
-    refs = []
-    for d_ref, t_ref, l_ref, s_ref in _references(table, d, seed):
-        refs += [Reference(t_ref, l_ref, s) for s in measure(d_ref, t_ref, l_ref, s_ref)
-                 if not s.hidden]
-    return fit_calibration(table, refs)
-
-
-def _stood(scan: Scan, xy: Sequence[tuple[float, float]]) -> list[tuple[float, int]]:
-    """Per recorded position, the distance from the edge where its chain stood (off the
-    recorded coordinates by the scan's coordinate error) and its noise seed."""
-    out = []
-    for k, (x, y) in enumerate(xy):
-        seed = int(np.random.default_rng([scan.seed, k, int(x * 1e6), int(y * 1e6)])
-                   .integers(0, 2**31))
-        stood = (x, y)
-        if scan.coordinate_sd_m > 0:
-            ex, ey = np.random.default_rng([seed, 7]).normal(0.0, scan.coordinate_sd_m, 2)
-            stood = (x + float(ex), y + float(ey))
-        out.append((scan.distance(*stood), seed))
-    return out
-
-
 def _scan_positions(scan: Scan, xy: Sequence[tuple[float, float]], measure: Measurer,
                     cal: Calibration) -> list[joint_map.ScanPosition]:
     out = []
-    for k, ((x, y), (length, seed)) in enumerate(zip(xy, _stood(scan, xy), strict=True)):
+    for k, ((x, y), (length, seed)) in enumerate(zip(xy, stood(scan, xy), strict=True)):
         inputs = measure(scan.diameter_m, scan.thickness_m, length, seed)
         out.append(joint_map.ScanPosition(f"P{k + 1:02d}", x, y, inputs, cal))
     return out
@@ -315,69 +136,96 @@ def _joint_edge(table: ModelTable, positions: Sequence[joint_map.ScanPosition],
 
 
 def score_scan(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
-               sequential: bool = True, shared_calibration: bool = False) -> dict[str, Any]:
+               sequential: bool = True, shared_calibration: bool = False) -> ScanRow:
     """One scan's rows: per position the three answers against the truth, the edge's coverage,
     and (``sequential``) the edge's error as positions are added, suggested or random."""
     t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
     xy = scan.random_positions[:scan.n_positions]
     positions = _scan_positions(scan, xy, measure, cal)
-    row: dict[str, Any] = {"seed": scan.seed, "thickness_m": scan.thickness_m,
-                           "normal_angle_deg": math.degrees(scan.theta),
-                           "offset_m": scan.offset_m, "n_positions": scan.n_positions}
-    alone: list[dict[str, Any] | None] = []
+    alone: list[Mapping[str, Any] | None] = []
     for p in positions:
         found = invert(table, p.inputs, cal) if p.inputs else None
         alone.append(None if found is None else found.to_dict())
-    joint: dict[str, Any] = {}
-    at_scan: dict[str, Any] = {}
+    joint: dict[str, JointAnswer | None] = {}
+    at_scan: dict[str, EdgeAtScan] = {}
     for kind in ("free", "common"):
         try:
             post = joint_map.posterior(table, positions, joint_map.ThicknessPrior(
                 kind, COMMON_SPREAD), shared_calibration=shared_calibration)
             joint[kind] = joint_map.summary(post)
             at_scan[kind] = _edge_at_scan(post, scan)
-        except joint_map.JointMapError as exc:
-            joint[kind] = {"error": str(exc)}
-    per_position = []
-    by_name = {k: {p["position"]: p for p in j.get("positions", [])} for k, j in joint.items()}
-    for p, est in zip(positions, alone, strict=True):
-        truth_l = scan.distance(p.x_m, p.y_m)
-        entry: dict[str, Any] = {"x_m": p.x_m, "y_m": p.y_m, "distance_m": truth_l}
-        answers = {"alone": (est or {}).get("thickness_m") or {"status": "none"}}
-        for kind in joint:
-            answers[kind] = (by_name[kind].get(p.name) or {}).get("thickness_m") or \
-                {"status": "none"}
-        for name, ans in answers.items():
-            entry[name] = {"status": ans.get("status"), "ci95": ans.get("ci95"),
-                           "covered": (_covered(ans.get("ci95"), scan.thickness_m)
-                                       if _answered(ans) else None),
-                           "width_m": _width(ans, t_range)}
-        per_position.append(entry)
-    row["positions"] = per_position
-    # the edge's offset: joint against the per-position fit
-    for kind, j in joint.items():
-        s = j.get("support")
-        row[f"edge_{kind}"] = None if not s else {
-            "ci95_offset_m": s["ci95_offset_m"], "offset_m": s["offset_m"],
-            "normal_angle_deg": s["normal_angle_deg"],
-            "covered": _offset_covered(s, scan), "offset_z": _offset_z(s, scan),
-            "fit": j.get("fit"),
-            "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"]),
-            **at_scan.get(kind, {})}
+        except joint_map.JointMapError:
+            joint[kind] = None
     fit, reason = locate([{"x_m": p.x_m, "y_m": p.y_m, "distance_m": (e or {}).get("distance_m")}
                           for p, e in zip(positions, alone, strict=True)])
-    row["edge_alone"] = {"reason": reason} if fit is None else {
+    edge_alone: EdgeScore = {"reason": reason} if fit is None else {
         "ci95_offset_m": list(fit.ci95_offset_m), "offset_m": fit.offset_m,
         "normal_angle_deg": fit.normal_angle_deg,
         "covered": _offset_covered(fit.to_dict(), scan),
         "offset_z": _offset_z(fit.to_dict(), scan),
         "error_m": scan.edge_error(math.radians(fit.normal_angle_deg), fit.offset_m)}
+    row: ScanRow = {
+        "seed": scan.seed, "thickness_m": scan.thickness_m,
+        "normal_angle_deg": math.degrees(scan.theta), "offset_m": scan.offset_m,
+        "n_positions": scan.n_positions,
+        "positions": _position_scores(scan, positions, alone, joint, t_range),
+        # the edge's offset: joint against the per-position fit
+        "edge_free": _joint_edge_score(joint["free"], at_scan.get("free"), scan),
+        "edge_common": _joint_edge_score(joint["common"], at_scan.get("common"), scan),
+        "edge_alone": edge_alone}
     if sequential:
         row["sequence"] = _sequence(table, scan, measure, cal, shared_calibration)
     return row
 
 
-def _edge_at_scan(post: joint_map.JointPosterior, scan: Scan) -> dict[str, Any]:
+def _thickness_score(answer: Mapping[str, Any], scan: Scan,
+                     t_range: tuple[float, float]) -> ThicknessScore:
+    return {"status": answer.get("status"), "ci95": answer.get("ci95"),
+            "covered": (_covered(answer.get("ci95"), scan.thickness_m)
+                        if _answered(answer) else None),
+            "width_m": _width(answer, t_range)}
+
+
+def _position_scores(scan: Scan, positions: Sequence[joint_map.ScanPosition],
+                     alone: Sequence[Mapping[str, Any] | None],
+                     joint: Mapping[str, JointAnswer | None],
+                     t_range: tuple[float, float]) -> list[PositionScore]:
+    """Each position's three thickness answers (its own, the joint map's free and common)
+    against the plate's thickness."""
+    by_name = {k: {p["position"]: p for p in (j["positions"] if j else [])}
+               for k, j in joint.items()}
+    none = {"status": "none"}
+    out: list[PositionScore] = []
+    for p, est in zip(positions, alone, strict=True):
+        answers = {"alone": (est or {}).get("thickness_m") or none}
+        for kind in joint:
+            row = by_name[kind].get(p.name)
+            answers[kind] = (row["thickness_m"] if row else None) or none
+        scores = {k: _thickness_score(a, scan, t_range) for k, a in answers.items()}
+        out.append({"x_m": p.x_m, "y_m": p.y_m, "distance_m": scan.distance(p.x_m, p.y_m),
+                    "alone": scores["alone"], "free": scores["free"],
+                    "common": scores["common"]})
+    return out
+
+
+def _joint_edge_score(answer: JointAnswer | None, at_scan: EdgeAtScan | None,
+                      scan: Scan) -> EdgeScore | None:
+    """The joint map's located edge against the true one (None where it gave no answer)."""
+    if answer is None:
+        return None
+    s = answer["support"]
+    score: EdgeScore = {
+        "ci95_offset_m": s["ci95_offset_m"], "offset_m": s["offset_m"],
+        "normal_angle_deg": s["normal_angle_deg"],
+        "covered": _offset_covered(s, scan), "offset_z": _offset_z(s, scan),
+        "fit": answer["fit"],
+        "error_m": scan.edge_error(math.radians(s["normal_angle_deg"]), s["offset_m"])}
+    if at_scan is not None:
+        score.update(at_scan)
+    return score
+
+
+def _edge_at_scan(post: joint_map.JointPosterior, scan: Scan) -> EdgeAtScan:
     """The edge's two parameters as the scan sees them: its direction (the 95 % interval of
     the normal's angle) and where it lies at the scan (the 95 % interval of the positions'
     centroid's distance from it), each with whether it holds the truth. The offset in the
@@ -419,13 +267,15 @@ def _offset_z(support: Mapping[str, Any], scan: Scan) -> float:
 
 
 def _sequence(table: ModelTable, scan: Scan, measure: Measurer, cal: Calibration,
-              shared_calibration: bool = False) -> dict[str, Any]:
-    out: dict[str, Any] = {}
+              shared_calibration: bool = False) -> dict[str, SequenceScore]:
+    """Per strategy (:data:`STRATEGIES`), the edge's error as positions are added to the
+    scan's first three."""
+    out: dict[str, SequenceScore] = {}
     for strategy in STRATEGIES:
         xy = list(scan.random_positions[:START_POSITIONS])
         fallback = (scan.plate_positions if strategy == "random_on_plate"
                     else scan.random_positions)
-        errors = []
+        errors: list[float] = []
         while True:
             positions = _scan_positions(scan, xy, measure, cal)
             post, theta, offset = _joint_edge(table, positions, shared_calibration)
@@ -452,12 +302,12 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
         measurements: str | Path | None = None, sequential: bool = True,
         progress: Callable[[str, int, int], None] | None = None,
         shared_calibration: bool = False, exact_positions: bool = False,
-        truth_plate_theory: str = "auto", workers: int = 1) -> dict[str, Any]:
+        truth_plate_theory: str = "auto", workers: int = 1) -> StudyResult:
     """The study (see the module doc): per-scan rows and the summary metrics.
     ``shared_calibration``: the joint maps draw the calibration's TOF offset error once per
     scan (:func:`~solitonde.instrument.inference.joint_map.posterior`). Each position's chain
     stands off its recorded coordinates by the error the joint map states for them
-    (:data:`~solitonde.instrument.inference.joint_map.POSITION_SD_M` per coordinate), so the
+    (:data:`~solitonde.instrument.inference.joint_likelihood.POSITION_SD_M` per coordinate), so the
     study tests that statement; ``exact_positions`` puts it exactly there.
     ``truth_plate_theory`` (``sem.plate_theory`` of every simulated plate, the reference plates
     included, as :func:`.validate.validate` does): ``3d`` simulates next to a support on the 3-D
@@ -483,10 +333,10 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
         base = apply_overrides(base, {"sem.plate_theory": truth_plate_theory})
     measure = Measurer(base, measurements)
     started = time.perf_counter()
-    coordinate_sd_m = 0.0 if exact_positions else joint_map.POSITION_SD_M
+    coordinate_sd_m = 0.0 if exact_positions else POSITION_SD_M
     scans = [Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m,
                   coordinate_sd_m) for k in range(n_scans)]
-    requests = _references(table, diameter_m, seed * 1000 + 1)
+    requests = references(table, diameter_m, seed * 1000 + 1)
     for scan in scans:
         lists = [scan.random_positions[:scan.n_positions]]
         if sequential:
@@ -495,11 +345,11 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
                       + scan.plate_positions[START_POSITIONS:]]
         for xy in lists:
             requests += [(diameter_m, scan.thickness_m, length, s)
-                         for length, s in _stood(scan, xy)]
+                         for length, s in stood(scan, xy)]
     measure.prefetch(requests, workers, progress)
     measure.save()
-    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
-    rows = []
+    cal = reference_calibration(table, measure, diameter_m, seed * 1000 + 1)
+    rows: list[ScanRow] = []
     for k, scan in enumerate(scans):
         rows.append(score_scan(table, scan, measure, cal, sequential, shared_calibration))
         measure.save()
@@ -528,7 +378,8 @@ def _width_at_distance(table: ModelTable, inputs: Sequence[FeatureSummary],
                        distance_m: float, t_range: tuple[float, float]) -> float:
     """The 95 % thickness interval's width (an open side to the table's end) of a position's
     own likelihood at a known distance, by a single inversion's rules."""
-    from solitonde.instrument.inference.inversion import cell_likelihood, summarise_marginal
+    from solitonde.instrument.inference.likelihood import cell_likelihood
+    from solitonde.instrument.inference.marginals import summarise_marginal
 
     keep = cell_likelihood(table, inputs, cal, material_spread=spread)
     dev, g = keep["deviance"], keep["grid"]
@@ -560,7 +411,7 @@ def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
     file it keeps is reused)."""
     from dataclasses import replace
 
-    from solitonde.instrument.inference.inversion import fine_grid
+    from solitonde.instrument.inference.fine_grid import fine_grid
 
     if isinstance(n_scans, bool) or not isinstance(n_scans, int) or n_scans < 1:
         raise StudyInputError("scans", f"must be an integer >= 1, got {n_scans!r}")
@@ -569,14 +420,14 @@ def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
                   else float(table.axes["diameter_m"][table.diameter_index(diameter_m)]))
     t_range = (float(table.axes["thickness_m"][0]), float(table.axes["thickness_m"][-1]))
     measure = Measurer(table.sweep.get("scene", {}), measurements)
-    cal = _calibration(table, measure, diameter_m, seed * 1000 + 1)
+    cal = reference_calibration(table, measure, diameter_m, seed * 1000 + 1)
     exact = cal.to_dict()
     for entry in exact["per_diameter"]:
         entry["arr_factor_std"] = entry["tof_offset_std_s"] = 0.0
     cal_exact = Calibration.from_any(exact)
     no_material = dict.fromkeys(("youngs_modulus_rel_sd", "poisson_ratio_sd",
                                  "density_rel_sd"), 0.0)
-    rows: list[dict[str, Any]] = []
+    rows: list[SplitRow] = []
     for k in range(n_scans):
         scan = Scan(table, int(np.random.default_rng([seed, k]).integers(0, 2**31)), diameter_m)
         for p in _scan_positions(scan, scan.random_positions[:scan.n_positions], measure, cal):
@@ -625,12 +476,12 @@ def _binomial_se(hits: Sequence[bool]) -> float | None:
     return math.sqrt(max(p * (1.0 - p), 1.0 / len(hits)) / len(hits))
 
 
-def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+def summarise(rows: Sequence[ScanRow]) -> dict[str, Any]:
     """Coverage, widths near the edge, and the edge's error against the number of positions."""
     out: dict[str, Any] = {}
-    for name in ("alone", "free", "common"):
-        cov = [p[name]["covered"] for r in rows for p in r["positions"]
-               if p[name]["covered"] is not None]
+    for name in ANSWER_KINDS:
+        cov = [c for r in rows for p in r["positions"]
+               if (c := p[name]["covered"]) is not None]
         n_all = sum(len(r["positions"]) for r in rows)
         near = [p[name]["width_m"] / r["thickness_m"] for r in rows for p in r["positions"]
                 if p["distance_m"] <= NEAR_EDGE_M]
@@ -643,8 +494,8 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             "near_edge_width_median_rel": float(np.median(near)) if near else None,
             "near_edge_width_median_m": float(np.median(near_abs)) if near_abs else None,
             "near_edge_positions": len(near)}
-    for name in ("alone", "free", "common"):
-        edges = [r.get(f"edge_{name}") for r in rows]
+    for name in ANSWER_KINDS:
+        edges = [_edge_of(r, name) for r in rows]
         located = [e for e in edges if e and "covered" in e]
         out[f"edge_{name}"] = {
             "coverage_95": float(np.mean([e["covered"] for e in located])) if located else None,
@@ -670,14 +521,14 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                 angle_z_rms=_rms([e.get("angle_z") for e in seen]),
                 at_scan_z_rms=_rms([e.get("at_scan_z") for e in seen]))
             # where the edge lies at the scan means something only where its direction is
-            # fixed: the joint map warns beyond joint_map.WIDE_ANGLE_DEG
-            fixed = [e for e in seen if e["angle_ci95_width_deg"] <= joint_map.WIDE_ANGLE_DEG]
+            # fixed: the joint map warns beyond WIDE_ANGLE_DEG
+            fixed = [e for e in seen if e["angle_ci95_width_deg"] <= WIDE_ANGLE_DEG]
             out[f"edge_{name}"].update(
                 direction_fixed_scans=len(fixed),
                 at_scan_coverage_95_direction_fixed=float(np.mean(
                     [e["at_scan_covered"] for e in fixed])) if fixed else None,
                 at_scan_z_rms_direction_fixed=_rms([e.get("at_scan_z") for e in fixed]))
-    free = [r["edge_free"]["fit"]["p_value"] for r in rows if r.get("edge_free")]
+    free = [e["fit"]["p_value"] for r in rows if (e := r.get("edge_free"))]
     out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
     seqs = [r["sequence"] for r in rows if "sequence" in r]
     if seqs:
@@ -704,6 +555,13 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def _edge_of(row: ScanRow, kind: AnswerKind) -> EdgeScore | None:
+    """The scan's edge as the answers of ``kind`` locate it."""
+    if kind == "alone":
+        return row.get("edge_alone")
+    return row.get("edge_free") if kind == "free" else row.get("edge_common")
+
+
 def _counts(values: Any) -> dict[str, int]:
     out: dict[str, int] = {}
     for v in values:
@@ -711,5 +569,5 @@ def _counts(values: Any) -> dict[str, int]:
     return out
 
 
-__all__ = ["SPLIT_STEPS", "Scan", "StudyInputError", "run", "score_scan", "summarise",
-           "width_split"]
+__all__ = ["DISTANCE_RANGE_M", "MAX_POSITIONS", "POSITIONS", "SPLIT_STEPS", "TILT_DEG", "Measurer",
+           "Scan", "StudyInputError", "run", "score_scan", "summarise", "width_split"]

@@ -17,7 +17,9 @@ import pytest
 
 from solitonde.instrument.inference import joint_map
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.inversion import FeatureSummary, invert, predict
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.suggest import check_request, suggest
 from solitonde.instrument.tables.table import ModelTable
 
@@ -238,7 +240,7 @@ def test_a_calibration_error_enters_the_deviance_as_its_stated_quadratic(table):
     """``cell_likelihood(..., shared_calibration=True)`` leaves the calibration's uncertainty
     out and keeps how the deviance moves with its errors: at a TOF offset error eta the
     deviance is exactly the one with the offset moved by eta and no uncertainty stated."""
-    from solitonde.instrument.inference.inversion import cell_likelihood
+    from solitonde.instrument.inference.likelihood import cell_likelihood
 
     rng = np.random.default_rng(3)
     inputs = measured(table, 3.0e-3, 0.012, rng)
