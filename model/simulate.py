@@ -20,8 +20,8 @@ from numba import njit
 from .chain import PK_BOT_F, PK_BOT_T, PK_INC_F, PK_INC_T, PK_REF_F, PK_REF_T, new_peak_tracker
 from .errors import SimulationError
 from .greens import GreensCache
-from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, check_solver, plan
-from .record import chain_record
+from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, RunPlan, check_solver, plan
+from .record import ChainRecord, chain_record
 from .scene import STANDARD_GRAVITY, Scene
 from .status import RUN_OK, RUN_SHORT_RESPONSE, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
 from .tiers import ChainRun, StepPlan, make_boundary
@@ -130,16 +130,60 @@ def simulate(
     adaptive = solver.integrator == "dopri5"
     boundary = make_boundary(scene, check_solver(scene), greens_cache)
     planned = plan(scene, boundary, steps_per_period=steps_per_period)
-    n = scene.chain.n_particles
-    m = scene.sphere_mass
-    a_s = scene.a_s
-    g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
-    v_imp = scene.impact_velocity
-    tau = scene.effects.damping if scene.effects.dissipation else 0.0
+    _check_budget(planned, adaptive, max_steps, max_samples)
+    n_samples, interval = planned.n_samples, planned.interval_s
+    record = _start_record(scene, boundary.a_bottom, n_samples)
+    step_plan = StepPlan(planned.dt_s, planned.n_sub, n_samples, integrator=solver.integrator,
+                         rtol=solver.rtol, max_steps=max_steps)
+    run = boundary.integrate(record, step_plan)
+    if run.status != RUN_OK:
+        raise SimulationError(_failure(run, step_plan, boundary.name))
+    steps, dt = (n_samples - 1) * planned.n_sub, planned.dt_s
+    if adaptive:
+        steps = int(run.extra["steps_accepted"])
+        dt = interval * (n_samples - 1) / max(steps, 1)
+    truth, valid = _truth(scene, run)
     auto = scene.output.duration == "auto"
-    dt, n_sub, n_samples = planned.dt_s, planned.n_sub, planned.n_samples
-    interval = planned.interval_s
-    steps = (n_samples - 1) * n_sub
+    diagnostics: dict[str, Any] = {
+        # auto: the record was meant to pass the reflection; say so only when one was found
+        "status": ("reflection_passed" if valid else "reflection_not_found") if auto
+                  else "duration_reached",
+        **_energy(scene, run, record.energy, adaptive),
+        "integrator": solver.integrator,
+        **({"rtol": solver.rtol} if adaptive else {}),
+        "steps": steps,
+        "dt_s": dt,
+        "duration_s": interval * (n_samples - 1),
+        "wall_s": time.perf_counter() - started,
+        "integration_wall_s": run.wall_s,
+        **run.extra,
+    }
+    traces = None
+    if scene.output.traces:
+        traces = {
+            "u_m": record.u_trace,
+            "v_m_s": record.v_trace,
+            "contact_force_N": record.f_trace,
+            "plate_deflection_m": record.w_trace,
+        }
+    return SimulationResult(
+        scene=scene,
+        plate_model=boundary.name,
+        plate_model_reason=boundary.reason,
+        t0=0.0,
+        dt=interval,
+        samples=record.samples,
+        diagnostics=diagnostics,
+        truth=truth,
+        traces=traces,
+        energy=record.energy,
+    )
+
+
+def _check_budget(planned: RunPlan, adaptive: bool, max_steps: int, max_samples: int) -> None:
+    """Refuse a run whose fixed steps or samples exceed the budget (before any work)."""
+    dt, n_samples, interval = planned.dt_s, planned.n_samples, planned.interval_s
+    steps = (n_samples - 1) * planned.n_sub
     if (steps > max_steps and not adaptive) or n_samples > max_samples:
         duration = planned.duration_s
         advice = ("shorten output.duration, lower output.sample_rate or raise the budget"
@@ -152,36 +196,30 @@ def simulate(
             f"{max_samples:,} samples); {advice}"
         )
 
-    u, v = initial_state(n, m, g, a_s, boundary.a_bottom, v_imp)
-    traces_on = scene.output.traces
-    rows = n_samples if traces_on else 0
-    record = chain_record(
-        u, v, u.copy(), m, g, a_s, boundary.a_bottom, n * m * g, tau, scene.chain.sensor_index,
+
+def _start_record(scene: Scene, a_bottom: float, n_samples: int) -> ChainRecord:
+    """The chain at the instant of impact and room for ``n_samples`` samples (and the traces
+    when the scene asks for them)."""
+    n = scene.chain.n_particles
+    m = scene.sphere_mass
+    a_s = scene.a_s
+    g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
+    tau = scene.effects.damping if scene.effects.dissipation else 0.0
+    u, v = initial_state(n, m, g, a_s, a_bottom, scene.impact_velocity)
+    rows = n_samples if scene.output.traces else 0
+    return chain_record(
+        u, v, u.copy(), m, g, a_s, a_bottom, n * m * g, tau, scene.chain.sensor_index,
         np.empty(n_samples), np.empty(n_samples), np.empty((rows, n + 1)),
         np.empty((rows, n + 1)), np.empty((rows, n + 1)), np.empty(rows), new_peak_tracker(),
         scene.striker_mass, scene.a_0,
     )
-    step_plan = StepPlan(dt, n_sub, n_samples, integrator=solver.integrator, rtol=solver.rtol,
-                         max_steps=max_steps)
-    run = boundary.integrate(record, step_plan)
-    if run.status != RUN_OK:
-        raise SimulationError(_failure(run, step_plan, boundary.name))
-    if adaptive:
-        steps = int(run.extra["steps_accepted"])
-        dt = interval * (n_samples - 1) / max(steps, 1)
 
-    # Relative to the energy in play: the striker's, or what left the chain if that is more
-    # (with gravity a chain that keeps sinking into an infinite plate feeds it without end).
-    e_scale = max(0.5 * scene.striker_mass * v_imp**2, abs(run.plate_work) + run.dissipated)
-    balance = record.energy
-    if adaptive:
-        # dopri5's samples interpolate the balance between step ends: drift is measured there.
-        drift = float(run.extra["energy_deviation_step_ends_J"])
-        final = abs(balance[-1] - balance[0])
-    else:
-        deviation = np.abs(balance - balance[0])
-        drift, final = deviation.max(), deviation[-1]
-    static_sensor = (scene.chain.sensor_index - 0.5) * m * g
+
+def _truth(scene: Scene, run: ChainRun) -> tuple[dict[str, float], bool]:
+    """The model's own peaks (see :class:`SimulationResult`), and whether the sensor told the
+    incident and the reflected pulse apart."""
+    g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
+    static_sensor = (scene.chain.sensor_index - 0.5) * scene.sphere_mass * g
     pk = run.peaks.tolist()
     inc_f, ref_f = pk[PK_INC_F], pk[PK_REF_F]
     rise_inc, rise_ref = inc_f - static_sensor, ref_f - static_sensor
@@ -200,41 +238,27 @@ def simulate(
         "bottom_peak_N": float(pk[PK_BOT_F]),
         "bottom_peak_time_s": float(pk[PK_BOT_T]),
     }
-    diagnostics: dict[str, Any] = {
-        # auto: the record was meant to pass the reflection; say so only when one was found
-        "status": ("reflection_passed" if valid else "reflection_not_found") if auto
-                  else "duration_reached",
+    return truth, valid
+
+
+def _energy(scene: Scene, run: ChainRun, balance: np.ndarray, adaptive: bool) -> dict[str, float]:
+    """The energy balance's diagnostics: drift and final error relative to the energy in play,
+    that scale, and the energy that left the chain."""
+    # Relative to the energy in play: the striker's, or what left the chain if that is more
+    # (with gravity a chain that keeps sinking into an infinite plate feeds it without end).
+    e_scale = max(0.5 * scene.striker_mass * scene.impact_velocity**2,
+                  abs(run.plate_work) + run.dissipated)
+    if adaptive:
+        # dopri5's samples interpolate the balance between step ends: drift is measured there.
+        drift = float(run.extra["energy_deviation_step_ends_J"])
+        final = abs(balance[-1] - balance[0])
+    else:
+        deviation = np.abs(balance - balance[0])
+        drift, final = deviation.max(), deviation[-1]
+    return {
         "energy_drift": float(drift / e_scale),
         "energy_error_final": float(final / e_scale),
         "energy_scale_J": e_scale,
         "plate_work_J": run.plate_work,
         "dissipated_J": run.dissipated,
-        "integrator": solver.integrator,
-        **({"rtol": solver.rtol} if adaptive else {}),
-        "steps": steps,
-        "dt_s": dt,
-        "duration_s": interval * (n_samples - 1),
-        "wall_s": time.perf_counter() - started,
-        "integration_wall_s": run.wall_s,
-        **run.extra,
     }
-    traces = None
-    if traces_on:
-        traces = {
-            "u_m": record.u_trace,
-            "v_m_s": record.v_trace,
-            "contact_force_N": record.f_trace,
-            "plate_deflection_m": record.w_trace,
-        }
-    return SimulationResult(
-        scene=scene,
-        plate_model=boundary.name,
-        plate_model_reason=boundary.reason,
-        t0=0.0,
-        dt=interval,
-        samples=record.samples,
-        diagnostics=diagnostics,
-        truth=truth,
-        traces=traces,
-        energy=balance,
-    )

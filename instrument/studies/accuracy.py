@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 import pandas as pd
@@ -44,7 +44,16 @@ THICKNESS_M = 2.29e-3
 SCENES_M = {"near_support": 0.02, "centre": 0.457}
 """Distance to the clamped support of the two benchmark scenes."""
 
-BUDGETS = {
+
+
+class Budget(TypedDict):
+    """Largest relative errors a use accepts."""
+
+    tof: float
+    arr: float
+
+
+BUDGETS: dict[str, Budget] = {
     "rest_simulate": {"tof": 0.02, "arr": 0.10},
     "table_build": {"tof": 0.01, "arr": 0.05},
 }
@@ -52,6 +61,67 @@ BUDGETS = {
 shot (shot-to-shot scatter of a few per cent in TOF, more in ARR, and measured ARR lies below the
 dissipation-free model anyway); a table should stay below the inversion's resolution. ARR gets the
 wider band because ARR is the noisier measured feature (and the one the inversion weighs less)."""
+
+
+class SemSection(TypedDict):
+    """The scene's ``sem`` section of a meshed configuration."""
+
+    preset: str
+    elements: list[int]
+    order: list[int]
+    step_factor: float
+    contact_refinement: NotRequired[int]
+    mindlin_element_size: NotRequired[float]
+
+
+class Shot(TypedDict):
+    """One timed shot: the features as read, the model's own, its cost and mesh size."""
+
+    tof_s: float
+    arr: float
+    truth_tof_s: float
+    truth_arr: float
+    wall_s: float
+    dofs: int
+    plate_dt_s: float | None
+    energy_drift: float
+
+
+class RestChoice(TypedDict):
+    """The cheapest configuration within the REST budget at one scene."""
+
+    config: str
+    tof_error: float
+    arr_error: float
+    cost_s: float
+
+
+class TableChoice(TypedDict):
+    """The cheapest configuration within the table budget on both scenes (``config`` None, and
+    ``why``, when none is)."""
+
+    budget: Budget
+    config: str | None
+    why: NotRequired[str]
+    tof_error: NotRequired[float]
+    arr_error: NotRequired[float]
+    cost_per_shot_s: NotRequired[float]
+    first_shot_per_position_s: NotRequired[float]
+
+
+class ConfigName(TypedDict):
+    config: str
+
+
+class Recommendation(TypedDict):
+    """Per use, the cheapest configuration within its budget.
+
+    ``rest_simulate`` holds the ``budget`` and, per scene, a :class:`RestChoice` (None when no
+    configuration meets the budget there)."""
+
+    rest_simulate: dict[str, Budget | RestChoice | None]
+    table_build: TableChoice
+    reference: ConfigName
 
 
 @dataclass(frozen=True)
@@ -94,7 +164,7 @@ class Config:
             "effects": {"plate_model": self.tier},
         }
         if self.elements is not None:
-            sem: dict[str, Any] = {"preset": self.preset, "elements": list(self.elements),
+            sem: SemSection = {"preset": self.preset, "elements": list(self.elements),
                                    "order": list(self.order or ()),
                                    "step_factor": self.step_factor or 0.9}
             if self.preset == "resolved":
@@ -147,7 +217,7 @@ def configs(quick: bool = False) -> list[Config]:
     return out
 
 
-def first_shot(scene: Scene, cache: greens.GreensCache | None = None) -> dict[str, Any]:
+def first_shot(scene: Scene, cache: greens.GreensCache | None = None) -> Shot:
     """TOF and ARR as the extractor reads them, the model's own peaks, and the cost of a shot at
     a new plate: the plate assembled (its process cache cleared) and, without ``cache``, its
     response computed."""
@@ -184,7 +254,7 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
     tick = tick or (lambda _label: None)
     _warm_up()
     ref_cfg = reference_config(quick)
-    reference = {}
+    reference: dict[str, Shot] = {}
     for name, distance in SCENES_M.items():
         reference[name] = first_shot(ref_cfg.scene(distance))
         tick(f"reference, {name}")
@@ -251,11 +321,11 @@ def pareto(frame: pd.DataFrame) -> list[bool]:
     return keep
 
 
-def _within(frame: pd.DataFrame, budget: dict[str, float]) -> pd.Series:
+def _within(frame: pd.DataFrame, budget: Budget) -> pd.Series:
     return (frame["tof_error"] <= budget["tof"]) & (frame["arr_error"] <= budget["arr"])
 
 
-def recommend(frame: pd.DataFrame, ref_cfg: Config) -> dict[str, Any]:
+def recommend(frame: pd.DataFrame, ref_cfg: Config) -> Recommendation:
     """The cheapest configuration within each use's error budget.
 
     REST simulate: per scene, by the cost of a first shot (the ``auto`` plate model already picks
@@ -264,9 +334,8 @@ def recommend(frame: pd.DataFrame, ref_cfg: Config) -> dict[str, Any]:
     cached (a table reuses it for every sphere size and drop height at a position); the one-off
     cost of the response is reported with it.
     """
-    out: dict[str, Any] = {}
     budget = BUDGETS["rest_simulate"]
-    rest: dict[str, Any] = {"budget": budget}
+    rest: dict[str, Budget | RestChoice | None] = {"budget": budget}
     for key, g in frame.groupby("scene"):
         scene = str(key)
         ok = g[_within(g, budget)].sort_values("wall_s")
@@ -276,7 +345,6 @@ def recommend(frame: pd.DataFrame, ref_cfg: Config) -> dict[str, Any]:
         best = ok.iloc[0]
         rest[scene] = {"config": best["config"], "tof_error": float(best["tof_error"]),
                        "arr_error": float(best["arr_error"]), "cost_s": float(best["wall_s"])}
-    out["rest_simulate"] = rest
     budget = BUDGETS["table_build"]
     frame = frame.assign(ok=_within(frame, budget),
                          cost=frame["wall_warm_s"].fillna(frame["wall_s"]))
@@ -284,18 +352,17 @@ def recommend(frame: pd.DataFrame, ref_cfg: Config) -> dict[str, Any]:
                                       first=("wall_s", "max"), tof_error=("tof_error", "max"),
                                       arr_error=("arr_error", "max"))
     agg = agg[agg["ok"]].sort_values("cost")
+    table: TableChoice
     if agg.empty:
-        out["table_build"] = {"budget": budget, "config": None,
-                              "why": "no configuration meets the budget on both scenes"}
+        table = {"budget": budget, "config": None,
+                 "why": "no configuration meets the budget on both scenes"}
     else:
         best = agg.iloc[0]
-        out["table_build"] = {"budget": budget, "config": agg.index[0],
-                              "tof_error": float(best["tof_error"]),
-                              "arr_error": float(best["arr_error"]),
-                              "cost_per_shot_s": float(best["cost"]),
-                              "first_shot_per_position_s": float(best["first"])}
-    out["reference"] = {"config": ref_cfg.label}
-    return out
+        table = {"budget": budget, "config": agg.index[0],
+                 "tof_error": float(best["tof_error"]), "arr_error": float(best["arr_error"]),
+                 "cost_per_shot_s": float(best["cost"]),
+                 "first_shot_per_position_s": float(best["first"])}
+    return {"rest_simulate": rest, "table_build": table, "reference": {"config": ref_cfg.label}}
 
 
 def write_outputs(result: dict[str, Any], out: Path) -> None:

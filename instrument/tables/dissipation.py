@@ -111,7 +111,7 @@ def layer_from_table(table: ModelTable, damped_table: ModelTable) -> Dissipation
     with ``effects.dissipation`` on. TableError (naming what differs) otherwise."""
     if not damped_table.complete:
         raise TableError("source", "the damped table is not complete")
-    mine, theirs = dict(table.sweep), dict(damped_table.sweep)
+    mine, theirs = table.sweep, damped_table.sweep
     effects = (theirs.get("scene") or {}).get("effects") or {}
     if not effects.get("dissipation"):
         raise TableError("source", "the damped table was built without effects.dissipation")
@@ -137,7 +137,8 @@ def simulate_layer(table: ModelTable, damping_s: float, out_dir: Path, *,
     """Simulate ``table``'s sweep with damping ``damping_s`` (a table build into ``out_dir``
     named ``<stem>.damped-<tau>.h5``: an interrupted run resumes from its ``.partial``) and return
     it as a one-slice layer, with the damped table's path."""
-    from solitonde.instrument.tables.table_build import Sweep, build_table
+    from solitonde.instrument.tables.sweep import Sweep
+    from solitonde.instrument.tables.table_build import build_table
 
     sweep = Sweep.from_dict(table.sweep)
     damped_sweep = dataclasses.replace(sweep, scene=damped_scene(sweep.scene, damping_s))

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from solitonde.instrument.tables.sweep import Sweep
 from solitonde.instrument.tables.table import (
     ModelTable,
     TableError,
@@ -35,7 +36,7 @@ from solitonde.instrument.tables.table import (
     read_slopes,
     require_complete,
 )
-from solitonde.instrument.tables.table_build import Sweep, simulate_slopes, write_slopes
+from solitonde.instrument.tables.table_build import simulate_slopes, write_slopes
 from solitonde.signal.features import EXTRACTOR_VERSION
 
 

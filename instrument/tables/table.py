@@ -31,7 +31,7 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 import h5py
 import numpy as np
@@ -42,7 +42,10 @@ from solitonde.model.scene import PLATE_MODELS
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
 AXES = ("diameter_m", "thickness_m", "distance_m")
-SCALAR_FEATURES = (
+ScalarFeature = Literal["tof_s", "arr", "incident_time_s", "incident_peak_N", "reflected_peak_N",
+                        "snr_db", "arr_upper_bound"]
+SecondaryFeature = Literal["secondary_times_s", "secondary_ratios"]
+SCALAR_FEATURES: tuple[ScalarFeature, ...] = (
     "tof_s",
     "arr",
     "incident_time_s",
@@ -51,7 +54,7 @@ SCALAR_FEATURES = (
     "snr_db",
     "arr_upper_bound",
 )
-SECONDARY_FEATURES = ("secondary_times_s", "secondary_ratios")
+SECONDARY_FEATURES: tuple[SecondaryFeature, ...] = ("secondary_times_s", "secondary_ratios")
 MAX_SECONDARY = 4
 STATUS_PENDING, STATUS_OK, STATUS_NO_REFLECTION, STATUS_FAILED = -1, 0, 1, 2
 STATUS_NAMES = {
@@ -120,6 +123,19 @@ def read_layer(fh: h5py.File, shape: tuple[int, ...]) -> DissipationLayer | None
     return DissipationLayer(taus, arrays, status)
 
 
+class SweepDict(TypedDict):
+    """A table's sweep as its file stores it (the attribute ``sweep``, JSON): the grid axes, the
+    base scene (any scene keys), whether traces are kept, the extractor's options
+    (:class:`~.sweep.Sweep`)."""
+
+    diameters_m: list[float]
+    thicknesses_m: list[float]
+    distances_m: list[float]
+    scene: dict[str, Any]
+    traces: bool
+    detect: dict[str, Any]
+
+
 @dataclass
 class ModelTable:
     """A loaded model table (everything in memory; a table is a few MB).
@@ -143,7 +159,7 @@ class ModelTable:
     flags: np.ndarray
     plate_model: np.ndarray
     diagnostics: dict[str, np.ndarray]
-    sweep: dict[str, Any]
+    sweep: SweepDict
     provenance: dict[str, Any]
     complete: bool
     flag_names: tuple[str, ...] = ()
@@ -220,7 +236,8 @@ class ModelTable:
                                  f"solitonde reads (up to {FORMAT_VERSION})")
             axes = {a: _axis(fh, a) for a in AXES}
             grid = tuple(axes[a].size for a in AXES)
-            features = {k: _dataset(fh, f"features/{k}", float, grid) for k in SCALAR_FEATURES}
+            features: dict[str, np.ndarray] = {
+                k: _dataset(fh, f"features/{k}", float, grid) for k in SCALAR_FEATURES}
             features |= {k: _dataset(fh, f"features/{k}", float, grid, trailing=True)
                          for k in SECONDARY_FEATURES}
             diag = {}

@@ -11,18 +11,20 @@ import pytest
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
-from solitonde.instrument.studies.reproduce import (
+from solitonde.instrument.studies.paper_checks import (
+    check_critical_distance,
+    paper_statements,
+    settled_distance,
+    spearman,
+)
+from solitonde.instrument.studies.paper_points import theory_curve
+from solitonde.instrument.studies.paper_setup import (
     CENTRE_M,
     DIAMETERS_M,
     PLATES_M,
     THICK_PLATE_M,
     TRACE_DIAMETER_M,
-    check_critical_distance,
-    paper_statements,
     scene_for,
-    settled_distance,
-    spearman,
-    theory_curve,
 )
 from solitonde.model import zener
 

@@ -10,7 +10,8 @@ import h5py
 import numpy as np
 import pytest
 
-from solitonde.instrument.inference.inversion import FeatureSummary, invert
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,

@@ -14,7 +14,7 @@ from functools import partial
 import numpy as np
 import pytest
 
-from solitonde.instrument.tables.table_build import default_sweep
+from solitonde.instrument.tables.sweep import default_sweep
 from solitonde.model import greens
 from solitonde.model.scene import load_scene
 from solitonde.model.sem import single_threaded_blas
