@@ -32,14 +32,20 @@ import json
 import math
 import re
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn, NotRequired, TypedDict
 
 import typer
 from rich.console import Console
 
+from solitonde.instrument.cli.analyze_estimates import (
+    PositionEstimate,
+    estimate_failures,
+    estimates_for_locations,
+    write_estimates,
+)
 from solitonde.instrument.cli.common import sphere_sizes
 from solitonde.instrument.cli.console_tables import Column, fitted_table
 from solitonde.instrument.cli.manifest import ManifestError, Row
@@ -49,6 +55,7 @@ from solitonde.instrument.inference.measured_shots import (
     PEAK_READING,
     PositionShots,
     ShotInputError,
+    ShotRow,
 )
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
@@ -68,8 +75,6 @@ FLAGS = {"plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m"
          "channel": "--channel", "group": "--group", "format": "--format",
          "baseline": "--baseline"}
 """Command-line flags by the option or metadata key they set (for messages)."""
-MISSING_SIZE_FLAG = ("--sphere-diameter: --invert needs the sphere size, and these shots state "
-                     "none (give --sphere-diameter M, or a manifest's sphere_diameter_m)")
 
 
 def flag_message(text: str) -> str:
@@ -83,18 +88,29 @@ def flag_message(text: str) -> str:
     return text
 
 
+class StatedLocation(TypedDict, total=False):
+    """The location metadata the command line states for every file (the keys given)."""
+
+    plate_id: str
+    position: str
+    x_m: float
+    y_m: float
+    sphere_diameter: float
+    baseline: str
+
+
 @dataclass(frozen=True)
 class Choice:
     """What the command line says about every file: channels, group and location metadata."""
 
     channels: tuple[str, ...] = ()
     group: str | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: StatedLocation = field(default_factory=StatedLocation)
 
 
-def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
+def analyse_file(path: Path, fmt: str | None, options: ReaderOptions,
                  calibration: float | None = None, choice: Choice | None = None,
-                 row: Row | None = None) -> tuple[list[dict[str, Any]], bool]:
+                 row: Row | None = None) -> tuple[list[ShotRow], bool]:
     """One row per shot of ``path`` (instrument.inference.measured_shots.measure_file) and
     whether ``calibration`` (a fallback for files in volts without their own) was used.
 
@@ -102,7 +118,8 @@ def analyse_file(path: Path, fmt: str | None, options: dict[str, Any],
     metadata; a manifest row's calibration serves its file before ``--calibration``."""
     choice = choice or Choice()
     own = row.calibration if row is not None and row.calibration is not None else None
-    sources = [(FLAGS[k], {k: v}) for k, v in choice.metadata.items()]
+    sources: list[tuple[str, Mapping[str, Any]]] = [
+        (FLAGS[k], {k: v}) for k, v in choice.metadata.items()]
     if row is not None and row.metadata:
         sources.append((row.where, row.metadata))
     rows, used = measured_shots.measure_file(
@@ -124,100 +141,7 @@ def aggregates(groups: list[PositionShots]) -> list[dict[str, Any]]:
     return out
 
 
-def estimates_for_locations(groups: Sequence[PositionShots], table_files: Sequence[Path] | None,
-                            calibration_file: Path | None,
-                            plate_material: Any = None,
-                            setup: Setup | None = None) -> list[dict[str, Any]]:
-    """Estimates per (plate_id, position) from `analyze`'s summaries, sphere sizes combined,
-    each against the table of its family (instrument.table_set's rule) or the one its manifest
-    row or ``setup`` names, through the one estimate path (instrument.inference.pipeline).
-
-    With ``setup`` its table is found by id among ``table_files``, the bundled tables and
-    ``$SOLITONDE_TABLE``, and its chain calibration is applied, as the service does.
-
-    Raises TableError/CalibrationError when a table or the calibration cannot be read.
-    """
-    from solitonde.instrument.cli.common import choice_error, setup_tables, table_set
-    from solitonde.instrument.inference.calibration import Calibration
-    from solitonde.instrument.inference.inversion import InversionError
-    from solitonde.instrument.inference.pipeline import MISSING_SIZE, estimate
-    from solitonde.instrument.inference.table_set import TableChoiceError
-    from solitonde.instrument.tables.table import TableError
-
-    tables = table_set(table_files) if setup is None else setup_tables(setup, table_files)
-    cal = Calibration.load(calibration_file) if calibration_file else None
-    if setup is not None and setup.chain_calibration is not None:
-        cal = setup.calibration()
-    by_location = measured_shots.by_position(
-        groups, lambda g: tuple(g.location.get(k) for k in measured_shots.POSITION_KEYS))
-    out = []
-    for (plate, position, x_m, y_m), sizes in by_location.items():
-        row: dict[str, Any] = {"plate_id": plate, "position": position, "x_m": x_m, "y_m": y_m}
-        usable = [g.summary for g in sizes if g.summary.skip_reason() is None]
-        # the command line names its flag, not the metadata key the inversion reads
-        row["skipped"] = [{"sphere_diameter": g.location["sphere_diameter"],
-                           "reason": MISSING_SIZE_FLAG if g.summary.skip_reason() == MISSING_SIZE
-                           else g.summary.skip_reason()} for g in sizes
-                          if g.summary.skip_reason()]
-        row["diameters_m"] = [s.diameter_m for s in usable]
-        row["n_shots"] = sum(s.inputs().n_shots for s in usable)
-        row["estimate"] = None
-        if not usable:
-            out.append(row)
-            continue
-        chosen = _chosen_for(sizes, setup, plate_material)
-        if "error" in chosen:
-            row["error"] = chosen["error"]
-            out.append(row)
-            continue
-        try:
-            found = estimate(tables, usable, cal, table=chosen.get("table"),
-                             plate_material=chosen.get("plate_material"),
-                             skipped=row["skipped"])
-            row["estimate"] = found.to_dict()
-        except TableChoiceError as exc:
-            row["error"] = choice_error(exc)
-        except (InversionError, TableError) as exc:
-            row["error"] = str(exc)
-        out.append(row)
-    return out
-
-
-def _chosen_for(sizes: Sequence[PositionShots], setup: Setup | None,
-                plate_material: Any) -> dict[str, Any]:
-    """The table and plate material a position is estimated with: its manifest row's, else the
-    set-up's, else the command line's material; ``error`` where a row names another set-up
-    than ``--setup``, or a table that contradicts it."""
-    from solitonde.instrument.cli.common import parse_material
-
-    loc = sizes[0].location
-    named = loc.get("setup")
-    if named is not None and (setup is None or named != setup.id):
-        return {"error": f"--manifest: setup {named!r}: give that set-up's file with --setup"
-                + ("" if setup is None else f" (--setup is {setup.id!r})")}
-    if setup is not None:
-        for g in sizes:
-            d = g.location.get("sphere_diameter")
-            if d is not None and setup.size_of(float(d)) is None:
-                return {"error": f"sphere_diameter {float(d):g} m contradicts --setup "
-                        f"{setup.id!r}, whose sphere_diameters_m are "
-                        f"{', '.join(f'{s:g}' for s in setup.sphere_diameters_m)} m"}
-    table = loc.get("table")
-    if setup is not None and table is not None and table != setup.table:
-        return {"error": f"--manifest: table {table!r} contradicts --setup {setup.id!r}, whose "
-                f"table is {setup.table!r}"}
-    material = loc.get("plate_material")
-    try:
-        material = plate_material if material is None else parse_material(str(material))
-    except ValueError as exc:
-        return {"error": f"--manifest: plate_material: {exc}"}
-    if material is None and setup is not None:
-        material = setup.plate_material
-    return {"table": table if table is not None else None if setup is None else setup.table,
-            "plate_material": material}
-
-
-def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
+def _write_rows(out: Path, rows: list[ShotRow]) -> None:
     import pandas as pd
 
     table = pd.DataFrame([{k: r.get(k) for k in ROW_KEYS} for r in rows], columns=list(ROW_KEYS))
@@ -236,7 +160,7 @@ def _write_rows(out: Path, rows: list[dict[str, Any]]) -> None:
         write_bytes(out, neutralised(table).to_csv(index=False).encode())
 
 
-def _write_plots(folder: Path, rows: list[dict[str, Any]]) -> None:
+def _write_plots(folder: Path, rows: list[ShotRow]) -> None:
     """One PNG per measured shot, named ``<stem>_shot<k>.png`` after its file and shot number.
 
     Files that share a stem (``x.csv`` and ``x.npy``, or ``a/x.csv`` and ``b/x.csv``) keep the
@@ -330,95 +254,227 @@ def analyze(
                                            "calibration, as the service applies them."),
 ) -> None:
     """Measure TOF, ARR, SNR and quality flags of every shot; aggregate per position."""
-    console = Console(stderr=as_json)
+    request = AnalyzeRequest(
+        files=list(files or []), fmt=fmt, out=out, as_json=as_json, sample_rate=sample_rate,
+        calibration=calibration, units=units, channels=tuple(channel), group=group,
+        sphere_diameter=sphere_diameter, baseline=baseline, plate_id=plate_id,
+        position=position, x=x, y=y, manifest=manifest,
+        invert=invert or estimates_out is not None, estimates_out=estimates_out, table=table,
+        plate_material=plate_material, calibration_file=calibration_file, plots=plots,
+        setup_file=setup_file)
+    raise typer.Exit(code=run_analysis(request))
 
-    def usage(message: str) -> None:
-        typer.echo(f"error: {message}", err=True)  # unwrapped, one line for scripts and logs
-        raise typer.Exit(code=2)
 
-    setup = None
-    if setup_file is not None:
-        from solitonde.instrument.inference.setups import Setup, SetupError
+@dataclass
+class AnalyzeRequest:
+    """The options of one `analyze` run, as the command line gives them (``invert`` already
+    implied by ``estimates_out``; ``sphere_diameter`` filled in from a one-size set-up)."""
 
-        try:
-            setup = Setup.load(setup_file)
-        except SetupError as exc:
-            usage(f"--setup: {exc}")
-            return
-        if calibration_file is not None and setup.chain_calibration is not None:
-            usage(f"--calibration-file: set-up {setup.id!r} (revision {setup.revision}) has "
-                  "its own chain calibration; give one of the two")
-        if sphere_diameter is not None and setup.size_of(sphere_diameter) is None:
-            usage(f"--sphere-diameter: {sphere_diameter:g} m contradicts --setup {setup.id!r}, "
-                  f"whose sphere_diameters_m are "
-                  f"{', '.join(f'{d:g}' for d in setup.sphere_diameters_m)} m")
-        if sphere_diameter is None and len(setup.sphere_diameters_m) == 1:
-            sphere_diameter = setup.sphere_diameters_m[0]
+    files: list[Path]
+    fmt: str | None
+    out: Path | None
+    as_json: bool
+    sample_rate: float | None
+    calibration: float | None
+    units: str | None
+    channels: tuple[str, ...]
+    group: str | None
+    sphere_diameter: float | None
+    baseline: str | None
+    plate_id: str | None
+    position: str | None
+    x: float | None
+    y: float | None
+    manifest: Path | None
+    invert: bool
+    estimates_out: Path | None
+    table: list[Path]
+    plate_material: str | None
+    calibration_file: Path | None
+    plots: Path | None
+    setup_file: Path | None
 
-    for flag, path in (("--out", out), ("--estimates-out", estimates_out)):
+
+class ReaderOptions(TypedDict):
+    """The global reader options `analyze` passes to every file it reads."""
+
+    sample_rate: float | None
+    units: str | None
+
+
+class FailedSource(TypedDict):
+    """A file, shot, option or position that failed, as `analyze` reports it."""
+
+    source: str
+    shot: NotRequired[int | None]
+    error: str | None
+
+
+class SkippedChannel(TypedDict):
+    """A channel that is not a sensor trace, and why it was left out."""
+
+    source: str
+    channel: str | None
+    reason: str
+
+
+@dataclass
+class Analysis:
+    """What a run measured: the shots, their summaries per position, what was left out and
+    what failed (``estimates`` None unless ``--invert``, or when no estimate could be made)."""
+
+    rows: list[ShotRow]  # measured_shots' rows, one per shot
+    groups: list[PositionShots]
+    skipped: list[SkippedChannel]
+    errors: list[FailedSource]
+    estimates: list[PositionEstimate] | None = None
+
+
+def _usage(message: str) -> NoReturn:
+    """A usage error: one unwrapped line for scripts and logs, exit code 2."""
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code=2)
+
+
+def run_analysis(request: AnalyzeRequest) -> int:
+    """Check the options, measure every file, estimate, write and print; the exit code (0 all
+    succeeded, 1 some files or shots failed or there were none; usage errors exit 2 here)."""
+    console = Console(stderr=request.as_json)
+    setup = _load_setup(request)
+    _check_outputs(request)
+    material = _check_reading(request)
+    choice = Choice(request.channels, request.group, _stated(request))
+    jobs = _jobs(request)
+    analysis = _measure(jobs, request, choice)
+    if request.invert:
+        analysis.estimates = _estimate(analysis, request, material, setup)
+    _write_outputs(request, analysis)
+    _show(console, request, analysis)
+    return 1 if analysis.errors or not jobs else 0
+
+
+def _load_setup(request: AnalyzeRequest) -> Setup | None:
+    """The ``--setup`` file, checked against ``--calibration-file`` and ``--sphere-diameter``;
+    a set-up of one sphere size gives ``request`` that size when it states none."""
+    if request.setup_file is None:
+        return None
+    from solitonde.instrument.inference.setups import Setup, SetupError
+
+    try:
+        setup = Setup.load(request.setup_file)
+    except SetupError as exc:
+        _usage(f"--setup: {exc}")
+    if request.calibration_file is not None and setup.chain_calibration is not None:
+        _usage(f"--calibration-file: set-up {setup.id!r} (revision {setup.revision}) has "
+               "its own chain calibration; give one of the two")
+    size = request.sphere_diameter
+    if size is not None and setup.size_of(size) is None:
+        _usage(f"--sphere-diameter: {size:g} m contradicts --setup {setup.id!r}, "
+               f"whose sphere_diameters_m are "
+               f"{', '.join(f'{d:g}' for d in setup.sphere_diameters_m)} m")
+    if size is None and len(setup.sphere_diameters_m) == 1:
+        request.sphere_diameter = setup.sphere_diameters_m[0]
+    return setup
+
+
+def _check_outputs(request: AnalyzeRequest) -> None:
+    """The output paths: a table's suffix, a file where a file goes, a folder for the plots."""
+    for flag, path in (("--out", request.out), ("--estimates-out", request.estimates_out)):
         if path is not None and path.suffix.lower() not in OUT_SUFFIXES:
-            usage(f"{flag}: {path.name} must end in {' or '.join(OUT_SUFFIXES)}")
-    for flag, path, want in (("--out", out, "file"), ("--estimates-out", estimates_out, "file"),
-                             ("--plots", plots, "folder")):
+            _usage(f"{flag}: {path.name} must end in {' or '.join(OUT_SUFFIXES)}")
+    for flag, path, want in (("--out", request.out, "file"),
+                             ("--estimates-out", request.estimates_out, "file"),
+                             ("--plots", request.plots, "folder")):
         if path is not None and (path.is_dir() if want == "file"
                                  else path.exists() and not path.is_dir()):
-            usage(f"{flag}: {str(path)!r} is a {'folder' if want == 'file' else 'file'}; "
-                  f"give a {want}")
-    if fmt is not None:
+            _usage(f"{flag}: {str(path)!r} is a {'folder' if want == 'file' else 'file'}; "
+                   f"give a {want}")
+
+
+def _check_reading(request: AnalyzeRequest) -> Any:
+    """The reader options and numbers checked; the parsed ``--plate-material`` (or None)."""
+    if request.fmt is not None:
         try:
-            signal_io.detect_format("x", fmt)
+            signal_io.detect_format("x", request.fmt)
         except WaveformError as exc:
-            usage(f"--format: {exc.message} (allowed: {exc.allowed})")
-    if units is not None and units not in UNITS:
-        usage(f"--units: {units!r} is not N or V")
+            _usage(f"--format: {exc.message} (allowed: {exc.allowed})")
+    if request.units is not None and request.units not in UNITS:
+        _usage(f"--units: {request.units!r} is not N or V")
     material: Any = None
-    if plate_material is not None:
+    if request.plate_material is not None:
         from solitonde.instrument.cli.common import parse_material
 
         try:
-            material = parse_material(plate_material)
+            material = parse_material(request.plate_material)
         except ValueError as exc:
-            usage(f"--plate-material: {exc}")
-    for flag, value in (("--x", x), ("--y", y), ("--sample-rate", sample_rate),
-                        ("--calibration", calibration)):
+            _usage(f"--plate-material: {exc}")
+    for flag, value in (("--x", request.x), ("--y", request.y),
+                        ("--sample-rate", request.sample_rate),
+                        ("--calibration", request.calibration)):
         if value is not None and not math.isfinite(value):
-            usage(f"{flag}: {value} is not a finite number")
-    for flag, value in (("--sample-rate", sample_rate), ("--calibration", calibration)):
+            _usage(f"{flag}: {value} is not a finite number")
+    for flag, value in (("--sample-rate", request.sample_rate),
+                        ("--calibration", request.calibration)):
         if value is not None and value <= 0:
-            usage(f"{flag}: {value:g} must be > 0")
-    given = {k: v for k, v in (("plate_id", plate_id), ("position", position), ("x_m", x),
-                               ("y_m", y), ("sphere_diameter", sphere_diameter),
-                               ("baseline", baseline))
-             if v is not None}
-    try:  # the limits the service holds metadata to, for the flags' values too
+            _usage(f"{flag}: {value:g} must be > 0")
+    return material
+
+
+def _stated(request: AnalyzeRequest) -> StatedLocation:
+    """The location metadata the flags state for every file, held to the limits the service
+    holds metadata to."""
+    given = StatedLocation()
+    if request.plate_id is not None:
+        given["plate_id"] = request.plate_id
+    if request.position is not None:
+        given["position"] = request.position
+    if request.x is not None:
+        given["x_m"] = request.x
+    if request.y is not None:
+        given["y_m"] = request.y
+    if request.sphere_diameter is not None:
+        given["sphere_diameter"] = request.sphere_diameter
+    if request.baseline is not None:
+        given["baseline"] = request.baseline
+    try:
         measured_shots.check_metadata([given], measured_shots.shot_fields(""))
     except ShotInputError as exc:
-        usage(flag_message(str(exc)))
-    choice = Choice(tuple(channel), group, given)
-    files = list(files or [])
-    if not files and manifest is None:
-        usage("give waveform files or folders, or --manifest")
-    paths, missing = measured_shots.collect(files, fmt)
+        _usage(flag_message(str(exc)))
+    return given
+
+
+def _jobs(request: AnalyzeRequest) -> list[tuple[Path, Row | None]]:
+    """The files to read, each with its manifest row where ``--manifest`` gives one."""
+    files = request.files
+    if not files and request.manifest is None:
+        _usage("give waveform files or folders, or --manifest")
+    paths, missing = measured_shots.collect(files, request.fmt)
     if missing:
-        usage("; ".join(m["error"] for m in missing))
-    jobs: list[tuple[Path, Row | None]] = [(p, None) for p in paths]
-    if manifest is not None:
-        jobs = _manifest_jobs(manifest, paths if files else None, fmt, usage)
-    invert = invert or estimates_out is not None
-    options = {"sample_rate": sample_rate, "units": units}
+        _usage("; ".join(m["error"] for m in missing))
+    if request.manifest is not None:
+        return _manifest_jobs(request.manifest, paths if files else None, request.fmt)
+    return [(p, None) for p in paths]
+
+
+def _measure(jobs: list[tuple[Path, Row | None]], request: AnalyzeRequest,
+             choice: Choice) -> Analysis:
+    """Every file's shots measured, the channels left out set apart, the failures listed, the
+    shots summarised per position."""
+    options: ReaderOptions = {"sample_rate": request.sample_rate, "units": request.units}
     if jobs:  # a fresh install: a few shots interpreted while the extractor compiles
         from solitonde.signal import kernel_choice
 
         kernel_choice.start()
     calibration_used = False
-    rows: list[dict[str, Any]] = []
-    errors: list[dict[str, Any]] = []
+    rows: list[ShotRow] = []
+    errors: list[FailedSource] = []
     from tqdm import tqdm
 
     for path, row in tqdm(jobs, desc="analyze", unit="file", file=sys.stderr,
                           disable=len(jobs) < 5 or not sys.stderr.isatty()):
         try:
-            file_rows, used = analyse_file(path, fmt, options, calibration, choice, row)
+            file_rows, used = analyse_file(path, request.fmt, options, request.calibration,
+                                           choice, row)
         except WaveformError as exc:
             errors.append({"source": str(path), "error": flag_message(str(exc))})
             continue
@@ -430,131 +486,108 @@ def analyze(
             continue
         rows.extend(file_rows)
         calibration_used = calibration_used or used
-    if calibration is not None and jobs and not calibration_used and not errors:
+    if request.calibration is not None and jobs and not calibration_used and not errors:
         errors.append({"source": "--calibration", "error": "no file holds volts without a "
                        "calibration of its own; --calibration was not used"})
-    skipped = [{"source": r["source"], "channel": r["channel"], "reason": r["skipped"]}
-               for r in rows if "skipped" in r]
+    skipped: list[SkippedChannel] = [
+        {"source": r["source"], "channel": r["channel"], "reason": r["skipped"]}
+        for r in rows if "skipped" in r]
     rows = [r for r in rows if "skipped" not in r]
     for r in rows:
         if "error" in r:
             errors.append({"source": r["source"], "shot": r["shot"],
                            "error": flag_message(r["error"])})
-    groups = measured_shots.summarise_positions(rows)
-    aggs = aggregates(groups)
+    return Analysis(rows, measured_shots.summarise_positions(rows), skipped, errors)
+
+
+def _estimate(analysis: Analysis, request: AnalyzeRequest, material: Any,
+              setup: Setup | None) -> list[PositionEstimate] | None:
+    """The estimates per position (None when a table or the calibration cannot be read); what
+    fails is added to ``analysis.errors``."""
+    from solitonde.instrument.cli.common import table_path
+    from solitonde.instrument.inference.calibration import CalibrationError
+    from solitonde.instrument.tables.table import TableError
+
     estimates = None
-    if invert:
-        from solitonde.instrument.cli.common import table_path
-        from solitonde.instrument.inference.calibration import CalibrationError
-        from solitonde.instrument.inference.pipeline import (
-            ALL_EARLY,
-            ALL_REJECTED,
-            ALL_SATURATED,
-            ALL_TRUNCATED,
-            ALL_UNSTEADY,
-        )
-        from solitonde.instrument.tables.table import TableError
+    try:
+        estimates = estimates_for_locations(analysis.groups, request.table,
+                                            request.calibration_file, material, setup)
+    except CalibrationError as exc:
+        analysis.errors.append({"source": str(request.calibration_file), "error": str(exc)})
+    except (TableError, ValueError, OSError) as exc:  # table unreadable
+        analysis.errors.append({"source": ", ".join(map(str, request.table))
+                                or str(table_path(None)), "error": str(exc)})
+    for where, why in estimate_failures(estimates or []):
+        analysis.errors.append({"source": where, "error": why})
+    return estimates
 
-        try:
-            estimates = estimates_for_locations(groups, table, calibration_file, material,
-                                                setup)
-        except CalibrationError as exc:
-            errors.append({"source": str(calibration_file), "error": str(exc)})
-        except (TableError, ValueError, OSError) as exc:  # table unreadable
-            errors.append({"source": ", ".join(map(str, table)) or str(table_path(None)),
-                           "error": str(exc)})
-        from solitonde.instrument.cli.estimate_text import where_estimated
 
-        for est in estimates or []:
-            where = where_estimated(est)
-            if est.get("error"):  # an inversion that failed (e.g. a size the table lacks)
-                errors.append({"source": where, "error": est["error"]})
-            elif est.get("estimate") is None and any(
-                    s.get("reason") == MISSING_SIZE_FLAG for s in est.get("skipped", [])):
-                errors.append({"source": where, "error": MISSING_SIZE_FLAG})
-            elif est.get("estimate") is None and (unreadable := [
-                    s["reason"] for s in est.get("skipped", [])
-                    if any(every in s["reason"] for every in (
-                        ALL_TRUNCATED, ALL_SATURATED, ALL_EARLY, ALL_UNSTEADY, ALL_REJECTED))]):
-                # records too short, or clipped: no answer can be read from them
-                errors.append({"source": where, "error": unreadable[0]})
-            elif (est.get("estimate") or {}).get("thickness_m", {}).get("status") in (
-                    "inconsistent", "out_of_range"):
-                # an answer the table's family does not explain is no answer to act on
-                errors.append({"source": where, "error": est["estimate"]["warnings"][0]
-                               if est["estimate"].get("warnings") else
-                               est["estimate"].get("reason")})
-    outputs = [("--out", out, lambda target: _write_rows(target, rows)),
-               ("--plots", plots, lambda target: _write_plots(target, rows))]
+def _write_outputs(request: AnalyzeRequest, analysis: Analysis) -> None:
+    """``--out``, ``--plots`` and ``--estimates-out``; a file that cannot be written is an
+    error of the run, and the analysis stands."""
+    rows, estimates = analysis.rows, analysis.estimates
+    outputs: list[tuple[str, Path | None, Callable[[Path], None]]] = [
+        ("--out", request.out, lambda target: _write_rows(target, rows)),
+        ("--plots", request.plots, lambda target: _write_plots(target, rows))]
     if estimates is not None:
-        outputs.append(("--estimates-out", estimates_out,
-                        lambda target: _write_estimates(target, estimates)))
+        outputs.append(("--estimates-out", request.estimates_out,
+                        lambda target: write_estimates(target, estimates)))
     for flag, target, write in outputs:
         if target is None:
             continue
         try:
             write(target)
         except OSError as exc:  # the analysis stands; say what could not be written
-            errors.append({"source": flag, "error": f"cannot write {str(target)!r}: "
-                           f"{exc.strerror or exc}"})
-    shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
-    if as_json:
-        json.dump({"shots": shots, "aggregates": aggs, "skipped_channels": skipped,
-                   "errors": errors, **({"estimates": estimates} if invert else {})},
+            analysis.errors.append({"source": flag, "error": f"cannot write {str(target)!r}: "
+                                    f"{exc.strerror or exc}"})
+
+
+def _show(console: Console, request: AnalyzeRequest, analysis: Analysis) -> None:
+    """The shots, aggregates, skipped channels, errors (and estimates) as JSON or tables."""
+    rows = analysis.rows
+    aggs = aggregates(analysis.groups)
+    if request.as_json:
+        shots = [{k: r.get(k) for k in ROW_KEYS if k != "error" or "error" in r} for r in rows]
+        json.dump({"shots": shots, "aggregates": aggs, "skipped_channels": analysis.skipped,
+                   "errors": analysis.errors,
+                   **({"estimates": analysis.estimates} if request.invert else {})},
                   sys.stdout, indent=1, default=str)
         sys.stdout.write("\n")
-    else:
-        _print(console, rows, aggs, skipped, errors)
-        if estimates is not None:
-            from solitonde.instrument.cli.estimate_text import describe_row
+        return
+    _print(console, rows, aggs, analysis.skipped, analysis.errors)
+    if analysis.estimates is not None:
+        from solitonde.instrument.cli.estimate_text import describe_row
 
-            for est in estimates:
-                console.print(describe_row(est), highlight=False)
-    raise typer.Exit(code=1 if errors or not jobs else 0)
+        for est in analysis.estimates:
+            console.print(describe_row(est), highlight=False)
 
 
-def _manifest_jobs(manifest: Path, given: list[Path] | None, fmt: str | None,
-                   usage: Any) -> list[tuple[Path, Row | None]]:
+def _manifest_jobs(manifest: Path, given: list[Path] | None,
+                   fmt: str | None) -> list[tuple[Path, Row | None]]:
     """The files a manifest names, each with its row; with files given on the command line
     too, every one of them must have a row (the manifest's other rows are then not read)."""
     from solitonde.instrument.cli import manifest as campaign
 
     if not manifest.is_file():
-        usage(f"--manifest: no such file: {manifest}")
+        _usage(f"--manifest: no such file: {manifest}")
     try:
         rows = campaign.load(manifest)
         matched = campaign.match(rows, manifest.parent,
                                  None if fmt is not None else signal_io.EXTENSIONS)
     except ManifestError as exc:
-        usage(str(exc))
-        return []
+        _usage(str(exc))
     if given is None:
         return list(matched)
     by_file = {p.resolve(): (p, r) for p, r in matched}
     unmatched = [str(p) for p in given if p.resolve() not in by_file]
     if unmatched:
-        usage(f"--manifest: no row of {manifest.name} matches {unmatched[0]}"
-              + (f" (and {len(unmatched) - 1} more)" if len(unmatched) > 1 else ""))
+        _usage(f"--manifest: no row of {manifest.name} matches {unmatched[0]}"
+               + (f" (and {len(unmatched) - 1} more)" if len(unmatched) > 1 else ""))
     return [(p, by_file[p.resolve()][1]) for p in given]
 
 
-def _write_estimates(out: Path, estimates: list[dict[str, Any]]) -> None:
-    """One row per plate and position (instrument.estimate_rows' columns)."""
-    from solitonde.instrument.inference.estimate_rows import estimate_row, to_bytes
-    from solitonde.instrument.studies.figures import write_bytes
-
-    table = []
-    for est in estimates:
-        result = est.get("estimate")
-        reason = est.get("error") or ("; ".join(s["reason"] for s in est.get("skipped", []))
-                                      if result is None else None)
-        table.append(estimate_row(est, est.get("diameters_m", []), est.get("n_shots", 0),
-                                  result, reason))
-    write_bytes(out, to_bytes(table, "parquet" if out.suffix.lower() == ".parquet" else "csv"))
-
-
-def _print(console: Console, rows: list[dict[str, Any]], aggs: list[dict[str, Any]],
-           skipped: list[dict[str, Any]], errors: list[dict[str, Any]]) -> None:
+def _print(console: Console, rows: list[ShotRow], aggs: list[dict[str, Any]],
+           skipped: list[SkippedChannel], errors: list[FailedSource]) -> None:
     shot_rows = []
     for r in rows:
         if "error" in r:

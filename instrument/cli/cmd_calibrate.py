@@ -19,19 +19,21 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
 from solitonde.instrument.cli.common import sphere_sizes, table_path
-from solitonde.instrument.inference.calibration import CalibrationError
+from solitonde.instrument.inference.calibration import Calibration, CalibrationError
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
-from solitonde.instrument.inference.inversion import FeatureSummary, InversionError
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
 from solitonde.instrument.tables.table import ModelTable, TableError
 from solitonde.signal.errors import WaveformError
 
 
-def _fail(message: str) -> None:
+def _fail(message: str) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(2)
 
@@ -134,66 +136,97 @@ def calibrate_command(
     if out.is_dir():  # before any work: the fit would be lost
         _fail(f"--out: {str(out)!r} is a directory; give the name of the JSON file to write")
     try:
-        refs: list[Reference] = []
-        one_plate = bool(tof or arr or files)
-        if one_plate and (thickness is None or distance is None):
-            _fail("give the reference plate's --thickness and --distance (or each reference as "
-                  "--reference THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER)")
-            return
-        if (thickness is not None or distance is not None) and not one_plate:
-            _fail("--thickness and --distance need reference shot files or --tof/--arr/"
-                  "--diameter; with --reference each reference carries its own")
-            return
-        if (files or reference) and len(diameter) > 1:
-            _fail("with files give at most one --diameter")
-        if tof or arr:
-            n = len(tof)
-            if len(arr) != n or len(diameter) != n:
-                _fail("--tof, --arr and --diameter must be given the same number of times")
-            items = [FeatureSummary(diameter[i], tof[i], arr[i],
-                                    tof_std[i] if tof_std else None,
-                                    arr_std[i] if arr_std else None,
-                                    shots[i] if shots else 1) for i in range(n)]
-        elif files:
-            items = summaries_from_files(files, diameter[0] if diameter else None)
-        if one_plate:
-            assert thickness is not None and distance is not None
-            refs += [Reference(thickness, distance, s) for s in items]
-        for text in reference:
-            t_ref, l_ref, path = parse_reference(text)
-            refs += [Reference(t_ref, l_ref, s)
-                     for s in summaries_from_files([path], diameter[0] if diameter else None)]
-        if not refs:
-            _fail("give reference shot files, --tof/--arr/--diameter, or --reference "
-                  "THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER")
-            return
+        refs = _references(files, thickness, distance, reference, diameter,
+                           Means(tof, arr, tof_std, arr_std, shots))
         model = ModelTable.load(table_path(table))
         cal = fit_calibration(model, refs)
     except (CalibrationError, InversionError, TableError) as exc:
         _fail(str(exc))
-        return
     try:
         cal.save(out)
     except CalibrationError as exc:
         _fail(f"--out: {exc.full_message}")
-        return
     if as_json:
         typer.echo(json.dumps(cal.to_dict(), indent=2))
     else:
-        for e in cal.to_dict()["per_diameter"]:
-            damping = ("" if "damping_s" not in e else
-                       f"damping tau {e['damping_s']:.3g} +- {e['damping_std_s']:.2g} s, ")
-            typer.echo(f"D = {e['diameter_m'] * 1e3:.4g} mm: {damping}"
-                       f"arr_factor {e['arr_factor']:.4f} "
-                       f"+- {e['arr_factor_std']:.4f}, tof_offset {e['tof_offset_s'] * 1e6:.3f} "
-                       f"+- {e['tof_offset_std_s'] * 1e6:.3f} us")
-            for row in e.get("by_distance", []):
-                typer.echo(f"  at L = {row['distance_m'] * 1e3:.4g} mm "
-                           f"({row.get('n_references', 1)} ref.): arr_factor "
-                           f"{row['arr_factor']:.4f} +- {row.get('arr_factor_std', 0.0):.4f}, "
-                           f"tof_offset {row['tof_offset_s'] * 1e6:.3f} "
-                           f"+- {row.get('tof_offset_std_s', 0.0) * 1e6:.3f} us")
+        for line in _calibration_lines(cal):
+            typer.echo(line)
         typer.echo(f"wrote {out}")
+
+
+@dataclass(frozen=True)
+class Means:
+    """Features already measured on the one reference plate (``--tof``, ``--arr`` and their
+    scatter and shot counts), one entry per sphere size."""
+
+    tof: list[float]
+    arr: list[float]
+    tof_std: list[float]
+    arr_std: list[float]
+    shots: list[int]
+
+
+def _references(files: list[Path] | None, thickness: float | None, distance: float | None,
+                reference: list[str], diameter: list[float], means: Means) -> list[Reference]:
+    """The references the options give: the one plate (``--thickness``, ``--distance`` with
+    files or means), then each ``--reference``; a combination that does not fit exits 2."""
+    refs: list[Reference] = []
+    one_plate = bool(means.tof or means.arr or files)
+    if one_plate and (thickness is None or distance is None):
+        _fail("give the reference plate's --thickness and --distance (or each reference as "
+              "--reference THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER)")
+    if (thickness is not None or distance is not None) and not one_plate:
+        _fail("--thickness and --distance need reference shot files or --tof/--arr/"
+              "--diameter; with --reference each reference carries its own")
+    if (files or reference) and len(diameter) > 1:
+        _fail("with files give at most one --diameter")
+    if one_plate:
+        assert thickness is not None and distance is not None
+        refs += [Reference(thickness, distance, s)
+                 for s in _one_plate_summaries(files, diameter, means)]
+    for text in reference:
+        t_ref, l_ref, path = parse_reference(text)
+        refs += [Reference(t_ref, l_ref, s)
+                 for s in summaries_from_files([path], diameter[0] if diameter else None)]
+    if not refs:
+        _fail("give reference shot files, --tof/--arr/--diameter, or --reference "
+              "THICKNESS_M,DISTANCE_M,FILE_OR_FOLDER")
+    return refs
+
+
+def _one_plate_summaries(files: list[Path] | None, diameter: list[float],
+                         means: Means) -> list[FeatureSummary]:
+    """The one reference plate's features per sphere size: the means given, else the shot
+    files measured."""
+    if means.tof or means.arr:
+        n = len(means.tof)
+        if len(means.arr) != n or len(diameter) != n:
+            _fail("--tof, --arr and --diameter must be given the same number of times")
+        return [FeatureSummary(diameter[i], means.tof[i], means.arr[i],
+                               means.tof_std[i] if means.tof_std else None,
+                               means.arr_std[i] if means.arr_std else None,
+                               means.shots[i] if means.shots else 1) for i in range(n)]
+    assert files
+    return summaries_from_files(files, diameter[0] if diameter else None)
+
+
+def _calibration_lines(cal: Calibration) -> list[str]:
+    """The fitted calibration as printed: per sphere size, then per distance where fitted."""
+    lines = []
+    for e in cal.to_dict()["per_diameter"]:
+        damping = ("" if "damping_s" not in e else
+                   f"damping tau {e['damping_s']:.3g} +- {e['damping_std_s']:.2g} s, ")
+        lines.append(f"D = {e['diameter_m'] * 1e3:.4g} mm: {damping}"
+                     f"arr_factor {e['arr_factor']:.4f} "
+                     f"+- {e['arr_factor_std']:.4f}, tof_offset {e['tof_offset_s'] * 1e6:.3f} "
+                     f"+- {e['tof_offset_std_s'] * 1e6:.3f} us")
+        for row in e.get("by_distance", []):
+            lines.append(f"  at L = {row['distance_m'] * 1e3:.4g} mm "
+                         f"({row.get('n_references', 1)} ref.): arr_factor "
+                         f"{row['arr_factor']:.4f} +- {row.get('arr_factor_std', 0.0):.4f}, "
+                         f"tof_offset {row['tof_offset_s'] * 1e6:.3f} "
+                         f"+- {row.get('tof_offset_std_s', 0.0) * 1e6:.3f} us")
+    return lines
 
 
 def register(app: typer.Typer) -> None:

@@ -24,7 +24,8 @@ from solitonde.instrument.cli.common import (
 )
 from solitonde.instrument.cli.estimate_text import estimate_lines
 from solitonde.instrument.inference.calibration import Calibration, CalibrationError
-from solitonde.instrument.inference.inversion import Estimate, FeatureSummary, InversionError
+from solitonde.instrument.inference.estimate import Estimate
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
 from solitonde.instrument.inference.pipeline import estimate
 from solitonde.instrument.inference.table_set import TableChoiceError
 from solitonde.instrument.tables.table import TableError

@@ -22,8 +22,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn, NotRequired, TypedDict
 
 import typer
 from rich.console import Console
@@ -39,6 +40,64 @@ from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import Features, extract
 from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
+
+
+class Acquisition(TypedDict):
+    """How the noisy shots were made (``--shots``, ``--snr-db``, ``--drift``, ``--seed``) and
+    the incident peak their noise and drift are relative to."""
+
+    shots: int
+    snr_db: float
+    drift: float
+    seed: int
+    reference_N: float
+
+
+class ShotReading(TypedDict):
+    """A noisy shot's TOF, ARR, SNR and flags, or why its pulses could not be found."""
+
+    shot: int
+    tof_s: float
+    arr: float
+    snr_db: float
+    flags: list[str]
+    error: NotRequired[str]
+
+
+class SimulationSummary(TypedDict):
+    """The JSON of ``solitonde simulate --json``, its keys in this order."""
+
+    plate_model: str
+    tof_s: float
+    arr: float
+    incident_peak_N: float
+    reflected_peak_N: float
+    incident_time_s: float
+    reflected_time_s: float
+    energy_drift: float
+    steps: int
+    dt_s: float
+    wall_s: float
+    status: str
+    plate_model_reason: str
+    sample_rate_hz: float
+    n_samples: int
+    t0_s: float
+    duration_s: float
+    plate_work_J: float
+    dissipated_J: float
+    snr_db: float
+    tof_peak_s: float
+    arr_peak: float
+    flags: list[str]
+    feature_error: str | None
+    model_truth: dict[str, float]
+    mesh: NotRequired[Any]  # the meshed plate models' diagnostics, as the model gives them
+    dt_stability_ratio: NotRequired[float]
+    chain_dt_s: NotRequired[float]
+    greens_cached: NotRequired[bool]
+    shots: NotRequired[list[ShotReading]]
+    acquisition: NotRequired[Acquisition]
 
 
 def to_waveform(result: SimulationResult) -> Waveform:
@@ -58,7 +117,7 @@ def _nan(value: float | None) -> float:
 def summary(
     result: SimulationResult, recorded: Waveform, features: Features | None,
     feature_error: str | None = None,
-) -> dict[str, Any]:
+) -> SimulationSummary:
     """The JSON of ``solitonde simulate --json`` (the first twelve keys are a public contract).
 
     Pulse quantities the trace does not support (no reflection found, or no pulse the signal
@@ -68,7 +127,7 @@ def summary(
     d = result.diagnostics
     if features is None:
         features = Features(None, None, math.nan, None, math.nan, None, math.nan, ["no_features"])
-    return {
+    data: SimulationSummary = {
         "plate_model": result.plate_model,
         "tof_s": _nan(features.tof_s),
         "arr": _nan(features.arr),
@@ -94,14 +153,21 @@ def summary(
         "flags": list(features.flags),
         "feature_error": feature_error,
         "model_truth": result.truth,
-        # meshed plate models (sem, greens, mindlin, mindlin_greens) only
-        **{k: d[k] for k in ("mesh", "dt_stability_ratio", "chain_dt_s", "greens_cached")
-           if k in d},
     }
+    # meshed plate models (sem, greens, mindlin, mindlin_greens) only
+    if "mesh" in d:
+        data["mesh"] = d["mesh"]
+    if "dt_stability_ratio" in d:
+        data["dt_stability_ratio"] = d["dt_stability_ratio"]
+    if "chain_dt_s" in d:
+        data["chain_dt_s"] = d["chain_dt_s"]
+    if "greens_cached" in d:
+        data["greens_cached"] = d["greens_cached"]
+    return data
 
 
 def write_plot(path: Path, result: SimulationResult, recorded: Waveform,
-               data: dict[str, Any]) -> None:
+               data: SimulationSummary) -> None:
     """The measured sensor trace with the detected incident and reflected pulses marked (PNG)."""
     from solitonde.instrument.plotting import trace_png
     from solitonde.instrument.studies.figures import write_bytes
@@ -124,16 +190,16 @@ def noisy_shots(result: SimulationResult, recorded: Waveform, n: int, snr_db: fl
 
     rng = np.random.default_rng(seed)
     reference = float(result.samples.max() - result.samples[0])
-    meta = {"acquisition": {"shots": n, "snr_db": snr_db, "drift": drift, "seed": seed,
-                            "reference_N": reference}}
+    acquisition: Acquisition = {"shots": n, "snr_db": snr_db, "drift": drift, "seed": seed,
+                                "reference_N": reference}
     return [recorded.with_samples(degrade(recorded.samples, snr_db, rng, reference, drift))
-            .with_metadata(**meta, shot=k) for k in range(n)]
+            .with_metadata(acquisition=acquisition, shot=k) for k in range(n)]
 
 
-def shot_features(measured: list[Features | str]) -> list[dict[str, Any]]:
+def shot_features(measured: list[Features | str]) -> list[ShotReading]:
     """TOF, ARR, SNR and flags of each noisy shot as the signal package measured them, or why
     a shot's pulses could not be found."""
-    out: list[dict[str, Any]] = []
+    out: list[ShotReading] = []
     for k, f in enumerate(measured):
         if isinstance(f, str):
             out.append({"shot": k, "tof_s": math.nan, "arr": math.nan, "snr_db": math.nan,
@@ -144,7 +210,7 @@ def shot_features(measured: list[Features | str]) -> list[dict[str, Any]]:
     return out
 
 
-def _shots_line(rows: list[dict[str, Any]], acquisition: dict[str, Any]) -> str:
+def _shots_line(rows: list[ShotReading], acquisition: Acquisition) -> str:
     import numpy as np
 
     tof = np.array([r["tof_s"] for r in rows], dtype=float)
@@ -160,7 +226,7 @@ def _shots_line(rows: list[dict[str, Any]], acquisition: dict[str, Any]) -> str:
             f"{arr[ok].std(ddof=ddof):.4f}")
 
 
-def _table(data: dict[str, Any]) -> Table:
+def _table(data: SimulationSummary) -> Table:
     table = Table(title="Chain simulation", show_header=True)
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -207,72 +273,21 @@ def simulate_command(
                              "shots)."),
 ) -> None:
     """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
-    if scene_arg is not None and scene_file is not None and scene_arg != scene_file:
-        typer.echo(f"error: --scene: {scene_file} and the positional scene {scene_arg} differ; "
-                   "give one", err=True)
-        raise typer.Exit(code=2)
-    scene_file = scene_file or scene_arg
-    if shots is None and (snr_db is not None or drift):
-        shots = 1
-    if shots is not None and snr_db is None:
-        typer.echo("error: --snr-db: needed with --shots (the noise of the shots, in dB)",
-                   err=True)
-        raise typer.Exit(code=2)
-    for flag, path in (("--out", out), ("--plot", plot)):
-        if path is not None and path.is_dir():  # before the run, which may take minutes
-            typer.echo(f"error: {flag}: {str(path)!r} is a folder; give a file name", err=True)
-            raise typer.Exit(code=2)
-    try:
-        scene = load_scene(scene_file, overrides or [])
-        check_resolved(scene)
-        result = simulate(scene, greens_cache=greens_cache.disk_cache())
-    except (SceneError, WaveformError) as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(code=2) from None
-    except SimulationError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(code=1) from None
+    scene_file, shots = _checked_options(scene_arg, scene_file, shots, snr_db, drift, out, plot)
+    result = _simulated(scene_file, overrides or [])
     try:
         waveform = to_waveform(result)
     except WaveformError as exc:  # e.g. fewer samples than a shot needs
-        typer.echo(f"error: output.sample_rate / output.duration: the simulated trace cannot be "
-                   f"measured: {exc}", err=True)
-        raise typer.Exit(code=2) from None
-    features: Features | None = None
-    feature_error = None
+        _exit("output.sample_rate / output.duration: the simulated trace cannot be measured: "
+              f"{exc}", 2)
     options = detect_options(result.scene)
-    try:
-        features = extract(waveform, **options)
-    except WaveformError as exc:
-        feature_error = str(exc)
-        typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
-    data = summary(result, waveform, features, feature_error)
+    data = _measured(result, waveform, options)
     written: Waveform | list[Waveform] = waveform
     if shots is not None and snr_db is not None:
         written = noisy_shots(result, waveform, shots, snr_db, drift, seed)
-        measured: list[Features | str] = []
-        for shot in written:
-            try:  # the recorded trace with this shot's noise, measured as any recording
-                measured.append(extract(waveform.with_samples(shot.samples), **options))
-            except WaveformError as exc:
-                measured.append(str(exc))
-        data["shots"] = shot_features(measured)
+        data["shots"] = shot_features(_measured_shots(waveform, written, options))
         data["acquisition"] = written[0].metadata["acquisition"]
-    failed = []
-
-    def write_csv(path: Path) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        signal_io.write(path, written, format=None if path.suffix else "csv")
-
-    writers = (("--out", out, write_csv),
-               ("--plot", plot, lambda path: write_plot(path, result, waveform, data)))
-    for flag, path, write in writers:
-        if path is None:
-            continue
-        try:
-            write(path)
-        except OSError as exc:  # the result is still printed; the exit code says what failed
-            failed.append(f"error: {flag}: cannot write {str(path)!r}: {exc.strerror or exc}")
+    failed = _write_files(out, plot, written, result, waveform, data)
     if as_json:
         typer.echo(json.dumps(json_ready(data), indent=2))
     else:
@@ -283,6 +298,90 @@ def simulate_command(
         typer.echo(line, err=True)
     if failed:
         raise typer.Exit(code=1)
+
+
+def _exit(message: str, code: int) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code=code)
+
+
+def _checked_options(scene_arg: Path | None, scene_file: Path | None, shots: int | None,
+                     snr_db: float | None, drift: float, out: Path | None,
+                     plot: Path | None) -> tuple[Path | None, int | None]:
+    """The scene file and the number of noisy shots (one when only ``--snr-db`` or
+    ``--drift`` asks for noise), checked before the run, which may take minutes."""
+    if scene_arg is not None and scene_file is not None and scene_arg != scene_file:
+        _exit(f"--scene: {scene_file} and the positional scene {scene_arg} differ; give one", 2)
+    if shots is None and (snr_db is not None or drift):
+        shots = 1
+    if shots is not None and snr_db is None:
+        _exit("--snr-db: needed with --shots (the noise of the shots, in dB)", 2)
+    for flag, path in (("--out", out), ("--plot", plot)):
+        if path is not None and path.is_dir():
+            _exit(f"{flag}: {str(path)!r} is a folder; give a file name", 2)
+    return scene_file or scene_arg, shots
+
+
+def _simulated(scene_file: Path | None, overrides: list[str]) -> SimulationResult:
+    """The scene loaded, checked and simulated; a scene that cannot be run exits 2, a
+    simulation that fails exits 1."""
+    try:
+        scene = load_scene(scene_file, overrides)
+        check_resolved(scene)
+        return simulate(scene, greens_cache=greens_cache.disk_cache())
+    except (SceneError, WaveformError) as exc:
+        _exit(str(exc), 2)
+    except SimulationError as exc:
+        _exit(str(exc), 1)
+
+
+def _measured(result: SimulationResult, waveform: Waveform,
+              options: dict[str, float]) -> SimulationSummary:
+    """The summary of the simulated trace, its features measured as a recording's are (a
+    warning where no pulse could be found)."""
+    features: Features | None = None
+    feature_error = None
+    try:
+        features = extract(waveform, **options)
+    except WaveformError as exc:
+        feature_error = str(exc)
+        typer.echo(f"warning: no pulse features from the simulated trace: {exc}", err=True)
+    return summary(result, waveform, features, feature_error)
+
+
+def _measured_shots(waveform: Waveform, written: list[Waveform],
+                    options: dict[str, float]) -> list[Features | str]:
+    """Each noisy shot measured as any recording, or why its pulses could not be found."""
+    measured: list[Features | str] = []
+    for shot in written:
+        try:  # the recorded trace with this shot's noise, measured as any recording
+            measured.append(extract(waveform.with_samples(shot.samples), **options))
+        except WaveformError as exc:
+            measured.append(str(exc))
+    return measured
+
+
+def _write_files(out: Path | None, plot: Path | None, written: Waveform | list[Waveform],
+                 result: SimulationResult, waveform: Waveform,
+                 data: SimulationSummary) -> list[str]:
+    """``--out`` and ``--plot`` written; an error line for each that could not be (the result is
+    still printed, the exit code says what failed)."""
+    def write_csv(path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        signal_io.write(path, written, format=None if path.suffix else "csv")
+
+    failed = []
+    writers: tuple[tuple[str, Path | None, Callable[[Path], None]], ...] = (
+        ("--out", out, write_csv),
+        ("--plot", plot, lambda path: write_plot(path, result, waveform, data)))
+    for flag, path, write in writers:
+        if path is None:
+            continue
+        try:
+            write(path)
+        except OSError as exc:
+            failed.append(f"error: {flag}: cannot write {str(path)!r}: {exc.strerror or exc}")
+    return failed
 
 
 def register(app: typer.Typer) -> None:

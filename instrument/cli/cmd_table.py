@@ -29,16 +29,14 @@ from solitonde.instrument.inference.material_spread import (
     spread_source,
 )
 from solitonde.instrument.service.settings import DEFAULT_TABLE
-from solitonde.instrument.tables.table import ModelTable, TableError
-from solitonde.instrument.tables.table_build import (
+from solitonde.instrument.tables.sweep import (
     PAPER_DIAMETERS_M,
-    BuildPlan,
     Sweep,
-    build_table,
     default_distances_m,
     default_thicknesses_m,
-    partial_path,
 )
+from solitonde.instrument.tables.table import ModelTable, TableError
+from solitonde.instrument.tables.table_build import BuildPlan, build_table, partial_path
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import apply_overrides, load_scene_file, scene_from_dict
 from solitonde.signal.features import EXTRACTOR_VERSION

@@ -10,9 +10,9 @@ from typing import NoReturn
 import typer
 
 from solitonde.instrument.cli.common import table_path
+from solitonde.instrument.parallel import default_workers
 from solitonde.instrument.studies.validate import SHOTS, ValidationInputError, validate
 from solitonde.instrument.tables.table import ModelTable, TableError
-from solitonde.instrument.tables.table_build import default_workers
 
 
 def _fail(message: str) -> NoReturn:
@@ -130,6 +130,7 @@ def validate_command(
                f"{m['distance_status_counts']}")
     for b in m["by_distance"]:
         lo, hi = b["distance_m"]
+        assert lo is not None  # a bin's lower edge is a number; only the last bin is open
         span = f"{lo * 1e3:g}-{hi * 1e3:g} mm" if hi is not None else f"beyond {lo * 1e3:g} mm"
         typer.echo(f"  {span} from the support: {b['n']} plates, answered {num(b['answered'])}, "
                    f"coverage {num(b['coverage_95'])}, missed unflagged "

@@ -20,7 +20,7 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 from solitonde.instrument.errors import MessageError
 
@@ -41,6 +41,20 @@ class ManifestError(MessageError, ValueError):
     subject = "--manifest"
 
 
+class RowMetadata(TypedDict, total=False):
+    """The metadata a manifest row gives its files: the waveform metadata keys of the location,
+    and the columns that choose how a file is estimated (as text)."""
+
+    plate_id: str
+    position: str
+    setup: str
+    table: str
+    plate_material: str
+    x_m: float
+    y_m: float
+    sphere_diameter: float
+
+
 @dataclass(frozen=True)
 class Row:
     """One manifest row: where it is (``where``: file and row number), the file pattern, the
@@ -49,7 +63,7 @@ class Row:
 
     where: str
     pattern: str
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: RowMetadata = field(default_factory=RowMetadata)
     calibration: float | None = None
 
 
@@ -121,36 +135,46 @@ def _check_keys(keys: Iterable[Any], where: str) -> None:
                             f"{', '.join(KEYS)})")
 
 
-def _row(where: str, record: Mapping[str, Any]) -> Row:
-    def blank(value: Any) -> bool:
-        return value is None or (isinstance(value, str) and not value.strip())
+def _blank(value: Any) -> bool:
+    return value is None or (isinstance(value, str) and not value.strip())
 
+
+def _text(record: Mapping[str, Any], where: str, key: str, limit: int) -> str | None:
+    """A text column's value, stripped (None where blank), at most ``limit`` characters."""
+    value = record.get(key)
+    if _blank(value):
+        return None
+    text = str(value).strip()
+    if len(text) > limit:
+        raise ManifestError(f"--manifest: {where}: {key}: {len(text)} characters; at most "
+                            f"{limit}")
+    return text
+
+
+def _row(where: str, record: Mapping[str, Any]) -> Row:
     pattern = record.get("file")
-    if blank(pattern):
+    if _blank(pattern):
         raise ManifestError(f"--manifest: {where}: file: missing (a file name or glob, "
                             "relative to the manifest's folder)")
-    meta: dict[str, Any] = {}
-    for key in ("plate_id", "position"):
-        value = record.get(key)
-        if not blank(value):
-            text = str(value).strip()
-            if len(text) > TEXT_LIMIT:
-                raise ManifestError(f"--manifest: {where}: {key}: {len(text)} characters; at "
-                                    f"most {TEXT_LIMIT}")
-            meta[key] = text
-    for key in CHOICE_KEYS:
-        value = record.get(key)
-        if not blank(value):
-            text = str(value).strip()
-            if len(text) > TEXT_LIMIT * 5:
-                raise ManifestError(f"--manifest: {where}: {key}: {len(text)} characters; at "
-                                    f"most {TEXT_LIMIT * 5}")
-            meta[key] = text
-    for key, target in (("x_m", "x_m"), ("y_m", "y_m"), ("sphere_diameter_m", "sphere_diameter")):
-        if not blank(record.get(key)):
-            meta[target] = _number(record[key], where, key)
+    meta = RowMetadata()
+    if (plate_id := _text(record, where, "plate_id", TEXT_LIMIT)) is not None:
+        meta["plate_id"] = plate_id
+    if (position := _text(record, where, "position", TEXT_LIMIT)) is not None:
+        meta["position"] = position
+    if (setup := _text(record, where, "setup", TEXT_LIMIT * 5)) is not None:
+        meta["setup"] = setup
+    if (table := _text(record, where, "table", TEXT_LIMIT * 5)) is not None:
+        meta["table"] = table
+    if (material := _text(record, where, "plate_material", TEXT_LIMIT * 5)) is not None:
+        meta["plate_material"] = material
+    if not _blank(record.get("x_m")):
+        meta["x_m"] = _number(record["x_m"], where, "x_m")
+    if not _blank(record.get("y_m")):
+        meta["y_m"] = _number(record["y_m"], where, "y_m")
+    if not _blank(record.get("sphere_diameter_m")):
+        meta["sphere_diameter"] = _number(record["sphere_diameter_m"], where, "sphere_diameter_m")
     calibration = None
-    if not blank(record.get("calibration_N_per_V")):
+    if not _blank(record.get("calibration_N_per_V")):
         calibration = _number(record["calibration_N_per_V"], where, "calibration_N_per_V")
     return Row(where, str(pattern).strip(), meta, calibration)
 

@@ -8,7 +8,7 @@ for every sphere size of the table with the plate model ``auto`` picks and with 
 dissipation the table does not have (Kuwabara-Kono contact damping, :data:`DAMPING_S`). Each
 size's noise-free trace becomes :data:`SHOTS` shots with white noise at :data:`SNR_DB`, measured
 and aggregated exactly as measured files of a stated sphere size are
-(:func:`~solitonde.instrument.inference.chain_geometry.measure_shot`: the drift fitted on the gap
+(:func:`~solitonde.instrument.inference.shot_measure.measure_shot`: the drift fitted on the gap
 against the relaxation of the table family's chain, undamped, while the truth's chain is damped:
 a model error the answers must carry like a real chain's); the sizes with a detected
 reflection are inverted together. The dissipation is compensated as an operator would: a
@@ -36,18 +36,18 @@ flag, and ``missed_unwarned`` those of them with no warning of another reading e
 ``ambiguous`` (separate readings along the thickness-distance ridge, instrument.inference.ridge),
 which counts as covered when one of its readings covers the truth and as flagged otherwise;
 ``by_distance``, these scores per bin of the true distance to the support
-(:data:`DISTANCE_BINS_M`); the distance's coverage (one-sided
+(:data:`~.validate_scores.DISTANCE_BINS_M`); the distance's coverage (one-sided
 bounds counted as such); and the status. A size whose shots show no reflection enters with its
 ARR bound (instrument.inference.inversion).
 The expected status is what the noise-free model says the data can tell. For each end of each
 parameter's range, ``d`` is how many standard errors (the inversion's own sigmas,
-:func:`separations`) separate the truth's features from the closest table point on that end: along
-a slice (the other parameter at its true value) and along the profile (any value of the other
-parameter). A side is open (the parameter is not bounded there) when ``d < 1.5``, closed when ``d >
-3``, either in between. The slice misses joint (t, L) degeneracies (a thin plate near a support can
-mimic a thicker one far from it); the profile flags every one however little posterior mass it
-carries; a status supported by either counts as right (``status_accuracy``), and each is scored on
-its own as well (``status_accuracy_slice``, ``status_accuracy_profile``).
+:func:`~.validate_scores.separations`) separate the truth's features from the closest table point on
+that end: along a slice (the other parameter at its true value) and along the profile (any value of
+the other parameter). A side is open (the parameter is not bounded there) when ``d < 1.5``, closed
+when ``d > 3``, either in between. The slice misses joint (t, L) degeneracies (a thin plate near a
+support can mimic a thicker one far from it); the profile flags every one however little posterior
+mass it carries; a status supported by either counts as right (``status_accuracy``), and each is
+scored on its own as well (``status_accuracy_slice``, ``status_accuracy_profile``).
 L = 0 is a physical end and never open. So far from the support the distance must come back
 ``lower_bound_only``, and right at the support, where TOF and ARR no longer depend on the plate,
 thickness may honestly come back unbounded.
@@ -60,26 +60,33 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
-from itertools import pairwise
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.instrument.inference.calibration import (
-    Calibration,
-    calibrated_table,
-    calibration_along,
-)
+from solitonde.instrument.inference.calibration import Calibration, DiameterRecord
 from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
-from solitonde.instrument.inference.chain_geometry import measure_shot
-from solitonde.instrument.inference.inversion import FeatureSummary, fine_grid, invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.material_spread import spread_of
 from solitonde.instrument.inference.pipeline import SizeSummary
+from solitonde.instrument.inference.shot_measure import measure_shot
+from solitonde.instrument.parallel import run_tasks
+from solitonde.instrument.studies.validate_scores import (
+    OTHER_READING_WARNING,
+    DistanceBinScore,
+    DrawnMaterial,
+    MeasuredPlate,
+    PlateScore,
+    by_distance,
+    counts,
+    missed_unflagged,
+    plate_inputs,
+    score_plate,
+)
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.instrument.tables.table_build import run_tasks
 from solitonde.model.scene import apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.atomic import write_text
@@ -95,17 +102,6 @@ SNR_DB = 40.0
 REFERENCE_THICKNESS_M = 5.5e-3
 REFERENCE2_THICKNESS_M = 2.5e-3
 REFERENCE_DISTANCE_M = 0.457
-OPEN_BELOW = 1.5
-CLOSED_ABOVE = 3.0
-STATUSES = ("constrained", "lower_bound_only", "upper_bound_only", "unconstrained")
-ANSWERS = ("constrained", "lower_bound_only", "upper_bound_only", "ambiguous")
-"""Thickness statuses that are an answer (with at least one bound; an ``ambiguous`` one with
-its readings)."""
-OTHER_READING_WARNING = "another reading fits as well"
-"""How the warning of another reading near a support starts (a widened answer's or an ambiguous
-one's: instrument.inference.adequacy)."""
-DISTANCE_BINS_M = (0.0, 0.015, 0.03, 0.06, 0.12, None)
-"""Edges of the distance bins ``by_distance`` scores (m; the last bin open)."""
 
 
 class ValidationInputError(InstrumentError, ValueError):
@@ -122,7 +118,7 @@ def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> d
 
 def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness_m: float,
                   distance_m: float, seed: int, shots: int = SHOTS,
-                  snr_db: float = SNR_DB) -> dict[str, Any]:
+                  snr_db: float = SNR_DB) -> MeasuredPlate:
     """Simulate one plate for every sphere size (largest first, one Green's function) and measure
     ``shots`` noisy shots of each: per-size summaries (None where no reflection was detected)."""
     from solitonde.model import greens
@@ -130,7 +126,7 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
     rng = np.random.default_rng(seed)
     family = scene_from_dict(dict(base))
     plate_cache = greens.MemoryCache()  # one response serves every sphere size of this plate
-    summaries: dict[float, dict[str, Any] | None] = {}
+    summaries: dict[float, dict[str, Any] | None] = {}  # FeatureSummary's fields, as JSON
     started = time.perf_counter()
     for d in sorted(diameters, reverse=True):
         result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)),
@@ -157,7 +153,7 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
 
 
 def draw_plate_materials(table: ModelTable, spread: Mapping[str, float], n: int,
-                         rng: np.random.Generator) -> list[dict[str, Any]]:
+                         rng: np.random.Generator) -> list[DrawnMaterial]:
     """``n`` plates of the table's plate material as a grade's plates come: E, nu and rho each
     drawn from a normal distribution about the table's value with the grade's spread (relative
     sd for E and rho, sd for nu), as property mappings for ``plate.material``. Normal, with the
@@ -175,74 +171,93 @@ def draw_plate_materials(table: ModelTable, spread: Mapping[str, float], n: int,
             for ze, zn, zr in z.tolist()]
 
 
-def _inputs(summaries: Mapping[float, Any]) -> list[FeatureSummary]:
-    return [FeatureSummary(s["diameter_m"], s["tof_s"], s["arr"], s["tof_std_s"], s["arr_std"],
-                           int(s["n_shots"]), s.get("arr_upper_bound"))
-            for s in summaries.values() if s is not None]
+class ReferencePlates(TypedDict):
+    """The reference plates the calibration was fitted on."""
+
+    thickness_m: list[float]
+    distance_m: float
 
 
-def separations(table: ModelTable, inputs: Sequence[FeatureSummary], thickness_m: float,
-                distance_m: float, calibration: Calibration | None) -> dict[str, np.ndarray]:
-    """How far, in standard errors, the features of the closest point at each table end are
-    from the truth's (profile over the other parameter).
+class ValidationMetrics(TypedDict):
+    """The scores of a validation run and what it ran with (``validate --json``, keys in
+    order)."""
 
-    ``d(t, L) = sqrt(sum over sizes of (dTOF/sigma_tof)^2 + (dARR/sigma_arr)^2)`` between the
-    noise-free model at the truth and at (t, L), with the inversion's own sigmas; for thickness
-    the ends are the smallest ``d`` along t = t_min and t = t_max (any L), for distance along
-    L = L_min and L = L_max (any t). Returns ``{"thickness_m": [d_low, d_high],
-    "distance_m": [...]}``.
-    """
-    d2: np.ndarray | None = None
-    table = calibrated_table(table, calibration)
-    for item in inputs:
-        g = fine_grid(table, table.diameter_index(item.diameter_m))
-        i = int(np.argmin(np.abs(np.log(g.thickness_m / thickness_m))))
-        j = int(np.argmin(np.abs(g.distance_m - distance_m)))
-        # numbers, or rows over the grid's distances where the calibration follows distance
-        factor, offset, f_std, o_std = calibration_along(calibration, g.diameter_m,
-                                                         g.distance_m[None, :])
-        s_tof, s_arr = item.sigmas()
-        var_tof = s_tof**2 + o_std**2 + g.model_tof_var
-        var_arr = s_arr**2 + factor**2 * g.model_arr_var + (f_std * g.arr) ** 2
-        if np.ndim(factor) == 0:
-            term = (g.tof_s - g.tof_s[i, j]) ** 2 / var_tof
-            term += (factor * (g.arr - g.arr[i, j])) ** 2 / var_arr
-        else:  # the calibrated model at (t, L) against the calibrated truth at its own L
-            term = (g.tof_s + offset - g.tof_s[i, j] - offset[0, j]) ** 2 / var_tof
-            term += (factor * g.arr - factor[0, j] * g.arr[i, j]) ** 2 / var_arr
-        term[~g.valid] = np.inf
-        d2 = term if d2 is None else d2 + term
-        truth = (i, j)
-    assert d2 is not None
-    i, j = truth
-    d = np.sqrt(d2)
-    return {"thickness_m": np.array([d[0].min(), d[-1].min()]),
-            "distance_m": np.array([d[:, 0].min(), d[:, -1].min()]),
-            "thickness_m_slice": np.array([d[0, j], d[-1, j]]),
-            "distance_m_slice": np.array([d[i, 0], d[i, -1]])}
+    n: int
+    seed: int
+    thickness_error_median: float | None
+    thickness_error_p90: float | None
+    coverage_95: float | None
+    coverage_95_two_sided: float | None
+    answered: float | None
+    interval_width_median: float | None
+    inconsistent_rate: float | None
+    flagged_or_covered: float | None
+    missed_unflagged: float | None
+    missed_unwarned: float | None
+    other_reading_rate: float | None
+    ambiguous_rate: float | None
+    by_distance: list[DistanceBinScore]
+    wrong_family: str | None
+    material_spread_drawn: dict[str, float] | None
+    distance_coverage_95: float | None
+    status_accuracy: float | None
+    status_accuracy_slice: float
+    status_accuracy_profile: float
+    thickness_constrained: float
+    thickness_status_counts: dict[str, int]
+    distance_status_counts: dict[str, int]
+    n_estimated: int
+    damping_s: float
+    shots: int
+    near_support_m: float | None
+    snr_db: float
+    reference: ReferencePlates
+    calibration: list[DiameterRecord]  # the calibration's own form (Calibration.to_dict)
+    diameters_m: list[float]
+    truth_plate_theory: str
+    simulation_wall_s: float
+    table: str | None
 
 
-def expected_statuses(d: np.ndarray, lower_physical: bool) -> set[str]:
-    """Statuses the data support, from the separations at the two ends (:func:`separations`):
-    an end is open below :data:`OPEN_BELOW` standard errors, closed above :data:`CLOSED_ABOVE`,
-    and either in between."""
-    def states(x: float, physical: bool) -> set[bool]:
-        if physical or x > CLOSED_ABOVE:
-            return {False}
-        return {True} if x < OPEN_BELOW else {True, False}
+class DrawKey(TypedDict):
+    """What a stored measurements file must match to be reused: the draw and how its shots were
+    simulated and read."""
 
-    names = {(False, False): "constrained", (False, True): "lower_bound_only",
-             (True, False): "upper_bound_only", (True, True): "unconstrained"}
-    return {names[(lo, hi)] for lo in states(float(d[0]), lower_physical)
-            for hi in states(float(d[1]), False)}
+    n: int
+    seed: int
+    diameters_m: list[float]
+    scene: dict[str, Any]  # the table's scene, as its sweep stores it
+    thickness_range_m: list[float]
+    distance_range_m: list[float]
+    damping_s: float
+    shots: int
+    snr_db: float
+    wrong_family: str | None
+    material_spread_drawn: dict[str, float] | None
+    reading_version: Any
+    near_support_m: NotRequired[float]
+
+
+@dataclass(frozen=True)
+class Draw:
+    """The plates of one run: each one's truth (thickness, distance) and material, the seeds of
+    their noise (the first the reference plate's), and the reference plate."""
+
+    plates: list[tuple[float, float]]
+    seeds: list[int]
+    materials: list[DrawnMaterial | None]
+    spread: dict[str, float] | None
+    t_ref: float
+    l_ref: float
+    l_far: float
 
 
 @dataclass
 class ValidationReport:
     """Scores and per-scene rows."""
 
-    metrics: dict[str, Any]
-    scenes: list[dict[str, Any]]
+    metrics: ValidationMetrics
+    scenes: list[PlateScore]
     calibration: Calibration
 
 
@@ -289,17 +304,60 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     TableError
         (``diameter_m``) A sphere size the table does not hold.
     """
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValidationInputError("seed", f"must be an integer >= 0, got {seed!r}")
-    rng = np.random.default_rng(seed)
-    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
+    _check_count("seed", seed, 0)
+    sizes = _sizes(table, diameters)
+    reference_base, base = _bases(table, truth_plate_theory, wrong_family)
+    _check_count("shots", shots, 1)
+    draw = _draw(table, n, seed, _far_end(table, near_support_m),
+                 draw_material and wrong_family is None)
+    # the reference's task, then each plate's (with its shot count)
+    tasks: list[tuple[Any, ...]] = [(reference_base, sizes, draw.t_ref, draw.l_ref,
+                                     draw.seeds[0])]
+    tasks += [(base if mat is None else apply_overrides(dict(base), {"plate.material": mat}),
+               sizes, t, length, s, shots)
+              for (t, length), s, mat in zip(draw.plates, draw.seeds[1:], draw.materials,
+                                             strict=True)]
+    key = _draw_key(table, n, seed, sizes, base, shots, wrong_family, draw,
+                    near_support_m is not None)
+    measured, wall = _measured(tasks, key, measurements, workers, scheduler, progress)
+    ref = next(m for m in measured
+               if m["thickness_m"] == draw.t_ref and m["distance_m"] == draw.l_ref)
+    measured.remove(ref)
+    calibration, t_ref2 = _calibration(table, ref, reference_base, sizes, draw, seed)
+    order = {plate: i for i, plate in enumerate(draw.plates)}
+    drawn = dict(zip(draw.plates, draw.materials, strict=True))
+    measured.sort(key=lambda m: order[(m["thickness_m"], m["distance_m"])])
+    rows = [score_plate(table, m, calibration, drawn[(m["thickness_m"], m["distance_m"])])
+            for m in measured]
+    run = Run(n, seed, shots, None if near_support_m is None else draw.l_far, wrong_family,
+              draw.spread, [draw.t_ref, t_ref2], draw.l_ref, sizes, truth_plate_theory, wall,
+              str(table.path) if table.path else None)
+    return ValidationReport(_metrics(rows, run, calibration), rows, calibration)
+
+
+def _check_count(field: str, value: int, least: int) -> None:
+    """An integer (not a bool) of at least ``least``, else a ValidationInputError naming
+    ``field``."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
+        raise ValidationInputError(field, f"must be an integer >= {least}, got {value!r}")
+
+
+def _sizes(table: ModelTable, diameters: Sequence[float] | None) -> list[float]:
+    """The table's sphere sizes closest to ``diameters`` (all of them when None), each at most
+    once."""
     if diameters is None:
-        diameters = [float(d) for d in table.axes["diameter_m"]]
-    else:
-        diameters = [float(table.axes["diameter_m"][table.diameter_index(d)]) for d in diameters]
-        if len(set(diameters)) < len(diameters):
-            raise ValidationInputError("diameters", "a sphere size is listed twice (each table "
-                                       "size at most once)")
+        return [float(d) for d in table.axes["diameter_m"]]
+    sizes = [float(table.axes["diameter_m"][table.diameter_index(d)]) for d in diameters]
+    if len(set(sizes)) < len(sizes):
+        raise ValidationInputError("diameters", "a sphere size is listed twice (each table "
+                                   "size at most once)")
+    return sizes
+
+
+def _bases(table: ModelTable, truth_plate_theory: str,
+           wrong_family: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The scenes of the reference plates and of the truths: the table's, on the plate theory
+    asked for, the truths on ``wrong_family``'s material where given."""
     if truth_plate_theory not in ("auto", "3d", "mindlin"):
         raise ValidationInputError("truth_plate_theory", f"must be auto, 3d or mindlin, got "
                                    f"{truth_plate_theory!r}")
@@ -315,43 +373,67 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
     base = reference_base
     if wrong_family is not None:
         base = apply_overrides(dict(base), {"plate.material": wrong_family})
-    if isinstance(shots, bool) or not isinstance(shots, int | np.integer) or shots < 1:
-        raise ValidationInputError("shots", f"must be an integer >= 1, got {shots!r}")
+    return reference_base, base
+
+
+def _far_end(table: ModelTable, near_support_m: float | None) -> float:
+    """The largest distance drawn: the table's, or ``near_support_m`` where nearer."""
+    l_axis = table.axes["distance_m"]
     l_far = float(l_axis[-1])
-    if near_support_m is not None:
-        if not (isinstance(near_support_m, int | float) and math.isfinite(near_support_m)
-                and near_support_m > l_axis[0]):
-            raise ValidationInputError("near_support_m", f"must be a distance in m beyond the "
-                                       f"table's nearest ({float(l_axis[0]):g} m), got "
-                                       f"{near_support_m!r}")
-        l_far = min(l_far, float(near_support_m))
+    if near_support_m is None:
+        return l_far
+    if not (isinstance(near_support_m, int | float) and math.isfinite(near_support_m)
+            and near_support_m > l_axis[0]):
+        raise ValidationInputError("near_support_m", f"must be a distance in m beyond the "
+                                   f"table's nearest ({float(l_axis[0]):g} m), got "
+                                   f"{near_support_m!r}")
+    return min(l_far, float(near_support_m))
+
+
+def _draw(table: ModelTable, n: int, seed: int, l_far: float, draw_material: bool) -> Draw:
+    """``n`` plates drawn from ``seed``: thickness log-uniform and distance uniform inside the
+    table's range, each plate's material from the table material's spread (with
+    ``draw_material``), and the reference plate."""
+    rng = np.random.default_rng(seed)
+    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
     lo, hi = math.log(t_axis[0] * 1.01), math.log(t_axis[-1] / 1.01)
-    draws = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_far)))
-             for _ in range(n)]
-    seeds = rng.integers(0, 2**31, size=n + 1)
-    t_ref = float(np.clip(REFERENCE_THICKNESS_M, t_axis[0], t_axis[-1]))
-    l_ref = float(np.clip(REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1]))
-    spread = spread_of(table) if draw_material and wrong_family is None else None
-    materials = (draw_plate_materials(table, spread, n, np.random.default_rng([seed, 3]))
-                 if spread is not None else [None] * n)
-    # the reference's task, then each plate's (with its shot count)
-    tasks: list[tuple[Any, ...]] = [(reference_base, diameters, t_ref, l_ref, int(seeds[0]))]
-    tasks += [(base if mat is None else apply_overrides(dict(base), {"plate.material": mat}),
-               diameters, t, length, int(s), shots)
-              for (t, length), s, mat in zip(draws, seeds[1:], materials, strict=True)]
+    plates = [(float(math.exp(rng.uniform(lo, hi))), float(rng.uniform(l_axis[0], l_far)))
+              for _ in range(n)]
+    seeds = [int(s) for s in rng.integers(0, 2**31, size=n + 1)]
+    spread = spread_of(table) if draw_material else None
+    materials: list[DrawnMaterial | None] = (
+        list(draw_plate_materials(table, spread, n, np.random.default_rng([seed, 3])))
+        if spread is not None else [None] * n)
+    return Draw(plates, seeds, materials, spread,
+                t_ref=float(np.clip(REFERENCE_THICKNESS_M, t_axis[0], t_axis[-1])),
+                l_ref=float(np.clip(REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1])), l_far=l_far)
+
+
+def _draw_key(table: ModelTable, n: int, seed: int, sizes: list[float], base: dict[str, Any],
+              shots: int, wrong_family: str | None, draw: Draw, near_support: bool) -> DrawKey:
+    """What a stored measurements file must hold to be this run's."""
+    t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
+    key: DrawKey = {"n": n, "seed": seed, "diameters_m": sizes, "scene": base,
+                    "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
+                    "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
+                    "damping_s": DAMPING_S, "shots": shots, "snr_db": SNR_DB,
+                    "wrong_family": wrong_family, "material_spread_drawn": draw.spread,
+                    "reading_version": EXTRACTOR_VERSION}
+    if near_support:  # absent from the default draw's key: its files stay valid
+        key["near_support_m"] = draw.l_far
+    return key
+
+
+def _measured(tasks: list[tuple[Any, ...]], key: DrawKey, measurements: str | Path | None,
+              workers: int, scheduler: str | None,
+              progress: bool) -> tuple[list[MeasuredPlate], float]:
+    """Every plate simulated and measured, or read back from ``measurements`` where it holds
+    this draw (then written there); the simulations' wall time."""
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(tasks), unit="plate", desc="validate")
-    key = {"n": n, "seed": seed, "diameters_m": diameters, "scene": base,
-           "thickness_range_m": [float(t_axis[0]), float(t_axis[-1])],
-           "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
-           "damping_s": DAMPING_S, "shots": shots, "snr_db": SNR_DB,
-           "wrong_family": wrong_family, "material_spread_drawn": spread,
-           "reading_version": EXTRACTOR_VERSION}
-    if near_support_m is not None:  # absent from the default draw's key: its files stay valid
-        key["near_support_m"] = l_far
     stored = _load_measurements(measurements, key)
     started = time.perf_counter()
     if stored is not None:
@@ -367,141 +449,107 @@ def validate(table: ModelTable, n: int, seed: int = 0, *, workers: int = 1,
             _save_measurements(measurements, key, measured, wall)
     if bar is not None:
         bar.close()
-    ref = next(m for m in measured if m["thickness_m"] == t_ref and m["distance_m"] == l_ref)
-    measured.remove(ref)
-    # the second reference plate (far from the supports: a cheap run) shows how far the fitted
-    # factor and offset carry over between plates
-    t_ref2 = float(np.clip(REFERENCE2_THICKNESS_M, t_axis[0], t_axis[-1]))
-    ref2 = measure_plate(reference_base, diameters, t_ref2, l_ref,
-                         int(np.random.default_rng([seed, 2]).integers(0, 2**31)))
-    refs = [Reference(t_ref, l_ref, s) for s in _inputs(ref["summaries"]) if not s.hidden]
-    refs += [Reference(t_ref2, l_ref, s) for s in _inputs(ref2["summaries"]) if not s.hidden]
-    calibration = fit_calibration(table, refs)
-    order = {(t, length): i for i, (t, length) in enumerate(draws)}
-    drawn = {(t, length): mat for (t, length), mat in zip(draws, materials, strict=True)}
-    measured.sort(key=lambda m: order[(m["thickness_m"], m["distance_m"])])
+    return measured, wall
 
-    rows = []
-    for m in measured:
-        inputs = _inputs(m["summaries"])
-        row: dict[str, Any] = {"thickness_m": m["thickness_m"], "distance_m": m["distance_m"],
-                               "n_sizes": len(inputs), "wall_s": m["wall_s"],
-                               "plate_material": drawn[(m["thickness_m"], m["distance_m"])]}
-        if not inputs:
-            row.update(status_ok=False, reason="no reflection detected for any sphere size")
-            rows.append(row)
-            continue
-        est = invert(table, inputs, calibration)
-        t_est, l_est = est.thickness_m, est.distance_m
-        true_l = m["distance_m"]
-        true_t = m["thickness_m"]
-        # What the data the inversion used can tell: a size it left out as disagreeing with the
-        # others (see :func:`invert`) does not count towards the expected status either.
-        excluded = est.extra.get("excluded_diameters_m", [])
-        used = [i for i in inputs if i.diameter_m not in excluded and not i.hidden]
-        phys = bool(l_axis[0] <= 0.0)
-        ambiguous = t_est.status == "ambiguous"
-        # an ambiguous answer covers when one of its readings does, and is flagged otherwise
-        reading_covered = ambiguous and any(
-            _covered(r.thickness_m.ci95, true_t) for r in est.readings)
-        flagged = est.inconsistent or (ambiguous and not reading_covered)
-        answered = t_est.status in ANSWERS and not flagged
-        row.update(thickness=t_est.to_dict(), distance=l_est.to_dict(),
-                   excluded_diameters_m=excluded, fit=est.fit, warnings=est.warnings,
-                   hidden_diameters_m=[i.diameter_m for i in inputs if i.hidden],
-                   flagged=flagged, answered=answered, ambiguous=ambiguous,
-                   readings=[r.to_dict() for r in est.readings],
-                   other_reading=est.extra.get("other_reading"))
-        if used:
-            sep = separations(table, used, true_t, true_l, calibration)
-            # a slice (the other parameter at its true value) misses joint (t, L)
-            # degeneracies, the profile flags every one however little posterior mass it
-            # carries: both are answers the noise-free model supports, and both are scored
-            # separately too
-            exp_ts = expected_statuses(sep["thickness_m_slice"], lower_physical=False)
-            exp_ls = expected_statuses(sep["distance_m_slice"], lower_physical=phys)
-            exp_tp = expected_statuses(sep["thickness_m"], lower_physical=False)
-            exp_lp = expected_statuses(sep["distance_m"], lower_physical=phys)
-            row["separations"] = {k: v.tolist() for k, v in sep.items()}
-        else:  # no reflection at all: the bound is what the data can tell
-            exp_ts = exp_tp = {"upper_bound_only"}
-            exp_ls = exp_lp = set(STATUSES)
-        exp_t, exp_l = exp_ts | exp_tp, exp_ls | exp_lp
-        two = _two_sided(t_est) if answered else None
-        row.update(
-            expected_thickness_status=sorted(exp_t), expected_distance_status=sorted(exp_l),
-            status_ok=t_est.status in exp_t and l_est.status in exp_l,
-            status_ok_slice=t_est.status in exp_ts and l_est.status in exp_ls,
-            status_ok_profile=t_est.status in exp_tp and l_est.status in exp_lp,
-            thickness_error=(abs(t_est.median - true_t) / true_t
-                             if t_est.median is not None and not flagged else None),
-            # every answer with its bounds: a one-sided one covers when its bound holds
-            thickness_covered=(reading_covered if ambiguous else _covered(t_est.ci95, true_t))
-            if answered else None,
-            thickness_covered_two_sided=two[0] <= true_t <= two[1] if two else None,
-            thickness_width=(two[1] - two[0]) / true_t if two else None,
-            distance_covered=_covered(l_est.ci95, true_l) if not flagged else None,
-        )
-        rows.append(row)
+
+def _calibration(table: ModelTable, ref: MeasuredPlate, reference_base: dict[str, Any],
+                 sizes: list[float], draw: Draw, seed: int) -> tuple[Calibration, float]:
+    """The calibration fitted on the reference plate and a second one, thinner (far from the
+    supports: a cheap run), which shows how far the fitted factor and offset carry over between
+    plates; the second plate's thickness."""
+    t_axis = table.axes["thickness_m"]
+    t_ref2 = float(np.clip(REFERENCE2_THICKNESS_M, t_axis[0], t_axis[-1]))
+    ref2 = measure_plate(reference_base, sizes, t_ref2, draw.l_ref,
+                         int(np.random.default_rng([seed, 2]).integers(0, 2**31)))
+    refs = [Reference(draw.t_ref, draw.l_ref, s) for s in plate_inputs(ref["summaries"])
+            if not s.hidden]
+    refs += [Reference(t_ref2, draw.l_ref, s) for s in plate_inputs(ref2["summaries"])
+             if not s.hidden]
+    return fit_calibration(table, refs), t_ref2
+
+
+@dataclass(frozen=True)
+class Run:
+    """What a validation ran with, as its metrics state it."""
+
+    n: int
+    seed: int
+    shots: int
+    near_support_m: float | None
+    wrong_family: str | None
+    spread: dict[str, float] | None
+    reference_thickness_m: list[float]
+    reference_distance_m: float
+    diameters_m: list[float]
+    truth_plate_theory: str
+    simulation_wall_s: float
+    table: str | None
+
+
+def _mean(values: Sequence[bool | float]) -> float | None:
+    """The mean of ``values`` (booleans as 0 and 1), None when there are none."""
+    return float(np.mean(values)) if values else None
+
+
+def _metrics(rows: list[PlateScore], run: Run, calibration: Calibration) -> ValidationMetrics:
+    """The scores over the plates (see the module doc) and what the run was."""
     errors = np.array([r["thickness_error"] for r in rows if r.get("thickness_error") is not None])
-    t_cov = [r["thickness_covered"] for r in rows if r.get("thickness_covered") is not None]
-    t_cov2 = [r["thickness_covered_two_sided"] for r in rows
-              if r.get("thickness_covered_two_sided") is not None]
-    widths = [r["thickness_width"] for r in rows if r.get("thickness_width") is not None]
-    l_cov = [r["distance_covered"] for r in rows if r.get("distance_covered") is not None]
+    t_cov = [c for r in rows if (c := r.get("thickness_covered")) is not None]
+    t_cov2 = [c for r in rows if (c := r.get("thickness_covered_two_sided")) is not None]
+    widths = [w for r in rows if (w := r.get("thickness_width")) is not None]
+    l_cov = [c for r in rows if (c := r.get("distance_covered")) is not None]
     flags = [bool(r.get("flagged")) for r in rows]
     # a wrong family is handled when the answer is flagged or covers the truth anyway
     handled = [bool(r.get("flagged")) or bool(r.get("thickness_covered")) for r in rows]
-    missed = [_missed_unflagged(r) for r in rows]
+    missed = [missed_unflagged(r) for r in rows]
     # ... and of those, the ones no warning of another reading came with
     warned = [any(w.startswith(OTHER_READING_WARNING) for w in r.get("warnings") or [])
               for r in rows]
     unwarned = [m and not w for m, w in zip(missed, warned, strict=True)]
-    metrics = {
-        "n": n,
-        "seed": seed,
+    return {
+        "n": run.n,
+        "seed": run.seed,
         "thickness_error_median": float(np.median(errors)) if errors.size else None,
         "thickness_error_p90": float(np.percentile(errors, 90)) if errors.size else None,
-        "coverage_95": float(np.mean(t_cov)) if t_cov else None,
-        "coverage_95_two_sided": float(np.mean(t_cov2)) if t_cov2 else None,
-        "answered": float(np.mean([bool(r.get("answered")) for r in rows])) if rows else None,
+        "coverage_95": _mean(t_cov),
+        "coverage_95_two_sided": _mean(t_cov2),
+        "answered": _mean([bool(r.get("answered")) for r in rows]),
         "interval_width_median": float(np.median(widths)) if widths else None,
-        "inconsistent_rate": float(np.mean(flags)) if rows else None,
-        "flagged_or_covered": float(np.mean(handled)) if rows else None,
-        "missed_unflagged": float(np.mean(missed)) if rows else None,
-        "missed_unwarned": float(np.mean(unwarned)) if rows else None,
-        "other_reading_rate": float(np.mean(warned)) if rows else None,
-        "ambiguous_rate": float(np.mean([bool(r.get("ambiguous")) for r in rows]))
-        if rows else None,
+        "inconsistent_rate": _mean(flags),
+        "flagged_or_covered": _mean(handled),
+        "missed_unflagged": _mean(missed),
+        "missed_unwarned": _mean(unwarned),
+        "other_reading_rate": _mean(warned),
+        "ambiguous_rate": _mean([bool(r.get("ambiguous")) for r in rows]),
         "by_distance": by_distance(rows),
-        "wrong_family": wrong_family,
-        "material_spread_drawn": spread,
-        "distance_coverage_95": float(np.mean(l_cov)) if l_cov else None,
-        "status_accuracy": float(np.mean([r["status_ok"] for r in rows])) if rows else None,
+        "wrong_family": run.wrong_family,
+        "material_spread_drawn": run.spread,
+        "distance_coverage_95": _mean(l_cov),
+        "status_accuracy": _mean([r["status_ok"] for r in rows]),
         "status_accuracy_slice": float(np.mean([r.get("status_ok_slice", False) for r in rows])),
         "status_accuracy_profile": float(np.mean([r.get("status_ok_profile", False)
                                                   for r in rows])),
         "thickness_constrained": float(np.mean([r.get("thickness", {}).get("status")
                                                 == "constrained" for r in rows])),
-        "thickness_status_counts": _counts(r.get("thickness", {}).get("status") for r in rows),
-        "distance_status_counts": _counts(r.get("distance", {}).get("status") for r in rows),
+        "thickness_status_counts": counts(r.get("thickness", {}).get("status") for r in rows),
+        "distance_status_counts": counts(r.get("distance", {}).get("status") for r in rows),
         "n_estimated": int(errors.size),
         "damping_s": DAMPING_S,
-        "shots": shots,
-        "near_support_m": None if near_support_m is None else l_far,
+        "shots": run.shots,
+        "near_support_m": run.near_support_m,
         "snr_db": SNR_DB,
-        "reference": {"thickness_m": [t_ref, t_ref2], "distance_m": l_ref},
+        "reference": {"thickness_m": run.reference_thickness_m,
+                      "distance_m": run.reference_distance_m},
         "calibration": calibration.to_dict()["per_diameter"],
-        "diameters_m": diameters,
-        "truth_plate_theory": truth_plate_theory,
-        "simulation_wall_s": wall,
-        "table": str(table.path) if table.path else None,
+        "diameters_m": run.diameters_m,
+        "truth_plate_theory": run.truth_plate_theory,
+        "simulation_wall_s": run.simulation_wall_s,
+        "table": run.table,
     }
-    return ValidationReport(metrics, rows, calibration)
 
 
 def _load_measurements(path: str | Path | None,
-                       key: Mapping[str, Any]) -> tuple[list[dict[str, Any]], float] | None:
+                       key: DrawKey) -> tuple[list[MeasuredPlate], float] | None:
     """The stored plates when ``path`` holds this draw; None when absent or another draw (it is
     then overwritten). Anything else is an error, never silently replaced: the file may be the
     user's."""
@@ -547,54 +595,6 @@ def _load_measurements(path: str | Path | None,
     return plates, wall
 
 
-def _save_measurements(path: str | Path, key: Mapping[str, Any], plates: list[dict[str, Any]],
+def _save_measurements(path: str | Path, key: DrawKey, plates: list[MeasuredPlate],
                        wall: float) -> None:
     write_text(path, json.dumps({"key": key, "plates": plates, "wall_s": wall}))
-
-
-def _missed_unflagged(row: Mapping[str, Any]) -> bool:
-    """Whether a plate's answer misses its truth with nothing said: not flagged, not ambiguous,
-    a thickness with bounds (two-sided or one-sided) that do not hold it."""
-    status = row.get("thickness", {}).get("status")
-    return (not row.get("flagged") and status in ANSWERS and status != "ambiguous"
-            and row.get("thickness_covered") is False)
-
-
-def by_distance(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """The scores per bin of the true distance to the support (:data:`DISTANCE_BINS_M`):
-    plates, answered, the 95 % coverage, the unflagged misses and the ambiguous answers; a bin
-    without plates is left out."""
-    out = []
-    for lo, hi in pairwise(DISTANCE_BINS_M):
-        inside = [r for r in rows if r["distance_m"] >= lo and (hi is None or r["distance_m"] < hi)]
-        if not inside:
-            continue
-        cov = [r["thickness_covered"] for r in inside if r.get("thickness_covered") is not None]
-        out.append({"distance_m": [lo, hi], "n": len(inside),
-                    "answered": float(np.mean([bool(r.get("answered")) for r in inside])),
-                    "coverage_95": float(np.mean(cov)) if cov else None,
-                    "missed_unflagged": float(np.mean([_missed_unflagged(r) for r in inside])),
-                    "ambiguous_rate": float(np.mean([bool(r.get("ambiguous")) for r in inside]))})
-    return out
-
-
-def _two_sided(p: Any) -> tuple[float, float] | None:
-    """A constrained answer's 95 % interval, or None for any other."""
-    ci = p.ci95
-    if p.status != "constrained" or ci is None or ci[0] is None or ci[1] is None:
-        return None
-    return float(ci[0]), float(ci[1])
-
-
-def _covered(ci: Any, truth: float) -> bool | None:
-    if ci is None:
-        return None
-    lo, hi = ci
-    return (lo is None or lo <= truth) and (hi is None or truth <= hi)
-
-
-def _counts(values: Any) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for v in values:
-        out[str(v)] = out.get(str(v), 0) + 1
-    return out

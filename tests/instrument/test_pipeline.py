@@ -27,7 +27,7 @@ from solitonde.signal.waveform import Waveform
 ROOT = Path(__file__).resolve().parents[2]
 TABLE = ROOT / "data_samples" / "default_table.h5"
 CSV = ROOT / "data_samples" / "waveforms" / "synthetic_D9.53_t4.83_snr40.csv"
-STUDIES = {"studies/validate.py",  # inverts its synthetic plates itself, with a profile study
+STUDIES = {"studies/validate_scores.py",  # scores synthetic plates, with a profile study
            "studies/map_study.py"}  # inverts its scans' positions one by one beside the joint
 JOINT = {"inference/joint_map.py"}
 """A scan's joint posterior inverts each position against the one table the scan's family
