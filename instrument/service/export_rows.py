@@ -10,6 +10,7 @@ import json
 from collections.abc import Iterator
 from typing import Any
 
+from solitonde.instrument.service.measurement_json import StoredResult
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.store import Store
@@ -123,7 +124,7 @@ def estimates_export(svc: Service, fmt: str, plate_id: str | None) -> tuple[byte
     return to_bytes(rows, fmt, columns), MEDIA[fmt]
 
 
-def _estimated_sizes(result: dict[str, Any]) -> list[float]:
+def _estimated_sizes(result: StoredResult) -> list[float]:
     """The sphere sizes an estimate was made from (the inversion's inputs, less any it left
     out); without an estimate, every size measured."""
     estimate = result.get("estimate")

@@ -9,19 +9,30 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from types import EllipsisType
 from typing import Any
 
 import numpy as np
 
 from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.loaded_table import EstimateUnavailable
+from solitonde.instrument.inference.loaded_table import EstimateUnavailable, LoadedTable
 from solitonde.instrument.inference.measured_shots import ShotInputError
 from solitonde.instrument.inference.pipeline import SizeSummary
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
 from solitonde.instrument.inference.setups import Setup, SetupError
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import ShotMetadata
+from solitonde.instrument.service.measurement_json import (
+    EarlierEntry,
+    EarlierResult,
+    MeasurementJSON,
+    MetadataDifference,
+    Provenance,
+    ShotJSON,
+    StoredResult,
+    TableRef,
+)
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.service.store import (
@@ -31,6 +42,7 @@ from solitonde.instrument.service.store import (
     samples_digest,
 )
 from solitonde.signal.errors import WaveformError
+from solitonde.signal.features import Features
 from solitonde.signal.json_ready import json_ready
 from solitonde.signal.waveform import Waveform
 
@@ -157,10 +169,11 @@ def location_of(waveforms: Sequence[Waveform], prefix: str) -> tuple[str | None,
 
 
 def measure_shots(waveforms: Sequence[Waveform], prefix: str
-                  ) -> tuple[list[Any], list[str], list[SizeSummary]]:
+                  ) -> tuple[list[Features], list[str], list[SizeSummary]]:
     """Features per shot, the baseline each was measured on, and a summary per sphere
     diameter (the measured-shot road's :func:`~measured_shots.measure_waveform`)."""
-    feats, baselines = [], []
+    feats: list[Features] = []
+    baselines: list[str] = []
     for i, wf in enumerate(waveforms):
         try:
             feat, baseline = measured_shots.measure_waveform(wf)
@@ -207,14 +220,15 @@ def warm_up() -> float:
     return time.perf_counter() - started
 
 
-def shot_out(index: int, wf: Waveform, features: Any, baseline: str) -> dict[str, Any]:
+def shot_out(index: int, wf: Waveform, features: Features, baseline: str) -> ShotJSON:
     """A measured shot as the API shows it; its features name the baseline they used."""
     return {"shot_index": index, "metadata": json_ready(wf.metadata), "n_samples": wf.n,
             "t0": wf.t0, "dt": wf.dt, "units": wf.units,
             "features": {**json_ready(features.to_dict()), "baseline": baseline}}
 
 
-def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -> Any:
+def choose_table(waveforms: Sequence[Waveform], tables: TableSet,
+                 prefix: str) -> LoadedTable | None:
     """The table for these shots (their ``table`` / ``plate_material`` and sphere sizes), or
     None when the service has none; a 422 naming ``table`` or ``plate_material`` (under
     ``metadata.`` for a JSON body) when none fits or several could serve."""
@@ -231,9 +245,9 @@ def choose_table(waveforms: Sequence[Waveform], tables: TableSet, prefix: str) -
         raise Problem(422, f"{field}: {exc.message}", kind="invalid-input", field=field) from None
 
 
-def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
+def provenance(chosen: LoadedTable | None, waveforms: Sequence[Waveform] = (),
                setup: Setup | None = None,
-               calibration: Calibration | None = None) -> dict[str, Any]:
+               calibration: Calibration | None = None) -> Provenance:
     """What a result was computed with: the software version, the feature extractor and its
     settings (the defaults, and the chain's options each stated sphere size added), the table
     (id and SHA-256 of its file) or None, the set-up revision and its chain calibration (or
@@ -246,9 +260,9 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
     from solitonde.signal.pulses import DetectOptions
 
     version = package_version()
-    table = None
+    table: TableRef | None = None
     if chosen is not None:
-        table = {"id": chosen.table.table_id, "sha256": chosen.table.content_sha256}
+        table = {"id": chosen.model.table_id, "sha256": chosen.model.content_sha256}
     return {"software_version": version,
             "extractor": {"function": "solitonde.instrument.inference.chain_geometry.measure_shot",
                           "options": json_ready(dataclasses.asdict(DetectOptions())),
@@ -263,9 +277,9 @@ def provenance(chosen: Any, waveforms: Sequence[Waveform] = (),
 
 
 def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
-                   chosen: Any = ..., setup: Setup | None = None,
+                   chosen: LoadedTable | EllipsisType | None = ..., setup: Setup | None = None,
                    calibration: Calibration | None = None
-                   ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+                   ) -> tuple[list[ShotJSON], StoredResult]:
     """Features of every shot (as the API shows them) and the measurement's result: aggregates,
     estimate (or why none), the table, the location, the provenance. ``chosen``: the table a
     caller already chose (:func:`choose_table`) and checked the metadata against; ``setup``:
@@ -291,8 +305,9 @@ def compute_result(waveforms: Sequence[Waveform], tables: TableSet, prefix: str,
             reason = f"inversion failed: {exc}"
     shots = [shot_out(i, wf, f, b) for i, (wf, f, b)
              in enumerate(zip(waveforms, feats, baselines, strict=True))]
-    result = {"aggregates": [m.to_dict() for m in summaries], "estimate": estimate,
-              "estimate_reason": reason, "table": chosen.table.table_id if chosen else None}
+    result: StoredResult = {"aggregates": [m.to_dict() for m in summaries],
+                            "estimate": estimate, "estimate_reason": reason,
+                            "table": chosen.model.table_id if chosen else None}
     coordinates = {k: float(waveforms[0].metadata[k]) for k in ("x_m", "y_m")
                    if waveforms[0].metadata.get(k) is not None}
     if coordinates:  # where on the plate, for the estimates export
@@ -306,7 +321,7 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
                       idempotency: tuple[str, str] | None = None,
                       allow_duplicate: bool = False,
                       setup: Setup | None = None,
-                      calibration: Calibration | None = None) -> dict[str, Any]:
+                      calibration: Calibration | None = None) -> MeasurementJSON:
     """Analyse the shots, estimate, store in one transaction; the stored measurement as a dict.
 
     Shots whose samples are, in order, a stored measurement's are not stored again (unless
@@ -337,10 +352,11 @@ def measure_and_store(waveforms: Sequence[Waveform], store: Store, tables: Table
         n_shots=len(records), source=source, result=result, shots=records))
 
 
-def metadata_differences(waveforms: Sequence[Waveform], record: Any) -> list[dict[str, Any]]:
+def metadata_differences(waveforms: Sequence[Waveform],
+                         record: MeasurementRecord) -> list[MetadataDifference]:
     """Per shot, the metadata keys whose value a request states otherwise than the stored
     measurement ``record`` (``stored`` and ``sent``, JSON values)."""
-    out = []
+    out: list[MetadataDifference] = []
     for i, (wf, shot) in enumerate(zip(waveforms, record.shots, strict=True)):
         sent, stored = json_ready(dict(wf.metadata)), shot.metadata
         for key in sorted(set(sent) | set(stored)):
@@ -350,7 +366,7 @@ def metadata_differences(waveforms: Sequence[Waveform], record: Any) -> list[dic
     return out
 
 
-def measurement_dict(record: Any) -> dict[str, Any]:
+def measurement_dict(record: MeasurementRecord) -> MeasurementJSON:
     """A stored measurement as the API returns it."""
     return {
         "id": record.id,
@@ -374,7 +390,7 @@ def measurement_dict(record: Any) -> dict[str, Any]:
     }
 
 
-def _earlier(entry: dict[str, Any]) -> dict[str, Any]:
+def _earlier(entry: EarlierEntry) -> EarlierResult:
     """An earlier result of a measurement, as the API lists it."""
     result = entry["result"]
     return {"superseded_at": entry["superseded_at"],

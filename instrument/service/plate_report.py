@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from solitonde.instrument.errors import MessageError
@@ -17,7 +17,7 @@ from solitonde.instrument.inference.table_set import TableSet
 from solitonde.instrument.reports import content, render
 from solitonde.instrument.reports.content import Trace
 from solitonde.instrument.service import setup_book
-from solitonde.instrument.service.store import Store
+from solitonde.instrument.service.store import MeasurementRecord, Store
 
 log = logging.getLogger("solitonde.instrument")
 
@@ -48,7 +48,7 @@ def entries(store: Store, plate_id: str) -> list[dict[str, Any]]:
     return content.entries(store.all_of_plate(plate_id, POSITIONS_MAX + 1))
 
 
-def build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any], *,
+def build(store: Store, tables: TableSet, plate_id: str, source: Mapping[str, str], *,
           joint: bool = True, suggest: int | None = None,
           progress: Callable[[str], None] | None = None) -> tuple[dict[str, Any], list[Trace]]:
     """report.json of ``plate_id`` and the traces to draw; ``suggest`` None: three suggestions
@@ -59,7 +59,7 @@ def build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
                   progress or (lambda _: None))
 
 
-def report_bytes(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
+def report_bytes(store: Store, tables: TableSet, plate_id: str, source: Mapping[str, str],
                  fmt: str, *, joint: bool = True, suggest: int | None = None,
                  progress: Callable[[str], None] | None = None) -> bytes:
     """The report as ``pdf``, ``html`` or ``json``. NoSuchPlate for a plate without
@@ -81,7 +81,8 @@ def report_bytes(store: Store, tables: TableSet, plate_id: str, source: dict[str
     return out
 
 
-def _records_and_traces(store: Store, plate_id: str) -> tuple[list[Any], dict[Any, Trace]]:
+def _records_and_traces(store: Store, plate_id: str
+                        ) -> tuple[list[MeasurementRecord], dict[int, Trace]]:
     """The plate's measurements (with their shots) and, per position, its newest
     measurement's first shot with its samples."""
     from solitonde.instrument.inference import plate_map
@@ -103,8 +104,9 @@ def _records_and_traces(store: Store, plate_id: str) -> tuple[list[Any], dict[An
     return records, traces
 
 
-def _build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any],
-           records: list[Any], traces: dict[Any, Trace], joint: bool, suggest: int | None,
+def _build(store: Store, tables: TableSet, plate_id: str, source: Mapping[str, str],
+           records: list[MeasurementRecord], traces: dict[int, Trace], joint: bool,
+           suggest: int | None,
            say: Callable[[str], None]) -> tuple[dict[str, Any], list[Trace]]:
     from solitonde.instrument.inference import plate_map
     from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
@@ -125,7 +127,8 @@ def _build(store: Store, tables: TableSet, plate_id: str, source: dict[str, Any]
             result["joint_reason"] = str(exc)
     setups = {}
     for r in records:
-        ref = (r.result.get("provenance") or {}).get("setup")
+        provenance = r.result.get("provenance")
+        ref = provenance.get("setup") if provenance else None
         if ref and (ref["id"], ref["revision"]) not in setups:
             found = setup_book.revision(store, ref["id"], ref["revision"])
             if found is not None:

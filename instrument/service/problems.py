@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -38,6 +38,25 @@ _TITLES = {
 }
 
 
+class FieldError(TypedDict):
+    """One failing field of a problem and what is wrong with it."""
+
+    field: str
+    message: str
+
+
+class ProblemBody(TypedDict):
+    """A problem+json body (RFC 9457) as the service sends it."""
+
+    type: str
+    title: str
+    status: int
+    detail: str
+    instance: NotRequired[str]
+    field: NotRequired[str]
+    errors: NotRequired[list[FieldError]]
+
+
 class Problem(InstrumentError):
     """An error to send to the client as problem+json.
 
@@ -64,7 +83,7 @@ class Problem(InstrumentError):
         *,
         kind: str | None = None,
         field: str | None = None,
-        errors: Sequence[Mapping[str, Any]] | None = None,
+        errors: Sequence[FieldError] | None = None,
         headers: Mapping[str, str] | None = None,
         title: str | None = None,
     ) -> None:
@@ -73,13 +92,13 @@ class Problem(InstrumentError):
         self.detail = detail
         self.kind = kind or _slug(_TITLES.get(status, "error"))
         self.field = field or ""  # "" where the problem is about no one field
-        self.errors = list(errors) if errors else ([{"field": field, "message": detail}]
-                                                    if field else [])
+        self.errors: list[FieldError] = (
+            list(errors) if errors else ([{"field": field, "message": detail}] if field else []))
         self.headers = dict(headers or {})
         self.title = title or _TITLES.get(status, "Error")
 
-    def body(self, instance: str | None = None) -> dict[str, Any]:
-        out: dict[str, Any] = {
+    def body(self, instance: str | None = None) -> ProblemBody:
+        out: ProblemBody = {
             "type": TYPE_BASE + self.kind,
             "title": self.title,
             "status": self.status,
@@ -193,8 +212,9 @@ def from_validation_errors(
     errors: Sequence[Mapping[str, Any]], model: type[BaseModel] | None = None, prefix: str = ""
 ) -> Problem:
     """One 422 problem listing every pydantic error with its dotted field path."""
-    items = [{"field": join_loc(e.get("loc", ()), prefix), "message": _message(e, model)}
-             for e in errors]
+    items: list[FieldError] = [
+        {"field": join_loc(e.get("loc", ()), prefix), "message": _message(e, model)}
+        for e in errors]
     if not items:
         items = [{"field": prefix or "body", "message": "invalid input"}]
     first = items[0]

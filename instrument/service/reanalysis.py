@@ -11,7 +11,7 @@ serves the newest and lists the others.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict
 
 from solitonde.instrument.inference.setups import Setup
 from solitonde.instrument.inference.table_set import TableSet
@@ -20,19 +20,56 @@ from solitonde.instrument.service.ingest import (
     compute_result,
     waveforms_from_records,
 )
+from solitonde.instrument.service.measurement_json import StoredResult
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.store import Store
 from solitonde.signal.errors import WaveformError
 
 
-def _brief(result: dict[str, Any]) -> dict[str, Any]:
+class Brief(TypedDict):
+    """What a summary line shows of one result."""
+
+    table: str | None
+    table_sha256: str | None
+    software_version: str | None
+    thickness_m: float | None
+    """The thickness's MAP, m."""
+    estimate_reason: str | None
+
+
+class Recomputed(TypedDict):
+    """A measurement recomputed: its result before and after."""
+
+    id: int
+    plate_id: str | None
+    position: str | None
+    before: Brief
+    after: Brief
+    earlier_results: int
+    """How many earlier results it keeps now."""
+
+
+class Refused(TypedDict):
+    """A measurement the current version refuses, and why; its result is kept."""
+
+    id: int
+    reason: str
+
+
+class Reanalysis(TypedDict):
+    reanalyzed: list[Recomputed]
+    failed: list[Refused]
+
+
+def _brief(result: StoredResult) -> Brief:
     """The parts of a result a summary line shows: table (id, hash), thickness MAP, version."""
-    prov = result.get("provenance") or {}
-    table = prov.get("table") or {}
+    prov = result.get("provenance")
+    table = prov.get("table") if prov else None
     est = result.get("estimate") or {}
     thickness = (est.get("thickness_m") or {}).get("map")
-    return {"table": result.get("table"), "table_sha256": table.get("sha256"),
-            "software_version": prov.get("software_version"), "thickness_m": thickness,
+    return {"table": result.get("table"), "table_sha256": table.get("sha256") if table else None,
+            "software_version": prov.get("software_version") if prov else None,
+            "thickness_m": thickness,
             "estimate_reason": result.get("estimate_reason")}
 
 
@@ -46,7 +83,7 @@ def setup_of(store: Store, measurement_id: int) -> Setup | None:
 
 
 def recompute(store: Store, tables: TableSet, measurement_id: int,
-              setup: Setup | Literal["recorded"] | None = "recorded") -> dict[str, Any] | None:
+              setup: Setup | Literal["recorded"] | None = "recorded") -> Recomputed | None:
     """Recompute one measurement through the upload's road and make that its newest result,
     keeping the earlier one; the summary line, or None when it was deleted meanwhile.
 
@@ -70,14 +107,14 @@ def recompute(store: Store, tables: TableSet, measurement_id: int,
 
 
 def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
-              progress: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
+              progress: Callable[[dict[str, Any]], None] | None = None) -> Reanalysis:
     """Recompute every measurement (of ``plate_id``, or all) and keep the earlier results; each
     with the set-up revision it names.
 
     A measurement the current version refuses (its metadata no longer accepted, no table that
     fits) keeps its result untouched and is listed under ``failed`` with the reason."""
-    done: list[dict[str, Any]] = []
-    failed: list[dict[str, Any]] = []
+    done: list[Recomputed] = []
+    failed: list[Refused] = []
     after = 0
     while True:
         page = store.list(plate_id=plate_id, after_id=after, limit=200)
@@ -97,5 +134,5 @@ def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
                 continue
             done.append(line)
             if progress is not None:
-                progress(line)
+                progress(dict(line))
     return {"reanalyzed": done, "failed": failed}

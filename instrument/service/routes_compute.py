@@ -91,7 +91,7 @@ def _invert(tables: TableSet, inputs: list[dict[str, Any]], calibration: dict[st
             table: str | None, plate_material: Any) -> dict[str, Any]:
     """The request's inputs as FeatureSummary (InversionError naming a field) through the one
     estimate path."""
-    from solitonde.instrument.inference.inversion import FeatureSummary
+    from solitonde.instrument.inference.inversion_inputs import FeatureSummary
     from solitonde.instrument.inference.pipeline import estimate
 
     items = [FeatureSummary.from_any(i) for i in inputs]

@@ -47,6 +47,12 @@ from solitonde.instrument.service.measurement_forms import (
     binary_parameters,
     material_text,
 )
+from solitonde.instrument.service.measurement_json import (
+    MeasurementJSON,
+    MeasurementLine,
+    MeasurementPageJSON,
+    StoredShot,
+)
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
 from solitonde.instrument.service.routes_setups import resolve as resolve_setup
 from solitonde.instrument.service.state import Service
@@ -250,7 +256,8 @@ JSON_VALUES_SLACK = 10_000
 """Commas a JSON body may hold beyond one per allowed sample (metadata, keys)."""
 
 
-def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None) -> dict[str, Any]:
+def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None
+                 ) -> MeasurementJSON:
     if not body:
         raise Problem(422, "body: empty; send {\"shots\": [...]}", kind="invalid-input",
                       field="body")
@@ -271,7 +278,7 @@ def _ingest_json(svc: Service, body: bytes, idem: tuple[str, str] | None = None)
 
 
 def _ingest_binary(svc: Service, body: bytes, query: list[tuple[str, str]],
-                   idem: tuple[str, str] | None = None) -> dict[str, Any]:
+                   idem: tuple[str, str] | None = None) -> MeasurementJSON:
     """One shot from its raw little-endian samples; what they are comes from the query."""
     seen: set[str] = set()
     for name, _ in query:
@@ -372,7 +379,7 @@ def _file_bytes(stream: Any) -> bytes:
 
 def _ingest_file(svc: Service, stream: Any, fmt: str, opts: Any,
                  filename: str | None = None,
-                 idem: tuple[str, str] | None = None) -> dict[str, Any]:
+                 idem: tuple[str, str] | None = None) -> MeasurementJSON:
     settings = svc.settings
     path = svc.uploads.write(stream, fmt)
     try:
@@ -416,14 +423,14 @@ async def list_measurements(
     plate_id: str | None = Query(None, max_length=200, description="only this plate"),
     after: int = Query(0, ge=0, le=2**62, description="return ids greater than this"),
     limit: int = Query(50, ge=1, le=500, description="page size"),
-) -> dict[str, Any]:
+) -> MeasurementPageJSON:
     """Measurements in id order; ``next`` gives the following page."""
 
     limit = min(limit, svc.settings.page_size_max)
     records = await run_in_threadpool(svc.store.list, plate_id, after, limit + 1)
     more = len(records) > limit
     records = records[:limit]
-    items = [{"id": r.id, "created_at": r.created_at, "plate_id": r.plate_id,
+    items: list[MeasurementLine] = [{"id": r.id, "created_at": r.created_at, "plate_id": r.plate_id,
               "position": r.position, "n_shots": r.n_shots, "source": r.source,
               "aggregates": r.result.get("aggregates", []),
               "estimate": r.result.get("estimate"), "table": r.result.get("table"),
@@ -432,7 +439,7 @@ async def list_measurements(
     if more and records:
         from urllib.parse import urlencode
 
-        query: dict[str, Any] = {"after": records[-1].id, "limit": limit}
+        query: dict[str, int | str] = {"after": records[-1].id, "limit": limit}
         if plate_id is not None:
             query["plate_id"] = plate_id
         next_url = f"/v1/measurements?{urlencode(query)}"
@@ -471,7 +478,7 @@ def _missing(measurement_id: int) -> Problem:
 @router.get("/measurements/{measurement_id:int}", response_model=MeasurementOut,
             responses={**ERRORS, 404: PROBLEM_RESPONSE}, summary="One stored measurement",
             operation_id="get_measurement")
-async def get_measurement(svc: ServiceDep, measurement_id: MeasurementId) -> dict[str, Any]:
+async def get_measurement(svc: ServiceDep, measurement_id: MeasurementId) -> MeasurementJSON:
     """Features per shot, aggregates and estimate as stored."""
 
     record = await run_in_threadpool(svc.store.get, measurement_id)
@@ -495,9 +502,10 @@ async def delete_measurement(svc: ServiceDep, measurement_id: MeasurementId) -> 
 
 @router.get("/measurements/{measurement_id:int}/shots/{shot_index:int}",
             responses={**ERRORS, 404: PROBLEM_RESPONSE}, operation_id="get_shot",
+            response_model=dict,
             summary="One stored shot with its samples (as stored, bit for bit)")
 async def get_shot(svc: ServiceDep, measurement_id: MeasurementId,
-                   shot_index: ShotIndex) -> dict[str, Any]:
+                   shot_index: ShotIndex) -> StoredShot:
     """The trace of one shot: t0, dt, samples, units, calibration, metadata, features."""
 
     shot = await run_in_threadpool(svc.store.get_shot, measurement_id, shot_index)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypedDict
 from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, Path, Query, Request
@@ -37,24 +37,58 @@ PlateId = Path(..., min_length=1, max_length=200, description="the plate's plate
                "percent-encoded (a / in it as %2F, or as it is)")
 
 
-def plate_links(plate_id: str) -> dict[str, str]:
+class PlateLinks(TypedDict):
+    map: str
+    map_png: str
+
+
+class PlateLine(TypedDict):
+    """A plate of ``GET /v1/plates``: its counts, its last activity (ISO 8601 UTC), links."""
+
+    plate_id: str
+    n_measurements: int
+    n_shots: int
+    n_positions: int
+    last_activity: str | None
+    links: PlateLinks
+
+
+class PlateListing(TypedDict):
+    items: list[PlateLine]
+
+
+class DataDigest(TypedDict):
+    algorithm: str
+    value: str
+
+
+class PlateDigest(TypedDict):
+    """``GET /v1/plates/{id}/digest``: each measurement's digest entry and the plate's."""
+
+    plate_id: str
+    measurements: list[dict[str, Any]]
+    digest: DataDigest
+
+
+def plate_links(plate_id: str) -> PlateLinks:
     """A plate's links, its id percent-encoded whole (a ``/``, a space or a ``?`` in it stays
     part of the id)."""
     key = quote(plate_id, safe="")
     return {"map": f"/v1/plates/{key}/map", "map_png": f"/v1/plates/{key}/map.png"}
 
 
-@router.get("/plates", responses=ERRORS, summary="Plates in the store, with counts")
-async def list_plates(svc: ServiceDep) -> dict[str, Any]:
+@router.get("/plates", responses=ERRORS, response_model=dict,
+            summary="Plates in the store, with counts")
+async def list_plates(svc: ServiceDep) -> PlateListing:
     """Every plate_id with its measurement, shot and position counts and last activity (ISO
     8601 UTC)."""
     from solitonde.instrument.inference.estimate_rows import iso_utc
 
     plates = await run_in_threadpool(svc.store.plates)
-    for p in plates:
-        p["last_activity"] = iso_utc(p["last_activity"])
-        p["links"] = plate_links(p["plate_id"])
-    return {"items": plates}
+    return {"items": [{"plate_id": p["plate_id"], "n_measurements": p["n_measurements"],
+                       "n_shots": p["n_shots"], "n_positions": p["n_positions"],
+                       "last_activity": iso_utc(p["last_activity"]),
+                       "links": plate_links(p["plate_id"])} for p in plates]}
 
 
 MAPS_KEPT = 8
@@ -164,8 +198,9 @@ REPORT_MEDIA = {"pdf": "application/pdf", "html": "text/html; charset=utf-8",
 
 
 @router.get("/plates/{plate_id:path}/digest", responses={**ERRORS, 404: PROBLEM_RESPONSE},
+            response_model=dict,
             summary="The plate's data digest as stored now (what `report verify` compares)")
-async def get_digest(svc: ServiceDep, plate_id: str = PlateId) -> dict[str, Any]:
+async def get_digest(svc: ServiceDep, plate_id: str = PlateId) -> PlateDigest:
     """Per measurement its digest entry (id, position, shot sample hashes, stored result) and
     its digest, and the plate's data digest: what a report of the plate printed, if nothing
     changed since."""

@@ -3,7 +3,7 @@ model tables (``/v1/tables``, ``/v1/table``, behind the API key as every ``/v1``
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 from fastapi import APIRouter
 
@@ -18,14 +18,42 @@ __version__ = package_version()
 router = APIRouter(tags=["service"])
 
 
+class HealthJSON(TypedDict):
+    """:class:`Health`'s keys."""
+
+    status: Literal["ok"]
+    version: str
+
+
+class ReadyJSON(TypedDict):
+    """:class:`Ready`'s keys."""
+
+    ready: bool
+    store: str
+    table_loaded: bool
+    estimates: bool
+    reason: str | None
+
+
+class TableJSON(TypedDict):
+    """:class:`TableOut`'s keys."""
+
+    loaded: bool
+    path: str | None
+    reason: str | None
+    summary: dict[str, Any] | None
+    """The table's axes and provenance (the table's own JSON)."""
+    limits: dict[str, int | float]
+
+
 @router.get("/healthz", response_model=Health)
-async def healthz() -> dict[str, Any]:
+async def healthz() -> HealthJSON:
     """Liveness: the process answers."""
     return {"status": "ok", "version": __version__}
 
 
 @router.get("/readyz", response_model=Ready, responses={503: PROBLEM_RESPONSE})
-async def readyz(svc: ServiceDep) -> dict[str, Any]:
+async def readyz(svc: ServiceDep) -> ReadyJSON:
     """Readiness: the store answers; says whether estimates are available (a table loaded)."""
     try:
         svc.store.count()
@@ -44,7 +72,7 @@ async def tables(svc: ServiceDep) -> dict[str, Any]:
 
 
 @router.get("/v1/table", response_model=TableOut, dependencies=[AUTH])
-async def table(svc: ServiceDep) -> dict[str, Any]:
+async def table(svc: ServiceDep) -> TableJSON:
     """The loaded model table: axes, provenance; and the service's request limits."""
     tables = svc.tables
     return {"loaded": tables.loaded, "path": str(tables.path) if tables.path else None,

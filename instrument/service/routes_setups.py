@@ -11,7 +11,7 @@ keeping its earlier result.
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Any, TypedDict
 from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, Path, Request
@@ -19,7 +19,11 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, Field
 
-from solitonde.instrument.inference.calibration import Calibration, CalibrationError
+from solitonde.instrument.inference.calibration import (
+    Calibration,
+    CalibrationDict,
+    CalibrationError,
+)
 from solitonde.instrument.inference.setups import Setup, SetupError
 from solitonde.instrument.service import jobs, setup_book
 from solitonde.instrument.service.authentication import AUTH
@@ -66,6 +70,16 @@ class CalibrationIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
     references: list[ReferenceIn] = Field(min_length=1, max_length=100)
+
+
+class Recalibration(TypedDict):
+    """A set-up's new calibrated revision and the job re-estimating its measurements."""
+
+    setup: dict[str, Any]
+    """The new revision as :func:`setup_out` shows it."""
+    revision: int
+    chain_calibration: CalibrationDict | None
+    job: jobs.Job
 
 
 def setup_links(setup_id: str) -> dict[str, str]:
@@ -197,10 +211,10 @@ async def create_setup(request: Request, svc: ServiceDep) -> Any:
 
 
 @router.put("/setups/{setup_id:path}/calibration", status_code=201, responses=ERRORS,
-            dependencies=[Depends(require_json)],
+            dependencies=[Depends(require_json)], response_model=dict,
             summary="Give a set-up a chain calibration written by `solitonde calibrate`")
 async def put_calibration(request: Request, svc: ServiceDep,
-                          setup_id: str = SetupIdPath) -> dict[str, Any]:
+                          setup_id: str = SetupIdPath) -> Recalibration:
     """The calibration file as it is: a new revision holding it, and a job re-estimating the
     set-up's measurements with it."""
     current = await run_in_threadpool(_existing, svc, setup_id)
@@ -222,10 +236,10 @@ async def put_calibration(request: Request, svc: ServiceDep,
 
 
 @router.post("/setups/{setup_id:path}/calibration", status_code=201, responses=ERRORS,
-             dependencies=[Depends(require_json)],
+             dependencies=[Depends(require_json)], response_model=dict,
              summary="Fit a set-up's chain calibration on stored reference measurements")
 async def post_calibration(request: Request, svc: ServiceDep,
-                           setup_id: str = SetupIdPath) -> dict[str, Any]:
+                           setup_id: str = SetupIdPath) -> Recalibration:
     """``{"references": [{"measurement_ids": [..], "thickness_m", "distance_m"}]}``: fits what
     ``solitonde calibrate`` fits (the chain's damping against the table's dissipation layer,
     ARR factor, TOF offset, per sphere size; by distance where references sit at several) from
@@ -266,9 +280,9 @@ def _sizes_match(setup: Setup, calibration: Calibration) -> None:
                       kind="invalid-input", field="chain_calibration.per_diameter")
 
 
-def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> dict[str, Any]:
+def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> Recalibration:
     from solitonde.instrument.inference.calibration_fit import Reference, fit_calibration
-    from solitonde.instrument.inference.inversion import InversionError
+    from solitonde.instrument.inference.inversion_inputs import InversionError
     from solitonde.instrument.inference.loaded_table import EstimateUnavailable
     from solitonde.instrument.inference.table_set import TableChoiceError
     from solitonde.instrument.service.ingest import (
@@ -322,7 +336,7 @@ def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> dict[
 
 
 def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
-               source: dict[str, Any]) -> dict[str, Any]:
+               source: dict[str, Any]) -> Recalibration:
     """A new revision holding ``calibration``, and the job that re-estimates its
     measurements."""
     from solitonde.instrument.service.reanalysis import recompute
@@ -337,8 +351,8 @@ def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
 
     ids = older()
 
-    def work(progress: jobs.Progress) -> dict[str, Any]:
-        failed: list[dict[str, Any]] = []
+    def work(progress: jobs.Progress) -> jobs.Steps:
+        failed: list[jobs.Failure] = []
         done, tried = 0, set()
         todo = ids
         while todo:  # and those an upload named the older revision in while this ran
@@ -420,8 +434,9 @@ async def delete_setup(svc: ServiceDep, setup_id: str = SetupIdPath) -> Response
     return Response(status_code=204)
 
 
-@router.get("/jobs/{job_id}", responses=ERRORS, summary="A background job's progress")
-async def get_job(svc: ServiceDep, job_id: str = JobIdPath) -> dict[str, Any]:
+@router.get("/jobs/{job_id}", responses=ERRORS, response_model=dict,
+            summary="A background job's progress")
+async def get_job(svc: ServiceDep, job_id: str = JobIdPath) -> jobs.Job:
     """``state`` (queued, running, done, failed, stalled), ``done`` of ``total``, ``failed``
     (each id and why); any worker process answers."""
     job = await run_in_threadpool(jobs.get, svc.store, job_id)

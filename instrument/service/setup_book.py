@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
+from typing import TypedDict
 
 from solitonde.instrument.inference.setups import Setup
 from solitonde.instrument.service.store import SetupConflict, Store
@@ -59,10 +59,20 @@ def revision(store: Store, setup_id: str, number: int | None = None) -> Setup | 
     return Setup.from_dict(json.loads(rows[0][0])) if rows else None
 
 
-def revisions(store: Store, setup_id: str) -> list[dict[str, Any]]:
+class RevisionLine(TypedDict):
+    """One revision in a set-up's list: its number, time, and its calibration's origin."""
+
+    revision: int
+    created_at: float
+    calibrated: bool
+    calibration_source: str | None
+    """The calibration's ``kind`` (``file``, ``references``), or None."""
+
+
+def revisions(store: Store, setup_id: str) -> list[RevisionLine]:
     """Every revision of a set-up, oldest first: number, time, whether it is calibrated and
     where the calibration came from."""
-    out = []
+    out: list[RevisionLine] = []
     for number, created, body in store.rows(
             "SELECT revision, created_at, body FROM setups WHERE id = ? ORDER BY revision",
             (setup_id,)):

@@ -23,10 +23,11 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
+from solitonde.instrument.service.measurement_json import EarlierEntry, StoredResult
 from solitonde.instrument.service.store_errors import (
     KeyTaken,
     SchemaTooOld,
@@ -178,6 +179,17 @@ class ShotRecord:
             self.n_samples = int(np.size(self.samples))
 
 
+class PlateRow(TypedDict):
+    """A plate's line of :meth:`Store.plates`."""
+
+    plate_id: str
+    n_measurements: int
+    n_shots: int
+    n_positions: int
+    last_activity: float
+    """The newest measurement's time, Unix s."""
+
+
 @dataclass
 class MeasurementRecord:
     """One measurement as stored (shots without their samples unless asked for)."""
@@ -188,9 +200,9 @@ class MeasurementRecord:
     position: str | None
     n_shots: int
     source: str
-    result: dict[str, Any]
+    result: StoredResult
     shots: list[ShotRecord] = field(default_factory=list)
-    earlier: list[dict[str, Any]] = field(default_factory=list)
+    earlier: list[EarlierEntry] = field(default_factory=list)
     """Results a reanalysis replaced (:meth:`Store.earlier_results`); :meth:`Store.get` fills it."""
 
 
@@ -351,7 +363,7 @@ class Store:
             return [tuple(r) for r in self._conn.execute(sql, args).fetchall()]
 
     # Writing ------------------------------------------------------------------------------
-    def add(self, shots: Sequence[ShotRecord], result: dict[str, Any], source: str,
+    def add(self, shots: Sequence[ShotRecord], result: StoredResult, source: str,
             plate_id: str | None = None, position: str | None = None,
             idempotency: tuple[str, str] | None = None,
             setup: tuple[str, int] | None = None) -> tuple[int, float]:
@@ -396,7 +408,7 @@ class Store:
             raise KeyTaken(idempotency[0] if idempotency else "") from None
         return new_id, now
 
-    def replace_result(self, measurement_id: int, result: dict[str, Any],
+    def replace_result(self, measurement_id: int, result: StoredResult,
                        shot_features: Sequence[dict[str, Any]],
                        setup: tuple[str, int] | None = None) -> float:
         """Make ``result`` (and each shot's ``shot_features``) the measurement's newest, keeping
@@ -433,7 +445,7 @@ class Store:
                           "setup_id = ?", (setup[1], measurement_id, setup[0]))
         return now
 
-    def earlier_results(self, measurement_id: int) -> list[dict[str, Any]]:
+    def earlier_results(self, measurement_id: int) -> list[EarlierEntry]:
         """The results a reanalysis replaced, oldest first: ``superseded_at``, ``result`` and
         ``shot_features`` (each shot's features then)."""
         with self._lock:
@@ -478,7 +490,7 @@ class Store:
         return gone > 0
 
     # Reading ------------------------------------------------------------------------------
-    def plates(self) -> list[dict[str, Any]]:
+    def plates(self) -> list[PlateRow]:
         """Every plate_id with its measurement and shot counts and its last activity (Unix s);
         measurements without a plate_id are left out."""
         with self._lock:

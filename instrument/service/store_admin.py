@@ -17,7 +17,7 @@ import os
 import sqlite3
 import time
 from pathlib import Path
-from typing import Any
+from typing import Literal, TypedDict
 
 from solitonde.instrument.service.store import (
     MIGRATIONS,
@@ -40,13 +40,58 @@ def _connect(path: Path) -> sqlite3.Connection:
     return conn
 
 
-def _counts(conn: sqlite3.Connection) -> dict[str, int]:
+class Counts(TypedDict, total=False):
+    """Rows of the store's main tables (a table the store lacks is left out)."""
+
+    measurements: int
+    shots: int
+    earlier_results: int
+
+
+_COUNTED: tuple[Literal["measurements", "shots", "earlier_results"], ...] = (
+    "measurements", "shots", "earlier_results")
+
+
+class Backup(Counts):
+    """What :func:`backup` made: the copy, its schema and counts, its size, the time taken."""
+
+    store: str
+    backup: str
+    schema_version: int
+    bytes: int
+    seconds: float
+
+
+class Check(Counts):
+    """What :func:`check` found; ``ok`` when ``problems`` is empty."""
+
+    store: str
+    ok: bool
+    schema_version: int
+    schema_current: int
+    integrity: str | list[str]
+    """``"ok"``, or SQLite's first messages."""
+    foreign_key_violations: int
+    traces_checked: int
+    problems: list[str]
+
+
+Migration = TypedDict("Migration", {"store": str, "from": int, "to": int,
+                                     "backup": str | None})
+"""What :func:`migrate` did: the schema versions, and the backup made first (None where the
+store was current)."""
+
+
+def _counts(conn: sqlite3.Connection) -> Counts:
     tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-    return {name: int(conn.execute(f"SELECT COUNT(*) FROM {name}").fetchone()[0])
-            for name in ("measurements", "shots", "earlier_results") if name in tables}
+    counts: Counts = {}
+    for name in _COUNTED:
+        if name in tables:
+            counts[name] = int(conn.execute(f"SELECT COUNT(*) FROM {name}").fetchone()[0])
+    return counts
 
 
-def backup(store: Path, dest: Path) -> dict[str, Any]:
+def backup(store: Path, dest: Path) -> Backup:
     """Copy ``store`` to ``dest`` with SQLite's online backup; safe while the server writes.
 
     Refuses an existing ``dest``. Returns the copy's counts and how long it took."""
@@ -83,7 +128,7 @@ def backup(store: Path, dest: Path) -> dict[str, Any]:
             "bytes": dest.stat().st_size, "seconds": round(time.perf_counter() - started, 3)}
 
 
-def check(store: Path, traces: bool = True) -> dict[str, Any]:
+def check(store: Path, traces: bool = True) -> Check:
     """Integrity, foreign keys, schema version and (``traces``) every trace's SHA-256.
 
     ``ok`` is true when all of them pass and the schema is this version's."""
@@ -127,7 +172,7 @@ def check(store: Path, traces: bool = True) -> dict[str, Any]:
             "traces_checked": checked, "problems": problems}
 
 
-def migrate(store: Path, backup_to: Path | None = None) -> dict[str, Any]:
+def migrate(store: Path, backup_to: Path | None = None) -> Migration:
     """Bring ``store`` to :data:`SCHEMA_VERSION`: a backup first (``backup_to``, by default
     ``<store>.schema<v>-<UTC time>.sqlite`` beside it), then every migration in one
     transaction. A store already current is left alone (no backup)."""
