@@ -540,8 +540,10 @@ def _refine_peaks(
             pk[slot_f] = fp
 
 
+# One compiled loop over the steps (try, accept or reject, emit samples, check energy), kept in one
+# body so that numba compiles it as one loop with its state in locals (C901 exempt).
 @njit(cache=True, nogil=True, fastmath=FASTMATH, error_model="numpy")
-def integrate_dopri5(
+def integrate_dopri5(  # noqa: C901
     rec: ChainRecord, w: float, inv_z: float, interval: float, n_samples: int, rtol: float,
     max_steps: int,
 ) -> tuple[int, int, float, float, float, int, int, int, float]:
