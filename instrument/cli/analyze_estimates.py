@@ -17,6 +17,7 @@ from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.measured_shots import PositionShots
 
 if TYPE_CHECKING:
+    from solitonde.instrument.inference.pipeline import TableEstimateDict
     from solitonde.instrument.inference.setups import Setup
 
 MISSING_SIZE_FLAG = ("--sphere-diameter: --invert needs the sphere size, and these shots state "
@@ -40,7 +41,7 @@ class PositionEstimate(TypedDict):
     skipped: list[SkippedSize]
     diameters_m: list[float]
     n_shots: int
-    estimate: dict[str, Any] | None  # the pipeline's estimate as JSON, passed through
+    estimate: TableEstimateDict | None
     error: NotRequired[str]
 
 
@@ -190,10 +191,9 @@ def estimate_failures(estimates: Sequence[PositionEstimate]) -> Iterator[tuple[s
                 if any(every in str(s["reason"]) for every in every_unreadable)]):
             # records too short, or clipped: no answer can be read from them
             yield where, unreadable[0]
-        elif (result or {}).get("thickness_m", {}).get("status") in (
+        elif result is not None and result["thickness_m"].get("status") in (
                 "inconsistent", "out_of_range"):
             # an answer the table's family does not explain is no answer to act on
-            assert result is not None
             yield where, (result["warnings"][0] if result.get("warnings")
                           else result.get("reason"))
 

@@ -14,14 +14,14 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn, cast
 
 import typer
 
 if TYPE_CHECKING:
     from solitonde.instrument.inference.joint_map import ScanPosition
     from solitonde.instrument.inference.marginals import ParameterDict
-    from solitonde.instrument.inference.plate_map import JointOptions, MapPosition
+    from solitonde.instrument.inference.plate_map import JointOptions, MapPosition, PlateMap
     from solitonde.instrument.inference.table_set import TableSet
 
     ScanReader = Callable[[], tuple[list[ScanPosition], list[str | None]]]
@@ -195,7 +195,7 @@ def map_command(
         typer.echo(f"support: x cos({support['normal_angle_deg']:.2f} deg) + y sin(...) = "
                    f"{support['offset_m'] * 1e3:.2f} mm (95 % {lo * 1e3:.2f}..{hi * 1e3:.2f} mm), "
                    f"{support['n_positions']} positions, rms residual "
-                   f"{support['residual_m'] * 1e3:.2f} mm")
+                   f"{cast(float, support['residual_m']) * 1e3:.2f} mm")
     else:
         typer.echo(f"support: not located ({plate_map['support_reason']})")
     if plate_map.get("joint"):
@@ -208,8 +208,8 @@ def map_command(
         typer.echo(f"wrote {out}")
 
 
-def _joint(plate_map: dict[str, Any], scan: ScanReader, estimator: TableSet,
-           options: JointOptions) -> dict[str, Any]:
+def _joint(plate_map: PlateMap, scan: ScanReader, estimator: TableSet,
+           options: JointOptions) -> PlateMap:
     from solitonde.instrument.inference.joint_map import JointMapError
     from solitonde.instrument.inference.plate_map import with_joint
     from solitonde.instrument.inference.table_set import TableChoiceError
@@ -226,7 +226,7 @@ def _joint(plate_map: dict[str, Any], scan: ScanReader, estimator: TableSet,
     return plate_map  # not reached
 
 
-def _print_joint(plate_map: dict[str, Any]) -> None:
+def _print_joint(plate_map: PlateMap) -> None:
     """The joint answer, a line per position, then its fit and warnings."""
     def mm(p: ParameterDict | None) -> str:
         if not p:
@@ -240,10 +240,11 @@ def _print_joint(plate_map: dict[str, Any]) -> None:
             return f"<= {hi}"
         return str(p.get("status"))
 
-    prior = plate_map.get("thickness_prior") or {}
-    typer.echo(f"joint: thickness {prior.get('kind')}"
-               + (f" (spread {100 * prior['spread_rel']:.3g} %)" if prior.get("spread_rel")
-                  else "") + "; mm, 95 % in brackets:")
+    prior = plate_map.get("thickness_prior")
+    spread = prior.get("spread_rel") if prior else None
+    typer.echo(f"joint: thickness {prior['kind'] if prior else None}"
+               + (f" (spread {100 * spread:.3g} %)" if spread else "")
+               + "; mm, 95 % in brackets:")
     for p in plate_map["positions"]:
         own = p.get("per_position") or {}
         line = (f"  {p['position']}: thickness {mm(p.get('thickness_m'))}, distance "
@@ -253,8 +254,8 @@ def _print_joint(plate_map: dict[str, Any]) -> None:
         if p.get("joint_reason"):
             line += f"  (not in the joint answer: {p['joint_reason']})"
         typer.echo(line)
-    fit = plate_map.get("fit") or {}
-    if fit.get("chi2") is not None:
+    fit = plate_map.get("fit")
+    if fit is not None and fit["chi2"] is not None:
         typer.echo(f"fit: chi2 {fit['chi2']:.3g} for {fit['dof']:.3g} dof, p = "
                    f"{fit['p_value']:.3g}")
     for w in plate_map.get("warnings", []):

@@ -14,12 +14,16 @@ from __future__ import annotations
 import json
 import tempfile
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 from urllib.parse import quote
 
 import typer
 
 from solitonde.instrument.cli.cmd_post import API_KEY_ENV
+
+if TYPE_CHECKING:
+    from solitonde.instrument.reports.content import DigestEntry, Report
+    from solitonde.instrument.reports.digest import DigestItem
 
 report_app = typer.Typer(help="Inspection reports: build one (PDF, HTML or its JSON) and verify "
                          "one against the stored data.", no_args_is_help=True)
@@ -239,7 +243,7 @@ def _local(plate_id: str, fmt: str, store_path: Path | None, manifest: Path | No
             store.close()
 
 
-def read_report(path: Path) -> dict[str, Any]:
+def read_report(path: Path) -> Report:
     """The data a report file carries: a PDF's attached report.json, an HTML's embedded block,
     or report.json itself. ValueError where there are none."""
     import re
@@ -293,8 +297,7 @@ def verify(
     try:
         report = read_report(report_file)
         plate_id = report["plate_id"]
-        reported = [{k: v for k, v in e.items() if k != "digest"}
-                    for e in report["measurements"]]
+        reported = [content.without_digest(e) for e in report["measurements"]]
     except (ValueError, KeyError, TypeError) as exc:
         _fail(f"REPORT: {exc}")
         return
@@ -313,19 +316,19 @@ def verify(
     else:
         current = _local_entries(plate_id, store, manifest, table, setup, calibration_file,
                                  plate_material)
-    current = [{k: v for k, v in e.items() if k != "digest"} for e in current]
+    current_items = [content.without_digest(e) for e in current]
     found: list[str] = []
     if manifest is not None:
         # offline, the recordings, the table and the chain calibration are verified; today's
         # version may read the recordings anew, so the results themselves are not compared
-        for e in current:
+        for e in current_items:
             then = _by_id(reported, e["id"])
             if then is None:
                 continue
             found += [f"measurement {e['id']}: {what} differs from the report's"
-                      for what in _made_with(then["result"], e["result"])]
+                      for what in _made_with(then, e)]
             e["result"] = then["result"]
-    found += digest.changes(reported, current)
+    found += digest.changes(reported, current_items)
     if found:
         typer.echo(f"{report_file.name}: does not match plate {plate_id!r} as it is now:")
         for line in found:
@@ -333,14 +336,14 @@ def verify(
         raise typer.Exit(1)
     what = ("the recordings, their positions, the table and the chain calibration are the "
             "report's (results not recomputed); " if manifest is not None else "")
-    typer.echo(f"{report_file.name}: matches plate {plate_id!r} ({what}{len(current)} "
+    typer.echo(f"{report_file.name}: matches plate {plate_id!r} ({what}{len(current_items)} "
                f"measurements, data digest {report['digest']['value']})")
 
 
-def _made_with(then: dict[str, Any], now: dict[str, Any]) -> list[str]:
-    """What a result was made with that differs between two results of the same recordings:
-    the table (its SHA-256), the set-up revision, the chain calibration."""
-    a, b = then.get("provenance") or {}, now.get("provenance") or {}
+def _made_with(then: DigestItem, now: DigestItem) -> list[str]:
+    """What two entries' results of the same recordings were made with that differs: the table
+    (its SHA-256), the set-up revision, the chain calibration."""
+    a, b = then["result"].get("provenance") or {}, now["result"].get("provenance") or {}
     out = []
     if (a.get("table") or {}).get("sha256") != (b.get("table") or {}).get("sha256"):
         out.append("the table")
@@ -350,13 +353,13 @@ def _made_with(then: dict[str, Any], now: dict[str, Any]) -> list[str]:
     return out
 
 
-def _by_id(entries: list[dict[str, Any]], key: Any) -> dict[str, Any] | None:
+def _by_id(entries: list[DigestItem], key: Any) -> DigestItem | None:
     return next((e for e in entries if str(e["id"]) == str(key)), None)
 
 
 def _local_entries(plate_id: str, store_path: Path | None, manifest: Path | None,
                    tables_given: list[Path], setup: Path | None, calibration_file: Path | None,
-                   plate_material: str | None) -> list[dict[str, Any]]:
+                   plate_material: str | None) -> list[DigestEntry]:
     from solitonde.instrument.service import plate_report
 
     with tempfile.TemporaryDirectory(prefix="solitonde-verify-") as folder:

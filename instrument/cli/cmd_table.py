@@ -35,7 +35,7 @@ from solitonde.instrument.tables.sweep import (
     default_distances_m,
     default_thicknesses_m,
 )
-from solitonde.instrument.tables.table import ModelTable, TableError
+from solitonde.instrument.tables.table import ModelTable, TableError, TableSummary
 from solitonde.instrument.tables.table_build import BuildPlan, build_table, partial_path
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import apply_overrides, load_scene_file, scene_from_dict
@@ -197,6 +197,13 @@ SPREAD_SOURCES = {
     "none": "none (the table records no plate material)"}
 
 
+class TableInfo(TableSummary):
+    """``table info --json``: the table's summary and its plate material spread (with where
+    the spread comes from)."""
+
+    material_spread: dict[str, float | str]
+
+
 def info_command(
     file: Path = typer.Argument(DEFAULT_TABLE_PATH, help="table file"),
     as_json: bool = typer.Option(False, "--json", help="print JSON"),
@@ -207,8 +214,8 @@ def info_command(
     except TableError as exc:
         _fail(str(exc))
         return
-    data = table.summary()
-    data["material_spread"] = {**spread_of(table), "source": spread_source(table)}
+    spread, source = spread_of(table), spread_source(table)
+    data: TableInfo = {**table.summary(), "material_spread": {**spread, "source": source}}
     if as_json:
         typer.echo(json.dumps(data, indent=2))
         return
@@ -224,9 +231,8 @@ def info_command(
                                           if layer is None else
                                           "Kuwabara-Kono tau = " + ", ".join(
                                               f"{t:g}" for t in layer["damping_s"]) + " s"))
-    spread = data["material_spread"]
     typer.echo(f"  plate material spread: {describe_spread(spread)}, "
-               + SPREAD_SOURCES[spread["source"]])
+               + SPREAD_SOURCES[source])
     reading = data["reading_version"]
     typer.echo(f"  reading: {reading}" + ("" if reading == EXTRACTOR_VERSION else
                                            f" (shots are read with {EXTRACTOR_VERSION}: rebuild "

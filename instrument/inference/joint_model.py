@@ -87,9 +87,9 @@ def edge_model(table: ModelTable) -> EdgeModel:
 
     Raises JointMapError (``joint``) for a family without a clamped support or with all four
     edges clamped (not a line's angle and offset)."""
-    family = table.family or {}
-    supports = family.get("supports")
-    size = family.get("plate_size_m")
+    family = table.family
+    supports = family["supports"] if family else None
+    size = family["plate_size_m"] if family else None
     l_max = float(table.axes["distance_m"][-1])
     if supports in (None, "opposite_edges") and size:
         return EdgeModel("opposite_edges", float(size[0]), l_max)

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
-from typing import Any
+from typing import cast
 
 from solitonde.instrument.errors import MessageError
 from solitonde.instrument.inference.fine_grid import fine_grid
-from solitonde.instrument.tables.table import ModelTable
+from solitonde.instrument.tables.table import ModelTable, TableSummary
 from solitonde.signal.json_ready import json_ready
 
 log = logging.getLogger("solitonde.instrument")
@@ -77,14 +77,15 @@ class LoadedTable:
     def plate_size(self) -> list[float] | None:
         """The plate size (m) of the table's scenes, or None without a table."""
         if not hasattr(self, "_plate_size"):
-            plate = (((self.summary() or {}).get("provenance") or {}).get("scene_defaults")
-                     or {}).get("plate") or {}
+            summary = self.summary()
+            provenance = (summary["provenance"] if summary else None) or {}
+            plate = (provenance.get("scene_defaults") or {}).get("plate") or {}
             size = plate.get("size")
             self._plate_size = [float(s) for s in size] if size else None
         return self._plate_size
 
-    def summary(self) -> dict[str, Any] | None:
+    def summary(self) -> TableSummary | None:
         """The table's axes and provenance, JSON-ready."""
         if self.table is None:
             return None
-        return json_ready(self.table.summary())
+        return cast(TableSummary, json_ready(self.table.summary()))

@@ -192,8 +192,8 @@ def spread_of(table: ModelTable, plate_material: Any = None) -> dict[str, float]
 
     if plate_material is not None:
         return material_spread(plate_material)
-    family = table.family or {}
-    if not family.get("plate_material"):
+    family = table.family
+    if not family or not family["plate_material"]:
         return dict.fromkeys(SPREAD_ORDER, 0.0)
     return material_spread(family["plate_material"])
 
@@ -204,7 +204,7 @@ def spread_source(table: ModelTable) -> str:
     ``none`` (the table records no plate material)."""
     from solitonde.model.materials import is_default_spread
 
-    plate = (table.family or {}).get("plate_material")
+    plate = table.family["plate_material"] if table.family else None
     if not plate:
         return "none"
     if isinstance(plate, Mapping) and any(plate.get(k) is not None for k in SPREAD_ORDER):

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any, TypedDict, cast
 
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.estimate import Estimate
+from solitonde.instrument.inference.estimate import Estimate, EstimateDict
 from solitonde.instrument.inference.inversion import invert
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable, LoadedTable
@@ -33,6 +33,46 @@ from solitonde.signal.features import (
     aggregate,
 )
 from solitonde.signal.json_ready import json_ready
+
+
+class StatDict(TypedDict):
+    """One feature's mean, sample standard deviation and count over the kept shots."""
+
+    mean: float | None
+    std: float | None
+    count: int
+
+
+class RejectedShot(TypedDict):
+    """A shot an aggregate left out: the feature that condemned it, its value and why."""
+
+    index: int
+    feature: str
+    value: float | None
+    modified_z: float | None
+    reason: str
+
+
+class SizeSummaryDict(TypedDict):
+    """A sphere size's summary as stored and served (``aggregates`` of a measurement):
+    ``sphere_diameter``, then :meth:`~solitonde.signal.features.Aggregate.to_dict`'s keys (one
+    :class:`StatDict` per summarised feature)."""
+
+    sphere_diameter: float | None
+    n_shots: int
+    tof_s: StatDict
+    arr: StatDict
+    incident_time_s: StatDict
+    reflected_time_s: StatDict
+    incident_peak_N: StatDict
+    reflected_peak_N: StatDict
+    snr_db: StatDict
+    rejected: list[RejectedShot]
+    no_reflection: list[int]
+    arr_upper_bound: float | None
+    flag_counts: dict[str, int]
+    reflection_window_s: float | None
+
 
 MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sphere size"
 """Why shots without a sphere size give no input (the command line names its flag instead)."""
@@ -111,9 +151,10 @@ class SizeSummary:
         return FeatureSummary(float(self.diameter_m), float(tof.mean), float(arr.mean),
                               tof.std, arr.std, max(int(tof.count), 1))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> SizeSummaryDict:
         """The stored and served form: ``sphere_diameter`` then the aggregate's fields."""
-        return json_ready({"sphere_diameter": self.diameter_m, **self.aggregate.to_dict()})
+        return cast(SizeSummaryDict, json_ready({"sphere_diameter": self.diameter_m,
+                                                 **self.aggregate.to_dict()}))
 
 
 def summarise(diameters: Sequence[float | None],
@@ -133,6 +174,13 @@ class SkippedSize(TypedDict):
     reason: str
 
 
+class TableEstimateDict(EstimateDict):
+    """An estimate's JSON form with the table it used and the sphere sizes left out."""
+
+    table: str
+    skipped: list[SkippedSize]
+
+
 @dataclass
 class TableEstimate:
     """An inversion's estimate, the table it used and the sphere sizes left out (and why)."""
@@ -141,12 +189,12 @@ class TableEstimate:
     table_id: str
     skipped: list[SkippedSize] = field(default_factory=list)
 
-    def to_dict(self, posterior: bool = False) -> dict[str, Any]:
+    def to_dict(self, posterior: bool = False) -> TableEstimateDict:
         """The estimate's JSON form (:class:`~.estimate.EstimateDict`) with ``table`` and
-        ``skipped``, JSON-ready; kept as plain JSON where answers and stored results pass it
-        through."""
-        return json_ready({**self.estimate.to_dict(posterior=posterior), "table": self.table_id,
-                           "skipped": self.skipped})
+        ``skipped``, JSON-ready."""
+        return cast(TableEstimateDict, json_ready({**self.estimate.to_dict(posterior=posterior),
+                                                   "table": self.table_id,
+                                                   "skipped": self.skipped}))
 
 
 def estimate(

@@ -19,11 +19,11 @@ import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, TypedDict
+from typing import Any, Literal, NotRequired, TypedDict, cast
 
 from solitonde.instrument.inference import measured_shots
 from solitonde.instrument.inference.calibration import Calibration
-from solitonde.instrument.inference.edge_fit import locate
+from solitonde.instrument.inference.edge_fit import SupportFitDict, locate
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.joint_map import (
     DEFAULT_SPREAD,
@@ -33,14 +33,17 @@ from solitonde.instrument.inference.joint_map import (
 )
 from solitonde.instrument.inference.joint_map import posterior as joint_posterior
 from solitonde.instrument.inference.joint_map import summary as joint_summary
+from solitonde.instrument.inference.joint_model import EdgeModelRow, ThicknessPriorRow
+from solitonde.instrument.inference.joint_summary import JointFit, JointPositionRow, JointSupport
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
 from solitonde.instrument.inference.marginals import ParameterDict
 from solitonde.instrument.inference.pipeline import (
     SizeSummary,
+    TableEstimateDict,
     summarise,
 )
 from solitonde.instrument.inference.pipeline import estimate as estimate_from
-from solitonde.instrument.inference.suggest import check_request
+from solitonde.instrument.inference.suggest import Suggestion, check_request
 from solitonde.instrument.inference.suggest import describe as describe_gain
 from solitonde.instrument.inference.suggest import suggest as suggest_positions
 from solitonde.instrument.inference.table_set import TableSet
@@ -72,6 +75,51 @@ class MapPosition(_PlacedPosition, total=False):
     distance_to_located_support_m: float
     per_position: dict[str, ParameterDict | None]
     joint_reason: str
+
+
+class SuggestionsBasis(TypedDict):
+    """What a map's suggestions are chosen for: :class:`~.suggest.Suggestions` less the
+    positions, and what ``expected_gain`` measures, in words."""
+
+    objective: str
+    reason: NotRequired[str]
+    interval_95_m: NotRequired[float]
+    expected_interval_95_m: NotRequired[float]
+    thickness_m: NotRequired[float]
+    expected_gain: str
+
+
+class _PlateMapBase(TypedDict):
+    plate_id: str
+    plate_size_m: list[float] | None
+    n_positions: int
+    n_scan_positions: int
+    support: SupportFitDict | JointSupport | None
+    support_reason: str | None
+
+
+class MapOverview(_PlateMapBase, total=False):
+    """A plate's map less its positions (as a report keeps it): the located support, or null
+    and why, with what :func:`with_joint` adds after, in this order: whether the answer is
+    joint, then the joint fit, warnings, thickness prior, edge model and table, then the
+    suggestions (or why a report's joint answer failed)."""
+
+    joint: bool
+    fit: JointFit
+    warnings: list[str]
+    thickness_prior: ThicknessPriorRow
+    edges: EdgeModelRow
+    table: str
+    suggestions: list[Suggestion]
+    suggestions_basis: SuggestionsBasis
+    joint_reason: str
+
+
+class PlateMap(MapOverview):
+    """A plate's map (:func:`build`): :class:`MapOverview`'s keys with the positions, which
+    come after ``n_scan_positions``."""
+
+    positions: list[MapPosition]
 
 
 class _RowEstimate(TypedDict, total=False):
@@ -163,7 +211,7 @@ def _mixed_calibrations(members: Sequence[Any]) -> str | None:
     return MIXED_CALIBRATIONS if len(seen) > 1 else None
 
 
-def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:
+def _stored(members: Sequence[Any], tables: TableSet) -> TableEstimateDict | None:
     """A position of one measurement: its stored estimate, where the table it names is loaded
     with the same content (its SHA-256). That is what pooling its shots again would give, to
     the last bit, without the inversion's time; None otherwise (estimate again)."""
@@ -175,7 +223,8 @@ def _stored(members: Sequence[Any], tables: TableSet) -> dict[str, Any] | None:
     if (result.get("estimate") is None or loaded is None
             or loaded.model.content_sha256 != table.get("sha256")):
         return None
-    return dict(result["estimate"])
+    stored: TableEstimateDict = result["estimate"]
+    return stored.copy()
 
 
 def position_entry(name: Any, x: float | None, y: float | None, n_shots: int,
@@ -240,7 +289,7 @@ def _text(value: Any) -> str | None:
 
 
 def build(plate_id: str, positions: list[MapPosition],
-          plate_size_m: Sequence[float] | None = None) -> dict[str, Any]:
+          plate_size_m: Sequence[float] | None = None) -> PlateMap:
     """The map JSON: the positions, the located support (or null and why), the plate's size."""
     placed = [(p, x, y) for p in positions
               if (x := p["x_m"]) is not None and (y := p["y_m"]) is not None]
@@ -363,7 +412,7 @@ def scan_from_rows(rows: Sequence[Mapping[str, Any]]
 
 
 def of_records(plate_id: str, records: Sequence[Any], tables: TableSet,
-               options: JointOptions | None = None) -> dict[str, Any]:
+               options: JointOptions | None = None) -> PlateMap:
     """The map of a plate's stored measurements (:func:`from_records`, :func:`build`), with the
     joint answer and suggestions ``options`` asks for. Raises JointMapError, TableChoiceError
     (with the position by position map left for the caller to keep, if it wants)."""
@@ -374,9 +423,9 @@ def of_records(plate_id: str, records: Sequence[Any], tables: TableSet,
     return with_joint(result, scan, table_ids, tables, options)
 
 
-def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
+def with_joint(plate_map: PlateMap, scan: Sequence[ScanPosition],
                table_ids: Sequence[str | None], tables: TableSet,
-               options: JointOptions) -> dict[str, Any]:
+               options: JointOptions) -> PlateMap:
     """``plate_map`` with the joint answer (``options.joint``: positions' thickness and
     distance, ``support``, ``fit``, ``warnings``, ``thickness_prior``, each position's own answer
     kept under ``per_position``) and ``suggestions`` (``options.suggest``).
@@ -394,33 +443,39 @@ def with_joint(plate_map: dict[str, Any], scan: Sequence[ScanPosition],
     chosen = tables.choose(diameters, next(iter(named), None))
     prior = ThicknessPrior(options.thickness_prior, options.thickness_spread)
     post = joint_posterior(chosen.model, scan, prior)
-    plate_map = dict(plate_map)
+    plate_map = plate_map.copy()
     plate_map["joint"] = options.joint
     if options.joint:
         answer = joint_summary(post)
-        by_key = {(p["position"], p["x_m"], p["y_m"]): p for p in answer["positions"]}
+        by_key: dict[tuple[str | None, float | None, float | None], JointPositionRow] = {
+            (p["position"], p["x_m"], p["y_m"]): p for p in answer["positions"]}
         left_out = {(e["position"]): e["reason"] for e in answer["excluded"]}
         positions = []
         for entry in plate_map["positions"]:
-            entry = dict(entry)
+            entry = entry.copy()
             joint = by_key.get((entry["position"], entry["x_m"], entry["y_m"]))
             if joint is not None:
                 entry["per_position"] = {p: entry.get(p) for p in PARAMETERS}
-                entry.update({k: joint[k] for k in ("thickness_m", "distance_m",
-                                                    "distance_to_located_support_m")})
+                entry["thickness_m"] = joint["thickness_m"]
+                entry["distance_m"] = joint["distance_m"]
+                entry["distance_to_located_support_m"] = joint["distance_to_located_support_m"]
             elif entry["x_m"] is not None and entry["y_m"] is not None:
                 entry["joint_reason"] = left_out.get(entry["position"],
                                                      "no inversion input at this position")
             positions.append(entry)
-        plate_map.update(positions=positions, support=answer["support"], support_reason=None,
-                         fit=answer["fit"], warnings=answer["warnings"],
-                         thickness_prior=answer["thickness_prior"], edges=answer["edges"],
-                         table=chosen.model.table_id)
+        plate_map["positions"] = positions
+        plate_map["support"] = answer["support"]
+        plate_map["support_reason"] = None
+        plate_map["fit"] = answer["fit"]
+        plate_map["warnings"] = answer["warnings"]
+        plate_map["thickness_prior"] = answer["thickness_prior"]
+        plate_map["edges"] = answer["edges"]
+        plate_map["table"] = chosen.model.table_id
     if options.suggest:
         found = suggest_positions(post, options.suggest, objective=options.suggest_for,
                                   plate_size_m=plate_map.get("plate_size_m"))
         plate_map["suggestions"] = found["suggestions"]
-        plate_map["suggestions_basis"] = {
-            **{k: v for k, v in found.items() if k != "suggestions"},
-            "expected_gain": describe_gain(options.suggest_for)}
+        basis = cast(SuggestionsBasis, {k: v for k, v in found.items() if k != "suggestions"})
+        basis["expected_gain"] = describe_gain(options.suggest_for)
+        plate_map["suggestions_basis"] = basis
     return plate_map

@@ -16,7 +16,8 @@ from typing import Any, TypedDict
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.loaded_table import LoadedTable
-from solitonde.instrument.tables.family import describe, differences
+from solitonde.instrument.tables.family import Family, describe, differences
+from solitonde.instrument.tables.table import TableSummary
 
 log = logging.getLogger("solitonde.instrument")
 
@@ -38,7 +39,7 @@ class TableListing(TypedDict):
 
     id: str
     path: str
-    family: dict[str, Any] | None  # the table's own family record (ModelTable.family)
+    family: Family | None
     diameters_m: list[float]
     thickness_range_m: list[float]
     distance_range_m: list[float]
@@ -86,7 +87,7 @@ class TableSet:
     def path(self) -> Path | None:
         return self.default.path if self.default else None
 
-    def summary(self) -> dict[str, Any] | None:
+    def summary(self) -> TableSummary | None:
         return self.default.summary() if self.default else None
 
     def plate_size(self) -> list[float] | None:
@@ -158,7 +159,7 @@ class TableSet:
         keys = differences(stated, family)
         if keys:
             detail = "; ".join(f"{k}: measurement {describe(stated[k])}, table "
-                               f"{describe(family[k])}" for k in keys)
+                               f"{describe(family.get(k))}" for k in keys)
             raise TableChoiceError(keys[0], f"table {est.model.table_id!r} was built for "
                                    f"another plate family ({detail}); it is not inverted")
 

@@ -12,9 +12,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NotRequired, TypedDict, cast
 
+from solitonde.instrument.inference.calibration import CalibrationDict
+from solitonde.instrument.inference.plate_map import MapOverview, MapPosition, PlateMap
+from solitonde.instrument.inference.setups import SetupDict, SetupReference
 from solitonde.instrument.reports import digest
+from solitonde.instrument.reports.digest import DigestItem
+from solitonde.instrument.tables.family import Family
 
 FORMAT = "solitonde-report/1"
 """The version of report.json's layout."""
@@ -35,36 +40,106 @@ class Trace:
     features: Mapping[str, Any]
 
 
-def entries(records: Sequence[Any]) -> list[dict[str, Any]]:
+class DigestEntry(DigestItem):
+    """A measurement's digest entry (:class:`.digest.DigestItem`) with its own digest."""
+
+    digest: str
+
+
+class DataDigest(TypedDict):
+    algorithm: str
+    value: str
+
+
+class ReportShot(TypedDict):
+    """A shot's numbers as a report lists them (:data:`SHOT_KEYS`), each None if not read."""
+
+    measurement_id: int
+    shot_index: int
+    tof_s: float | None
+    arr: float | None
+    tof_peak_s: float | None
+    arr_peak: float | None
+    snr_db: float | None
+    flags: list[str] | None
+
+
+class TraceRef(TypedDict):
+    measurement_id: int
+    shot_index: int
+
+
+class ReportPosition(MapPosition, total=False):
+    """A map position with its shots' numbers and the shot drawn for it (None if none)."""
+
+    shots: list[ReportShot]
+    trace: TraceRef | None
+
+
+class ReportTable(TypedDict):
+    """The table the newest estimate used, and (where it is loaded) what it holds."""
+
+    id: str
+    sha256: str | None
+    family: Family | None
+    reading_version: int | None
+    loaded_sha256: NotRequired[str | None]
+
+
+class Report(TypedDict):
+    """report.json, in the order it is written (``content_digest`` last)."""
+
+    format: str
+    plate_id: str
+    generated_at: str
+    software_version: str
+    source: dict[str, str]
+    labels: dict[str, str | float]
+    setups: list[SetupDict | SetupReference]
+    chain_calibrations: list[CalibrationDict]
+    table: ReportTable | None
+    map: MapOverview
+    positions: list[ReportPosition]
+    measurements: list[DigestEntry]
+    digest: DataDigest
+    content_digest: NotRequired[DataDigest]
+
+
+def entries(records: Sequence[Any]) -> list[DigestEntry]:
     """Each stored measurement's digest entry (:func:`.digest.entry`) with its own digest."""
-    out = []
+    out: list[DigestEntry] = []
     for r in records:
         item = digest.entry(r.id, r.position, [s.sha256 for s in r.shots], r.result)
         out.append({**item, "digest": digest.entry_digest(item)})
     return out
 
 
-def _positions(plate_map: Mapping[str, Any], records: Sequence[Any]) -> list[dict[str, Any]]:
+def without_digest(entry: Mapping[str, Any]) -> DigestItem:
+    """A digest entry less its own digest (every other key it holds, as read)."""
+    return cast(DigestItem, {k: v for k, v in entry.items() if k != "digest"})
+
+
+def _positions(plate_map: PlateMap, records: Sequence[Any]) -> list[ReportPosition]:
     """The map's positions, each with its shots' numbers and its measurements' warnings."""
     by_id = {r.id: r for r in records}
-    out = []
+    out: list[ReportPosition] = []
     for p in plate_map["positions"]:
         members = [by_id[i] for i in p.get("measurement_ids", []) if i in by_id]
-        shots = [{"measurement_id": m.id, "shot_index": s.shot_index,
-                  **{k: s.features.get(k) for k in SHOT_KEYS}}
+        shots = [cast(ReportShot, {"measurement_id": m.id, "shot_index": s.shot_index,
+                                   **{k: s.features.get(k) for k in SHOT_KEYS}})
                  for m in members for s in m.shots]
         out.append({**p, "shots": shots})
     return out
 
 
-def _table(records: Sequence[Any], tables: Any) -> dict[str, Any] | None:
+def _table(records: Sequence[Any], tables: Any) -> ReportTable | None:
     """The table the newest estimate used: id, SHA-256, family, extractor reading."""
     for r in reversed(records):
         table = (r.result.get("provenance") or {}).get("table")
         if table:
             loaded = tables.by_id.get(table["id"]) if tables is not None else None
-            info = {"id": table["id"], "sha256": table.get("sha256"), "family": None,
-                    "reading_version": None}
+            info: ReportTable = {"id": table["id"], "sha256": table.get("sha256"),
+                                 "family": None, "reading_version": None}
             if loaded is not None:
                 info["family"] = loaded.model.family
                 info["reading_version"] = loaded.model.reading_version
@@ -73,11 +148,11 @@ def _table(records: Sequence[Any], tables: Any) -> dict[str, Any] | None:
     return None
 
 
-def build(plate_id: str, records: Sequence[Any], plate_map: Mapping[str, Any], *,
-          tables: Any = None, setups: Mapping[tuple[str, int], Mapping[str, Any]] | None = None,
-          software_version: str, source: Mapping[str, Any],
+def build(plate_id: str, records: Sequence[Any], plate_map: PlateMap, *,
+          tables: Any = None, setups: Mapping[tuple[str, int], SetupDict] | None = None,
+          software_version: str, source: Mapping[str, str],
           traces: Callable[[Any], Trace | None] | None = None,
-          ) -> tuple[dict[str, Any], list[Trace]]:
+          ) -> tuple[Report, list[Trace]]:
     """report.json for ``plate_id`` and the traces to draw (one per position: its newest
     measurement's first shot).
 
@@ -88,14 +163,15 @@ def build(plate_id: str, records: Sequence[Any], plate_map: Mapping[str, Any], *
     manifest), for ``report verify``; ``traces(measurement)``: its first shot, or None."""
     items = entries(records)
     setups = dict(setups or {})
-    named: list[dict[str, Any]] = []
+    named: list[SetupDict | SetupReference] = []
+    labels: dict[str, str | float] = {}  # the named set-ups' labels, a later one's winning
     for r in records:
-        ref = (r.result.get("provenance") or {}).get("setup")
+        ref: SetupReference | None = (r.result.get("provenance") or {}).get("setup")
         if ref and (ref["id"], ref["revision"]) not in [(s["id"], s["revision"]) for s in named]:
-            named.append(dict(setups.get((ref["id"], ref["revision"]), ref)))
-    labels: dict[str, Any] = {}
-    for s in named:
-        labels.update(s.get("labels") or {})
+            found = setups.get((ref["id"], ref["revision"]))
+            named.append(ref.copy() if found is None else found.copy())
+            if found is not None:
+                labels.update(found["labels"] or {})
     positions = _positions(plate_map, records)
     drawn: list[Trace] = []
     if traces is not None:
@@ -107,7 +183,7 @@ def build(plate_id: str, records: Sequence[Any], plate_map: Mapping[str, Any], *
                                                      "shot_index": trace.shot_index}
             if trace is not None:
                 drawn.append(trace)
-    report = {
+    report: Report = {
         "format": FORMAT,
         "plate_id": plate_id,
         "generated_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -117,12 +193,12 @@ def build(plate_id: str, records: Sequence[Any], plate_map: Mapping[str, Any], *
         "setups": named,
         "chain_calibrations": _calibrations(records),
         "table": _table(records, tables),
-        "map": {k: v for k, v in plate_map.items() if k != "positions"},
+        "map": cast(MapOverview, {k: v for k, v in plate_map.items() if k != "positions"}),
         "positions": positions,
         "measurements": items,
         "digest": {"algorithm": digest.ALGORITHM,
                    "value": digest.data_digest(
-                       [{k: v for k, v in e.items() if k != "digest"} for e in items])},
+                       [without_digest(e) for e in items])},
     }
     report["content_digest"] = {"algorithm": digest.ALGORITHM, "value": content_digest(report)}
     return report, drawn
@@ -138,9 +214,9 @@ def content_digest(report: Mapping[str, Any]) -> str:
     return hashlib.sha256(digest.canonical(body)).hexdigest()
 
 
-def _calibrations(records: Sequence[Any]) -> list[dict[str, Any]]:
+def _calibrations(records: Sequence[Any]) -> list[CalibrationDict]:
     """The distinct chain calibrations the measurements were estimated with."""
-    found: list[dict[str, Any]] = []
+    found: list[CalibrationDict] = []
     for r in records:
         cal = (r.result.get("provenance") or {}).get("chain_calibration")
         if cal is not None and cal not in found:
@@ -151,7 +227,7 @@ def _calibrations(records: Sequence[Any]) -> list[dict[str, Any]]:
 def verify_entries(report: Mapping[str, Any]) -> str | None:
     """Why a report's own data do not match its printed digest (an edited report.json), or
     None where they do."""
-    items = [{k: v for k, v in e.items() if k != "digest"} for e in report["measurements"]]
+    items = [without_digest(e) for e in report["measurements"]]
     for e, item in zip(report["measurements"], items, strict=True):
         if digest.entry_digest(item) != e["digest"]:
             return f"measurement {e['id']}'s data differ from its digest in the report"

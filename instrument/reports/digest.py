@@ -14,9 +14,20 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from typing import Any, TypedDict
 
 import rfc8785
+
+
+class DigestItem(TypedDict):
+    """One measurement's part of the digest: its id, position, shots' sample hashes and its
+    stored result (passed through as the store keeps it)."""
+
+    id: int
+    position: str | None
+    shots_sha256: list[str]
+    result: dict[str, Any]
+
 
 ALGORITHM = "sha256 of RFC 8785 canonical JSON"
 """How the digest is made, printed beside it."""
@@ -28,7 +39,7 @@ def canonical(value: Any) -> bytes:
 
 
 def entry(measurement_id: Any, position: Any, shot_sha256: Sequence[str],
-          result: Mapping[str, Any]) -> dict[str, Any]:
+          result: Mapping[str, Any]) -> DigestItem:
     """One measurement's part of the digest: what identifies it and what it answered."""
     return {"id": measurement_id, "position": position, "shots_sha256": list(shot_sha256),
             "result": dict(result)}

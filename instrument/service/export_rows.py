@@ -131,5 +131,5 @@ def _estimated_sizes(result: StoredResult) -> list[float]:
     if estimate and estimate.get("inputs"):
         excluded = set(estimate.get("excluded_diameters_m") or [])
         return [i["diameter_m"] for i in estimate["inputs"] if i["diameter_m"] not in excluded]
-    return [a["sphere_diameter"] for a in result.get("aggregates", [])
-            if a.get("sphere_diameter") is not None]
+    return [d for a in result.get("aggregates", [])
+            if (d := a.get("sphere_diameter")) is not None]

@@ -2,9 +2,8 @@
 provenance inside it, and the measurement as the API answers it.
 
 These are annotations only: the dicts are built and stored as they always were, so the stored
-rows and the responses do not change. The parts another layer writes (an estimate, the
-aggregates, a set-up's reference, a chain calibration) and the shots' metadata and features
-(free-form keys) stay plain JSON objects.
+rows and the responses do not change. The shots' metadata and features (free-form keys) stay
+plain JSON objects.
 """
 
 from __future__ import annotations
@@ -12,6 +11,7 @@ from __future__ import annotations
 from typing import Any, NotRequired, TypedDict
 
 from solitonde.instrument.inference.calibration import CalibrationDict
+from solitonde.instrument.inference.pipeline import SizeSummaryDict, TableEstimateDict
 from solitonde.instrument.inference.setups import SetupReference
 
 
@@ -50,9 +50,9 @@ class StoredResult(TypedDict):
     ``location`` only where the shots state x_m and y_m; ``provenance`` is missing from
     measurements stored before it was recorded."""
 
-    aggregates: list[dict[str, Any]]
+    aggregates: list[SizeSummaryDict]
     """Per sphere size, the pipeline's summary of its shots."""
-    estimate: dict[str, Any] | None
+    estimate: TableEstimateDict | None
     estimate_reason: str | None
     table: str | None
     location: NotRequired[dict[str, float]]
@@ -74,8 +74,8 @@ class EarlierResult(TypedDict):
     superseded_at: float
     provenance: Provenance | None
     table: str | None
-    aggregates: list[dict[str, Any]]
-    estimate: dict[str, Any] | None
+    aggregates: list[SizeSummaryDict]
+    estimate: TableEstimateDict | None
     estimate_reason: str | None
     shot_features: list[Any]
 
@@ -118,8 +118,8 @@ class MeasurementJSON(TypedDict):
     n_shots: int
     source: str
     shots: list[ShotJSON]
-    aggregates: list[dict[str, Any]]
-    estimate: dict[str, Any] | None
+    aggregates: list[SizeSummaryDict]
+    estimate: TableEstimateDict | None
     estimate_reason: str | None
     table: str | None
     location: dict[str, float] | None
@@ -141,8 +141,8 @@ class MeasurementLine(TypedDict):
     position: str | None
     n_shots: int
     source: str
-    aggregates: list[dict[str, Any]]
-    estimate: dict[str, Any] | None
+    aggregates: list[SizeSummaryDict]
+    estimate: TableEstimateDict | None
     table: str | None
     location: dict[str, float] | None
 

@@ -10,12 +10,11 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping
-from typing import Any
 
 from solitonde.instrument.errors import MessageError
 from solitonde.instrument.inference.table_set import TableSet
 from solitonde.instrument.reports import content, render
-from solitonde.instrument.reports.content import Trace
+from solitonde.instrument.reports.content import DigestEntry, Report, Trace
 from solitonde.instrument.service import setup_book
 from solitonde.instrument.service.store import MeasurementRecord, Store
 
@@ -42,7 +41,7 @@ def version() -> str:
     return package_version()
 
 
-def entries(store: Store, plate_id: str) -> list[dict[str, Any]]:
+def entries(store: Store, plate_id: str) -> list[DigestEntry]:
     """The plate's digest entries as the store holds them now (what ``report verify``
     compares a report's with)."""
     return content.entries(store.all_of_plate(plate_id, POSITIONS_MAX + 1))
@@ -50,7 +49,7 @@ def entries(store: Store, plate_id: str) -> list[dict[str, Any]]:
 
 def build(store: Store, tables: TableSet, plate_id: str, source: Mapping[str, str], *,
           joint: bool = True, suggest: int | None = None,
-          progress: Callable[[str], None] | None = None) -> tuple[dict[str, Any], list[Trace]]:
+          progress: Callable[[str], None] | None = None) -> tuple[Report, list[Trace]]:
     """report.json of ``plate_id`` and the traces to draw; ``suggest`` None: three suggestions
     up to :data:`SUGGEST_UP_TO` scan positions, none beyond. NoSuchPlate for a plate without
     measurements."""
@@ -107,7 +106,7 @@ def _records_and_traces(store: Store, plate_id: str
 def _build(store: Store, tables: TableSet, plate_id: str, source: Mapping[str, str],
            records: list[MeasurementRecord], traces: dict[int, Trace], joint: bool,
            suggest: int | None,
-           say: Callable[[str], None]) -> tuple[dict[str, Any], list[Trace]]:
+           say: Callable[[str], None]) -> tuple[Report, list[Trace]]:
     from solitonde.instrument.inference import plate_map
     from solitonde.instrument.inference.joint_map import DEFAULT_SPREAD, JointMapError
     from solitonde.instrument.inference.table_set import TableChoiceError
@@ -138,7 +137,7 @@ def _build(store: Store, tables: TableSet, plate_id: str, source: Mapping[str, s
                          traces=lambda record: traces.get(record.id))
 
 
-def render_report(report: dict[str, Any], traces: list[Trace], fmt: str,
+def render_report(report: Report, traces: list[Trace], fmt: str,
                   strips: list[bytes] | None = None,
                   progress: Callable[[str], None] | None = None) -> bytes:
     """The report as ``html`` or ``pdf`` bytes (``json``: report.json); ``strips``: the traces

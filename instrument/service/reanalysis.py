@@ -65,8 +65,8 @@ def _brief(result: StoredResult) -> Brief:
     """The parts of a result a summary line shows: table (id, hash), thickness MAP, version."""
     prov = result.get("provenance")
     table = prov.get("table") if prov else None
-    est = result.get("estimate") or {}
-    thickness = (est.get("thickness_m") or {}).get("map")
+    est = result.get("estimate")
+    thickness = est["thickness_m"].get("map") if est and est.get("thickness_m") else None
     return {"table": result.get("table"), "table_sha256": table.get("sha256") if table else None,
             "software_version": prov.get("software_version") if prov else None,
             "thickness_m": thickness,

@@ -9,7 +9,8 @@ the run happens in a worker thread, one at a time per process, so the event loop
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Sequence
+from typing import Any, TypedDict, cast
 
 import anyio
 from fastapi import APIRouter, Request
@@ -18,6 +19,7 @@ from pydantic import ValidationError
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.loaded_table import EstimateUnavailable
+from solitonde.instrument.inference.pipeline import TableEstimateDict
 from solitonde.instrument.inference.table_set import TableChoiceError, TableSet
 from solitonde.instrument.service.api_models import (
     Calibration,
@@ -38,6 +40,39 @@ router = APIRouter(tags=["compute"], dependencies=[AUTH])
 
 _SIMULATIONS = anyio.CapacityLimiter(1)
 
+
+class InvertJSON(TypedDict):
+    """``POST /v1/invert``'s answer (:class:`InvertOut`'s keys)."""
+
+    estimate: TableEstimateDict
+
+
+class SimulationCost(TypedDict):
+    """What a simulation costs (:meth:`solitonde.model.plan.RunPlan.cost_dict`)."""
+
+    plate_model: str
+    duration_s: float
+    n_samples: int
+    steps: int
+    dof: int
+    cost: float
+    estimate: str
+
+
+class SimulationJSON(TypedDict):
+    """``POST /v1/simulate``'s answer (:class:`SimulateOut`'s keys)."""
+
+    t0: float
+    dt: float
+    n_samples: int
+    samples: list[float] | None
+    units: str
+    features: dict[str, Any]
+    """The extractor's reading of the trace (or ``{"error"}``), JSON-ready."""
+    diagnostics: dict[str, Any]
+    """The model's own diagnostics and truth, JSON-ready."""
+    cost: SimulationCost
+
 async def _payload(request: Request, model: type[Any]) -> Any:
     """The request's JSON body validated as ``model``: 415 unless JSON, 422 naming the field."""
     require_json(request)
@@ -56,19 +91,16 @@ def _json_body(model: Any) -> dict[str, Any]:
 @router.post("/invert", response_model=InvertOut, responses={**ERRORS, 503: PROBLEM_RESPONSE},
              openapi_extra=_json_body(InvertIn),
              summary="Estimate thickness and distance to support from TOF and ARR")
-async def invert(request: Request, svc: ServiceDep) -> dict[str, Any]:
+async def invert(request: Request, svc: ServiceDep) -> InvertJSON:
     """Per sphere size: mean TOF and ARR with their scatter and shot count. Needs a loaded table
     (503 otherwise)."""
 
     payload = await _payload(request, InvertIn)
-    inputs = [i.model_dump() for i in payload.inputs]
-    calibration = payload.calibration.model_dump(exclude_none=True) if payload.calibration \
-        else None
     if not svc.tables.loaded:
         raise Problem(503, f"table: {svc.tables.reason}", kind="no-table", field="table")
     try:
-        estimate = await run_in_threadpool(_invert, svc.tables, inputs, calibration,
-                                           payload.table,
+        estimate = await run_in_threadpool(_invert, svc.tables, payload.inputs,
+                                           payload.calibration, payload.table,
                                            plate_material_value(payload.plate_material))
     except EstimateUnavailable as exc:
         raise Problem(503, f"table: {exc}", kind="no-table", field="table") from None
@@ -87,31 +119,32 @@ async def invert(request: Request, svc: ServiceDep) -> dict[str, Any]:
     return {"estimate": estimate}
 
 
-def _invert(tables: TableSet, inputs: list[dict[str, Any]], calibration: dict[str, Any] | None,
-            table: str | None, plate_material: Any) -> dict[str, Any]:
+def _invert(tables: TableSet, inputs: Sequence[InversionInput], calibration: Calibration | None,
+            table: str | None, plate_material: Any) -> TableEstimateDict:
     """The request's inputs as FeatureSummary (InversionError naming a field) through the one
     estimate path."""
     from solitonde.instrument.inference.inversion_inputs import FeatureSummary
     from solitonde.instrument.inference.pipeline import estimate
 
-    items = [FeatureSummary.from_any(i) for i in inputs]
-    return estimate(tables, items, calibration, table=table,
+    items = [FeatureSummary.from_any(i.model_dump()) for i in inputs]
+    stated = calibration.model_dump(exclude_none=True) if calibration else None
+    return estimate(tables, items, stated, table=table,
                     plate_material=plate_material).to_dict()
 
 
-def simulation_cost(scene: Any, budget: float = math.inf) -> dict[str, Any]:
+def simulation_cost(scene: Any, budget: float = math.inf) -> SimulationCost:
     """Price of simulating ``scene`` (:func:`solitonde.model.plan.plan`): plate model, duration,
     samples, steps, degrees of freedom and their product, in chain particle-steps (about 3.5e8
     per CPU second). A plate mesh is only built once a floor of its cost fits ``budget``."""
     from solitonde.model.plan import plan
 
-    return plan(scene, budget=budget).cost_dict()
+    return cast(SimulationCost, plan(scene, budget=budget).cost_dict())
 
 
 @router.post("/simulate", response_model=SimulateOut, responses={**ERRORS},
              openapi_extra=_json_body(SimulateIn),
              summary="Simulate a scene; trace and measured features out (cost-limited)")
-async def simulate(request: Request, svc: ServiceDep) -> dict[str, Any]:
+async def simulate(request: Request, svc: ServiceDep) -> SimulationJSON:
     """Runs the chain model on the scene and measures the sensor trace like a recorded shot.
 
     The scene has the keys of a scene file (chain, striker, plate, effects, output, ...). A scene
@@ -123,7 +156,7 @@ async def simulate(request: Request, svc: ServiceDep) -> dict[str, Any]:
                                 svc.settings.max_simulation_cost, svc.settings.max_samples_per_shot)
 
 
-def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> dict[str, Any]:
+def _simulate(payload: SimulateIn, budget: float, max_samples: int) -> SimulationJSON:
     from solitonde.instrument.tables.measured import as_measured, check_resolved, detect_options
     from solitonde.model.errors import SceneError, SimulationError
     from solitonde.model.scene import scene_from_dict

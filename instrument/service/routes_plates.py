@@ -27,7 +27,8 @@ from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.work_lanes import run_for_client
 
 if TYPE_CHECKING:
-    from solitonde.instrument.inference.plate_map import JointOptions
+    from solitonde.instrument.inference.plate_map import JointOptions, PlateMap
+    from solitonde.instrument.reports.content import DataDigest, DigestEntry
 
 router = APIRouter(tags=["plates"], dependencies=[AUTH])
 MAP_POSITIONS_MAX = 5_000
@@ -57,16 +58,11 @@ class PlateListing(TypedDict):
     items: list[PlateLine]
 
 
-class DataDigest(TypedDict):
-    algorithm: str
-    value: str
-
-
 class PlateDigest(TypedDict):
     """``GET /v1/plates/{id}/digest``: each measurement's digest entry and the plate's."""
 
     plate_id: str
-    measurements: list[dict[str, Any]]
+    measurements: list[DigestEntry]
     digest: DataDigest
 
 
@@ -92,7 +88,7 @@ async def list_plates(svc: ServiceDep) -> PlateListing:
 
 
 MAPS_KEPT = 8
-_kept: OrderedDict[tuple[Any, ...], dict[str, Any]] = OrderedDict()
+_kept: OrderedDict[tuple[Any, ...], PlateMap] = OrderedDict()
 _kept_lock = threading.Lock()
 
 
@@ -129,7 +125,7 @@ class MapQuery:
             raise Problem(422, str(exc), field=exc.field) from None
 
 
-def _map(svc: Service, plate_id: str, options: JointOptions | None = None) -> dict[str, Any]:
+def _map(svc: Service, plate_id: str, options: JointOptions | None = None) -> PlateMap:
     from solitonde.instrument.inference import plate_map
     from solitonde.instrument.inference.joint_map import JointMapError
     from solitonde.instrument.inference.table_set import TableChoiceError
@@ -159,10 +155,10 @@ def _map(svc: Service, plate_id: str, options: JointOptions | None = None) -> di
 
 
 @router.get("/plates/{plate_id:path}/map", responses={**ERRORS, 404: PROBLEM_RESPONSE},
-            operation_id="plate_map",
+            operation_id="plate_map", response_model=dict,
             summary="A plate's map: positions, estimates, the located support")
 async def get_map(svc: ServiceDep, plate_id: str = PlateId,
-                  query: MapQuery = Depends()) -> dict[str, Any]:
+                  query: MapQuery = Depends()) -> PlateMap:
     """Per position: coordinates, shot count, thickness and distance (median, intervals,
     status); then ``support`` (``normal_angle_deg``, ``offset_m``, ``ci95_offset_m``,
     ``n_positions``, ``residual_m``) or null with ``support_reason``.

@@ -11,6 +11,7 @@ from solitonde.instrument.service.api_models import Health, Ready, TableOut
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep
 from solitonde.instrument.service.problems import PROBLEM_RESPONSE, Problem
+from solitonde.instrument.tables.table import TableSummary
 from solitonde.model.version import package_version
 
 __version__ = package_version()
@@ -41,7 +42,7 @@ class TableJSON(TypedDict):
     loaded: bool
     path: str | None
     reason: str | None
-    summary: dict[str, Any] | None
+    summary: TableSummary | None
     """The table's axes and provenance (the table's own JSON)."""
     limits: dict[str, int | float]
 

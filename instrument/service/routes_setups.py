@@ -11,7 +11,7 @@ keeping its earlier result.
 from __future__ import annotations
 
 import json
-from typing import Any, TypedDict
+from typing import TYPE_CHECKING, Any, TypedDict
 from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, Path, Request
@@ -30,6 +30,9 @@ from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep, require_json
 from solitonde.instrument.service.problems import ERRORS, Problem
 from solitonde.instrument.service.state import Service
+
+if TYPE_CHECKING:
+    from solitonde.instrument.tables.family import Family
 
 router = APIRouter(tags=["setups"], dependencies=[AUTH])
 
@@ -138,7 +141,7 @@ CHAIN_FAMILY = {("chain", "material"): "sphere_material",
 a set-up whose chain is not the one its table was simulated with is refused."""
 
 
-def _chain_matches(setup: Setup, family: dict[str, Any] | None) -> None:
+def _chain_matches(setup: Setup, family: Family | None) -> None:
     """A 422 naming ``chain.<key>`` (or ``striker.<key>``) where the set-up's chain differs
     from the one ``family`` (the table's) was simulated with."""
     from solitonde.instrument.tables.family import describe, differences
@@ -157,7 +160,7 @@ def _chain_matches(setup: Setup, family: dict[str, Any] | None) -> None:
             raise Problem(422, f"{field}: {exc}", kind="invalid-input", field=field) from None
         if differences({family_key: stated}, family):
             raise Problem(422, f"{field}: {describe(stated)} differs from table "
-                          f"{setup.table!r}'s chain ({describe(family[family_key])}): its "
+                          f"{setup.table!r}'s chain ({describe(family.get(family_key))}): its "
                           "answers would be for another instrument", kind="invalid-input",
                           field=field)
 

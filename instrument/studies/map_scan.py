@@ -23,8 +23,7 @@ class Scan:
 
     def __init__(self, table: ModelTable, seed: int, diameter_m: float,
                  coordinate_sd_m: float = 0.0) -> None:
-        family = table.family or {}
-        size = family.get("plate_size_m") or [0.914, 0.914]
+        size = (table.family["plate_size_m"] if table.family else None) or [0.914, 0.914]
         self.a, self.b = float(size[0]), float(size[1])
         self.rng = np.random.default_rng(seed)
         t_axis = table.axes["thickness_m"]

@@ -158,7 +158,7 @@ def draw_plate_materials(table: ModelTable, spread: Mapping[str, float], n: int,
     drawn from a normal distribution about the table's value with the grade's spread (relative
     sd for E and rho, sd for nu), as property mappings for ``plate.material``. Normal, with the
     spread the intervals state, so a coverage measured on them tests that statement."""
-    props = (table.family or {}).get("plate_material")
+    props = table.family["plate_material"] if table.family else None
     if not props:
         raise ValidationInputError("draw_material", "the table records no plate material to "
                                    "draw about (rebuild it, or validate with exact material)")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NotRequired, TypedDict, cast
 
 from solitonde.model.materials import properties_from
 
@@ -19,24 +19,55 @@ FAMILY_KEYS = ("sphere_material", "plate_material", "plate_size_m", "supports", 
 """The keys of a family, in the order they are reported."""
 
 
-def family_of_scene(scene: Any) -> dict[str, Any]:
+class MaterialProperties(TypedDict):
+    """A material as :func:`solitonde.model.materials.properties_from` gives it, with the
+    spread a property mapping states, if it states one."""
+
+    name: str
+    youngs_modulus: float
+    poisson_ratio: float
+    density: float
+    youngs_modulus_rel_sd: NotRequired[float]
+    poisson_ratio_sd: NotRequired[float]
+    density_rel_sd: NotRequired[float]
+
+
+class Family(TypedDict):
+    """A table's family (:data:`FAMILY_KEYS`); materials as their property mappings."""
+
+    sphere_material: MaterialProperties
+    plate_material: MaterialProperties
+    plate_size_m: list[float]
+    supports: str
+    gravity: bool
+    n_particles: int
+    sensor_index: int
+    impact_velocity_m_s: float
+    striker_material: MaterialProperties
+
+
+def family_of_scene(scene: Any) -> Family:
     """The family of a validated scene (solitonde.model.scene.Scene)."""
     return {
-        "sphere_material": properties_from(scene.chain.material),
-        "plate_material": properties_from(scene.plate.material),
+        "sphere_material": _properties(scene.chain.material),
+        "plate_material": _properties(scene.plate.material),
         "plate_size_m": [float(s) for s in scene.plate.size],
         "supports": scene.plate.supports,
         "gravity": bool(scene.effects.gravity),
         "n_particles": int(scene.chain.n_particles),
         "sensor_index": int(scene.chain.sensor_index),
         "impact_velocity_m_s": float(scene.impact_velocity),
-        "striker_material": properties_from(scene.striker.material
-                                            if scene.striker.material is not None
-                                            else scene.chain.material),
+        "striker_material": _properties(scene.striker.material
+                                        if scene.striker.material is not None
+                                        else scene.chain.material),
     }
 
 
-def family_of_table(provenance: Mapping[str, Any]) -> dict[str, Any] | None:
+def _properties(material: Any) -> MaterialProperties:
+    return cast(MaterialProperties, properties_from(material))
+
+
+def family_of_table(provenance: Mapping[str, Any]) -> Family | None:
     """The family recorded in a table's provenance (its base scene), or None if it has none."""
     from solitonde.model.errors import SceneError
     from solitonde.model.scene import scene_from_dict

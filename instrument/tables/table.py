@@ -31,13 +31,16 @@ import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, TypedDict
+from typing import TYPE_CHECKING, Any, Literal, TypedDict
 
 import h5py
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.model.scene import PLATE_MODELS
+
+if TYPE_CHECKING:
+    from solitonde.instrument.tables.family import Family
 
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
@@ -136,6 +139,39 @@ class SweepDict(TypedDict):
     detect: dict[str, Any]
 
 
+class AxisSummary(TypedDict):
+    values: list[float]
+    min: float
+    max: float
+    n: int
+
+
+class DissipationSummary(TypedDict):
+    damping_s: list[float]
+
+
+class TableSummary(TypedDict):
+    """A table as :meth:`ModelTable.summary` describes it (``table info --json``, and the
+    service's ``GET /v1/table``), in this order."""
+
+    id: str
+    path: str | None
+    family: Family | None
+    format: str
+    format_version: int
+    reading_version: int
+    complete: bool
+    shape: list[int]
+    n_points: int
+    axes: dict[str, AxisSummary]
+    features: list[str]
+    status_counts: dict[str, int]
+    plate_models: dict[str, int]
+    sweep: SweepDict
+    provenance: dict[str, Any]
+    dissipation_layer: DissipationSummary | None
+
+
 @dataclass
 class ModelTable:
     """A loaded model table (everything in memory; a table is a few MB).
@@ -196,7 +232,7 @@ class ModelTable:
         return self._cache.get("sha256")
 
     @property
-    def family(self) -> dict[str, Any] | None:
+    def family(self) -> Family | None:
         """The plate family the table was built for (instrument.family), None if unrecorded."""
         if "family" not in self._cache:
             from solitonde.instrument.tables.family import family_of_table
@@ -287,7 +323,7 @@ class ModelTable:
         return {STATUS_NAMES.get(int(v), str(int(v))): int(c) for v, c in zip(values, counts,
                                                                               strict=True)}
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> TableSummary:
         """JSON-ready description: axes (values and ranges), point counts, provenance."""
         models, counts = np.unique(self.plate_model, return_counts=True)
         return {
