@@ -17,7 +17,7 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import typer
@@ -71,11 +71,51 @@ def _common_axis(waves: list[Waveform]) -> list[Waveform]:
             for w, cut in zip(waves, cuts, strict=True)]
 
 
-def make_samples(out_dir: Path, seed: int = 20240601) -> list[dict[str, Any]]:
+class TruthRow(TypedDict):
+    """A sample shot's truth (a row of truth.tsv, :data:`TRUTH_KEYS`)."""
+
+    file: str
+    shot: int
+    tof_s: float | None
+    arr: float | None
+    incident_time_s: float | None
+    reflected_time_s: float | None
+    incident_peak_N: float
+    reflected_peak_N: float | None
+    snr_db: float
+    drop_height_m: float
+    sphere_diameter_m: float
+    plate_thickness_m: float
+    sample_rate_hz: float
+
+
+class ScanTruth(TypedDict):
+    """A scan position's truth (a row of the scan's truth.tsv)."""
+
+    position: str
+    x_m: float
+    y_m: float
+    distance_m: float
+    thickness_m: float
+    plate_model: str
+    tof_s: float | None
+    arr: float | None
+
+
+class _ManifestRow(TypedDict):
+    file: str
+    plate_id: str
+    position: str
+    x_m: float
+    y_m: float
+    sphere_diameter_m: float
+
+
+def make_samples(out_dir: Path, seed: int = 20240601) -> list[TruthRow]:
     """Write every sample file into ``out_dir`` and return the truth rows (also in truth.tsv)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    truth_rows = []
+    truth_rows: list[TruthRow] = []
     for spec in SPECS:
         waves = []
         for shot in range(spec.shots):
@@ -129,7 +169,7 @@ SCAN_SHOTS = 3
 SCAN_SNR_DB = 40.0
 
 
-def make_scan(out_dir: Path, seed: int = 20261125) -> list[dict[str, Any]]:
+def make_scan(out_dir: Path, seed: int = 20261125) -> list[ScanTruth]:
     """A simulated scan of positions near the clamped edge x = 0 of the paper's plate, as a lab
     brings it: plain files that name nothing (``scan_<position>_shot<k>.csv``, force in N),
     a campaign manifest (``campaign.csv``) that says which file is where, and ``truth.tsv``.
@@ -141,7 +181,8 @@ def make_scan(out_dir: Path, seed: int = 20261125) -> list[dict[str, Any]]:
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    truth, manifest = [], []
+    truth: list[ScanTruth] = []
+    manifest: list[_ManifestRow] = []
     for name, x, y in SCAN_POSITIONS:
         scene = load_scene(None, [f"chain.diameter={SCAN_DIAMETER!r}",
                                   f"plate.thickness={SCAN_THICKNESS!r}",
@@ -185,9 +226,9 @@ def samples(
         typer.echo(f"error: --out: {str(out)!r} is a file; give a folder", err=True)
         raise typer.Exit(2)
     if scan:
-        rows = make_scan(out, 20261125 if seed is None else seed)
-        typer.echo(f"wrote {len(rows)} positions x {SCAN_SHOTS} shots, campaign.csv, truth.tsv "
-                   f"to {out}")
+        positions = make_scan(out, 20261125 if seed is None else seed)
+        typer.echo(f"wrote {len(positions)} positions x {SCAN_SHOTS} shots, campaign.csv, "
+                   f"truth.tsv to {out}")
         return
     rows = make_samples(out, 20240601 if seed is None else seed)
     typer.echo(f"wrote {len({r['file'] for r in rows})} files, {len(rows)} shots, truth.tsv "

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn, TypedDict, cast
 from urllib.parse import quote
 
 import typer
@@ -18,8 +18,23 @@ import typer
 from solitonde.instrument.cli.cmd_post import API_KEY_ENV, SERVER
 from solitonde.instrument.cli.common import sphere_sizes
 
+if TYPE_CHECKING:
+    from solitonde.instrument.inference.setups import SetupDict
+
 setup_app = typer.Typer(help="Instrument set-ups kept by a service: create, show, list, "
                         "calibrate.", no_args_is_help=True)
+
+
+class SetupBody(TypedDict, total=False):
+    """What ``setup create`` states of a set-up (the service's ``SetupIn``)."""
+
+    id: str
+    sphere_diameters_m: list[float]
+    table: str
+    plate_material: Any
+    chain: Any
+    striker: Any
+    labels: dict[str, str]
 
 
 def _fail(message: str, code: int = 2) -> NoReturn:
@@ -28,9 +43,9 @@ def _fail(message: str, code: int = 2) -> NoReturn:
 
 
 def _request(server: str, api_key_env: str, method: str, path: str,
-             body: Any = None) -> dict[str, Any]:
-    """One JSON request; the server's problem detail (exit 1) or an unreachable server (exit
-    1) is said in one line."""
+             body: Any = None) -> Any:
+    """One JSON request and the server's JSON answer ({} for none); the server's problem
+    detail (exit 1) or an unreachable server (exit 1) is said in one line."""
     from solitonde.instrument.cli.uploader import ServerError, call
 
     try:
@@ -44,7 +59,7 @@ def _path(setup_id: str, *rest: str) -> str:
     return "/v1/setups/" + "/".join([quote(setup_id, safe=""), *rest])
 
 
-def _line(s: dict[str, Any]) -> str:
+def _line(s: SetupDict) -> str:
     cal = s.get("chain_calibration")
     sizes = ", ".join(f"{d * 1e3:.4g}" for d in s["sphere_diameters_m"])
     how = "not calibrated"
@@ -89,12 +104,13 @@ def create(
         if not sep or not key.strip():
             _fail(f"--label: {item!r} is not KEY=VALUE")
         labels[key.strip()] = value.strip()
-    body: dict[str, Any] = {"id": setup_id}
+    body: SetupBody = {"id": setup_id}
     if revise:  # the newest revision, what this call states replacing it
         from solitonde.instrument.inference.setups import INPUT_FIELDS
 
         current = _request(server, api_key_env, "GET", _path(setup_id))
-        body = {k: current[k] for k in INPUT_FIELDS if current.get(k) is not None}
+        body = cast(SetupBody, {k: current[k] for k in INPUT_FIELDS
+                                if current.get(k) is not None})
         labels = {**(current.get("labels") or {}), **labels}
     elif not sphere_diameter or table is None:
         _fail("--sphere-diameter and --table are needed to create a set-up (--revise takes "

@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
 from solitonde.instrument.cli.main import HELP_MARKUP
+
+if TYPE_CHECKING:
+    from solitonde.instrument.service.reanalysis import Brief, Recomputed
 
 store_app = typer.Typer(help="Back up, check, migrate and reanalyze a measurement store.",
                         no_args_is_help=True, rich_markup_mode=HELP_MARKUP)
@@ -108,10 +111,11 @@ def _mm(v: Any) -> str:
     return "-" if v is None else f"{1e3 * float(v):.3f}"
 
 
-def _table(b: dict[str, Any]) -> str:
+def _table(b: Brief) -> str:
     if b["table"] is None:
         return "none"
-    return f"{b['table']}@{b['table_sha256'][:8]}" if b.get("table_sha256") else b["table"]
+    sha256 = b["table_sha256"]
+    return f"{b['table']}@{sha256[:8]}" if sha256 else b["table"]
 
 
 @store_app.command("reanalyze")
@@ -141,7 +145,7 @@ def reanalyze_cmd(
     except StoreError as exc:
         _fail(f"store: {exc}")
 
-    def show(line: dict[str, Any]) -> None:
+    def show(line: Recomputed) -> None:
         if as_json:
             return
         b, a = line["before"], line["after"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TypedDict, cast
 
 import typer
 from rich.console import Console
@@ -17,10 +17,23 @@ from solitonde.model.zener import A0_K, RAYLEIGH_K, predict
 GRID_DIAMETERS_M = (4.76e-3, 9.53e-3, 19.05e-3)  # 3/16, 3/8, 3/4 in (paper Sec. 2)
 GRID_THICKNESSES_M = (2.29e-3, 3.18e-3, 4.83e-3)
 
+GridRow = TypedDict("GridRow", {
+    "diameter_m": float, "thickness_m": float, "d_over_t": float, "lambda": float, "e": float,
+    "arr": float, "tof_s": float, "tof_over_d_s_per_m": float})
+"""One sphere/plate combination of the grid (``theory --grid --json``)."""
 
-def grid_rows(scene: Scene) -> list[dict[str, Any]]:
+TheoryJSON = TypedDict("TheoryJSON", {
+    "lambda": float, "e": float, "tau_c": float, "contact_time_s": float, "arr": float,
+    "tof_s": float, "travel_time_s": float, "critical_distance_m": dict[str, float],
+    "critical_distance_k057_m": float, "critical_distance_k02_m": float,
+    "solitary_wave_speed_m_s": float, "incident_peak_force_N": float, "travel_diameters": int,
+    "diameter_m": float, "thickness_m": float, "d_over_t": float, "impact_velocity_m_s": float})
+"""``theory --json`` (:meth:`solitonde.model.zener.TheoryPrediction.to_dict`)."""
+
+
+def grid_rows(scene: Scene) -> list[GridRow]:
     """Theory for the paper's sphere/plate combinations, other scene settings kept, by D/t."""
-    rows = []
+    rows: list[GridRow] = []
     for diameter in GRID_DIAMETERS_M:
         for thickness in GRID_THICKNESSES_M:
             variant = scene.with_overrides(
@@ -40,7 +53,7 @@ def grid_rows(scene: Scene) -> list[dict[str, Any]]:
     return sorted(rows, key=lambda row: row["d_over_t"])
 
 
-def _scene_table(data: dict[str, Any]) -> Table:
+def _scene_table(data: TheoryJSON) -> Table:
     table = Table(title="Zener theory (infinite plate)", show_header=True)
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -68,7 +81,7 @@ def _scene_table(data: dict[str, Any]) -> Table:
     return table
 
 
-def _grid_table(rows: list[dict[str, Any]]) -> Table:
+def _grid_table(rows: list[GridRow]) -> Table:
     table = Table(title="Zener theory on the paper's 3 x 3 grid (infinite plate)")
     for name in ("D mm", "t mm", "D/t", "lambda", "e", "ARR", "TOF ms", "TOF/D s/m"):
         table.add_column(name, justify="right")
@@ -104,7 +117,7 @@ def theory(
             else:
                 console.print(_grid_table(rows))
             return
-        data = predict(scene).to_dict()
+        data = cast(TheoryJSON, predict(scene).to_dict())
     except SceneError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=2) from None

@@ -24,7 +24,7 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any, NotRequired, TypedDict, cast
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.instrument.inference.calibration import (
@@ -54,6 +54,25 @@ class SetupReference(TypedDict):
     revision: int
 
 
+class ReferenceRow(TypedDict):
+    """Stored measurements on a reference plate, its thickness and the chain's distance to the
+    support there (as a calibration fitted on them records them)."""
+
+    measurement_ids: list[int]
+    thickness_m: float
+    distance_m: float
+
+
+class CalibrationSource(TypedDict):
+    """Where a set-up's chain calibration came from: a calibration file (``file``, with the
+    file's own ``reference``) or a fit on stored reference measurements (``references``)."""
+
+    kind: str
+    reference: NotRequired[dict[str, Any] | None]
+    """The file's ``reference``, kept as the file states it."""
+    references: NotRequired[list[ReferenceRow]]
+
+
 class SetupDict(TypedDict):
     """A set-up revision's JSON form (:meth:`Setup.to_dict`), the keys of :data:`FIELDS`."""
 
@@ -67,7 +86,7 @@ class SetupDict(TypedDict):
     striker: dict[str, Any] | None  # likewise
     labels: dict[str, str | float] | None
     chain_calibration: CalibrationDict | None
-    calibration_source: dict[str, Any] | None  # provenance, kept as stored
+    calibration_source: CalibrationSource | None
 
 
 class SetupError(InstrumentError):
@@ -169,7 +188,7 @@ class Setup:
     """Operator, instrument serial, lab: what a report's title block names."""
     chain_calibration: CalibrationDict | None = None
     """The chain calibration (:class:`~.calibration.Calibration`'s dict), or None."""
-    calibration_source: dict[str, Any] | None = None
+    calibration_source: CalibrationSource | None = None
     """Where the calibration came from: the reference measurements, or an uploaded file (its
     own provenance), kept as stored."""
 
@@ -213,7 +232,8 @@ class Setup:
             striker=_mapping(data.get("striker"), "striker"),
             labels=labels,
             chain_calibration=calibration,
-            calibration_source=_mapping(data.get("calibration_source"), "calibration_source"),
+            calibration_source=cast(CalibrationSource | None, _mapping(
+                data.get("calibration_source"), "calibration_source")),
         )
 
     @classmethod

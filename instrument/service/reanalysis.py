@@ -11,7 +11,7 @@ serves the newest and lists the others.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Literal, TypedDict
+from typing import Literal, TypedDict
 
 from solitonde.instrument.inference.setups import Setup
 from solitonde.instrument.inference.table_set import TableSet
@@ -107,7 +107,7 @@ def recompute(store: Store, tables: TableSet, measurement_id: int,
 
 
 def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
-              progress: Callable[[dict[str, Any]], None] | None = None) -> Reanalysis:
+              progress: Callable[[Recomputed], None] | None = None) -> Reanalysis:
     """Recompute every measurement (of ``plate_id``, or all) and keep the earlier results; each
     with the set-up revision it names.
 
@@ -134,5 +134,5 @@ def reanalyze(store: Store, tables: TableSet, plate_id: str | None = None,
                 continue
             done.append(line)
             if progress is not None:
-                progress(dict(line))
+                progress(line.copy())
     return {"reanalyzed": done, "failed": failed}

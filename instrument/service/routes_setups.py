@@ -24,11 +24,17 @@ from solitonde.instrument.inference.calibration import (
     CalibrationDict,
     CalibrationError,
 )
-from solitonde.instrument.inference.setups import Setup, SetupError
+from solitonde.instrument.inference.setups import (
+    CalibrationSource,
+    Setup,
+    SetupDict,
+    SetupError,
+)
 from solitonde.instrument.service import jobs, setup_book
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep, require_json
 from solitonde.instrument.service.problems import ERRORS, Problem
+from solitonde.instrument.service.setup_book import RevisionLine
 from solitonde.instrument.service.state import Service
 
 if TYPE_CHECKING:
@@ -75,17 +81,37 @@ class CalibrationIn(BaseModel):
     references: list[ReferenceIn] = Field(min_length=1, max_length=100)
 
 
+class SetupLinks(TypedDict):
+    self: str
+    calibration: str
+
+
+class LinkedSetup(SetupDict):
+    """A set-up revision with its links (``GET .../revisions/{n}``, a listing's item)."""
+
+    links: SetupLinks
+
+
+class SetupOut(LinkedSetup):
+    """A set-up's newest revision with the list of its revisions, then its links."""
+
+    revisions: list[RevisionLine]
+
+
+class SetupListing(TypedDict):
+    items: list[LinkedSetup]
+
+
 class Recalibration(TypedDict):
     """A set-up's new calibrated revision and the job re-estimating its measurements."""
 
-    setup: dict[str, Any]
-    """The new revision as :func:`setup_out` shows it."""
+    setup: SetupOut
     revision: int
     chain_calibration: CalibrationDict | None
     job: jobs.Job
 
 
-def setup_links(setup_id: str) -> dict[str, str]:
+def setup_links(setup_id: str) -> SetupLinks:
     """A set-up's links, its id percent-encoded whole."""
     key = quote(setup_id, safe="")
     return {"self": f"/v1/setups/{key}", "calibration": f"/v1/setups/{key}/calibration"}
@@ -96,7 +122,7 @@ def _invalid(exc: SetupError | CalibrationError, prefix: str = "") -> Problem:
     return Problem(422, f"{field}: {exc.full_message}", kind="invalid-input", field=field)
 
 
-def setup_out(svc: Service, setup: Setup) -> dict[str, Any]:
+def setup_out(svc: Service, setup: Setup) -> SetupOut:
     """A set-up's newest revision, its revisions and links (saved as a file, what
     ``analyze --setup`` reads)."""
     return {**setup.to_dict(), "revisions": setup_book.revisions(svc.store, setup.id),
@@ -333,13 +359,14 @@ def _fit_and_calibrate(svc: Service, setup: Setup, body: CalibrationIn) -> Recal
         field = exc.field if exc.field.startswith("references") else f"references.{exc.field}"
         raise Problem(422, f"{field}: {exc.full_message}", kind="invalid-input",
                       field=field) from None
-    source = {"kind": "references",
-              "references": [r.model_dump() for r in body.references]}
+    source: CalibrationSource = {"kind": "references", "references": [
+        {"measurement_ids": list(r.measurement_ids), "thickness_m": r.thickness_m,
+         "distance_m": r.distance_m} for r in body.references]}
     return _calibrate(svc, setup, calibration, source)
 
 
 def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
-               source: dict[str, Any]) -> Recalibration:
+               source: CalibrationSource) -> Recalibration:
     """A new revision holding ``calibration``, and the job that re-estimates its
     measurements."""
     from solitonde.instrument.service.reanalysis import recompute
@@ -378,10 +405,10 @@ def _calibrate(svc: Service, setup: Setup, calibration: Calibration,
 
 
 @router.get("/setups/{setup_id:path}/revisions/{number}", responses=ERRORS,
-            summary="One revision of a set-up, as it was written")
+            response_model=dict, summary="One revision of a set-up, as it was written")
 async def get_revision(svc: ServiceDep, setup_id: str = SetupIdPath,
                        number: int = Path(..., ge=1, le=2**31, description="the revision")
-                       ) -> dict[str, Any]:
+                       ) -> LinkedSetup:
     """Revisions are immutable: what a measurement's ``provenance.setup`` names is here as it
     was when that measurement used it."""
     found = await run_in_threadpool(setup_book.revision, svc.store, setup_id, number)
@@ -393,9 +420,10 @@ async def get_revision(svc: ServiceDep, setup_id: str = SetupIdPath,
 
 
 @router.put("/setups/{setup_id:path}", status_code=200, responses=ERRORS,
-            dependencies=[Depends(require_json)], summary="Revise a set-up (a new revision)")
+            dependencies=[Depends(require_json)], response_model=dict,
+            summary="Revise a set-up (a new revision)")
 async def revise_setup(request: Request, svc: ServiceDep,
-                       setup_id: str = SetupIdPath) -> dict[str, Any]:
+                       setup_id: str = SetupIdPath) -> SetupOut:
     """The set-up as a whole, as for ``POST``; its chain calibration carries over. Earlier
     revisions stay as they were, and measurements keep naming the one they used."""
     current = _existing(svc, setup_id)
@@ -408,15 +436,17 @@ async def revise_setup(request: Request, svc: ServiceDep,
     return await run_in_threadpool(setup_out, svc, stored)
 
 
-@router.get("/setups", responses=ERRORS, summary="Every set-up's newest revision")
-async def list_setups(svc: ServiceDep) -> dict[str, Any]:
+@router.get("/setups", responses=ERRORS, response_model=dict,
+            summary="Every set-up's newest revision")
+async def list_setups(svc: ServiceDep) -> SetupListing:
     setups = await run_in_threadpool(setup_book.newest, svc.store)
     return {"items": [{**s.to_dict(), "links": setup_links(s.id)} for s in setups]}
 
 
 @router.get("/setups/{setup_id:path}", responses=ERRORS,
+            response_model=dict,
             summary="A set-up's newest revision and the list of its revisions")
-async def get_setup(svc: ServiceDep, setup_id: str = SetupIdPath) -> dict[str, Any]:
+async def get_setup(svc: ServiceDep, setup_id: str = SetupIdPath) -> SetupOut:
     """Saved as a file, this is what ``solitonde analyze --setup FILE`` reads offline."""
     return await run_in_threadpool(setup_out, svc, _existing(svc, setup_id))
 
