@@ -35,7 +35,7 @@ import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, NotRequired, TypedDict
+from typing import TYPE_CHECKING, Any, NoReturn, NotRequired, TypedDict, cast
 
 import typer
 from rich.console import Console
@@ -55,8 +55,10 @@ from solitonde.instrument.inference.measured_shots import (
     PEAK_READING,
     PositionShots,
     ShotInputError,
+    ShotLocation,
     ShotRow,
 )
+from solitonde.instrument.inference.pipeline import AggregateDict
 from solitonde.signal import io as signal_io
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import FEATURES
@@ -128,15 +130,20 @@ def analyse_file(path: Path, fmt: str | None, options: ReaderOptions,
     return rows, used and own is None  # whether --calibration served
 
 
-def aggregates(groups: list[PositionShots]) -> list[dict[str, Any]]:
+class PositionAggregate(ShotLocation, AggregateDict):
+    """A summary as `analyze --json` prints it: the location, then the aggregate."""
+
+
+def aggregates(groups: list[PositionShots]) -> list[PositionAggregate]:
     """The summaries as JSON: location, then the aggregate; each rejected shot names its file
     and shot number."""
-    out = []
+    out: list[PositionAggregate] = []
     for g in groups:
-        agg = g.summary.aggregate.to_dict()
+        agg = cast(AggregateDict, g.summary.aggregate.to_dict())
         for rej in agg["rejected"]:
             m = g.rows[rej["index"]]
-            rej.update(source=m["source"], shot=m["shot"])
+            rej["source"] = m["source"]
+            rej["shot"] = m["shot"]
         out.append({**g.location, **agg})
     return out
 
@@ -586,7 +593,7 @@ def _manifest_jobs(manifest: Path, given: list[Path] | None,
     return [(p, by_file[p.resolve()][1]) for p in given]
 
 
-def _print(console: Console, rows: list[ShotRow], aggs: list[dict[str, Any]],
+def _print(console: Console, rows: list[ShotRow], aggs: list[PositionAggregate],
            skipped: list[SkippedChannel], errors: list[FailedSource]) -> None:
     shot_rows = []
     for r in rows:
@@ -604,12 +611,13 @@ def _print(console: Console, rows: list[ShotRow], aggs: list[dict[str, Any]],
                     Column("flags", text=True)]
     agg_rows = []
     for a in aggs:
-        tof, arr = a["tof_s"], a["arr"]
-        position = a["position"] if a.get("source") is None else f"(file {Path(a['source']).name})"
+        tof, ratio = a["tof_s"], a["arr"]
+        source = a.get("source")
+        position = a["position"] if source is None else f"(file {Path(source).name})"
         diameter = "-" if a["sphere_diameter"] is None else f"{a['sphere_diameter'] * 1e3:.4g}"
         agg_rows.append([str(a["plate_id"] or "-"), str(position), diameter, str(a["n_shots"]),
-                         _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3), _fmt(arr["mean"]),
-                         _fmt(arr["std"], 1, 3), str(len(a["rejected"]))])
+                         _fmt(tof["mean"], 1e6, 5), _fmt(tof["std"], 1e6, 3), _fmt(ratio["mean"]),
+                         _fmt(ratio["std"], 1, 3), str(len(a["rejected"]))])
     agg_columns = [Column("plate", text=True), Column("position", text=True), Column("D (mm)"),
                    Column("shots"), Column("TOF mean (us)"), Column("TOF std (us)", drop_order=1),
                    Column("ARR mean"), Column("ARR std", drop_order=1),

@@ -18,7 +18,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict, cast
 
 import typer
 
@@ -31,6 +31,27 @@ from solitonde.instrument.cli.uploader import (
     manifest_row_for,
     status_line,
 )
+
+
+class UploadForm(TypedDict, total=False):
+    """The command line's metadata as an upload's form fields (only those given)."""
+
+    plate_id: str
+    position: str
+    x_m: float
+    y_m: float
+    sphere_diameter: float
+    calibration: float
+    units: str
+    sample_rate: float
+    format: str
+    channel: str
+    group: str
+    plate_material: str
+    table: str
+    setup: str
+    allow_duplicate: str
+
 
 UPLOAD_FORMATS = ("csv", "npy", "npz", "hdf5", "tdms", "json")
 """What the service's upload reads (``--format`` names one)."""
@@ -77,7 +98,7 @@ def given_fields(plate_id: str | None, position: str | None, x: float | None,
                  units: str | None, sample_rate: float | None, fmt: str | None,
                  channel: str | None, group: str | None, plate_material: str | None,
                  table: str | None = None, allow_duplicate: bool = False,
-                 setup: str | None = None) -> dict[str, Any]:
+                 setup: str | None = None) -> UploadForm:
     """The command line's metadata as the upload's form fields; a bad value is a
     :class:`typer.BadParameter` naming the flag and what is allowed."""
     for flag, value in (("--x", x), ("--y", y), ("--sample-rate", sample_rate),
@@ -97,7 +118,7 @@ def given_fields(plate_id: str | None, position: str | None, x: float | None,
               "sample_rate": sample_rate, "format": fmt, "channel": channel, "group": group,
               "plate_material": plate_material, "table": table, "setup": setup,
               "allow_duplicate": "true" if allow_duplicate else None}
-    return {k: v for k, v in fields.items() if v is not None}
+    return cast(UploadForm, {k: v for k, v in fields.items() if v is not None})
 
 
 def load_manifest(manifest: Path | None) -> list[Any]:
@@ -115,7 +136,7 @@ def load_manifest(manifest: Path | None) -> list[Any]:
                                  param_hint="--manifest") from None
 
 
-def post_one(client: Client, path: Path, given: dict[str, Any], rows: list[Any],
+def post_one(client: Client, path: Path, given: UploadForm, rows: list[Any],
              base: Path | None, attempts: int = 3, pause_s: float = 1.0) -> Outcome:
     """Upload ``path`` with its fields, retrying a transient failure ``attempts`` times."""
     row = manifest_row_for(rows, base, path) if rows and base is not None else None

@@ -26,6 +26,7 @@ import random
 import signal
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,7 @@ from solitonde.instrument.cli.cmd_post import (
     SPHERE,
     TABLE,
     UNITS,
+    UploadForm,
     X,
     Y,
     given_fields,
@@ -73,7 +75,7 @@ def say(text: str) -> None:
 class Watcher:
     """One watched folder, its queue and its client; :meth:`step` does one round."""
 
-    def __init__(self, folder: Path, queue: Queue, client: Client, given: dict[str, Any],
+    def __init__(self, folder: Path, queue: Queue, client: Client, given: UploadForm,
                  rows: list[Any], base: Path | None, pattern: str | None, settle_s: float,
                  max_backoff_s: float, stop: threading.Event) -> None:
         self.folder, self.queue, self.client = folder, queue, client
@@ -179,7 +181,8 @@ class Watcher:
             entry.attempts += 1
             if outcome.ok:
                 entry.state, entry.error = DONE, None
-                entry.id = (outcome.measurement or {}).get("id")
+                answer: Mapping[str, Any] = outcome.measurement or {}
+                entry.id = answer.get("id")
                 self.server_failures = 0
                 self.queue.save()
                 say(status_line(outcome))

@@ -19,11 +19,18 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import httpx
 
 from solitonde.instrument.errors import MessageError
+
+if TYPE_CHECKING:
+    from solitonde.instrument.inference.pipeline import TableEstimateDict
+    from solitonde.instrument.service.measurement_json import (
+        MeasurementJSON,
+        MetadataDifference,
+    )
 
 FIELD_FLAGS: dict[str, str] = {
     "plate_id": "--plate-id", "position": "--position", "x_m": "--x", "y_m": "--y",
@@ -60,6 +67,25 @@ def idempotency_key(content: bytes, filename: str, fields: Mapping[str, Any]) ->
     return KEY_PREFIX + h.hexdigest()
 
 
+class UploadLine(TypedDict):
+    """One upload as ``post --json`` prints it (the stored measurement's parts, None where the
+    server answered none)."""
+
+    source: str
+    state: str
+    id: int | None
+    status_code: int | None
+    idempotency_key: str
+    plate_id: str | None
+    position: str | None
+    n_shots: int | None
+    estimate: TableEstimateDict | None
+    estimate_reason: str | None
+    error: str | None
+    duplicate_of: int | None
+    metadata_differences: list[MetadataDifference] | None
+
+
 @dataclass
 class Outcome:
     """What became of one upload.
@@ -75,7 +101,8 @@ class Outcome:
     state: str
     key: str
     status_code: int | None = None
-    measurement: dict[str, Any] | None = None
+    measurement: MeasurementJSON | None = None
+    """The server's answer: the measurement stored (or the one it duplicates)."""
     error: str | None = None
 
     @property
@@ -86,8 +113,8 @@ class Outcome:
     def transient(self) -> bool:
         return self.state == "unreachable"
 
-    def to_dict(self) -> dict[str, Any]:
-        m = self.measurement or {}
+    def to_dict(self) -> UploadLine:
+        m: Mapping[str, Any] = self.measurement or {}
         return {"source": self.source, "state": self.state, "id": m.get("id"),
                 "status_code": self.status_code, "idempotency_key": self.key,
                 "plate_id": m.get("plate_id"), "position": m.get("position"),
@@ -255,7 +282,7 @@ def estimate_text(measurement: Mapping[str, Any] | None) -> str:
 
 def status_line(outcome: Outcome) -> str:
     """One line per file for the console and the log."""
-    m = outcome.measurement or {}
+    m: Mapping[str, Any] = outcome.measurement or {}
     if outcome.ok:
         where = "/".join(str(m[k]) for k in ("plate_id", "position") if m.get(k) is not None)
         text = (f"{outcome.state}: {outcome.source} -> measurement {m.get('id')}"

@@ -21,7 +21,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
-from typing import Any
+from typing import Any, TypedDict, cast
 
 from solitonde.signal.json_ready import json_ready
 
@@ -33,6 +33,49 @@ ESTIMATE_COLUMNS = (*LOCATION_COLUMNS, *(f"{p}_{s}" for p in PARAMETERS for s in
                     "size_summaries", "calibration", "material_spread", "other_reading",
                     "readings")
 """The columns of an estimates file, in order."""
+
+
+class ParameterColumns(TypedDict):
+    """One estimate's ``thickness_m_*`` and ``distance_m_*`` columns (:data:`STATS`)."""
+
+    thickness_m_map: float | None
+    thickness_m_median: float | None
+    thickness_m_ci68_low: float | None
+    thickness_m_ci68_high: float | None
+    thickness_m_ci95_low: float | None
+    thickness_m_ci95_high: float | None
+    thickness_m_status: str | None
+    distance_m_map: float | None
+    distance_m_median: float | None
+    distance_m_ci68_low: float | None
+    distance_m_ci68_high: float | None
+    distance_m_ci95_low: float | None
+    distance_m_ci95_high: float | None
+    distance_m_status: str | None
+
+
+class EstimateRow(ParameterColumns):
+    """A row of an estimates file (:data:`ESTIMATE_COLUMNS`, in that order): where, from
+    what, the parameters' columns, then the reason, fit and warnings and, as JSON text, what
+    the estimate was made from."""
+
+    plate_id: str | None
+    position: str | None
+    x_m: float | None
+    y_m: float | None
+    sphere_diameters_m: str | None
+    n_shots: int
+    reason: str | None
+    fit_chi2: float | None
+    fit_dof: float | None
+    fit_p_value: float | None
+    warnings: str | None
+    table: str | None
+    size_summaries: str | None
+    calibration: str | None
+    material_spread: str | None
+    other_reading: str | None
+    readings: str | None
 
 
 def iso_utc(epoch_s: float | None) -> str | None:
@@ -50,9 +93,9 @@ def _finite(value: Any) -> float | None:
     return number if math.isfinite(number) else None
 
 
-def parameter_columns(estimate: Mapping[str, Any] | None) -> dict[str, Any]:
+def parameter_columns(estimate: Mapping[str, Any] | None) -> ParameterColumns:
     """The ``thickness_m_*`` and ``distance_m_*`` columns of one estimate (its ``to_dict``)."""
-    out: dict[str, Any] = {}
+    out: dict[str, float | str | None] = {}
     for name in PARAMETERS:
         p = (estimate or {}).get(name) or {}
         ci68, ci95 = p.get("ci68") or (None, None), p.get("ci95") or (None, None)
@@ -66,31 +109,37 @@ def parameter_columns(estimate: Mapping[str, Any] | None) -> dict[str, Any]:
         for stat, value in values.items():
             out[f"{name}_{stat}"] = _finite(value)
         out[f"{name}_status"] = status
-    return out
+    return cast(ParameterColumns, out)
 
 
 def estimate_row(location: Mapping[str, Any], diameters: Sequence[float], n_shots: int,
-                 estimate: Mapping[str, Any] | None, reason: str | None) -> dict[str, Any]:
+                 estimate: Mapping[str, Any] | None, reason: str | None) -> EstimateRow:
     """One row: where (plate, position, coordinates), from what (sphere sizes, shots), the
     estimate's columns, and ``reason`` when there is no estimate or it comes with one."""
-    row = {"plate_id": location.get("plate_id"), "position": location.get("position"),
-           "x_m": _finite(location.get("x_m")), "y_m": _finite(location.get("y_m")),
-           "sphere_diameters_m": ";".join(f"{d:.6g}" for d in sorted(set(diameters))) or None,
-           "n_shots": int(n_shots)}
-    row.update(parameter_columns(estimate))
-    row["reason"] = reason if reason else (estimate or {}).get("reason")
-    fit = (estimate or {}).get("fit") or {}
-    for key in ("chi2", "dof", "p_value"):
-        row[f"fit_{key}"] = _finite(fit.get(key))
-    row["warnings"] = "; ".join((estimate or {}).get("warnings") or []) or None
-    row["table"] = (estimate or {}).get("table")
-    for key, value in (("size_summaries", (estimate or {}).get("inputs")),
-                       ("calibration", (estimate or {}).get("calibration")),
-                       ("material_spread", (estimate or {}).get("material_spread")),
-                       ("other_reading", (estimate or {}).get("other_reading")),
-                       ("readings", (estimate or {}).get("readings"))):
-        row[key] = json.dumps(json_ready(value), allow_nan=False) if value else None
-    return row
+    given: Mapping[str, Any] = estimate or {}
+    fit = given.get("fit") or {}
+    return {
+        "plate_id": location.get("plate_id"), "position": location.get("position"),
+        "x_m": _finite(location.get("x_m")), "y_m": _finite(location.get("y_m")),
+        "sphere_diameters_m": ";".join(f"{d:.6g}" for d in sorted(set(diameters))) or None,
+        "n_shots": int(n_shots),
+        **parameter_columns(estimate),
+        "reason": reason if reason else given.get("reason"),
+        "fit_chi2": _finite(fit.get("chi2")), "fit_dof": _finite(fit.get("dof")),
+        "fit_p_value": _finite(fit.get("p_value")),
+        "warnings": "; ".join(given.get("warnings") or []) or None,
+        "table": given.get("table"),
+        "size_summaries": _json_text(given.get("inputs")),
+        "calibration": _json_text(given.get("calibration")),
+        "material_spread": _json_text(given.get("material_spread")),
+        "other_reading": _json_text(given.get("other_reading")),
+        "readings": _json_text(given.get("readings")),
+    }
+
+
+def _json_text(value: Any) -> str | None:
+    """A part of the estimate as one cell of JSON text, or None where it is empty."""
+    return json.dumps(json_ready(value), allow_nan=False) if value else None
 
 
 FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")

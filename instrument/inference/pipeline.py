@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypedDict, cast
+from typing import Any, NotRequired, TypedDict, cast
 
 from solitonde.instrument.inference.calibration import Calibration
 from solitonde.instrument.inference.estimate import Estimate, EstimateDict
@@ -51,14 +51,15 @@ class RejectedShot(TypedDict):
     value: float | None
     modified_z: float | None
     reason: str
+    source: NotRequired[str]
+    """Where `analyze` names the shot: its file and shot number."""
+    shot: NotRequired[Any]
 
 
-class SizeSummaryDict(TypedDict):
-    """A sphere size's summary as stored and served (``aggregates`` of a measurement):
-    ``sphere_diameter``, then :meth:`~solitonde.signal.features.Aggregate.to_dict`'s keys (one
-    :class:`StatDict` per summarised feature)."""
+class AggregateDict(TypedDict):
+    """:meth:`~solitonde.signal.features.Aggregate.to_dict`'s keys: the shot count, one
+    :class:`StatDict` per summarised feature, what was left out and why."""
 
-    sphere_diameter: float | None
     n_shots: int
     tof_s: StatDict
     arr: StatDict
@@ -72,6 +73,13 @@ class SizeSummaryDict(TypedDict):
     arr_upper_bound: float | None
     flag_counts: dict[str, int]
     reflection_window_s: float | None
+
+
+class SizeSummaryDict(AggregateDict):
+    """A sphere size's summary as stored and served (``aggregates`` of a measurement):
+    ``sphere_diameter``, then the aggregate's keys."""
+
+    sphere_diameter: float | None
 
 
 MISSING_SIZE = "metadata.sphere_diameter is missing: the inversion needs the sphere size"

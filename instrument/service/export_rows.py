@@ -10,6 +10,7 @@ import json
 from collections.abc import Iterator
 from typing import Any
 
+from solitonde.instrument.inference.estimate_rows import EstimateRow
 from solitonde.instrument.service.measurement_json import StoredResult
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.state import Service
@@ -57,6 +58,14 @@ def _flat(features: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+class MeasurementEstimateRow(EstimateRow):
+    """A row of the estimates export: the measurement's id and time, then its estimate's
+    columns."""
+
+    measurement_id: int
+    created_at: str | None
+
+
 MEDIA = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet"}
 """The export formats and their media types."""
 
@@ -102,7 +111,7 @@ def estimates_export(svc: Service, fmt: str, plate_id: str | None) -> tuple[byte
     )
 
     limit = svc.settings.export_rows_max
-    rows: list[dict[str, Any]] = []
+    rows: list[MeasurementEstimateRow] = []
     after = 0
     while True:
         page = svc.store.list(plate_id, after, 1000)
