@@ -6,9 +6,12 @@ trace through the signal extractor, with the model's own step-resolution peaks b
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from solitonde.model.batch import scene_grid, simulate_many
 from solitonde.model.zener import predict
@@ -18,6 +21,7 @@ from solitonde.signal.waveform import Waveform
 
 DIAMETERS = [4.76e-3, 9.53e-3, 19.05e-3]
 THICKNESSES = [2.29e-3, 3.18e-3, 4.83e-3]
+FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "theory-grid.json"
 
 
 def _features(result):
@@ -28,8 +32,9 @@ def _features(result):
     return (math.nan if f.arr is None else f.arr), (math.nan if f.tof_s is None else f.tof_s)
 
 
-def test_grid_against_theory():
-    """Simulated ARR falls with D/t like e^(6/5); TOF follows Eq. 15 where the reflection exists."""
+def _rows() -> list[tuple[float, ...]]:
+    """Per scene, sorted by D/t: (D/t, D, t, lambda, e, ARR theory, ARR of the model's peaks, ARR
+    read by the extractor, TOF theory, TOF of the model's peaks, TOF read by the extractor)."""
     scenes = scene_grid({"effects": {"plate_model": "infinite"}},
                         {"chain.diameter": DIAMETERS, "plate.thickness": THICKNESSES})
     results = simulate_many(scenes, workers=2)
@@ -40,6 +45,12 @@ def test_grid_against_theory():
         rows.append((scene.d_over_t, scene.chain.diameter, scene.plate.thickness, p.lambda_, p.e,
                      p.arr, r.truth["arr"], arr_sig, p.tof_s, r.truth["tof_s"], tof_sig))
     rows.sort()
+    return rows
+
+
+def test_grid_against_theory():
+    """Simulated ARR falls with D/t like e^(6/5); TOF follows Eq. 15 where the reflection exists."""
+    rows = _rows()
     print("\n D/t   D mm   t mm  lambda     e   ARR th  ARR sim ARR sig  TOF th ms TOF sim TOF sig"
           "  dTOF %")
     for row in rows:
@@ -56,3 +67,15 @@ def test_grid_against_theory():
     # ... and TOF agrees with Eq. 15 to 15 % where a reflected pulse exists.
     for row in with_reflection:
         assert abs(row[9] / row[8] - 1) < 0.15
+
+
+@pytest.mark.slow
+def test_the_docs_table_of_the_grid() -> None:
+    """docs/explanation/physics.md's table: docs/figures/theory-grid.json."""
+    keys = ("d_over_t", "diameter_m", "thickness_m", "lambda", "e", "arr_theory", "arr_model",
+            "arr_read", "tof_theory_s", "tof_model_s", "tof_read_s")
+    rows = [{k: (None if isinstance(v, float) and math.isnan(v) else v)
+             for k, v in zip(keys, row, strict=True)} for row in _rows()]
+    FIGURES.write_text(json.dumps({
+        "command": "pytest -m slow tests/model/test_chain_theory_grid.py --timeout 0",
+        "figures": {"rows": rows}}, indent=1) + "\n")

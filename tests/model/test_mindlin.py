@@ -165,3 +165,45 @@ def test_plan_prices_the_mindlin_plate_as_it_runs(small_runs) -> None:
     floor = plan(scene, budget=0.0)
     assert floor.estimate.startswith("floor")
     assert floor.chain_steps <= p.plate_steps
+
+
+@pytest.mark.slow
+def test_the_docs_coupled_comparison() -> None:
+    """docs/explanation/accuracy-cost.md's coupled table: D 9.53 mm on the paper's two thinnest
+    plates, 20 mm from the support and at the centre, ``sem`` against ``mindlin`` on the same
+    16 x 16 mesh (``bench plates --kind coupled --set sem.elements_per_wavelength=0``); writes
+    docs/figures/mindlin-coupled.json. Minutes: the 3-D runs."""
+    import json
+    from pathlib import Path
+
+    from solitonde.instrument.studies.plate_theory import Point, compare
+
+    points = [Point(9.53e-3, t, d) for t in (3.18e-3, 2.29e-3) for d in (0.02, 0.457)]
+    result = compare(points, "coupled", overrides=["sem.elements_per_wavelength=0"])
+    figures = Path(__file__).resolve().parents[2] / "docs" / "figures" / "mindlin-coupled.json"
+    figures.write_text(json.dumps({
+        "command": "pytest -m slow tests/model/test_mindlin.py::test_the_docs_coupled_comparison"
+                   " --timeout 0",
+        "figures": result}, indent=1, default=str) + "\n")
+
+
+@pytest.mark.slow
+def test_the_docs_mid_distance_convergence() -> None:
+    """docs/explanation/accuracy-cost.md's thin plate at a mid distance (D 9.53 mm, t 1.5 mm,
+    L 50 mm): both plates coupled on 16 x 16 and on 32 x 32 in-plane elements; writes
+    docs/figures/mindlin-mid-distance.json. Minutes: the 3-D runs."""
+    import json
+    from pathlib import Path
+
+    from solitonde.instrument.studies.plate_theory import Point, compare
+
+    runs = {n: compare([Point(9.53e-3, 1.5e-3, 0.05)], "coupled",
+                       overrides=["sem.elements_per_wavelength=0", f"sem.elements=[{n},{n},1]"])
+            for n in (16, 32)}
+    name = "mindlin-mid-distance.json"
+    figures = Path(__file__).resolve().parents[2] / "docs" / "figures" / name
+    figures.write_text(json.dumps({
+        "command": "pytest -m slow tests/model/test_mindlin.py"
+                   "::test_the_docs_mid_distance_convergence --timeout 0",
+        "figures": {str(n): run["rows"][0] for n, run in runs.items()}}, indent=1, default=str)
+        + "\n")

@@ -14,6 +14,9 @@ the table of docs/explanation/extractor.md.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy_chain import ChainTrace, solve
@@ -24,6 +27,7 @@ from solitonde.signal.features import extract
 from solitonde.signal.waveform import Waveform
 
 DRAWS = 100
+FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "extractor-drift.json"
 CELLS = {  # name: (diameter, thickness, gravity, sample rate, record after the impact, SNR dB)
     "D9.53 t4.83 g0 2MHz": (9.53e-3, 4.83e-3, False, 2e6, 0.9e-3, 40.0),
     "D9.53 t3.18 g0 1MHz": (9.53e-3, 3.18e-3, False, 1e6, 0.9e-3, 40.0),
@@ -87,6 +91,16 @@ def table() -> dict[str, Row]:
               + " | ".join(f"{100 * a:+.2f} % (pre-trigger {100 * b:+.1f} %), TOF "
                            f"{1e6 * t:+.3f} us" for t, a, _, b in
                            (row[d] for d in DRIFTS)) + " |")
+    FIGURES.write_text(json.dumps({
+        "command": "pytest -m slow tests/signal/test_feature_drift.py --timeout 0",
+        "figures": {"draws": DRAWS, "cells": {
+            name: {"diameter_m": d, "thickness_m": t, "gravity": g, "rate_hz": rate,
+                   "snr_db": snr,
+                   "drifts": {k: dict(zip(("tof_change_s", "arr_change_rel", "arr_sd_rel",
+                                           "pre_trigger_arr_sd_rel" if k == "none" else
+                                           "pre_trigger_arr_change_rel"), v, strict=True))
+                              for k, v in rows[name].items()}}
+            for name, (d, t, g, rate, _end, snr) in CELLS.items()}}}, indent=1) + "\n")
     return rows
 
 
