@@ -14,9 +14,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from doc_examples import DECIMAL, figure_paragraphs, json_numbers, unbacked_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "how-to" / "setups.md"
+FIGURES = ROOT / "docs" / "figures" / "setups-walk.json"
 
 
 def _section() -> str:
@@ -31,7 +33,7 @@ def _fmt(p: dict) -> str:
 def test_the_setups_walk_runs_as_written(tmp_path: Path) -> None:
     section = _section()
     script = re.search(r"```bash\n(.*?)```", section, flags=re.S).group(1)
-    printed = re.search(r"It prints, among the rest:\n\n```\n(.*?)```", section,
+    printed = re.search(r"It prints, among the rest:\n\n(?:<!--.*?-->\n)?```\n(.*?)```", section,
                         flags=re.S).group(1).splitlines()
     env = {k: v for k, v in os.environ.items() if not k.startswith("SOLITONDE_")}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"
@@ -60,6 +62,7 @@ def test_the_setups_walk_runs_as_written(tmp_path: Path) -> None:
     rows = {r.split("|")[1].strip(): [c.strip() for c in r.split("|")[2:5]]
             for r in section.splitlines() if r.startswith("| centre") or " from the clamp |" in r}
     names = {"centre": "centre", "d60": "60 mm from the clamp", "d30": "30 mm from the clamp"}
+    figures: dict[str, dict] = {}
     for source, name in names.items():
         record = by_source[source]
         assert record.result["provenance"]["setup"] == {"id": "ti-chain", "revision": 2}
@@ -76,8 +79,25 @@ def test_the_setups_walk_runs_as_written(tmp_path: Path) -> None:
         assert t["ci95"][0] <= 3.5e-3 <= t["ci95"][1], (source, t)
         _, after, offline_cell = rows[name]
         assert after == _fmt(t) and offline_cell == _fmt(offline["thickness_m"]), (name, rows)
+        figures[source] = {"service": t, "offline": offline["thickness_m"]}
         if source == "centre":
             before = record.earlier[0]["result"]["estimate"]["thickness_m"]
+            figures[source]["before"] = before
             assert rows[name][0] == (f"{before['median'] * 1e3:.2f} mm (95 % "
                                      f"{before['ci95'][0] * 1e3:.2f}-"
                                      f"{before['ci95'][1] * 1e3:.2f})")
+    write_figures(figures, printed)
+
+
+def write_figures(figures: dict[str, dict], printed: list[str]) -> None:
+    """docs/figures/setups-walk.json: the walk's estimates; the default run checks the page's
+    table against it (tests/test_docs_examples.py)."""
+    # the shown lines were each found in the walk's output above: their numbers are its own
+    numbers = [float(x) for line in printed for x in DECIMAL.findall(line)]
+    data = {"command": "pytest -m slow tests/test_docs_setups.py --timeout 0",
+            "figures": {"estimates": figures, "printed": numbers}}
+    FIGURES.write_text(json.dumps(data, indent=1) + "\n")
+    for line, files, paragraph in figure_paragraphs(DOC):
+        if FIGURES in files:
+            values = json_numbers(data["figures"])
+            assert not unbacked_numbers(paragraph, values), (line, paragraph)
