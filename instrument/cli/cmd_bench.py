@@ -6,13 +6,16 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
 from solitonde.instrument.cli.main import HELP_MARKUP
+
+if TYPE_CHECKING:
+    from solitonde.instrument.studies.accuracy import BenchResult
 
 
 def accuracy_command(
@@ -54,7 +57,7 @@ def accuracy_command(
         raise typer.Exit(1)
 
 
-def _print(result: dict[str, Any]) -> None:
+def _print(result: BenchResult) -> None:
     from solitonde.instrument.studies.accuracy import table_rows
     from solitonde.signal.json_ready import json_ready
 

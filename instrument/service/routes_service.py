@@ -3,10 +3,11 @@ model tables (``/v1/tables``, ``/v1/table``, behind the API key as every ``/v1``
 
 from __future__ import annotations
 
-from typing import Any, Literal, TypedDict
+from typing import Literal, TypedDict
 
 from fastapi import APIRouter
 
+from solitonde.instrument.inference.table_set import TableListing
 from solitonde.instrument.service.api_models import Health, Ready, TableOut
 from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep
@@ -65,8 +66,15 @@ async def readyz(svc: ServiceDep) -> ReadyJSON:
             "estimates": loaded, "reason": None if loaded else svc.tables.reason}
 
 
-@router.get("/v1/tables", dependencies=[AUTH])
-async def tables(svc: ServiceDep) -> dict[str, Any]:
+class TablesJSON(TypedDict):
+    """``GET /v1/tables``: every loaded table, and why any configured one is not."""
+
+    items: list[TableListing]
+    problems: list[str]
+
+
+@router.get("/v1/tables", dependencies=[AUTH], response_model=dict)
+async def tables(svc: ServiceDep) -> TablesJSON:
     """Every loaded model table: id, plate family (materials with their properties, plate
     size, supports, gravity, chain, striker), sphere sizes and axes' ranges."""
     return {"items": svc.tables.listing(), "problems": svc.tables.problems}

@@ -25,7 +25,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NotRequired, TypedDict
+from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 import pandas as pd
@@ -85,6 +85,25 @@ class Shot(TypedDict):
     dofs: int
     plate_dt_s: float | None
     energy_drift: float
+
+
+class BenchRow(Shot):
+    """One configuration at one scene (a row of accuracy.csv): its shot, the warm time with
+    the plate's response kept, the errors against the reference, and whether it is on the
+    Pareto front."""
+
+    scene: str
+    distance_m: float
+    config: str
+    tier: str
+    elements: str
+    order: str
+    step_factor: float
+    wall_warm_s: float
+    tof_error: float
+    arr_error: float
+    error: float
+    pareto: bool
 
 
 class RestChoice(TypedDict):
@@ -245,7 +264,30 @@ def _warm_up() -> None:
         simulate(Config(tier, (2, 2, 1), (2, 2, 1), 0.9).scene(0.3))
 
 
-def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) -> dict[str, Any]:
+class BenchScene(TypedDict):
+    diameter_m: float
+    thickness_m: float
+    distances_m: dict[str, float]
+
+
+class BenchReference(ConfigName):
+    """The reference configuration and its shot at each scene (:data:`SCENES_M`)."""
+
+    near_support: Shot
+    centre: Shot
+
+
+class BenchResult(TypedDict):
+    """What :func:`run_bench` returns (accuracy.json)."""
+
+    scene: BenchScene
+    reference: BenchReference
+    rows: list[BenchRow]
+    recommendation: Recommendation
+    quick: bool
+
+
+def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) -> BenchResult:
     """Run the ladder on both scenes and return rows, reference values and recommendations.
 
     ``greens`` runs use a private in-memory response cache (never the user's disk cache), so the
@@ -286,8 +328,9 @@ def run_bench(quick: bool = False, tick: Callable[[str], None] | None = None) ->
     return {
         "scene": {"diameter_m": DIAMETER_M, "thickness_m": THICKNESS_M,
                   "distances_m": SCENES_M},
-        "reference": {"config": ref_cfg.label, **{k: v for k, v in reference.items()}},
-        "rows": frame.to_dict(orient="records"),
+        "reference": cast(BenchReference, {"config": ref_cfg.label,
+                                           **{k: v for k, v in reference.items()}}),
+        "rows": cast(list[BenchRow], frame.to_dict(orient="records")),
         "recommendation": recommend(frame, ref_cfg),
         "quick": quick,
     }
@@ -365,7 +408,7 @@ def recommend(frame: pd.DataFrame, ref_cfg: Config) -> Recommendation:
     return {"rest_simulate": rest, "table_build": table, "reference": {"config": ref_cfg.label}}
 
 
-def write_outputs(result: dict[str, Any], out: Path) -> None:
+def write_outputs(result: BenchResult, out: Path) -> None:
     """accuracy.csv, accuracy.json and the Pareto plot accuracy_pareto.png in ``out``."""
     frame = pd.DataFrame(result["rows"])
     save_csv(frame, out / "accuracy.csv")
@@ -408,7 +451,7 @@ def write_outputs(result: dict[str, Any], out: Path) -> None:
     save_png(fig, out / "accuracy_pareto.png")
 
 
-def table_rows(result: dict[str, Any]) -> list[list[str]]:
+def table_rows(result: BenchResult) -> list[list[str]]:
     """Rows for the printed table: config, scene, TOF, ARR, errors, times."""
     rows = []
     for r in result["rows"]:

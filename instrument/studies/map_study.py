@@ -46,7 +46,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypedDict, cast
 
 import numpy as np
 
@@ -366,8 +366,10 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
     return {"metrics": metrics, "scans": rows}
 
 
-SPLIT_STEPS = ("alone", "distance_known", "no_material_spread", "no_calibration_uncertainty",
-               "no_table_error")
+SplitStep = Literal["alone", "distance_known", "no_material_spread",
+                    "no_calibration_uncertainty", "no_table_error"]
+SPLIT_STEPS: tuple[SplitStep, ...] = ("alone", "distance_known", "no_material_spread",
+                                      "no_calibration_uncertainty", "no_table_error")
 """The near-edge width split, each step removing one more source of a position's thickness
 interval: the distance (known exactly), the material's spread, the calibration's stated
 uncertainty, the table's interpolation error; what is left is the shots' noise."""
@@ -399,9 +401,31 @@ def _width_at_distance(table: ModelTable, inputs: Sequence[FeatureSummary],
     return _width(est.to_dict(), t_range)
 
 
+class StepWidths(TypedDict):
+    """Medians over the near-edge positions of their 95 % widths at one step of the split
+    (None without positions)."""
+
+    median_width_m: float | None
+    median_width_rel_t: float | None
+    median_ratio_to_alone: float | None
+
+
+class WidthSplit(TypedDict):
+    positions: int
+    n_scans: int
+    seed: int
+    alone: StepWidths
+    distance_known: StepWidths
+    no_material_spread: StepWidths
+    no_calibration_uncertainty: StepWidths
+    no_table_error: StepWidths
+"""What :func:`width_split` returns: the positions, scans and seed, then one
+:class:`StepWidths` per step of :data:`SPLIT_STEPS`."""
+
+
 def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
                 diameter_m: float | None = None, measurements: str | Path | None = None
-                ) -> dict[str, Any]:
+                ) -> WidthSplit:
     """What a near-edge position's thickness interval is made of: for every position of the
     study's scans within :data:`NEAR_EDGE_M` of the edge, the width of its own 95 % interval
     (:data:`SPLIT_STEPS`): alone, then with its distance known exactly, then without the
@@ -453,7 +477,8 @@ def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
             rows.append({"thickness_m": scan.thickness_m, "distance_m": dist,
                          "widths_m": dict(zip(SPLIT_STEPS, widths, strict=True))})
     measure.save()
-    out: dict[str, Any] = {"positions": len(rows), "n_scans": n_scans, "seed": seed}
+    out: dict[str, int | StepWidths] = {"positions": len(rows), "n_scans": n_scans,
+                                        "seed": seed}
     for step in SPLIT_STEPS:
         w = np.array([r["widths_m"][step] for r in rows])
         t = np.array([r["thickness_m"] for r in rows])
@@ -461,7 +486,7 @@ def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
         out[step] = {"median_width_m": float(np.median(w)) if rows else None,
                      "median_width_rel_t": float(np.median(w / t)) if rows else None,
                      "median_ratio_to_alone": float(np.median(w / alone)) if rows else None}
-    return out
+    return cast(WidthSplit, out)
 
 
 def _rms(values: Sequence[float | None]) -> float | None:

@@ -21,9 +21,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import product
-from typing import Any
+from typing import TypedDict, cast
 
-from solitonde.instrument.studies.accuracy import BUDGETS, first_shot
+from solitonde.instrument.studies.accuracy import BUDGETS, Budget, first_shot
 from solitonde.model import greens
 from solitonde.model.scene import Scene, load_scene, scene_from_dict
 from solitonde.model.simulate import simulate
@@ -74,9 +74,70 @@ def _warm_up(pair: tuple[str, str]) -> None:
         simulate(scene, greens_cache=greens.MemoryCache())
 
 
+class TheoryRow(TypedDict):
+    """One point on both plate models: the errors of the Mindlin plate against the 3-D one,
+    whether they are within the table budget, and what each cost."""
+
+    diameter_m: float
+    thickness_m: float
+    distance_m: float
+    d_over_t: float
+    elements_mindlin: list[int]
+    tof_3d_s: float
+    arr_3d: float
+    tof_mindlin_s: float
+    arr_mindlin: float
+    tof_error: float
+    arr_error: float
+    within_budget: bool
+    wall_3d_s: float
+    wall_mindlin_s: float
+    speedup: float
+    dofs_3d: int
+    dofs_mindlin: int
+    dt_3d_s: float | None
+    dt_mindlin_s: float | None
+    energy_drift_3d: float
+    energy_drift_mindlin: float
+
+
+class OutsideBudget(TypedDict):
+    diameter_m: float
+    thickness_m: float
+    distance_m: float
+    d_over_t: float
+    tof_error: float
+    arr_error: float
+
+
+class TheorySummary(TypedDict, total=False):
+    """The worst errors, the speed-up range and the points outside the budget (empty without
+    points)."""
+
+    points: int
+    within_budget: int
+    max_tof_error: float
+    max_arr_error: float
+    speedup_min: float
+    speedup_median: float
+    outside_budget: list[OutsideBudget]
+
+
+class Comparison(TypedDict):
+    """What :func:`compare` returns (``bench-plates --json``)."""
+
+    kind: str
+    models: dict[str, str]
+    reference_mesh: str
+    budget: Budget
+    overrides: list[str]
+    rows: list[TheoryRow]
+    summary: TheorySummary
+
+
 def compare(points: Sequence[Point], kind: str = "greens",
             tick: Callable[[str], None] | None = None,
-            overrides: Sequence[str] = (), reference_mesh: str = "same-mesh") -> dict[str, Any]:
+            overrides: Sequence[str] = (), reference_mesh: str = "same-mesh") -> Comparison:
     """Run every point on both models of ``PAIRS[kind]``; rows, the budget, a summary.
 
     ``overrides`` (``key=value``) describe the user's set-up (plate material, sphere material,
@@ -93,7 +154,7 @@ def compare(points: Sequence[Point], kind: str = "greens",
         p.scene(mindlin, overrides)
     _warm_up(PAIRS[kind])
     budget = BUDGETS["table_build"]
-    rows = []
+    rows: list[TheoryRow] = []
     for p in points:
         scene = p.scene(mindlin, overrides)
         elements = mindlin_elements(scene)
@@ -123,7 +184,7 @@ def compare(points: Sequence[Point], kind: str = "greens",
             "overrides": list(overrides), "rows": rows, "summary": summary(rows)}
 
 
-def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+def summary(rows: Sequence[TheoryRow]) -> TheorySummary:
     """Worst errors, the speed-up range and the scenes outside the budget."""
     if not rows:
         return {}
@@ -135,7 +196,7 @@ def summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "speedup_min": min(r["speedup"] for r in rows),
         "speedup_median": sorted(r["speedup"] for r in rows)[len(rows) // 2],
         "outside_budget": [
-            {k: r[k] for k in ("diameter_m", "thickness_m", "distance_m", "d_over_t",
-                               "tof_error", "arr_error")}
+            cast(OutsideBudget, {k: r[k] for k in ("diameter_m", "thickness_m", "distance_m",
+                                                   "d_over_t", "tof_error", "arr_error")})
             for r in rows if not r["within_budget"]],
     }

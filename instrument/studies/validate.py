@@ -61,7 +61,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, NotRequired, TypedDict
+from typing import Any, NotRequired, TypedDict, cast
 
 import numpy as np
 
@@ -78,6 +78,7 @@ from solitonde.instrument.studies.validate_scores import (
     DistanceBinScore,
     DrawnMaterial,
     MeasuredPlate,
+    MeasuredSize,
     PlateScore,
     by_distance,
     counts,
@@ -126,7 +127,7 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
     rng = np.random.default_rng(seed)
     family = scene_from_dict(dict(base))
     plate_cache = greens.MemoryCache()  # one response serves every sphere size of this plate
-    summaries: dict[float, dict[str, Any] | None] = {}  # FeatureSummary's fields, as JSON
+    summaries: dict[float, MeasuredSize | None] = {}
     started = time.perf_counter()
     for d in sorted(diameters, reverse=True):
         result = simulate(scene_from_dict(_scene_dict(base, d, thickness_m, distance_m)),
@@ -146,8 +147,8 @@ def measure_plate(base: Mapping[str, Any], diameters: Sequence[float], thickness
         # what the inversion reads of these shots (no reflection: the ARR bound alone), or
         # None where they give nothing (SizeSummary.skip_reason says why)
         size = SizeSummary(d, aggregate(feats)) if feats else None
-        summaries[d] = None if size is None or size.skip_reason() is not None else {
-            **asdict(size.inputs()), "plate_model": result.plate_model}
+        summaries[d] = None if size is None or size.skip_reason() is not None else cast(
+            MeasuredSize, {**asdict(size.inputs()), "plate_model": result.plate_model})
     return {"thickness_m": thickness_m, "distance_m": distance_m, "summaries": summaries,
             "wall_s": time.perf_counter() - started}
 

@@ -24,7 +24,7 @@ from solitonde.instrument.inference.calibration import (
 )
 from solitonde.instrument.inference.fine_grid import fine_grid
 from solitonde.instrument.inference.inversion import invert
-from solitonde.instrument.inference.inversion_inputs import FeatureSummary
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary, FeatureSummaryDict
 from solitonde.instrument.tables.table import ModelTable
 
 if TYPE_CHECKING:
@@ -54,6 +54,13 @@ class DrawnMaterial(TypedDict):
     density: float
 
 
+class MeasuredSize(FeatureSummaryDict):
+    """What one sphere size's noisy shots gave: the inversion's inputs, and the plate model
+    simulated."""
+
+    plate_model: str
+
+
 class MeasuredPlate(TypedDict):
     """One simulated plate and what its noisy shots gave per sphere size: the inversion's
     inputs (``FeatureSummary`` as a mapping, with the ``plate_model`` simulated) or None where
@@ -61,7 +68,7 @@ class MeasuredPlate(TypedDict):
 
     thickness_m: float
     distance_m: float
-    summaries: dict[float, dict[str, Any] | None]  # FeatureSummary's fields, as JSON
+    summaries: dict[float, MeasuredSize | None]
     wall_s: float
 
 
