@@ -18,7 +18,7 @@ from solitonde.instrument.inference.calibration_fit import Reference, fit_calibr
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.parallel import run_tasks
 from solitonde.instrument.studies import validate as single
-from solitonde.instrument.studies.validate_scores import MeasuredPlate
+from solitonde.instrument.studies.validate_scores import MeasuredPlate, MeasuredSize
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.atomic import write_text
 from solitonde.signal.features import EXTRACTOR_VERSION
@@ -38,7 +38,8 @@ class Measurer:
     def __init__(self, base: Mapping[str, Any], path: str | Path | None) -> None:
         self.base = dict(base)
         self.path = Path(path) if path is not None else None
-        self.cache: dict[str, Any] = {}
+        self.cache: dict[str, dict[str, MeasuredSize | None]] = {}
+        """Per :meth:`key`, each sphere size's (as text) measured summary."""
         if self.path is not None and self.path.is_file():
             try:
                 data = json.loads(self.path.read_text(encoding="utf-8"))
