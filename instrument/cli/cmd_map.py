@@ -255,7 +255,7 @@ def _print_joint(plate_map: PlateMap) -> None:
             line += f"  (not in the joint answer: {p['joint_reason']})"
         typer.echo(line)
     fit = plate_map.get("fit")
-    if fit is not None and fit["chi2"] is not None:
+    if fit and fit["chi2"] is not None:
         typer.echo(f"fit: chi2 {fit['chi2']:.3g} for {fit['dof']:.3g} dof, p = "
                    f"{fit['p_value']:.3g}")
     for w in plate_map.get("warnings", []):
