@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, cast
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
 
@@ -191,11 +191,7 @@ def map_command(
     typer.echo(f"plate {plate_id}: {plate_map['n_positions']} positions, "
                f"{plate_map['n_scan_positions']} with coordinates")
     if support:
-        lo, hi = support["ci95_offset_m"]
-        typer.echo(f"support: x cos({support['normal_angle_deg']:.2f} deg) + y sin(...) = "
-                   f"{support['offset_m'] * 1e3:.2f} mm (95 % {lo * 1e3:.2f}..{hi * 1e3:.2f} mm), "
-                   f"{support['n_positions']} positions, rms residual "
-                   f"{cast(float, support['residual_m']) * 1e3:.2f} mm")
+        typer.echo(support_line(support))
     else:
         typer.echo(f"support: not located ({plate_map['support_reason']})")
     if plate_map.get("joint"):
@@ -265,3 +261,15 @@ def _print_joint(plate_map: PlateMap) -> None:
 def register(app: typer.Typer) -> None:
     """Add `map` to the CLI."""
     app.command("map")(map_command)
+
+
+def support_line(support: Mapping[str, Any]) -> str:
+    """The located edge as printed. A joint fit whose positions have no constrained distance
+    has no residual to state: it says so instead of failing."""
+    lo, hi = support["ci95_offset_m"]
+    residual = support.get("residual_m")
+    rms = ("n/a (no position's distance is constrained)" if residual is None
+           else f"{residual * 1e3:.2f} mm")
+    return (f"support: x cos({support['normal_angle_deg']:.2f} deg) + y sin(...) = "
+            f"{support['offset_m'] * 1e3:.2f} mm (95 % {lo * 1e3:.2f}..{hi * 1e3:.2f} mm), "
+            f"{support['n_positions']} positions, rms residual {rms}")

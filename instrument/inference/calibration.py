@@ -5,10 +5,10 @@ Real chains lose energy the elastic model does not (contact damping, friction, p
 measured ARR sits below the simulated one, and by how much depends on the plate. With
 Kuwabara-Kono damping the loss is 7.7 % of ARR on a 5.5 mm aluminium plate far from the supports
 but 2-5 % on 2.4-3.0 mm ones, and a thin plate's reflection moves by up to tens of microseconds
-(docs/inversion.md, "Dissipation"): one factor and offset fitted on one plate do not carry to
-another. So where the table has a dissipation layer (instrument.tables.dissipation: the sweep
-simulated again with damping), a calibration first fits the chain's Kuwabara-Kono time constant
-``damping_s`` (with ``damping_std_s``) and the inversion reads the table at it
+(docs/explanation/inversion.md, "Dissipation"): one factor and offset fitted on one plate do not
+carry to another. So where the table has a dissipation layer (instrument.tables.dissipation:
+the sweep simulated again with damping), a calibration first fits the chain's Kuwabara-Kono
+time constant ``damping_s`` (with ``damping_std_s``) and the inversion reads the table at it
 (:func:`calibrated_table`); the ARR factor and TOF offset then hold what damping leaves (about 1
 and 0 for a chain whose losses are contact damping). Without the layer, the factor and offset are
 the whole calibration, as before.

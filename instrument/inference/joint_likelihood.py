@@ -20,8 +20,8 @@ POSITION_SD_M = 1.0e-3
 the coordinates' own error (the chain's contact point against the mark, read off a rule), so a
 joint edge is not sharper than the positions can place it. (It was first sized for a distance
 axis 10 mm apart next to the clamp too; the axis is 2.5 mm apart there now, and the value was
-kept: in the map study dropping it did not narrow the edge's angle, docs/joint-map.md.) Each
-position's likelihood is averaged over it along L."""
+kept: in the map study dropping it did not narrow the edge's angle, docs/explanation/joint-map.md.)
+Each position's likelihood is averaged over it along L."""
 
 
 @dataclass

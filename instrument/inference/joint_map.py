@@ -35,7 +35,7 @@ unknown:
   single inversion's (:mod:`.adequacy`) it leaves out the deviance's log-determinant, which
   varies across the posterior with the model's stated error and summed over a scan's positions
   took p_D to 18.5 for 10 positions of a 1.93 mm plate (12 parameters): five of the map study's
-  30 right-family scans were flagged so, none now; docs/joint-map.md). A single
+  30 right-family scans were flagged so, none now; docs/explanation/joint-map.md). A single
   position near a support fits any edge and leaves no degree of freedom; together they test the
   edge. Below ``p = 0.001`` the joint answers are marked ``inconsistent`` and the warning names
   the positions that disagree most.
@@ -55,7 +55,8 @@ unknown:
   a few us); counted per position, the offset's 12 us also covers that. The ARR factor's
   uncertainty stays per position (the study's calibration states 0.4 %, a fifth of the table's
   own ARR error next to a clamp), and so does the plate material's spread (E +- 0.8 %: it does
-  not change a near-edge position's thickness interval at two decimals, docs/joint-map.md).
+  not change a near-edge position's thickness interval at two decimals,
+  docs/explanation/joint-map.md).
 """
 
 from __future__ import annotations
@@ -145,7 +146,7 @@ def posterior(table: ModelTable, positions: Sequence[ScanPosition],
     integrated over once (one calibration, one plate); by default it is taken per position, as
     each position's own inversion takes it, which the map study found keeps the thickness
     answers' coverage (sharing it narrows them too far: the offset's error is not one number
-    for a plate, docs/joint-map.md).
+    for a plate, docs/explanation/joint-map.md).
 
     Raises JointMapError (``positions``) when no position can enter it, or (``joint``) for a
     family whose supports are not a line's angle and offset."""

@@ -22,7 +22,7 @@ SPREAD_RANGE = (1e-3, 1.0)
 HYPER_STRIDE = 8
 """The common mean's grid: every 8th fine thickness (4 per table interval, 2.3 % apart on the
 bundled tables' 16 thickness nodes). A spread well below that is under-resolved: the mean's
-interval snaps to the grid's nodes (docs/joint-map.md)."""
+interval snaps to the grid's nodes (docs/explanation/joint-map.md)."""
 
 
 class JointMapError(InstrumentError, ValueError):

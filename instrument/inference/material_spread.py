@@ -37,8 +37,8 @@ the slopes, by up to 2.5 times in ARR: the intervals there are wider than they n
 narrower). Why not a material axis or a marginal over nearby families: a material axis
 multiplies a build's cost by its points near the supports (the meshed plate, about a second a
 point), and a marginal over the grade's box does not cover a plate at its corner either (the
-data do not tell the material from the thickness: docs/inversion.md); far from the supports the
-slopes cost 4 runs a node.
+data do not tell the material from the thickness: docs/explanation/inversion.md); far from the
+supports the slopes cost 4 runs a node.
 """
 
 from __future__ import annotations

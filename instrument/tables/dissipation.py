@@ -5,8 +5,9 @@ a measured reflection is weaker than the model's and, where the plate is thin, a
 another time. How much weaker is not one factor: with Kuwabara-Kono damping (tau = 1e-7 s, the
 synthetic studies' chain) ARR falls by 7.7 % on a 5.5 mm aluminium plate far from the supports,
 by 2-5 % on 2.4-3.0 mm plates, by 8 % within 20 mm of a clamp, and a thin plate's reflection
-moves by up to tens of microseconds (docs/inversion.md, "Dissipation"). A calibration that scales
-the elastic model by one ARR factor cannot follow that; runs of the model with damping can.
+moves by up to tens of microseconds (docs/explanation/inversion.md, "Dissipation"). A calibration
+that scales the elastic model by one ARR factor cannot follow that; runs of the model with damping
+can.
 
 The layer is the table's sweep simulated again with ``effects.dissipation`` on, at a few
 Kuwabara-Kono time constants (:data:`DEFAULT_DAMPINGS_S`), stored in the table file as the group
@@ -31,7 +32,7 @@ loss is smooth in tau. With the slices at 0.7, 1.2 and 2 x 1e-7 s, against the m
 and 1.35 x 1e-7 s at 44 random points (D 9.53 mm, t 1.9-6 mm, L 3-450 mm), the read's misses in
 units of its stated error (with the elastic table's interpolation error) had an rms of 0.91 in
 ARR and 0.74 in TOF, the largest 2.2 (one point in 44 each); without the uniform spread they
-were 1.57 and 0.98, the largest 4.4 (docs/inversion.md, "Dissipation"). The fitted tau's
+were 1.57 and 0.98, the largest 4.4 (docs/explanation/inversion.md, "Dissipation"). The fitted tau's
 uncertainty adds ``(sd_tau * dF/dtau)^2``. A node where a slice lost the reflection the elastic
 table has takes the relative loss of its row's nearest node with both, all of it as error.
 

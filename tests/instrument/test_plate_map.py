@@ -346,3 +346,14 @@ def test_the_services_map_jointly_with_suggestions(scanned):
                                            "--json"])
     assert res.exit_code == 0, res.output
     _joint_checks(json.loads(res.stdout))
+
+
+def test_an_edge_without_a_residual_prints_instead_of_failing() -> None:
+    """A joint edge whose positions have no constrained distance has no rms residual (None):
+    the map command says so rather than raising on None * 1e3."""
+    from solitonde.instrument.cli.cmd_map import support_line
+
+    edge = {"normal_angle_deg": 0.0, "offset_m": 0.001, "ci95_offset_m": [-0.002, 0.004],
+            "n_positions": 3, "residual_m": None}
+    assert support_line(edge).endswith("rms residual n/a (no position's distance is constrained)")
+    assert support_line({**edge, "residual_m": 0.00022}).endswith("rms residual 0.22 mm")
