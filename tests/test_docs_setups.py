@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from doc_examples import DECIMAL, figure_paragraphs, json_numbers, unbacked_numbers
+from doc_examples import decimals, figure_paragraphs, json_numbers, unbacked_numbers
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "how-to" / "setups.md"
@@ -93,7 +93,7 @@ def write_figures(figures: dict[str, dict], printed: list[str]) -> None:
     """docs/figures/setups-walk.json: the walk's estimates; the default run checks the page's
     table against it (tests/test_docs_examples.py)."""
     # the shown lines were each found in the walk's output above: their numbers are its own
-    numbers = [float(x) for line in printed for x in DECIMAL.findall(line)]
+    numbers = [float(x) for line in printed for x in decimals(line)]
     data = {"command": "pytest -m slow tests/test_docs_setups.py --timeout 0",
             "figures": {"estimates": figures, "printed": numbers}}
     FIGURES.write_text(json.dumps(data, indent=1) + "\n")

@@ -36,7 +36,7 @@ FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```", re.S | re.M)
 OPTION = re.compile(r"<!--\s*doc-test:\s*(.*?)\s*-->\s*$")
 FIGURES = re.compile(r"<!--\s*doc-figures:\s*(.*?)\s*-->")
 NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
-DECIMAL = re.compile(r"(?<![\w.])\d+\.\d+(?:e-?\d+)?(?![\w.])")
+DECIMAL = re.compile(r"(?<![\w.])\d+\.\d+(?:e-?\d+)?(?!\w|\.\d)")
 
 
 @dataclass(frozen=True)
@@ -174,6 +174,11 @@ def json_numbers(value: object) -> list[float]:
 SCALES = (1.0, 100.0, 1e3, 1e6)
 
 
+def decimals(text: str) -> list[str]:
+    """The decimal numbers of a text as written: ``3.502..5.422`` is two, a full stop ends one."""
+    return DECIMAL.findall(text.replace("..", " .. "))
+
+
 def shows(value: float, token: str) -> bool:
     """Whether ``value`` (or its size) written with the token's digits is the token."""
     mantissa, _, exponent = token.partition("e")
@@ -186,7 +191,7 @@ def shows(value: float, token: str) -> bool:
 def unbacked_numbers(paragraph: str, values: list[float]) -> list[str]:
     """The decimal numbers of a paragraph (signs and range hyphens aside) that no value shows."""
     finite = [v * s for v in values if math.isfinite(v) for s in SCALES]
-    return [token for token in DECIMAL.findall(paragraph)
+    return [token for token in decimals(paragraph)
             if not any(shows(v, token) for v in finite)]
 
 
