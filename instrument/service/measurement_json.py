@@ -108,8 +108,8 @@ class MetadataDifference(TypedDict):
     sent: Any
 
 
-class MeasurementJSON(TypedDict):
-    """A stored measurement as the API returns it (``MeasurementOut``'s keys)."""
+class MeasurementHead(TypedDict):
+    """What a measurement's full answer and its listing line both begin with."""
 
     id: int
     created_at: float
@@ -117,6 +117,11 @@ class MeasurementJSON(TypedDict):
     position: str | None
     n_shots: int
     source: str
+
+
+class MeasurementJSON(MeasurementHead):
+    """A stored measurement as the API returns it (``MeasurementOut``'s keys)."""
+
     shots: list[ShotJSON]
     aggregates: list[SizeSummaryDict]
     estimate: TableEstimateDict | None
@@ -132,15 +137,9 @@ class MeasurementJSON(TypedDict):
     """An upload's channels not analysed: ``{"channel", "reason"}``."""
 
 
-class MeasurementLine(TypedDict):
+class MeasurementLine(MeasurementHead):
     """One line of a measurement listing (``MeasurementSummary``'s keys)."""
 
-    id: int
-    created_at: float
-    plate_id: str | None
-    position: str | None
-    n_shots: int
-    source: str
     aggregates: list[SizeSummaryDict]
     estimate: TableEstimateDict | None
     table: str | None
