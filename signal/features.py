@@ -103,13 +103,20 @@ class Features:
             for f in fields(cls) if f.name in data}
         return cls(**values)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> FeatureDict:
         """JSON-safe dict with unit-carrying keys, in field order; lists copied."""
-        out: dict[str, Any] = {}
+        out: FeatureDict = {}
         for f in fields(self):
             value = getattr(self, f.name)
             out[f.name] = list(value) if f.metadata["kind"] in ("series", "flags") else value
         return out
+
+
+FeatureValue = float | str | list[float] | list[str] | None
+"""One feature's JSON value: a number or None, a list of numbers (a series) or of flag names, or
+a tag a door adds (``baseline``; ``error`` where no pulse was found)."""
+FeatureDict = dict[str, FeatureValue]
+"""A shot's features as JSON (:meth:`Features.to_dict`), keyed by field name."""
 
 
 FEATURES = tuple(f.name for f in fields(Features) if f.metadata.get("summarised"))

@@ -113,6 +113,10 @@ SHAPE_SKEW = 0.0045
 MAX_ITER = 50
 
 
+DetectKeywords = dict[str, float | str | None]
+"""Some of :class:`DetectOptions`' fields as JSON keywords (a model table's ``detect``)."""
+
+
 @dataclass(frozen=True)
 class DetectOptions:
     """Tuning of :func:`detect`; every field can be passed as a keyword to ``detect``/``extract``.

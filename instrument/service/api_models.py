@@ -256,6 +256,15 @@ class ShotOut(BaseModel):
         description="what the extractor read of the shot (each field says which reading)")
 
 
+class MetadataDifferenceOut(BaseModel):
+    """A metadata key a repeated post states otherwise than the stored shot."""
+
+    shot: int = Field(description="the shot's index")
+    key: str
+    stored: Any = Field(description="the stored measurement's value")
+    sent: Any = Field(description="the request's value")
+
+
 class MeasurementOut(BaseModel):
     """A stored measurement: features per shot, aggregates, estimate."""
 
@@ -288,7 +297,7 @@ class MeasurementOut(BaseModel):
     links: dict[str, str] = Field(default_factory=dict)
     duplicate_of: int | None = Field(None, description="on a 200 to a post: the stored "
                                      "measurement whose samples these shots are, in order")
-    metadata_differences: list[dict[str, Any]] | None = Field(
+    metadata_differences: list[MetadataDifferenceOut] | None = Field(
         None, description="on a 200 to a post: per shot, what the request's metadata says "
         "otherwise than the stored measurement's (shot, key, stored, sent)")
     skipped_channels: list[dict[str, str]] = Field(

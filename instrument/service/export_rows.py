@@ -15,15 +15,19 @@ from solitonde.instrument.service.measurement_json import StoredResult
 from solitonde.instrument.service.problems import Problem
 from solitonde.instrument.service.state import Service
 from solitonde.instrument.service.store import Store
+from solitonde.signal.features import FeatureDict
 
 EXPORT_COLUMNS = ("measurement_id", "created_at", "plate_id", "position", "shot_index",
                   "shot", "sphere_diameter", "t0_s", "dt_s", "units", "calibration",
                   "n_samples")
 """The columns :func:`shot_rows` puts before each shot's features."""
 
+Cell = str | float | int | None
+"""One value of an export row: CSV and Parquet hold one scalar per cell."""
+
 
 def shot_rows(store: Store, plate_id: str | None = None,
-              limit: int = 200_000) -> Iterator[dict[str, Any]]:
+              limit: int = 200_000) -> Iterator[dict[str, Cell]]:
     """Flat rows (one per shot, features spread into columns) for export."""
     sql = ("SELECT m.id, m.created_at, m.plate_id, m.position, s.shot_index, s.t0, s.dt, "
            "s.units, s.calibration, s.n_samples, s.metadata, s.features "
@@ -45,17 +49,10 @@ def shot_rows(store: Store, plate_id: str | None = None,
         }
 
 
-def _flat(features: dict[str, Any]) -> dict[str, Any]:
+def _flat(features: FeatureDict) -> dict[str, Cell]:
     """Scalar features as columns; lists joined so CSV and Parquet hold one value per cell."""
-    out: dict[str, Any] = {}
-    for key, value in features.items():
-        if isinstance(value, list | tuple):
-            out[key] = ";".join(str(v) for v in value)
-        elif isinstance(value, dict):
-            out[key] = json.dumps(value)
-        else:
-            out[key] = value
-    return out
+    return {key: ";".join(str(v) for v in value) if isinstance(value, list) else value
+            for key, value in features.items()}
 
 
 class MeasurementEstimateRow(EstimateRow):

@@ -13,6 +13,7 @@ from typing import Any, NotRequired, TypedDict
 from solitonde.instrument.inference.calibration import CalibrationDict
 from solitonde.instrument.inference.pipeline import SizeSummaryDict, TableEstimateDict
 from solitonde.instrument.inference.setups import SetupReference
+from solitonde.signal.features import FeatureDict
 
 
 class TableRef(TypedDict):
@@ -89,7 +90,7 @@ class ShotJSON(TypedDict):
     t0: float
     dt: float
     units: str
-    features: dict[str, Any]
+    features: FeatureDict
     """The extractor's reading (:class:`~.api_models.ShotFeatures`'s keys, and any a later
     extractor adds) and the baseline it used."""
 
@@ -162,4 +163,4 @@ class StoredShot(TypedDict):
     units: str
     calibration: float | None
     metadata: dict[str, Any]
-    features: dict[str, Any]
+    features: FeatureDict

@@ -117,6 +117,13 @@ class Problem(InstrumentError):
                             media_type=PROBLEM_MEDIA_TYPE, headers=self.headers)
 
 
+class FieldErrorModel(BaseModel):
+    """One failing field of a 422: its dotted path and what is wrong with it."""
+
+    field: str
+    message: str
+
+
 class ProblemModel(BaseModel):
     """Schema of a problem+json body (for the OpenAPI document)."""
 
@@ -126,7 +133,7 @@ class ProblemModel(BaseModel):
     detail: str
     instance: str | None = None
     field: str | None = None
-    errors: list[dict[str, Any]] | None = None
+    errors: list[FieldErrorModel] | None = None
 
 
 PROBLEM_RESPONSE: dict[str, Any] = {"model": ProblemModel,

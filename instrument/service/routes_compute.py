@@ -34,6 +34,7 @@ from solitonde.instrument.service.authentication import AUTH
 from solitonde.instrument.service.dependencies import ServiceDep, require_json
 from solitonde.instrument.service.problems import ERRORS, PROBLEM_RESPONSE, Problem, from_pydantic
 from solitonde.instrument.service.work_lanes import run_for_client
+from solitonde.signal.features import FeatureDict
 from solitonde.signal.json_ready import json_ready
 
 router = APIRouter(tags=["compute"], dependencies=[AUTH])
@@ -67,7 +68,7 @@ class SimulationJSON(TypedDict):
     n_samples: int
     samples: list[float] | None
     units: str
-    features: dict[str, Any]
+    features: FeatureDict | dict[str, str]
     """The extractor's reading of the trace (or ``{"error"}``), JSON-ready."""
     diagnostics: dict[str, Any]
     """The model's own diagnostics and truth, JSON-ready."""

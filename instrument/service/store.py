@@ -42,6 +42,7 @@ from solitonde.instrument.service.trace_codec import (
     encode_samples,
 )
 from solitonde.instrument.service.trace_codec import samples_digest as samples_digest
+from solitonde.signal.features import FeatureDict
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS measurements (
@@ -168,7 +169,7 @@ class ShotRecord:
     units: str
     calibration: float | None
     metadata: dict[str, Any]
-    features: dict[str, Any]
+    features: FeatureDict
     shot_index: int = 0
     n_samples: int = -1
     sha256: str | None = None
@@ -409,7 +410,7 @@ class Store:
         return new_id, now
 
     def replace_result(self, measurement_id: int, result: StoredResult,
-                       shot_features: Sequence[dict[str, Any]],
+                       shot_features: Sequence[FeatureDict],
                        setup: tuple[str, int] | None = None) -> float:
         """Make ``result`` (and each shot's ``shot_features``) the measurement's newest, keeping
         the one it replaces in ``earlier_results``; one transaction. Returns the time.

@@ -14,6 +14,7 @@ import numpy as np
 from solitonde.instrument.tables.table import SweepDict, TableError
 from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
 from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
+from solitonde.signal.pulses import DetectKeywords
 
 #: The paper's sphere sizes (3/16, 3/8, 3/4 in).
 PAPER_DIAMETERS_M = (4.76e-3, 9.53e-3, 19.05e-3)
@@ -37,7 +38,7 @@ class Sweep:
     distances_m: list[float]
     scene: dict[str, Any] = field(default_factory=dict)
     traces: bool = False
-    detect: dict[str, Any] = field(default_factory=dict)
+    detect: DetectKeywords = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for name in ("diameters_m", "thicknesses_m", "distances_m"):

@@ -38,6 +38,7 @@ import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
 from solitonde.model.scene import PLATE_MODELS
+from solitonde.signal.pulses import DetectKeywords
 
 if TYPE_CHECKING:
     from solitonde.instrument.tables.family import Family
@@ -136,7 +137,7 @@ class SweepDict(TypedDict):
     distances_m: list[float]
     scene: dict[str, Any]
     traces: bool
-    detect: dict[str, Any]
+    detect: DetectKeywords
 
 
 class AxisSummary(TypedDict):
