@@ -17,7 +17,7 @@ FUNCTION_LINES = 100
 LONG_FUNCTIONS = {("model/dopri.py", "integrate_dopri5"),
                   ("model/sem_kernels.py", "_sumfact_elements"),
                   ("signal/pulses.py", "detect")}
-LOOSE_DICTS = 91
+LOOSE_DICTS = 72
 """Today's count, which may only fall; the aim is 60. What is left is mostly free-form (shot
 metadata, scenes, what a client states, OpenAPI fragments) and the response models' fields,
 where a type would change the published schema."""

@@ -7,11 +7,14 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import typer
 
 from solitonde.instrument.cli.common import table_path
+
+if TYPE_CHECKING:
+    from solitonde.instrument.studies.map_metrics import MapMetrics
 
 
 def _fail(message: str, code: int = 1) -> NoReturn:
@@ -103,10 +106,10 @@ def validate_map_command(
         typer.echo(line)
 
 
-def report_lines(m: dict[str, Any]) -> list[str]:
-    """The study's figures as the docs print them."""
-    def num(v: float | None, fmt: str = ".3f") -> str:
-        return "-" if v is None else format(v, fmt)
+def report_lines(m: MapMetrics) -> list[str]:
+    """The study's figures as the docs print them ("-" where a figure has no value)."""
+    def num(v: float | None, fmt: str = ".3f", scale: float = 1.0) -> str:
+        return "-" if v is None else format(v * scale, fmt)
 
     lines = [f"map study on {m['table']}: {m['n_scans']} scans, seed {m['seed']}, D "
              f"{m['diameter_m'] * 1e3:.2f} mm"
@@ -115,47 +118,54 @@ def report_lines(m: dict[str, Any]) -> list[str]:
                 if m.get("truth_plate_theory", "auto") != "auto" else "")
              + f", {m['simulated_positions']} positions simulated "
              f"({m['simulation_wall_s']:.0f} s), {m['wall_s']:.0f} s in all"]
-    names = {"alone": "position by position", "free": "joint, thickness free",
-             "common": "joint, common mean (5 %)"}
-    for key, name in names.items():
-        t, e = m[f"thickness_{key}"], m[f"edge_{key}"]
+    kinds = (("position by position", m["thickness_alone"], m["edge_alone"]),
+             ("joint, thickness free", m["thickness_free"], m["edge_free"]),
+             ("joint, common mean (5 %)", m["thickness_common"], m["edge_common"]))
+    for name, t, e in kinds:
         lines.append(f"  {name}: thickness coverage {num(t['coverage_95'])} ({t['answers']} "
                      f"answers of {t['positions']}); within {30} mm of the edge median 95 % "
-                     f"width {num(t['near_edge_width_median_m'] * 1e3, '.2f')} mm "
+                     f"width {num(t['near_edge_width_median_m'], '.2f', 1e3)} mm "
                      f"({num(t['near_edge_width_median_rel'], '.3f')} of t, "
                      f"{t['near_edge_positions']} positions); edge offset coverage "
                      f"{num(e['coverage_95'])} ({e['located']} of {e['scans']} located; "
-                     f"error over stated sd, rms {num(e.get('offset_z_rms'), '.2f')}), median "
-                     f"error {num((e['error_median_m'] or 0) * 1e3, '.2f')} mm, median 95 % "
-                     f"width {num((e['ci95_width_median_m'] or 0) * 1e3, '.1f')} mm")
+                     f"error over stated sd, rms {num(e['offset_z_rms'], '.2f')}), median "
+                     f"error {num(e['error_median_m'], '.2f', 1e3)} mm, median 95 % "
+                     f"width {num(e['ci95_width_median_m'], '.1f', 1e3)} mm")
         if "angle_coverage_95" in e:
             lines.append(f"    the edge as the scan sees it: angle coverage "
                          f"{num(e['angle_coverage_95'])} (rms z "
                          f"{num(e.get('angle_z_rms'), '.2f')}; median 95 % width "
-                         f"{num(e['angle_ci95_width_median_deg'], '.2f')} deg); where it lies "
-                         f"at the positions' centroid: coverage {num(e['at_scan_coverage_95'])} "
-                         f"(rms z {num(e.get('at_scan_z_rms'), '.2f')}; "
-                         f"median 95 % width {e['at_scan_ci95_width_median_m'] * 1e3:.1f} mm; "
+                         f"{num(e.get('angle_ci95_width_median_deg'), '.2f')} deg); where it "
+                         f"lies at the positions' centroid: coverage "
+                         f"{num(e.get('at_scan_coverage_95'))} (rms z "
+                         f"{num(e.get('at_scan_z_rms'), '.2f')}; median 95 % width "
+                         f"{num(e.get('at_scan_ci95_width_median_m'), '.1f', 1e3)} mm; "
                          f"{num(e.get('at_scan_coverage_95_direction_fixed'))} over the "
                          f"{e.get('direction_fixed_scans')} scans whose direction is fixed); "
                          f"the frame's origin lies a median "
-                         f"{e['lever_median_m'] * 1e3:.0f} mm along the edge from them")
+                         f"{num(e.get('lever_median_m'), '.0f', 1e3)} mm along the edge from "
+                         "them")
     lines.append("  (rms z: each miss over the sd its 95 % interval states; 1 where the intervals "
                  "are as wide as the errors, below 1 where they are wider)")
-    for strategy in ("suggested", "random_near_edge", "random_on_plate"):
-        s = m.get(f"sequence_{strategy}")
-        if not s:
+    sequences = (("suggested", m.get("sequence_suggested")),
+                 ("random_near_edge", m.get("sequence_random_near_edge")),
+                 ("random_on_plate", m.get("sequence_random_on_plate")))
+    for strategy, seq in sequences:
+        if not seq:
             continue
         curve = ", ".join(f"{k}: {v * 1e3:.1f}" for k, v in
-                          s["edge_error_median_m_by_positions"].items())
+                          seq["edge_error_median_m_by_positions"].items())
         lines.append(f"  {strategy}: median edge error (mm) by positions {curve}; 5 mm reached "
-                     f"in {s['reached_target']} of {s['scans']} scans, median positions "
-                     f"{num(s['positions_to_target_median'], '.1f')}")
-    for other in ("random_near_edge", "random_on_plate"):
-        if f"suggested_fewer_than_{other}" in m:
-            lines.append(f"  suggested needed fewer positions than {other} in "
-                         f"{m[f'suggested_fewer_than_{other}']} scans, more in "
-                         f"{m[f'suggested_more_than_{other}']}")
+                     f"in {seq['reached_target']} of {seq['scans']} scans, median positions "
+                     f"{num(seq['positions_to_target_median'], '.1f')}")
+    against = (("random_near_edge", m.get("suggested_fewer_than_random_near_edge"),
+                m.get("suggested_more_than_random_near_edge")),
+               ("random_on_plate", m.get("suggested_fewer_than_random_on_plate"),
+                m.get("suggested_more_than_random_on_plate")))
+    for other, fewer, more in against:
+        if fewer is not None:
+            lines.append(f"  suggested needed fewer positions than {other} in {fewer} scans, "
+                         f"more in {more}")
     return lines
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import csv
 import glob
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypedDict
@@ -74,6 +74,7 @@ def load(path: Path) -> list[Row]:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise ManifestError(f"--manifest: cannot read {str(path)!r} ({exc})") from None
+    records: Sequence[tuple[str, Mapping[str, Any]]]
     if suffix == ".csv":
         records = _csv_records(text, path)
     elif suffix in (".yaml", ".yml"):
@@ -85,7 +86,8 @@ def load(path: Path) -> list[Row]:
     return [_row(where, record) for where, record in records]
 
 
-def _csv_records(text: str, path: Path) -> list[tuple[str, dict[str, Any]]]:
+def _csv_records(text: str, path: Path) -> list[tuple[str, dict[str, str | None]]]:
+    """Each row's cells as text (None where the row is short), named by the header."""
     lines = [line for line in text.splitlines() if line.strip() and not line.startswith("#")]
     if not lines:
         return []

@@ -4,7 +4,7 @@ positions are added. Written as JSON by ``validate-map --out``, keys in order.""
 
 from __future__ import annotations
 
-from typing import Any, Literal, NotRequired, TypedDict
+from typing import Literal, NotRequired, TypedDict
 
 from solitonde.instrument.inference.joint_summary import JointFit
 
@@ -91,14 +91,6 @@ class ScanRow(TypedDict):
     edge_common: EdgeScore | None
     edge_alone: EdgeScore
     sequence: NotRequired[dict[str, SequenceScore]]
-
-
-class StudyResult(TypedDict):
-    """The study (:func:`.map_study.run`): the summary metrics (keyed by answer kind and
-    strategy, as :func:`.map_study.summarise` names them) and the scans' rows."""
-
-    metrics: dict[str, Any]
-    scans: list[ScanRow]
 
 
 class SplitRow(TypedDict):

@@ -56,7 +56,7 @@ from solitonde.instrument.inference.edge_fit import locate
 from solitonde.instrument.inference.inversion import invert
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.joint_likelihood import POSITION_SD_M
-from solitonde.instrument.inference.joint_summary import WIDE_ANGLE_DEG, JointAnswer
+from solitonde.instrument.inference.joint_summary import JointAnswer
 from solitonde.instrument.studies import validate as single  # noqa: F401 (measures the positions)
 from solitonde.instrument.studies.map_measurer import (
     Measurer,
@@ -64,16 +64,22 @@ from solitonde.instrument.studies.map_measurer import (
     reference_calibration,
     references,
 )
+from solitonde.instrument.studies.map_metrics import (
+    NEAR_EDGE_M,
+    START_POSITIONS,
+    STRATEGIES,
+    TARGET_ERROR_M,
+    MapMetrics,
+    StudyResult,
+    summarise,
+)
 from solitonde.instrument.studies.map_rows import (
-    ANSWER_KINDS,
-    AnswerKind,
     EdgeAtScan,
     EdgeScore,
     PositionScore,
     ScanRow,
     SequenceScore,
     SplitRow,
-    StudyResult,
     ThicknessScore,
 )
 from solitonde.instrument.studies.map_scan import (
@@ -88,13 +94,6 @@ from solitonde.instrument.studies.validate_scores import ANSWERS
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.model.scene import apply_overrides
 
-START_POSITIONS = 3
-NEAR_EDGE_M = 0.03
-TARGET_ERROR_M = 0.005
-STRATEGIES = ("suggested", "random_near_edge", "random_on_plate")
-"""How the positions after the first three are chosen: the joint posterior's suggestion;
-at random as the first ones were (near the true edge: an operator who already knows roughly
-where the support is); at random anywhere on the plate."""
 COMMON_SPREAD = 0.05
 TRUTH_PLATE_THEORIES = ("auto", "3d", "mindlin")
 """``sem.plate_theory`` of the simulated plates (:func:`run`)."""
@@ -355,14 +354,13 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
         measure.save()
         if progress is not None:
             progress("scans scored", k + 1, n_scans)
-    metrics = summarise(rows)
-    metrics.update(n_scans=n_scans, seed=seed, diameter_m=diameter_m,
-                   shared_calibration=shared_calibration,
-                   coordinate_sd_m=coordinate_sd_m, truth_plate_theory=truth_plate_theory,
-                   simulated_positions=measure.simulated, simulation_wall_s=measure.wall_s,
-                   wall_s=time.perf_counter() - started,
-                   calibration=cal.to_dict()["per_diameter"],
-                   table=str(table.path) if table.path else None)
+    metrics: MapMetrics = {
+        **summarise(rows), "n_scans": n_scans, "seed": seed, "diameter_m": diameter_m,
+        "shared_calibration": shared_calibration, "coordinate_sd_m": coordinate_sd_m,
+        "truth_plate_theory": truth_plate_theory, "simulated_positions": measure.simulated,
+        "simulation_wall_s": measure.wall_s, "wall_s": time.perf_counter() - started,
+        "calibration": cal.to_dict()["per_diameter"],
+        "table": str(table.path) if table.path else None}
     return {"metrics": metrics, "scans": rows}
 
 
@@ -487,111 +485,6 @@ def width_split(table: ModelTable, n_scans: int, seed: int = 0, *,
                      "median_width_rel_t": float(np.median(w / t)) if rows else None,
                      "median_ratio_to_alone": float(np.median(w / alone)) if rows else None}
     return cast(WidthSplit, out)
-
-
-def _rms(values: Sequence[float | None]) -> float | None:
-    v = np.array([x for x in values if x is not None and math.isfinite(x)], dtype=float)
-    return float(np.sqrt(np.mean(v**2))) if v.size else None
-
-
-def _binomial_se(hits: Sequence[bool]) -> float | None:
-    if not hits:
-        return None
-    p = float(np.mean(hits))
-    return math.sqrt(max(p * (1.0 - p), 1.0 / len(hits)) / len(hits))
-
-
-def summarise(rows: Sequence[ScanRow]) -> dict[str, Any]:
-    """Coverage, widths near the edge, and the edge's error against the number of positions."""
-    out: dict[str, Any] = {}
-    for name in ANSWER_KINDS:
-        cov = [c for r in rows for p in r["positions"]
-               if (c := p[name]["covered"]) is not None]
-        n_all = sum(len(r["positions"]) for r in rows)
-        near = [p[name]["width_m"] / r["thickness_m"] for r in rows for p in r["positions"]
-                if p["distance_m"] <= NEAR_EDGE_M]
-        near_abs = [p[name]["width_m"] for r in rows for p in r["positions"]
-                    if p["distance_m"] <= NEAR_EDGE_M]
-        out[f"thickness_{name}"] = {
-            "coverage_95": float(np.mean(cov)) if cov else None, "answers": len(cov),
-            "positions": n_all,
-            "statuses": _counts(p[name]["status"] for r in rows for p in r["positions"]),
-            "near_edge_width_median_rel": float(np.median(near)) if near else None,
-            "near_edge_width_median_m": float(np.median(near_abs)) if near_abs else None,
-            "near_edge_positions": len(near)}
-    for name in ANSWER_KINDS:
-        edges = [_edge_of(r, name) for r in rows]
-        located = [e for e in edges if e and "covered" in e]
-        out[f"edge_{name}"] = {
-            "coverage_95": float(np.mean([e["covered"] for e in located])) if located else None,
-            "located": len(located), "scans": len(rows),
-            "error_median_m": float(np.median([e["error_m"] for e in located]))
-            if located else None,
-            "ci95_width_median_m": float(np.median([e["ci95_offset_m"][1] - e["ci95_offset_m"][0]
-                                                    for e in located])) if located else None,
-            # how sure a coverage over this many scans is (binomial, at the coverage seen;
-            # 30 scans resolve 0.967 from 1.000 and no finer), and the offset's z (_z)
-            "coverage_95_se": _binomial_se([e["covered"] for e in located]),
-            "offset_z_rms": _rms([e.get("offset_z") for e in located])}
-        seen = [e for e in located if "angle_covered" in e]
-        if seen:
-            out[f"edge_{name}"].update(
-                angle_coverage_95=float(np.mean([e["angle_covered"] for e in seen])),
-                angle_ci95_width_median_deg=float(np.median([e["angle_ci95_width_deg"]
-                                                             for e in seen])),
-                at_scan_coverage_95=float(np.mean([e["at_scan_covered"] for e in seen])),
-                at_scan_ci95_width_median_m=float(np.median([e["at_scan_ci95_width_m"]
-                                                             for e in seen])),
-                lever_median_m=float(np.median([e["lever_m"] for e in seen])),
-                angle_z_rms=_rms([e.get("angle_z") for e in seen]),
-                at_scan_z_rms=_rms([e.get("at_scan_z") for e in seen]))
-            # where the edge lies at the scan means something only where its direction is
-            # fixed: the joint map warns beyond WIDE_ANGLE_DEG
-            fixed = [e for e in seen if e["angle_ci95_width_deg"] <= WIDE_ANGLE_DEG]
-            out[f"edge_{name}"].update(
-                direction_fixed_scans=len(fixed),
-                at_scan_coverage_95_direction_fixed=float(np.mean(
-                    [e["at_scan_covered"] for e in fixed])) if fixed else None,
-                at_scan_z_rms_direction_fixed=_rms([e.get("at_scan_z") for e in fixed]))
-    free = [e["fit"]["p_value"] for r in rows if (e := r.get("edge_free"))]
-    out["joint_fit_p_below_0.001"] = float(np.mean([p < 1e-3 for p in free])) if free else None
-    seqs = [r["sequence"] for r in rows if "sequence" in r]
-    if seqs:
-        for strategy in STRATEGIES:
-            errors = np.array([s[strategy]["errors_m"] for s in seqs])
-            counts = [s[strategy]["positions_to_target"] for s in seqs]
-            reached = [c for c in counts if c is not None]
-            out[f"sequence_{strategy}"] = {
-                "edge_error_median_m_by_positions": {
-                    str(START_POSITIONS + k): float(np.median(errors[:, k]))
-                    for k in range(errors.shape[1])},
-                "reached_target": len(reached), "scans": len(seqs),
-                # a scan that never reached it counts as needing more than the maximum
-                "positions_to_target_median": float(np.median(
-                    [c if c is not None else MAX_POSITIONS + 1 for c in counts])),
-                "positions_to_target_mean_reached": float(np.mean(reached)) if reached else None,
-                "target_m": TARGET_ERROR_M}
-        big = MAX_POSITIONS + 1
-        for other in STRATEGIES[1:]:
-            pairs = [(s["suggested"]["positions_to_target"], s[other]["positions_to_target"])
-                     for s in seqs]
-            out[f"suggested_fewer_than_{other}"] = sum((a or big) < (b or big) for a, b in pairs)
-            out[f"suggested_more_than_{other}"] = sum((a or big) > (b or big) for a, b in pairs)
-    return out
-
-
-def _edge_of(row: ScanRow, kind: AnswerKind) -> EdgeScore | None:
-    """The scan's edge as the answers of ``kind`` locate it."""
-    if kind == "alone":
-        return row.get("edge_alone")
-    return row.get("edge_free") if kind == "free" else row.get("edge_common")
-
-
-def _counts(values: Any) -> dict[str, int]:
-    out: dict[str, int] = {}
-    for v in values:
-        out[str(v)] = out.get(str(v), 0) + 1
-    return out
 
 
 __all__ = ["DISTANCE_RANGE_M", "MAX_POSITIONS", "POSITIONS", "SPLIT_STEPS", "TILT_DEG", "Measurer",

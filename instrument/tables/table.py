@@ -140,6 +140,50 @@ class SweepDict(TypedDict):
     detect: DetectKeywords
 
 
+class BuildMachine(TypedDict):
+    """The machine a table was built on."""
+
+    node: str
+    system: str
+    processor: str
+    cpus: int | None
+    python: str
+
+
+class StepRange(TypedDict):
+    """The smallest and largest integration step the table's points took, s."""
+
+    min: float
+    max: float
+
+
+class TableProvenance(TypedDict, total=False):
+    """How, where and from what code a table was built (the attribute ``provenance``). Every key
+    may be missing: a table written before a key was recorded lacks it, and a later version may
+    add keys."""
+
+    solitonde_version: str
+    git_revision: str | None
+    sessions: list[Any]
+    """The build's sessions (resumed builds have several), as :mod:`.table_file` records them."""
+    built_at: str
+    """ISO 8601, UTC."""
+    build_wall_s: float
+    point_cpu_s: float
+    runner: str
+    command: str | None
+    machine: BuildMachine
+    scene_defaults: dict[str, Any]
+    """The base scene with every default spelled out (:meth:`Scene.to_dict`)."""
+    table_id: str
+    tiers: list[str]
+    mesh: dict[str, Any] | None
+    """The plate mesh's description, as the meshed tier reports it."""
+    step_s: StepRange | None
+    pretrigger_fraction: float
+    feature_extractor: str
+
+
 class AxisSummary(TypedDict):
     values: list[float]
     min: float
@@ -169,7 +213,7 @@ class TableSummary(TypedDict):
     status_counts: dict[str, int]
     plate_models: dict[str, int]
     sweep: SweepDict
-    provenance: dict[str, Any]
+    provenance: TableProvenance
     dissipation_layer: DissipationSummary | None
 
 
@@ -197,7 +241,7 @@ class ModelTable:
     plate_model: np.ndarray
     diagnostics: dict[str, np.ndarray]
     sweep: SweepDict
-    provenance: dict[str, Any]
+    provenance: TableProvenance
     complete: bool
     flag_names: tuple[str, ...] = ()
     plate_model_names: tuple[str, ...] = PLATE_MODEL_NAMES

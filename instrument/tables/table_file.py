@@ -30,6 +30,7 @@ from solitonde.instrument.tables.table import (
     SECONDARY_FEATURES,
     STATUS_PENDING,
     TableError,
+    TableProvenance,
     reading_version_of,
 )
 from solitonde.signal.features import EXTRACTOR_VERSION
@@ -182,7 +183,7 @@ def solitonde_version() -> str:
 
 
 def provenance(fh: h5py.File, sweep: Sweep, runner: str, command: str | None,
-               table_id: str | None = None) -> dict[str, Any]:
+               table_id: str | None = None) -> TableProvenance:
     """How, where and from what code a complete table was built (the attribute ``provenance``:
     metadata, free-form JSON that later versions may extend)."""
     models = np.unique(fh["plate_model"][...])

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app as build_cli
-from solitonde.instrument.studies import map_study
+from solitonde.instrument.studies import map_metrics, map_study
 from solitonde.instrument.tables.table import ModelTable
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -138,9 +138,9 @@ def test_an_edges_miss_is_scored_in_the_sds_its_interval_states():
     assert map_study._z(2.0, 1.0, 3.0) == 0.0
     assert map_study._z(3.0, 1.0, 3.0) == pytest.approx(1.96)
     assert map_study._z(0.0, 1.0, 3.0) == pytest.approx(-3.92)
-    assert map_study._rms([1.0, None, -1.0, math.nan]) == pytest.approx(1.0)
-    assert map_study._binomial_se([True] * 30) == pytest.approx(1 / 30)
-    assert map_study._binomial_se([True] * 27 + [False] * 3) == pytest.approx(
+    assert map_metrics._rms([1.0, None, -1.0, math.nan]) == pytest.approx(1.0)
+    assert map_metrics._binomial_se([True] * 30) == pytest.approx(1 / 30)
+    assert map_metrics._binomial_se([True] * 27 + [False] * 3) == pytest.approx(
         math.sqrt(0.9 * 0.1 / 30))
 
 
