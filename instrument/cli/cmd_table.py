@@ -126,6 +126,10 @@ def build_command(
     workers: int | None = typer.Option(None, help="local worker processes (default: one per "
                                        "core); 1 runs serially without Dask"),
     scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
+    responses: Path | None = typer.Option(
+        None, "--responses", help="folder of the plate-response store (default: "
+        "$SOLITONDE_CACHE/greens, else ~/.cache/solitonde/greens); on a cluster, a folder every "
+        "worker reads and writes"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the build report as JSON"),
     overwrite: bool = typer.Option(False, "--overwrite", help="replace an existing table file "
@@ -164,9 +168,11 @@ def build_command(
         command = "solitonde " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
                              command=command, table_id=table_id,
-                             plan=lambda p: typer.echo(plan_text(p), err=as_json))
+                             plan=lambda p: typer.echo(plan_text(p), err=as_json),
+                             responses=True if responses is None else responses)
         if report.complete and dissipation_layer:
-            _add_layer(out, dissipation_layer, [], workers, progress, as_json)
+            _add_layer(out, dissipation_layer, [], workers, progress, as_json, scheduler,
+                       True if responses is None else responses)
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return
@@ -271,7 +277,8 @@ def _check_damping(value: float, flag: str) -> None:
 
 
 def _add_layer(file: Path, dampings: list[float], sources: list[Path], workers: int | None,
-               progress: bool, quiet: bool) -> None:
+               progress: bool, quiet: bool, scheduler: str | None = None,
+               responses: Path | bool = True) -> None:
     """Simulate slices at ``dampings`` (or take them from ``sources``) and add them to the
     dissipation layer of ``file``."""
     import time
@@ -290,7 +297,8 @@ def _add_layer(file: Path, dampings: list[float], sources: list[Path], workers: 
         one = layer_from_table(table, ModelTable.load(source))
         layer = one if layer is None else layer.merged(one)
     for tau in dampings:
-        one, path = simulate_layer(table, tau, file.parent, workers=workers, progress=progress)
+        one, path = simulate_layer(table, tau, file.parent, workers=workers, progress=progress,
+                                   scheduler=scheduler, responses=responses)
         built.append(path)
         layer = one if layer is None else layer.merged(one)
     assert layer is not None

@@ -49,6 +49,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
                                    "summary.json with the checks."),
     "table": ("cmd_table", "Build and inspect model tables."),
     "bench": ("cmd_bench", "Benchmarks of the model."),
+    "cache": ("cmd_cache", "What the plate-response store and the compiled-code cache hold; "
+                           "clear them."),
     "store": ("cmd_store", "Back up, check, migrate and reanalyze a measurement store."),
     "setup": ("cmd_setup", "Instrument set-ups kept by a service: create, show, list, "
                            "calibrate."),

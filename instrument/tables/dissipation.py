@@ -47,7 +47,7 @@ import dataclasses
 import json
 import math
 from collections import OrderedDict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -134,10 +134,13 @@ def layer_from_table(table: ModelTable, damped_table: ModelTable) -> Dissipation
 
 def simulate_layer(table: ModelTable, damping_s: float, out_dir: Path, *,
                    workers: int | None = None, progress: bool = False,
-                   build: Callable[..., Any] | None = None) -> tuple[DissipationLayer, Path]:
+                   scheduler: str | None = None,
+                   responses: str | Path | bool = True) -> tuple[DissipationLayer, Path]:
     """Simulate ``table``'s sweep with damping ``damping_s`` (a table build into ``out_dir``
     named ``<stem>.damped-<tau>.h5``: an interrupted run resumes from its ``.partial``) and return
-    it as a one-slice layer, with the damped table's path."""
+    it as a one-slice layer, with the damped table's path. The damping acts in the chain: the
+    plates' responses are the elastic sweep's, read from the response store ``responses`` where
+    it holds them (:func:`~.table_build.build_table`)."""
     from solitonde.instrument.tables.sweep import Sweep
     from solitonde.instrument.tables.table_build import build_table
 
@@ -145,7 +148,8 @@ def simulate_layer(table: ModelTable, damping_s: float, out_dir: Path, *,
     damped_sweep = dataclasses.replace(sweep, scene=damped_scene(sweep.scene, damping_s))
     stem = table.path.stem if table.path else "table"
     target = out_dir / f"{stem}.damped-{damping_s:g}.h5"
-    report = (build or build_table)(damped_sweep, target, workers=workers, progress=progress)
+    report = build_table(damped_sweep, target, workers=workers, scheduler=scheduler,
+                         progress=progress, responses=responses)
     if not report.complete:
         raise TableError("dissipation", f"the damped sweep did not finish ({report.path})")
     return layer_from_table(table, ModelTable.load(target)), target

@@ -1,36 +1,71 @@
-"""On-disk cache of the plate's contact responses (the ``greens`` plate model).
+"""On-disk store of the plate's contact responses (the ``greens`` plate model).
 
 The model layer computes a response once per plate, mesh, position, supports, material and step
 and asks a cache object for it (:mod:`solitonde.model.greens`); this module is that object on disk:
-one ``<key>.npz`` per response under ``$SOLITONDE_CACHE/greens`` or ``~/.cache/solitonde/greens``.
+one ``<key>.npz`` per response under ``$SOLITONDE_CACHE/greens``, else under the root the compiled
+kernels' cache uses (:func:`solitonde.model.jit_cache.default_root`, ``~/.cache/solitonde`` by
+default). The key holds everything the response depends on, so any process, Dask worker or
+machine that reads the same folder may use what another wrote.
+
 Files are written to a temporary name and renamed, so a reader never sees half a file and two
-processes computing the same response at once both end with a whole one.
+processes computing the same response at once both end with a whole one. The folder is held under
+a size cap (``$SOLITONDE_CACHE_MAX_MB``, default :data:`DEFAULT_MAX_MB`): past it, the responses
+used longest ago are deleted (a load marks a file as used).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from solitonde.model import greens
+from solitonde.model.jit_cache import default_root
 from solitonde.signal.atomic import atomic_path
+
+DEFAULT_MAX_MB = 4096
+"""The store's default size cap, MB: a few full tables' responses."""
 
 
 def cache_dir() -> Path:
-    """Where responses live: ``$SOLITONDE_CACHE/greens``, else ``~/.cache/solitonde/greens``."""
+    """Where responses live: ``$SOLITONDE_CACHE/greens``, else ``<root>/greens`` under the
+    compiled kernels' root (``$SOLITONDE_CACHE_DIR``, ..., ``~/.cache/solitonde``)."""
     root = os.environ.get("SOLITONDE_CACHE")
-    base = Path(root) if root else Path.home() / ".cache" / "solitonde"
-    return base / "greens"
+    return (Path(root) if root else default_root()) / "greens"
+
+
+def max_bytes() -> int:
+    """The size cap: ``$SOLITONDE_CACHE_MAX_MB`` (a positive number of MB), else the default."""
+    raw = os.environ.get("SOLITONDE_CACHE_MAX_MB", "")
+    try:
+        mb = float(raw) if raw.strip() else DEFAULT_MAX_MB
+    except ValueError:
+        raise ValueError(f"SOLITONDE_CACHE_MAX_MB must be a number of MB, got {raw!r}") from None
+    if not mb > 0:
+        raise ValueError(f"SOLITONDE_CACHE_MAX_MB must be > 0, got {raw!r}")
+    return int(mb * 1e6)
+
+
+@dataclass(frozen=True)
+class StoreInfo:
+    """What the store holds: its folder, how many responses and how many bytes."""
+
+    folder: Path
+    responses: int
+    bytes: int
+    max_bytes: int
 
 
 class DiskGreensCache:
-    """Responses as ``<key>.npz`` files (array ``response``) in one folder."""
+    """Responses as ``<key>.npz`` files (array ``response``) in one folder, under a size cap."""
 
-    def __init__(self, folder: str | Path | None = None) -> None:
+    def __init__(self, folder: str | Path | None = None, cap_bytes: int | None = None) -> None:
         self.folder = Path(folder) if folder is not None else cache_dir()
+        self.cap_bytes = max_bytes() if cap_bytes is None else int(cap_bytes)
 
     def path(self, key: str) -> Path:
         if not key.isalnum():
@@ -41,9 +76,12 @@ class DiskGreensCache:
         path = self.path(key)
         try:
             with np.load(path) as data:
-                return np.asarray(data["response"], dtype=float)
+                found = np.asarray(data["response"], dtype=float)
         except (FileNotFoundError, KeyError, ValueError, OSError, zipfile.BadZipFile):
             return None  # missing or unreadable: recompute (and overwrite)
+        with contextlib.suppress(OSError):
+            os.utime(path)  # used now: the last to go when the cap is reached
+        return found
 
     def store(self, key: str, response: np.ndarray) -> None:
         path = self.path(key)
@@ -53,14 +91,70 @@ class DiskGreensCache:
                 np.savez(fh, response=np.asarray(response, dtype=float))
         except OSError:
             return  # a read-only or full disk must not stop a simulation: it stays in memory
+        self.prune()
+
+    def _files(self) -> list[os.DirEntry[str]]:
+        try:
+            with os.scandir(self.folder) as entries:
+                return [e for e in entries if e.name.endswith(".npz") and e.is_file()]
+        except OSError:
+            return []
+
+    def info(self) -> StoreInfo:
+        files = self._files()
+        return StoreInfo(self.folder, len(files), sum(_size(e) for e in files), self.cap_bytes)
+
+    def prune(self) -> int:
+        """Delete the responses used longest ago until the folder is under its cap; returns how
+        many were deleted. Another process deleting the same file at once is harmless."""
+        files = self._files()
+        total = sum(_size(e) for e in files)
+        if total <= self.cap_bytes:
+            return 0
+        removed = 0
+        for entry in sorted(files, key=_mtime):
+            if total <= 0.9 * self.cap_bytes:
+                break
+            size = _size(entry)
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(entry.path)
+                removed += 1
+            total -= size
+        return removed
+
+    def clear(self) -> int:
+        """Delete every response; returns how many."""
+        removed = 0
+        for entry in self._files():
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(entry.path)
+                removed += 1
+        return removed
+
+
+def _size(entry: os.DirEntry[str]) -> int:
+    try:
+        return entry.stat().st_size
+    except OSError:
+        return 0
+
+
+def _mtime(entry: os.DirEntry[str]) -> float:
+    try:
+        return entry.stat().st_mtime
+    except OSError:
+        return 0.0
 
 
 class LayeredCache:
-    """Memory in front of disk: repeated runs in one process never touch the file twice."""
+    """Memory in front of disk: repeated runs in one process never touch the file twice.
+    ``computed`` counts the responses stored, that is computed here (a found one is not
+    stored again)."""
 
-    def __init__(self, disk: DiskGreensCache) -> None:
-        self.memory = greens.MemoryCache()
+    def __init__(self, disk: DiskGreensCache, memory: greens.MemoryCache | None = None) -> None:
+        self.memory = greens.MemoryCache() if memory is None else memory
         self.disk = disk
+        self.computed = 0
 
     def load(self, key: str) -> np.ndarray | None:
         found = self.memory.load(key)
@@ -71,6 +165,7 @@ class LayeredCache:
         return found
 
     def store(self, key: str, response: np.ndarray) -> None:
+        self.computed += 1
         self.memory.store(key, response)
         self.disk.store(key, response)
 

@@ -33,6 +33,7 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.parallel import default_workers, run_tasks, runner_label
+from solitonde.instrument.tables.greens_cache import DiskGreensCache, LayeredCache, cache_dir
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.sweep import Sweep
 from solitonde.instrument.tables.table import (
@@ -124,20 +125,27 @@ def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
 
 
 def run_plate(sweep: SweepDict, i_t: int, i_l: int,
-              diameters: Sequence[int] | None = None) -> PlateResult:
+              diameters: Sequence[int] | None = None, responses: str | None = None
+              ) -> PlateResult:
     """One task: every sphere size (largest first) on plate ``(i_t, i_l)``.
 
     The sizes share a task-local cache of plate responses: where the response does not depend on
     the sphere (the 3-D plate's), the largest sphere's record is the longest and its response
-    covers the others; the Mindlin plate computes one response per distinct mesh.
+    covers the others; the Mindlin plate computes one response per distinct mesh. With
+    ``responses`` (a folder), the response store there stands behind it: a response another
+    build, layer or worker computed is read, not computed again, and the new ones are kept.
+    ``greens_computed`` counts the responses this task computed.
     """
     spec = Sweep.from_dict(sweep)
     order = sorted(range(len(spec.diameters_m)) if diameters is None else diameters, reverse=True)
     # This task's responses, dropped when it ends; unbounded, so that its size counts them.
     task_cache = greens.MemoryCache(max_bytes=sys.maxsize)
+    cache: greens.GreensCache = task_cache
+    if responses is not None:
+        cache = LayeredCache(DiskGreensCache(responses), memory=task_cache)
     points = {i_d: simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces,
-                                  task_cache) for i_d in order}
-    computed = len(task_cache)
+                                  cache) for i_d in order}
+    computed = cache.computed if isinstance(cache, LayeredCache) else len(task_cache)
     return {"i_t": i_t, "i_l": i_l, "points": points, "greens_computed": computed}
 
 
@@ -187,7 +195,7 @@ def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
 
 
 def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
-           scheduler: str | None) -> tuple[BuildPlan, int, int]:
+           scheduler: str | None, responses: str | None) -> tuple[BuildPlan, int, int]:
     """Run the first pending plate of each kind here, write it, and plan the rest; returns the
     plan, and the points and plates written."""
     tasks = pending(fh, sweep)
@@ -206,11 +214,12 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
         # the middle plate of the kind (thin plates cost more, thick ones less)
         i_t, i_l, todo = sorted(of_kind, key=lambda t: sweep.thicknesses_m[t[0]])[len(of_kind) // 2]
         t0 = time.perf_counter()
-        written += write_plate(fh, run_plate(spec, i_t, i_l, todo))
+        written += write_plate(fh, run_plate(spec, i_t, i_l, todo, responses))
         plates += 1
         first = time.perf_counter() - t0
         # Timed again, warm: the first run of an installation compiles the numba kernels
-        # (minutes), which the workers then load from the cache; that is no plate's cost.
+        # (minutes), which the workers then load from the cache; that is no plate's cost. Run
+        # without the response store, which now holds this plate's responses.
         t0 = time.perf_counter()
         run_plate(spec, i_t, i_l, todo)
         again = time.perf_counter() - t0
@@ -236,6 +245,7 @@ def build_table(
     on_plate: Callable[[PlateResult], None] | None = None,
     table_id: str | None = None,
     plan: Callable[[BuildPlan], None] | None = None,
+    responses: str | Path | bool = True,
 ) -> BuildReport:
     """Build (or continue building) the table for ``sweep`` at ``out``.
 
@@ -250,6 +260,9 @@ def build_table(
     table_id: the table's id, recorded in the provenance (default: the file's stem when loaded).
     plan: called with the :class:`BuildPlan` before the sweep runs: the first plate of each kind
         is run here as a pilot (and kept), and the time of the rest estimated from it.
+    responses: the plate responses' store (:mod:`.greens_cache`): True, the default folder; a
+        folder (one the workers share, on a cluster); False, none (each task computes its own).
+        The table is the same either way: a stored response is the computed one, bit for bit.
 
     Raises
     ------
@@ -267,6 +280,8 @@ def build_table(
         sweep.scene_at(*ix)
     workers = default_workers() if workers is None else max(1, int(workers))
     runner = runner_label(workers, scheduler)
+    store = (str(cache_dir()) if responses is True else None if responses is False
+             else str(responses))
     started = time.perf_counter()
     written = plates = 0
     spec = sweep.to_dict()
@@ -280,7 +295,7 @@ def build_table(
         start_session(fh, runner)
         eta = None
         if plan is not None and max_plates is None and pending(fh, sweep):
-            the_plan, written, plates = _pilot(fh, sweep, spec, workers, scheduler)
+            the_plan, written, plates = _pilot(fh, sweep, spec, workers, scheduler, store)
             eta = the_plan.eta_s
             plan(the_plan)
         tasks = pending(fh, sweep)
@@ -288,7 +303,7 @@ def build_table(
             tasks = tasks[:max(0, max_plates)]
         try:
             more, more_plates = _run_plates(fh, spec, tasks, workers, scheduler, progress, eta,
-                                            on_plate)
+                                            on_plate, store)
         finally:
             fh.attrs["build_wall_s"] = (float(fh.attrs["build_wall_s"])
                                         + time.perf_counter() - started)
@@ -307,7 +322,8 @@ def build_table(
 
 def _run_plates(fh: h5py.File, spec: SweepDict, tasks: Sequence[tuple[int, int, list[int]]],
                 workers: int, scheduler: str | None, progress: bool, eta: float | None,
-                on_plate: Callable[[PlateResult], None] | None) -> tuple[int, int]:
+                on_plate: Callable[[PlateResult], None] | None,
+                responses: str | None = None) -> tuple[int, int]:
     """Run the pending plates ``tasks`` through the executor and write each as it comes back;
     returns the points and plates written (those of a plate that raised are not counted)."""
     written = plates = 0
@@ -320,7 +336,7 @@ def _run_plates(fh: h5py.File, spec: SweepDict, tasks: Sequence[tuple[int, int, 
         if eta is not None:  # tqdm's own ETA takes over once plates come back
             bar.set_postfix_str(f"planned {eta:.0f} s", refresh=True)
     try:
-        jobs = [(spec, i_t, i_l, todo) for i_t, i_l, todo in tasks]
+        jobs = [(spec, i_t, i_l, todo, responses) for i_t, i_l, todo in tasks]
         for result in run_tasks(run_plate, jobs, workers, scheduler):
             n = write_plate(fh, result)
             written += n

@@ -1,0 +1,186 @@
+"""The plate-response store: a table's dissipation layer and a rebuild read the responses the
+first build computed and give the same points to the bit; the store holds its size cap, keeps
+whole files under concurrent writers, and `solitonde cache` reports and clears it. A build on a
+Dask cluster of separate scheduler and worker processes, sharing the store's folder, gives the
+serial build's table."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.tables.dissipation import damped_scene
+from solitonde.instrument.tables.greens_cache import DiskGreensCache
+from solitonde.instrument.tables.table import SCALAR_FEATURES, SECONDARY_FEATURES, ModelTable
+from solitonde.instrument.tables.table_build import Sweep, build_table
+
+FAST = {"sem": {"elements": [6, 6, 1], "order": [2, 2, 2]}}
+
+
+def _sweep() -> Sweep:
+    # both sizes near the support (the meshed plate) and one far (the dashpot)
+    return Sweep([4.76e-3, 9.53e-3], [3e-3, 5e-3], [0.0, 0.02, 0.3], scene=FAST)
+
+
+def _build(sweep: Sweep, out: Path, responses: Path | bool, **kw: object) -> int:
+    """Build; returns how many plate responses the build computed."""
+    computed: list[int] = []
+    report = build_table(sweep, out, workers=1, responses=responses,
+                         on_plate=lambda r: computed.append(r["greens_computed"]), **kw)
+    assert report.complete
+    return sum(computed)
+
+
+def _same_points(a: Path, b: Path) -> None:
+    """Every feature, status and flag equal to the bit (NaN == NaN)."""
+    ta, tb = ModelTable.load(a), ModelTable.load(b)
+    for k in (*SCALAR_FEATURES, *SECONDARY_FEATURES):
+        np.testing.assert_array_equal(ta.features[k], tb.features[k], err_msg=k)
+    with h5py.File(a) as fa, h5py.File(b) as fb:
+        for k in ("status", "flags", "plate_model", "messages"):
+            np.testing.assert_array_equal(fa[k][...], fb[k][...], err_msg=k)
+
+
+def test_a_layer_and_a_rebuild_compute_no_response_again(tmp_path: Path) -> None:
+    """The damping acts in the chain, not the plate: the damped sweep's plates are the elastic
+    sweep's, so a layer (and the same table built again) reads every response from the store,
+    and its points are those of a build that computed them itself."""
+    store = tmp_path / "store"
+    elastic = _build(_sweep(), tmp_path / "a.h5", store)
+    assert elastic > 0
+    assert _build(_sweep(), tmp_path / "again.h5", store) == 0
+    damped = dataclasses.replace(_sweep(), scene=damped_scene(FAST, 1e-6))
+    assert _build(damped, tmp_path / "layer.h5", store) == 0
+    assert _build(damped, tmp_path / "layer-alone.h5", False) == elastic
+    _same_points(tmp_path / "a.h5", tmp_path / "again.h5")
+    _same_points(tmp_path / "layer.h5", tmp_path / "layer-alone.h5")
+
+
+def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(tmp_path: Path) -> None:
+    """Past the cap, the responses used longest ago go first; a load counts as a use."""
+    one = np.arange(1000, dtype=float)  # about 8 kB on disk
+    size = len(np.lib.format.header_data_from_array_1_0(one)) + one.nbytes
+    store = DiskGreensCache(tmp_path, cap_bytes=int(3.5 * (size + 300)))
+    for i, key in enumerate(("a", "b", "c")):
+        store.store(key, one + i)
+        os.utime(store.path(key), (1000.0 + i, 1000.0 + i))  # a, then b, then c
+    assert store.load("a") is not None  # a is now the most recently used
+    store.store("d", one)
+    kept = {p.stem for p in tmp_path.glob("*.npz")}
+    assert "b" not in kept and {"a", "d"} <= kept
+    assert store.info().bytes <= store.cap_bytes
+
+
+def test_concurrent_writers_of_one_response_leave_a_whole_file(tmp_path: Path) -> None:
+    """Writers race on one key while a reader loads it: every load is whole or None, never a
+    torn file, and the last file is one writer's array."""
+    store = DiskGreensCache(tmp_path)
+    arrays = [np.full(20_000, float(i)) for i in range(4)]
+    seen: list[np.ndarray | None] = []
+    done = threading.Event()
+
+    def write(a: np.ndarray) -> None:
+        for _ in range(15):
+            store.store("k", a)
+
+    def read() -> None:
+        while not done.is_set():
+            seen.append(store.load("k"))
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    writers = [threading.Thread(target=write, args=(a,)) for a in arrays]
+    for w in writers:
+        w.start()
+    for w in writers:
+        w.join()
+    done.set()
+    reader.join()
+    final = store.load("k")
+    assert final is not None and any(np.array_equal(final, a) for a in arrays)
+    for got in seen:
+        assert got is None or any(np.array_equal(got, a) for a in arrays)
+    assert not [p for p in tmp_path.iterdir() if not p.name.endswith(".npz")]
+
+
+def test_cache_info_and_clear_name_each_cache(tmp_path: Path,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SOLITONDE_CACHE", str(tmp_path))
+    DiskGreensCache().store("abc", np.ones(10))
+    runner = CliRunner()
+    out = runner.invoke(build_app(), ["cache", "info", "--responses"])
+    assert out.exit_code == 0, out.output
+    assert out.output.startswith(f"responses: 1 in {tmp_path / 'greens'} (")
+    assert "compiled" not in out.output
+    both = runner.invoke(build_app(), ["cache", "info"])
+    assert "responses: 1" in both.output and "compiled: " in both.output
+    cleared = runner.invoke(build_app(), ["cache", "clear", "--responses"])
+    assert cleared.output == f"responses: deleted 1 from {tmp_path / 'greens'}\n"
+    assert DiskGreensCache().info().responses == 0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_a_build_on_a_dask_cluster_of_separate_processes_is_the_serial_build(
+        tmp_path: Path) -> None:
+    """`dask scheduler` and two `dask worker` processes, as a lab would start them, with the
+    response store on a folder every worker reads: the table is the serial one to the bit, and
+    a layer on the cluster computes no response again."""
+    dask = shutil.which("dask", path=str(Path(sys.executable).parent)) or shutil.which("dask")
+    if dask is None:
+        pytest.skip("the dask command line is not installed")
+    serial = tmp_path / "serial.h5"
+    _build(_sweep(), serial, False)
+    store = tmp_path / "shared-store"
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    env = {**os.environ, "SOLITONDE_CACHE": str(tmp_path / "own")}  # not the store's folder
+    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port",
+                               address.rsplit(":", 1)[1], "--dashboard-address", ":0"],
+                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        time.sleep(1.0)
+        procs += [subprocess.Popen([dask, "worker", address, "--nthreads", "1",
+                                    "--nworkers", "1", "--dashboard-address", ":0"],
+                                   env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                  for _ in range(2)]
+        from dask.distributed import Client
+
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
+        computed: list[int] = []
+        report = build_table(_sweep(), tmp_path / "cluster.h5", scheduler=address,
+                             responses=store,
+                             on_plate=lambda r: computed.append(r["greens_computed"]))
+        assert report.complete and report.runner.startswith("dask scheduler")
+        assert sum(computed) > 0 and DiskGreensCache(store).info().responses == sum(computed)
+        _same_points(serial, tmp_path / "cluster.h5")
+        layer: list[int] = []
+        damped = dataclasses.replace(_sweep(), scene=damped_scene(FAST, 1e-6))
+        build_table(damped, tmp_path / "layer.h5", scheduler=address, responses=store,
+                    on_plate=lambda r: layer.append(r["greens_computed"]))
+        assert sum(layer) == 0
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
