@@ -280,9 +280,12 @@ def _add_layer(file: Path, dampings: list[float], sources: list[Path], workers: 
                progress: bool, quiet: bool, scheduler: str | None = None,
                responses: Path | bool = True) -> None:
     """Simulate slices at ``dampings`` (or take them from ``sources``) and add them to the
-    dissipation layer of ``file``."""
+    dissipation layer of ``file``. The slices share one local cluster (started once, not once a
+    slice) unless a scheduler is given or the build is serial."""
+    import contextlib
     import time
 
+    from solitonde.instrument.parallel import default_workers, local_cluster
     from solitonde.instrument.tables.dissipation import (
         add_to_table,
         layer_from_table,
@@ -296,11 +299,17 @@ def _add_layer(file: Path, dampings: list[float], sources: list[Path], workers: 
     for source in sources:
         one = layer_from_table(table, ModelTable.load(source))
         layer = one if layer is None else layer.merged(one)
-    for tau in dampings:
-        one, path = simulate_layer(table, tau, file.parent, workers=workers, progress=progress,
-                                   scheduler=scheduler, responses=responses)
-        built.append(path)
-        layer = one if layer is None else layer.merged(one)
+    lanes = default_workers() if workers is None else workers
+    with contextlib.ExitStack() as stack:
+        if dampings and scheduler is None and lanes > 1:
+            cluster = stack.enter_context(local_cluster(lanes))
+            scheduler = cluster.scheduler_address
+        for tau in dampings:
+            one, path = simulate_layer(table, tau, file.parent, workers=workers,
+                                       progress=progress, scheduler=scheduler,
+                                       responses=responses)
+            built.append(path)
+            layer = one if layer is None else layer.merged(one)
     assert layer is not None
     full = add_to_table(file, layer)
     for path in built:
