@@ -96,11 +96,18 @@ def plan_text(plan: BuildPlan) -> str:
              f"  distances, mm:        {_mm(sw.distances_m)}"]
     kinds = {"meshed": "near a support (meshed plate)", "dashpot": "far (Zener's dashpot)"}
     for kind, n in plan.points_by_kind.items():
-        lines.append(f"  {n} points {kinds[kind]}: pilot {plan.pilots[kind]:.2f} s a point")
+        pilots = ", ".join(f"{c[1]:.2f} s a point at {c[0] * 1e3:g} mm"
+                           for c in sorted(plan.costs[kind]))
+        lines.append(f"  {n} points {kinds[kind]}: pilot {pilots}")
     if plan.compile_s > 10:
         lines.append(f"  (the pilot first compiled the model's kernels: {duration(plan.compile_s)}"
                      ", once per installation)")
-    lines.append(f"  estimated time: {duration(plan.eta_s)} on {plan.workers} worker"
+    if plan.layers:
+        lines.append(f"  {plan.layers} dissipation layer{'s' * (plan.layers != 1)}: the plates' "
+                     f"responses read from the store, only the chains run: "
+                     f"{duration(plan.layers_eta_s)}")
+    total = plan.eta_s + plan.layers_eta_s
+    lines.append(f"  estimated time: {duration(total)} on {plan.workers} worker"
                  f"{'s' * (plan.workers != 1)} (+ their start), after a "
                  f"{duration(plan.pilot_wall_s)} pilot")
     return "\n".join(lines)
@@ -169,7 +176,8 @@ def build_command(
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
                              command=command, table_id=table_id,
                              plan=lambda p: typer.echo(plan_text(p), err=as_json),
-                             responses=True if responses is None else responses)
+                             responses=True if responses is None else responses,
+                             layers=len(dissipation_layer))
         if report.complete and dissipation_layer:
             _add_layer(out, dissipation_layer, [], workers, progress, as_json, scheduler,
                        True if responses is None else responses)

@@ -26,6 +26,7 @@ import json
 import math
 import os
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -173,23 +174,46 @@ class BuildReport:
 class BuildPlan:
     """What a build is about to do and how long it should take, from a pilot run.
 
-    ``pilots`` holds, per kind of plate (``meshed``: a plate model with a mesh, near a support;
-    ``dashpot``: every other tier), the seconds one point took in the pilot (the plate of middle
-    thickness of that kind, all its sphere sizes, run in this process and kept in the table), timed
-    on a second, warm run; ``compile_s`` is what the first runs took more (the numba kernels
-    compiled, once per installation). ``eta_s`` spreads the remaining points' cost over the
-    workers.
+    Per kind of plate (``meshed``: a plate model with a mesh, near a support; ``dashpot``: every
+    other tier) the pilot runs the thinnest and the thickest plate of the kind (all their sphere
+    sizes, in this process, kept in the table): ``costs[kind]`` holds ``(thickness_m, seconds a
+    point, seconds a point of a dissipation layer)`` for each, timed warm, the second with the
+    plate's responses read from the store (what a layer's point costs: only the chain). A point's
+    cost is read between them as a power of the thickness (thin plates cost several times more).
+    ``compile_s`` is what the first runs took more (the numba kernels compiled, once per
+    installation). ``eta_s`` spreads the remaining points' cost, and ``layers_eta_s`` that of the
+    ``layers`` dissipation layers that follow, over the workers.
     """
 
     sweep: Sweep
     points_todo: int
     plates_todo: int
     points_by_kind: dict[str, int]
-    pilots: dict[str, float]
+    costs: dict[str, list[tuple[float, float, float]]]
     pilot_wall_s: float
     eta_s: float
     workers: int
     compile_s: float = 0.0
+    layers: int = 0
+    layers_eta_s: float = 0.0
+
+    @property
+    def pilots(self) -> dict[str, float]:
+        """Per kind, the dearest pilot's seconds a point."""
+        return {kind: max(c[1] for c in pairs) for kind, pairs in self.costs.items()}
+
+
+def point_cost(pairs: Sequence[tuple[float, float, float]], thickness_m: float,
+               layer: bool = False) -> float:
+    """Seconds a point of ``thickness_m`` costs, from the pilots' ``(t, s, layer s)``: a power
+    law in t through the two pilots (log-log interpolation), held at the ends."""
+    col = 2 if layer else 1
+    pts = sorted((math.log(p[0]), math.log(max(p[col], 1e-9))) for p in pairs)
+    if len(pts) == 1 or pts[0][0] == pts[-1][0]:
+        return math.exp(pts[0][1])
+    x = min(max(math.log(thickness_m), pts[0][0]), pts[-1][0])
+    (x0, y0), (x1, y1) = pts[0], pts[-1]
+    return math.exp(y0 + (y1 - y0) * (x - x0) / (x1 - x0))
 
 
 def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
@@ -198,41 +222,64 @@ def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
 
 
 def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
-           scheduler: str | None, responses: str | None) -> tuple[BuildPlan, int, int]:
-    """Run the first pending plate of each kind here, write it, and plan the rest; returns the
-    plan, and the points and plates written."""
+           scheduler: str | None, responses: str | None, layers: int
+           ) -> tuple[BuildPlan, int, int]:
+    """Run the thinnest and the thickest pending plate of each kind here, write them, and plan
+    the rest; returns the plan, and the points and plates written."""
     tasks = pending(fh, sweep)
-    kinds = {(i_t, i_l): _kind(sweep, i_t, i_l) for i_t, i_l, _ in tasks}
+    all_points = [(i_t, i_l, len(sweep.diameters_m)) for i_t, i_l in sweep.groups()]
+    kinds = {(i_t, i_l): _kind(sweep, i_t, i_l) for i_t, i_l, _ in all_points}
     points_by_kind: dict[str, int] = {}
     for i_t, i_l, todo in tasks:
         points_by_kind[kinds[i_t, i_l]] = points_by_kind.get(kinds[i_t, i_l], 0) + len(todo)
-    pilots: dict[str, float] = {}
+    costs: dict[str, list[tuple[float, float, float]]] = {}
+    stored: dict[str, bool] = {}  # every pilot of the kind found its responses in the store
     written = plates = 0
     compile_s = 0.0
     started = time.perf_counter()
     by_kind: dict[str, list[tuple[int, int, list[int]]]] = {}
     for task in tasks:
         by_kind.setdefault(kinds[task[0], task[1]], []).append(task)
-    for kind, of_kind in by_kind.items():
-        # the middle plate of the kind (thin plates cost more, thick ones less)
-        i_t, i_l, todo = sorted(of_kind, key=lambda t: sweep.thicknesses_m[t[0]])[len(of_kind) // 2]
-        t0 = time.perf_counter()
-        written += write_plate(fh, run_plate(spec, i_t, i_l, todo, responses))
-        plates += 1
-        first = time.perf_counter() - t0
-        # Timed again, warm: the first run of an installation compiles the numba kernels
-        # (minutes), which the workers then load from the cache; that is no plate's cost. Run
-        # without the response store, which now holds this plate's responses.
-        t0 = time.perf_counter()
-        run_plate(spec, i_t, i_l, todo)
-        again = time.perf_counter() - t0
-        pilots[kind] = again / len(todo)
-        compile_s += max(0.0, first - again)
+    with tempfile.TemporaryDirectory(prefix="solitonde-pilot-") as scratch:
+        # without a store the pilot's layer timing needs one: a scratch folder, dropped after
+        store = responses if responses is not None else scratch
+        for kind, of_kind in by_kind.items():
+            ordered = sorted(of_kind, key=lambda t: (sweep.thicknesses_m[t[0]], t[1]))
+            ends = [ordered[0]] if len(ordered) == 1 else [ordered[0], ordered[-1]]
+            costs[kind] = []
+            for i_t, i_l, todo in ends:
+                t0 = time.perf_counter()
+                result = run_plate(spec, i_t, i_l, todo, store)
+                written += write_plate(fh, result)
+                plates += 1
+                first = time.perf_counter() - t0
+                stored[kind] = stored.get(kind, True) and result["greens_computed"] == 0
+                # Timed again, warm: the first run of an installation compiles the numba kernels
+                # (minutes), which the workers then load from the cache; that is no plate's
+                # cost. Once without the store (a point's cost), once with it (a layer's).
+                t0 = time.perf_counter()
+                run_plate(spec, i_t, i_l, todo)
+                again = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                run_plate(spec, i_t, i_l, todo, store)
+                chain = time.perf_counter() - t0
+                costs[kind].append((sweep.thicknesses_m[i_t], again / len(todo),
+                                    chain / len(todo)))
+                compile_s += max(0.0, first - again)
     rest = pending(fh, sweep)
-    lanes = 1 if scheduler is None and workers <= 1 else max(1, min(workers, len(rest)))
-    work = sum(len(todo) * pilots[kinds[i_t, i_l]] for i_t, i_l, todo in rest)
-    plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, pilots,
-                     time.perf_counter() - started, work / lanes, lanes, compile_s)
+    lanes = 1 if scheduler is None and workers <= 1 else max(1, min(workers, len(rest) or 1))
+    # a store that held the pilots' responses is taken to hold the rest (a rebuild): chains only
+    work = sum(len(todo) * point_cost(costs[kinds[i_t, i_l]], sweep.thicknesses_m[i_t],
+                                      layer=stored[kinds[i_t, i_l]] and responses is not None)
+               for i_t, i_l, todo in rest)
+    layer_work = layers * sum(
+        n * point_cost(costs[kinds[i_t, i_l]], sweep.thicknesses_m[i_t],
+                       layer=responses is not None)
+        for i_t, i_l, n in all_points if kinds[i_t, i_l] in costs)
+    layer_lanes = 1 if scheduler is None and workers <= 1 else max(1, workers)
+    plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, costs,
+                     time.perf_counter() - started, work / lanes, lanes, compile_s, layers,
+                     layer_work / layer_lanes)
     return plan, written, plates
 
 
@@ -249,6 +296,7 @@ def build_table(
     table_id: str | None = None,
     plan: Callable[[BuildPlan], None] | None = None,
     responses: str | Path | bool = True,
+    layers: int = 0,
 ) -> BuildReport:
     """Build (or continue building) the table for ``sweep`` at ``out``.
 
@@ -266,6 +314,8 @@ def build_table(
     responses: the plate responses' store (:mod:`.greens_cache`): True, the default folder; a
         folder (one the workers share, on a cluster); False, none (each task computes its own).
         The table is the same either way: a stored response is the computed one, bit for bit.
+    layers: how many dissipation layers the caller builds after this sweep (the plan counts
+        their time; they are built by :func:`.dissipation.simulate_layer`).
 
     Raises
     ------
@@ -298,7 +348,8 @@ def build_table(
         start_session(fh, runner)
         eta = None
         if plan is not None and max_plates is None and pending(fh, sweep):
-            the_plan, written, plates = _pilot(fh, sweep, spec, workers, scheduler, store)
+            the_plan, written, plates = _pilot(fh, sweep, spec, workers, scheduler, store,
+                                               layers)
             eta = the_plan.eta_s
             plan(the_plan)
         tasks = pending(fh, sweep)

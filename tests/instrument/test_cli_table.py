@@ -131,3 +131,34 @@ def test_a_build_with_a_dissipation_layer_stores_the_damped_sweep(tmp_path: Path
                                            str(tmp_path / "x.h5"), "--dissipation-layer", "0"])
     assert bad.exit_code == 2 and "--dissipation-layer" in bad.output
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_points_cost_follows_the_thickness_between_the_pilots() -> None:
+    """Two pilots, at the thinnest and the thickest plate: the cost between them is a power law
+    in the thickness through both, held beyond them; one pilot is a constant."""
+    from solitonde.instrument.tables.table_build import point_cost
+
+    pairs = [(2e-3, 8.0, 0.8), (8e-3, 2.0, 0.4)]  # cost ~ t^-1, layer cost ~ t^-0.5
+    assert point_cost(pairs, 4e-3) == pytest.approx(4.0)
+    assert point_cost(pairs, 4e-3, layer=True) == pytest.approx(0.8 / 2**0.5)
+    assert point_cost(pairs, 1e-3) == pytest.approx(8.0)
+    assert point_cost(pairs, 20e-3) == pytest.approx(2.0)
+    assert point_cost([(3e-3, 1.5, 0.2)], 6e-3) == pytest.approx(1.5)
+
+
+def test_the_plan_counts_the_dissipation_layers(tmp_path: Path) -> None:
+    """With --dissipation-layer the plan names the layers and their time (chain runs only: the
+    plates' responses come from the store), and the estimate includes them."""
+    out = tmp_path / "t.h5"
+    res = CliRunner().invoke(build_app(), [
+        "table", "build", "--diameters", "4.76e-3", "--thicknesses", "3e-3,5e-3",
+        "--distances", "0,0.3", "--set", "sem.elements=[6,6,1]", "--set", "sem.order=[2,2,2]",
+        "--workers", "1", "--no-progress", "--out", str(out), "--responses",
+        str(tmp_path / "store"), "--dissipation-layer", "1e-7", "--dissipation-layer", "2e-7"])
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    meshed = next(line for line in lines if "near a support" in line)
+    assert " s a point at 3 mm, " in meshed and " s a point at 5 mm" in meshed
+    assert any(line.startswith("  2 dissipation layers: the plates' responses read from the "
+                               "store, only the chains run: ") for line in lines)
+    assert any(line.startswith("  estimated time: ") for line in lines)
