@@ -14,9 +14,14 @@ the code of one release never meets the cache of another. ``<root>`` is ``$SOLIT
 else a ``$NUMBA_CACHE_DIR`` the user set, else ``$XDG_CACHE_HOME/solitonde`` (``~/.cache``
 when unset). Folders of earlier versions can be deleted at any time; nothing else is kept there.
 
+Inside that folder a kernel's files are named by its module's place in the package
+(:mod:`solitonde.model.jit_locator`), not by the checkout's absolute path as numba's own locator
+does: a clone at another path, of the same source, reuses the compiled kernels.
+
 It runs first thing when ``solitonde.model`` or ``solitonde.instrument`` is imported (before any
 kernel is decorated: numba fixes a kernel's cache folder when the decorator runs). It sets
-``NUMBA_CACHE_DIR``, so worker processes (uvicorn, Dask) inherit the same folder. A process that
+``NUMBA_CACHE_DIR`` and ``NUMBA_CACHE_LOCATOR_CLASSES``, so worker processes (uvicorn, Dask)
+inherit the same folder and naming. A process that
 imports only ``solitonde.signal`` modules, which have no package ``__init__`` to run it, gets
 numba's default cache beside the source unless it calls :func:`configure` first.
 """
@@ -33,6 +38,12 @@ from solitonde.model.version import package_version
 
 PREFIX = "solitonde-"
 """Leaf folders start with this; an inherited ``NUMBA_CACHE_DIR`` with it is one of ours."""
+
+LOCATORS = ("solitonde.model.jit_locator.PackageLocator,UserProvidedCacheLocator,"
+            "InTreeCacheLocator,UserWideCacheLocator,IPythonCacheLocator,ZipCacheLocator")
+"""numba's cache locators, ours first (:mod:`solitonde.model.jit_locator`: a kernel's cache file
+is named by its place in the package, so a clone at another path reuses the compiled kernels of
+the same source), then numba's own, in numba's order."""
 
 KERNEL_PACKAGES = ("solitonde.model", "solitonde.signal")
 """Every numba kernel and everything a kernel can inline lives in these two packages."""
@@ -90,8 +101,10 @@ def configure() -> Path:
     else:
         target = default_root() / leaf
     os.environ["NUMBA_CACHE_DIR"] = str(target)
+    os.environ["NUMBA_CACHE_LOCATOR_CLASSES"] = LOCATORS
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.CACHE_DIR = str(target)  # type: ignore[attr-defined]
+        config.CACHE_LOCATOR_CLASSES = LOCATORS  # type: ignore[attr-defined]
     _configured = target
     return target

@@ -123,3 +123,26 @@ def test_workers_inherit_the_folder_and_a_users_folder_is_the_root(tmp_path: Pat
     ours = _run(code, tmp_path, _env(NUMBA_CACHE_DIR=mine,
                                       SOLITONDE_CACHE_DIR=str(tmp_path / "s")))["dir"]
     assert Path(ours).parent == tmp_path / "s"
+
+
+def test_a_clone_at_another_path_loads_the_compiled_kernels(package_copy: Path,
+                                                            tmp_path: Path) -> None:
+    """The same source at another path (a second clone, a moved checkout) finds its kernels in
+    the cache: files are named by their place in the package, not by the absolute path."""
+    code = """
+        import json, os, numpy as np
+        import solitonde.model as m
+        from solitonde.model.chain import contact_forces
+        u = np.array([0.0, -1e-6, -3e-6]); f = np.zeros(2)
+        contact_forces(u, 1e9, 1e9, f)
+        print(json.dumps({"file": m.__file__, "f": f.tolist(),
+                          "hits": sum(contact_forces.stats.cache_hits.values())}))
+    """
+    moved = tmp_path / "elsewhere" / "checkout"
+    shutil.copytree(package_copy, moved)
+    cache = str(tmp_path / "cache")
+    first = _run(code, tmp_path, _env(PYTHONPATH=str(package_copy), SOLITONDE_CACHE_DIR=cache))
+    there = _run(code, tmp_path, _env(PYTHONPATH=str(moved), SOLITONDE_CACHE_DIR=cache))
+    assert first["file"] != there["file"] and there["file"].startswith(str(moved))
+    assert first["hits"] == 0 and there["hits"] == 1, "the other clone compiled again"
+    assert there["f"] == first["f"]
