@@ -274,6 +274,12 @@ def simulate_command(
 ) -> None:
     """Simulate one shot (striker, chain, plate) and report TOF, ARR and diagnostics."""
     scene_file, shots = _checked_options(scene_arg, scene_file, shots, snr_db, drift, out, plot)
+    # A fresh install: the extractor compiles in two background processes while the model's
+    # kernels compile here, and its interpreted kernels measure the shots meanwhile (the same
+    # numbers to round-off), as analyze and serve do: seconds, not half a minute, to the answer.
+    from solitonde.signal import kernel_choice
+
+    kernel_choice.start()
     result = _simulated(scene_file, overrides or [])
     try:
         waveform = to_waveform(result)

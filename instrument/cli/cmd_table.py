@@ -96,7 +96,7 @@ def plan_text(plan: BuildPlan) -> str:
              f"  distances, mm:        {_mm(sw.distances_m)}"]
     kinds = {"meshed": "near a support (meshed plate)", "dashpot": "far (Zener's dashpot)"}
     for kind, n in plan.points_by_kind.items():
-        pilots = ", ".join(f"{c[1]:.2f} s a point at {c[0] * 1e3:g} mm"
+        pilots = ", ".join(f"{c[1]:.2f} s a point at {c[0] * 1e3:.3g} mm"
                            for c in sorted(plan.costs[kind]))
         lines.append(f"  {n} points {kinds[kind]}: pilot {pilots}")
     if plan.compile_s > 10:
@@ -173,6 +173,12 @@ def build_command(
         for tau in dissipation_layer:
             _check_damping(tau, "--dissipation-layer")
         command = "solitonde " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        # A fresh install: the extractor compiles in the background while the pilot compiles
+        # the model's kernels; the pilot's first shot waits for it (build_table's points are
+        # read by the compiled extractor only).
+        from solitonde.signal import kernel_choice
+
+        kernel_choice.start()
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
                              command=command, table_id=table_id,
                              plan=lambda p: typer.echo(plan_text(p), err=as_json),

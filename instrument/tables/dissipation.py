@@ -149,7 +149,7 @@ def simulate_layer(table: ModelTable, damping_s: float, out_dir: Path, *,
     stem = table.path.stem if table.path else "table"
     target = out_dir / f"{stem}.damped-{damping_s:g}.h5"
     report = build_table(damped_sweep, target, workers=workers, scheduler=scheduler,
-                         progress=progress, responses=responses)
+                         progress=progress, responses=responses, slopes=False)
     if not report.complete:
         raise TableError("dissipation", f"the damped sweep did not finish ({report.path})")
     return layer_from_table(table, ModelTable.load(target)), target

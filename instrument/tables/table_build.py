@@ -68,6 +68,8 @@ from solitonde.model.greens import GreensCache
 from solitonde.model.scene import Scene, scene_from_dict
 from solitonde.model.simulate import SimulationResult, simulate
 from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
+from solitonde.model.tiers.meshed import forget_plates
+from solitonde.signal import kernel_choice
 from solitonde.signal.errors import WaveformError
 from solitonde.signal.features import Features, extract
 from solitonde.signal.pulses import FLAGS
@@ -121,6 +123,9 @@ def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
         result = simulate(scene, greens_cache=greens_cache)
     except (SimulationError, SceneError) as exc:
         return point_record(None, None, f"simulation: {exc}", traces)
+    # a table's points are read by the compiled extractor only (never the interpreted kernels
+    # that bridge a background compile): the same bits whenever the table is built
+    kernel_choice.finish()
     try:
         features = extract(as_measured(result), **{**detect_options(scene), **dict(detect or {})})
     except WaveformError as exc:
@@ -175,11 +180,12 @@ class BuildPlan:
     """What a build is about to do and how long it should take, from a pilot run.
 
     Per kind of plate (``meshed``: a plate model with a mesh, near a support; ``dashpot``: every
-    other tier) the pilot runs the thinnest and the thickest plate of the kind (all their sphere
-    sizes, in this process, kept in the table): ``costs[kind]`` holds ``(thickness_m, seconds a
-    point, seconds a point of a dissipation layer)`` for each, timed warm, the second with the
-    plate's responses read from the store (what a layer's point costs: only the chain). A point's
-    cost is read between them as a power of the thickness (thin plates cost several times more).
+    other tier) the pilot runs the thinnest, a middle and the thickest plate of the kind (all their
+    sphere sizes, in this process, kept in the table): ``costs[kind]`` holds ``(thickness_m,
+    seconds a point, seconds a point of a dissipation layer)`` for each, timed warm, the second
+    with the plate's responses read from the store (what a layer's point costs: only the chain).
+    A point's cost is read between them as a power of the thickness (thin plates cost several
+    times more, and the cost falls faster than one power law across the range).
     ``compile_s`` is what the first runs took more (the numba kernels compiled, once per
     installation). ``eta_s`` spreads the remaining points' cost, and ``layers_eta_s`` that of the
     ``layers`` dissipation layers that follow, over the workers.
@@ -206,14 +212,11 @@ class BuildPlan:
 def point_cost(pairs: Sequence[tuple[float, float, float]], thickness_m: float,
                layer: bool = False) -> float:
     """Seconds a point of ``thickness_m`` costs, from the pilots' ``(t, s, layer s)``: a power
-    law in t through the two pilots (log-log interpolation), held at the ends."""
+    law in t between neighbouring pilots (piecewise linear in log-log), held beyond the ends."""
     col = 2 if layer else 1
-    pts = sorted((math.log(p[0]), math.log(max(p[col], 1e-9))) for p in pairs)
-    if len(pts) == 1 or pts[0][0] == pts[-1][0]:
-        return math.exp(pts[0][1])
-    x = min(max(math.log(thickness_m), pts[0][0]), pts[-1][0])
-    (x0, y0), (x1, y1) = pts[0], pts[-1]
-    return math.exp(y0 + (y1 - y0) * (x - x0) / (x1 - x0))
+    pts = sorted({math.log(p[0]): math.log(max(p[col], 1e-9)) for p in pairs}.items())
+    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+    return math.exp(float(np.interp(math.log(thickness_m), xs, ys)))
 
 
 def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
@@ -221,11 +224,23 @@ def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
     return "meshed" if model in MESHED_PLATE_MODELS else "dashpot"
 
 
+def _ends(tasks: Sequence[tuple[int, int, list[int]]]) -> list[tuple[int, int, list[int]]]:
+    """The pilot's plates of one kind: at its thinnest, middle and thickest thickness (fewer if
+    some are the same), each at the middle of that thickness's distances (the cost varies less
+    with the distance than with the thickness; the middle one stands for them)."""
+    present = sorted({t[0] for t in tasks})
+    out = []
+    for i_t in sorted({present[0], present[len(present) // 2], present[-1]}):
+        same = sorted((t for t in tasks if t[0] == i_t), key=lambda t: t[1])
+        out.append(same[len(same) // 2])
+    return out
+
+
 def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
            scheduler: str | None, responses: str | None, layers: int
            ) -> tuple[BuildPlan, int, int]:
-    """Run the thinnest and the thickest pending plate of each kind here, write them, and plan
-    the rest; returns the plan, and the points and plates written."""
+    """Run the thinnest, a middle and the thickest pending plate of each kind here, write them,
+    and plan the rest; returns the plan, and the points and plates written."""
     tasks = pending(fh, sweep)
     all_points = [(i_t, i_l, len(sweep.diameters_m)) for i_t, i_l in sweep.groups()]
     kinds = {(i_t, i_l): _kind(sweep, i_t, i_l) for i_t, i_l, _ in all_points}
@@ -244,8 +259,7 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
         # without a store the pilot's layer timing needs one: a scratch folder, dropped after
         store = responses if responses is not None else scratch
         for kind, of_kind in by_kind.items():
-            ordered = sorted(of_kind, key=lambda t: (sweep.thicknesses_m[t[0]], t[1]))
-            ends = [ordered[0]] if len(ordered) == 1 else [ordered[0], ordered[-1]]
+            ends = _ends(of_kind)
             costs[kind] = []
             for i_t, i_l, todo in ends:
                 t0 = time.perf_counter()
@@ -256,10 +270,13 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 stored[kind] = stored.get(kind, True) and result["greens_computed"] == 0
                 # Timed again, warm: the first run of an installation compiles the numba kernels
                 # (minutes), which the workers then load from the cache; that is no plate's
-                # cost. Once without the store (a point's cost), once with it (a layer's).
+                # cost. Once without the store (a point's cost), once with it (a layer's), each
+                # building its plate as a worker does.
+                forget_plates()
                 t0 = time.perf_counter()
                 run_plate(spec, i_t, i_l, todo)
                 again = time.perf_counter() - t0
+                forget_plates()
                 t0 = time.perf_counter()
                 run_plate(spec, i_t, i_l, todo, store)
                 chain = time.perf_counter() - t0
@@ -297,6 +314,7 @@ def build_table(
     plan: Callable[[BuildPlan], None] | None = None,
     responses: str | Path | bool = True,
     layers: int = 0,
+    slopes: bool = True,
 ) -> BuildReport:
     """Build (or continue building) the table for ``sweep`` at ``out``.
 
@@ -316,6 +334,8 @@ def build_table(
         The table is the same either way: a stored response is the computed one, bit for bit.
     layers: how many dissipation layers the caller builds after this sweep (the plan counts
         their time; they are built by :func:`.dissipation.simulate_layer`).
+    slopes: also simulate the material slopes into the table (a dissipation layer's sweep, whose
+        features alone are kept, goes without).
 
     Raises
     ------
@@ -365,7 +385,8 @@ def build_table(
         written, plates = written + more, plates + more_plates
         complete = bool(fh["done"][...].all())
         if complete:
-            write_slopes(fh, simulate_slopes(sweep))
+            if slopes:
+                write_slopes(fh, simulate_slopes(sweep))
             fh.attrs["provenance"] = json.dumps(provenance(fh, sweep, runner, command, table_id))
             fh.attrs["complete"] = True
     if complete:

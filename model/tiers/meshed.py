@@ -44,6 +44,12 @@ def _plate_cached(
     return build_plate(mesh, material, supports)
 
 
+def forget_plates() -> None:
+    """Drop the plates kept for reuse in this process (:func:`plate_for`), so that the next run
+    of each builds its plate again, as a fresh worker process does (a pilot's timing)."""
+    _plate_cached.cache_clear()
+
+
 def contact_radius(scene: Scene) -> float:
     """The contact patch radius r_c of a scene, m (0 for the 'paper' preset).
 
