@@ -249,6 +249,7 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
         points_by_kind[kinds[i_t, i_l]] = points_by_kind.get(kinds[i_t, i_l], 0) + len(todo)
     costs: dict[str, list[tuple[float, float, float]]] = {}
     stored: dict[str, bool] = {}  # every pilot of the kind found its responses in the store
+    write_s: list[float] = []  # the driver's time to write and flush a plate
     written = plates = 0
     compile_s = 0.0
     started = time.perf_counter()
@@ -264,7 +265,9 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
             for i_t, i_l, todo in ends:
                 t0 = time.perf_counter()
                 result = run_plate(spec, i_t, i_l, todo, store)
+                t_write = time.perf_counter()
                 written += write_plate(fh, result)
+                write_s.append(time.perf_counter() - t_write)
                 plates += 1
                 first = time.perf_counter() - t0
                 stored[kind] = stored.get(kind, True) and result["greens_computed"] == 0
@@ -294,9 +297,11 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                        layer=responses is not None)
         for i_t, i_l, n in all_points if kinds[i_t, i_l] in costs)
     layer_lanes = 1 if scheduler is None and workers <= 1 else max(1, workers)
+    # a layer's plates come back fast: the driver writing them, one at a time, sets the pace
+    layer_writes = layers * len(all_points) * (float(np.median(write_s)) if write_s else 0.0)
     plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, costs,
                      time.perf_counter() - started, work / lanes, lanes, compile_s, layers,
-                     layer_work / layer_lanes)
+                     layer_work / layer_lanes + layer_writes)
     return plan, written, plates
 
 
