@@ -24,12 +24,14 @@ import json
 import threading
 import time
 from collections import OrderedDict
+from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
 from numba import njit
 
 from .chain import PK_BOT_F, chain_energy, record_into
+from .jit_cache import source_digest
 from .mindlin import MindlinPlate
 from .record import ChainRecord
 from .sem import ElasticPlate
@@ -39,7 +41,16 @@ from .status import RUN_NONFINITE, RUN_OK, RUN_SHORT_RESPONSE
 #: Bump when the meaning of a stored response changes (invalidates every cache entry).
 #: 2: the force acts through a contact patch and g is the patch-weighted deflection; the key
 #: holds the patch radius and the element edges (local refinement).
-GREENS_VERSION = 2
+#: 3: the key holds the model's source digest (:func:`model_digest`): a response computed by
+#: other code, even one that differs in the last bit, is never taken for this code's.
+GREENS_VERSION = 3
+
+
+@lru_cache(maxsize=1)
+def model_digest() -> str:
+    """The hash of the model package's source (:func:`.jit_cache.source_digest`): what computes a
+    response. An update or an edit of the model makes every stored response another key."""
+    return source_digest(("solitonde.model",))
 
 
 class GreensCache(Protocol):
@@ -122,6 +133,7 @@ def response_key(plate: ElasticPlate | MindlinPlate, dt: float) -> str:
         "supports": plate.supports,
         "material": [mat.youngs_modulus, mat.poisson_ratio, mat.density],
         "dt_s": float(dt),
+        "code": model_digest(),
     }
     if isinstance(plate, MindlinPlate):  # named only for Mindlin: 3-D keys stay what they were
         desc["plate_theory"] = "mindlin"

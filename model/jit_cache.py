@@ -20,8 +20,8 @@ does: a clone at another path, of the same source, reuses the compiled kernels.
 
 It runs first thing when ``solitonde.model`` or ``solitonde.instrument`` is imported (before any
 kernel is decorated: numba fixes a kernel's cache folder when the decorator runs). It sets
-``NUMBA_CACHE_DIR`` and ``NUMBA_CACHE_LOCATOR_CLASSES``, so worker processes (uvicorn, Dask)
-inherit the same folder and naming. A process that
+``NUMBA_CACHE_DIR``, so worker processes (uvicorn, Dask) inherit the same folder; they import
+solitonde, which registers the locator in each of them. A process that
 imports only ``solitonde.signal`` modules, which have no package ``__init__`` to run it, gets
 numba's default cache beside the source unless it calls :func:`configure` first.
 """
@@ -29,21 +29,17 @@ numba's default cache beside the source unless it calls :func:`configure` first.
 from __future__ import annotations
 
 import hashlib
+import importlib.abc
 import os
 import sys
 from importlib import util
 from pathlib import Path
+from typing import Any
 
 from solitonde.model.version import package_version
 
 PREFIX = "solitonde-"
 """Leaf folders start with this; an inherited ``NUMBA_CACHE_DIR`` with it is one of ours."""
-
-LOCATORS = ("solitonde.model.jit_locator.PackageLocator,UserProvidedCacheLocator,"
-            "InTreeCacheLocator,UserWideCacheLocator,IPythonCacheLocator,ZipCacheLocator")
-"""numba's cache locators, ours first (:mod:`solitonde.model.jit_locator`: a kernel's cache file
-is named by its place in the package, so a clone at another path reuses the compiled kernels of
-the same source), then numba's own, in numba's order."""
 
 KERNEL_PACKAGES = ("solitonde.model", "solitonde.signal")
 """Every numba kernel and everything a kernel can inline lives in these two packages."""
@@ -101,10 +97,51 @@ def configure() -> Path:
     else:
         target = default_root() / leaf
     os.environ["NUMBA_CACHE_DIR"] = str(target)
-    os.environ["NUMBA_CACHE_LOCATOR_CLASSES"] = LOCATORS
     config = sys.modules.get("numba.core.config")
     if config is not None:
         config.CACHE_DIR = str(target)  # type: ignore[attr-defined]
-        config.CACHE_LOCATOR_CLASSES = LOCATORS  # type: ignore[attr-defined]
+    _register_locator()
     _configured = target
     return target
+
+
+def _register_locator() -> None:
+    """Put :class:`~solitonde.model.jit_locator.PackageLocator` first among numba's cache
+    locators, in this process only: now if numba's caching module is loaded, else the moment it
+    is (a finder on ``sys.meta_path`` waits for it, so that importing solitonde does not import
+    numba). Nothing goes into the environment: another program this process starts, with
+    another Python, keeps numba's own locators."""
+    caching = sys.modules.get("numba.core.caching")
+    if caching is not None:
+        _prepend_locator(caching)
+    elif not any(isinstance(f, _CachingFinder) for f in sys.meta_path):
+        sys.meta_path.insert(0, _CachingFinder())
+
+
+def _prepend_locator(caching: Any) -> None:
+    from solitonde.model.jit_locator import PackageLocator
+
+    classes = caching.CacheImpl._locator_classes
+    if PackageLocator not in classes:
+        classes.insert(0, PackageLocator)
+
+
+class _CachingFinder(importlib.abc.MetaPathFinder):
+    """Runs :func:`_prepend_locator` once ``numba.core.caching`` has been executed."""
+
+    def find_spec(self, name: str, path: Any, target: Any = None) -> Any:
+        if name != "numba.core.caching":
+            return None
+        sys.meta_path.remove(self)
+        spec = util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        loader = spec.loader
+        run = loader.exec_module
+
+        def exec_module(module: Any) -> None:
+            run(module)
+            _prepend_locator(module)
+
+        loader.exec_module = exec_module  # type: ignore[method-assign]
+        return spec

@@ -9,9 +9,9 @@ source) already holds them. :class:`PackageLocator` names it after the module's 
 its package (``model``, ``model/tiers``, ``signal``) instead. That is safe because the cache folder
 already changes with any change of the source, and numba still checks each file's content hash.
 
-:func:`solitonde.model.jit_cache.configure` puts it first in ``NUMBA_CACHE_LOCATOR_CLASSES`` (with
-numba's own after it, for any other code); this module imports numba, so only numba imports it,
-when the first cached kernel is decorated.
+:func:`solitonde.model.jit_cache.configure` puts it first among numba's locators in the process
+(numba's own follow, for any other code) once numba's caching module is loaded; this module
+imports numba, so it is imported only then.
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ _ROOTS = _roots()
 def package_folder(py_file: str) -> str | None:
     """``py_file``'s folder relative to its package (``model``, ``model/tiers``, ``signal``),
     or None for a file outside the kernel packages."""
-    path = Path(py_file).resolve().parent
+    path = Path(py_file).parent.resolve()
     for name, root in _ROOTS:
         if path == root or root in path.parents:
             return "/".join((name, *path.relative_to(root).parts))

@@ -19,8 +19,8 @@ configure()
 os.environ[COMPILE_FIRST_ENV] = "1"
 
 # Table builds keep plate responses in an on-disk store (solitonde.instrument.tables.greens_cache):
-# this session's go to a folder of its own, never the user's, and are removed at the end.
-if not os.environ.get("SOLITONDE_CACHE"):
-    _responses = tempfile.mkdtemp(prefix="solitonde-test-responses-")
-    os.environ["SOLITONDE_CACHE"] = _responses
-    atexit.register(shutil.rmtree, _responses, ignore_errors=True)
+# this session's go to a folder of its own, never the user's (even one SOLITONDE_CACHE names),
+# and are removed at the end.
+_responses = tempfile.mkdtemp(prefix="solitonde-test-responses-")
+os.environ["SOLITONDE_CACHE"] = _responses
+atexit.register(shutil.rmtree, _responses, ignore_errors=True)

@@ -6,8 +6,9 @@ t = 1.5..6 mm, L = 0..457 mm dense within 200 mm). With ``--scene`` (or ``--set
 chain.diameter=...``) and no ``--diameters`` the table is built for the scene's sphere size only.
 
 Before the sweep starts, ``build`` prints its plan: the points, the sphere sizes, thicknesses
-and distances, how many points need a meshed plate, and a time estimate from a pilot (one plate
-of each kind run first and kept); then a progress bar whose ETA tqdm refines as plates return.
+and distances, how many points need a meshed plate, and a time estimate from a pilot (the
+thinnest, a middle and the thickest plate of each kind run first and kept; the dissipation
+layers' chains too); then a progress bar whose ETA tqdm refines as plates return.
 """
 
 from __future__ import annotations
@@ -134,9 +135,9 @@ def build_command(
                                        "core); 1 runs serially without Dask"),
     scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
     responses: Path | None = typer.Option(
-        None, "--responses", help="folder of the plate-response store (default: "
-        "$SOLITONDE_CACHE/greens, else ~/.cache/solitonde/greens); on a cluster, a folder every "
-        "worker reads and writes"),
+        None, "--responses", help="folder of the plate-response store (default: each machine's "
+        "own, `solitonde cache info` names it); on a cluster, a folder every worker reads and "
+        "writes"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
     as_json: bool = typer.Option(False, "--json", help="print the build report as JSON"),
     overwrite: bool = typer.Option(False, "--overwrite", help="replace an existing table file "
@@ -344,6 +345,10 @@ def dissipation_command(
                                       "--set effects.damping=TAU (repeatable)"),
     workers: int | None = typer.Option(None, help="local worker processes (default: one per "
                                        "core)"),
+    scheduler: str | None = typer.Option(None, help="address of an existing Dask scheduler"),
+    responses: Path | None = typer.Option(
+        None, "--responses", help="folder of the plate-response store the table was built with "
+        "(default: each machine's own)"),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="progress bar"),
 ) -> None:
     """Add slices to a table's dissipation layer (table build --dissipation-layer does): the
@@ -355,7 +360,8 @@ def dissipation_command(
     if not damping and not source:
         damping = list(DEFAULT_DAMPINGS_S)
     try:
-        _add_layer(file, damping, source, workers, progress, False)
+        _add_layer(file, damping, source, workers, progress, False, scheduler,
+                   True if responses is None else responses)
     except (TableError, SceneError) as exc:
         _fail(str(exc))
 

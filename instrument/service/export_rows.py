@@ -51,8 +51,16 @@ def shot_rows(store: Store, plate_id: str | None = None,
 
 def _flat(features: FeatureDict) -> dict[str, Cell]:
     """Scalar features as columns; lists joined so CSV and Parquet hold one value per cell."""
-    return {key: ";".join(str(v) for v in value) if isinstance(value, list) else value
-            for key, value in features.items()}
+    out: dict[str, Cell] = {}
+    for key, value in features.items():
+        raw: object = value  # a row stored by an older version may hold a mapping
+        if isinstance(raw, list | tuple):
+            out[key] = ";".join(str(v) for v in raw)
+        elif isinstance(raw, dict):
+            out[key] = json.dumps(raw)
+        else:
+            out[key] = value  # type: ignore[assignment]
+    return out
 
 
 class MeasurementEstimateRow(EstimateRow):

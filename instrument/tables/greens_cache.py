@@ -16,7 +16,10 @@ used longest ago are deleted (a load marks a file as used).
 from __future__ import annotations
 
 import contextlib
+import math
 import os
+import time
+import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +32,23 @@ from solitonde.signal.atomic import atomic_path
 
 DEFAULT_MAX_MB = 4096
 """The store's default size cap, MB: a few full tables' responses."""
+PRUNE_EVERY = 16
+"""A process checks the folder against the cap at its first store and every this many after
+(listing a large folder on a network share at every store would cost more than the store): the
+cap may be passed by as many responses for a while."""
+STALE_TMP_S = 3600.0
+"""A temporary file this old is a write that was killed; ``clear`` deletes it."""
+
+
+DEFAULT_STORE = "<default>"
+"""A store folder passed to another process as "its own default" (:func:`cache_dir` there: on a
+cluster, each machine's), never a path."""
+
+
+def store_folder(name: str | None) -> Path:
+    """The folder a store argument names: :data:`DEFAULT_STORE` or None, this process's
+    :func:`cache_dir`; else the path itself."""
+    return cache_dir() if name is None or name == DEFAULT_STORE else Path(name)
 
 
 def cache_dir() -> Path:
@@ -39,14 +59,18 @@ def cache_dir() -> Path:
 
 
 def max_bytes() -> int:
-    """The size cap: ``$SOLITONDE_CACHE_MAX_MB`` (a positive number of MB), else the default."""
+    """The size cap: ``$SOLITONDE_CACHE_MAX_MB`` (a finite number of MB above 0), else the
+    default; a value that is none says so (a warning) and the default holds: a cache setting must
+    not stop a build or a simulation."""
     raw = os.environ.get("SOLITONDE_CACHE_MAX_MB", "")
     try:
-        mb = float(raw) if raw.strip() else DEFAULT_MAX_MB
+        mb = float(raw) if raw.strip() else float(DEFAULT_MAX_MB)
     except ValueError:
-        raise ValueError(f"SOLITONDE_CACHE_MAX_MB must be a number of MB, got {raw!r}") from None
-    if not mb > 0:
-        raise ValueError(f"SOLITONDE_CACHE_MAX_MB must be > 0, got {raw!r}")
+        mb = math.nan
+    if not (math.isfinite(mb) and mb > 0):
+        warnings.warn(f"SOLITONDE_CACHE_MAX_MB: {raw!r} is not a size in MB (a number above 0); "
+                      f"the default {DEFAULT_MAX_MB} MB holds", stacklevel=2)
+        mb = float(DEFAULT_MAX_MB)
     return int(mb * 1e6)
 
 
@@ -66,6 +90,7 @@ class DiskGreensCache:
     def __init__(self, folder: str | Path | None = None, cap_bytes: int | None = None) -> None:
         self.folder = Path(folder) if folder is not None else cache_dir()
         self.cap_bytes = max_bytes() if cap_bytes is None else int(cap_bytes)
+        self._stores = 0
 
     def path(self, key: str) -> Path:
         if not key.isalnum():
@@ -91,7 +116,10 @@ class DiskGreensCache:
                 np.savez(fh, response=np.asarray(response, dtype=float))
         except OSError:
             return  # a read-only or full disk must not stop a simulation: it stays in memory
-        self.prune()
+        self._stores += 1
+        if self._stores % PRUNE_EVERY == 1 or PRUNE_EVERY == 1:
+            with contextlib.suppress(OSError):  # nor must a file another user owns
+                self.prune(keep=path)
 
     def _files(self) -> list[os.DirEntry[str]]:
         try:
@@ -104,9 +132,10 @@ class DiskGreensCache:
         files = self._files()
         return StoreInfo(self.folder, len(files), sum(_size(e) for e in files), self.cap_bytes)
 
-    def prune(self) -> int:
-        """Delete the responses used longest ago until the folder is under its cap; returns how
-        many were deleted. Another process deleting the same file at once is harmless."""
+    def prune(self, keep: Path | None = None) -> int:
+        """Delete the responses used longest ago (never ``keep``, the one just written) until the
+        folder is under 90 % of its cap; returns how many were deleted. A file another process
+        deletes first, or one this process may not delete, is passed over."""
         files = self._files()
         total = sum(_size(e) for e in files)
         if total <= self.cap_bytes:
@@ -115,20 +144,28 @@ class DiskGreensCache:
         for entry in sorted(files, key=_mtime):
             if total <= 0.9 * self.cap_bytes:
                 break
+            if keep is not None and entry.name == keep.name:
+                continue
             size = _size(entry)
-            with contextlib.suppress(FileNotFoundError):
+            with contextlib.suppress(OSError):
                 os.unlink(entry.path)
                 removed += 1
             total -= size
         return removed
 
     def clear(self) -> int:
-        """Delete every response; returns how many."""
+        """Delete every response, and the temporary files of writes that were killed (older than
+        :data:`STALE_TMP_S`); returns how many responses."""
         removed = 0
         for entry in self._files():
-            with contextlib.suppress(FileNotFoundError):
+            with contextlib.suppress(OSError):
                 os.unlink(entry.path)
                 removed += 1
+        with contextlib.suppress(OSError), os.scandir(self.folder) as entries:
+            for entry in entries:
+                if entry.name.endswith(".tmp") and time.time() - _mtime(entry) > STALE_TMP_S:
+                    with contextlib.suppress(OSError):
+                        os.unlink(entry.path)
         return removed
 
 

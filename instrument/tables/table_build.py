@@ -37,7 +37,12 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.parallel import default_workers, run_tasks, runner_label
-from solitonde.instrument.tables.greens_cache import DiskGreensCache, LayeredCache, cache_dir
+from solitonde.instrument.tables.greens_cache import (
+    DEFAULT_STORE,
+    DiskGreensCache,
+    LayeredCache,
+    store_folder,
+)
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.sweep import Sweep
 from solitonde.instrument.tables.table import (
@@ -141,8 +146,9 @@ def run_plate(sweep: SweepDict, i_t: int, i_l: int,
     The sizes share a task-local cache of plate responses: where the response does not depend on
     the sphere (the 3-D plate's), the largest sphere's record is the longest and its response
     covers the others; the Mindlin plate computes one response per distinct mesh. With
-    ``responses`` (a folder), the response store there stands behind it: a response another
-    build, layer or worker computed is read, not computed again, and the new ones are kept.
+    ``responses`` (a folder, or :data:`~.greens_cache.DEFAULT_STORE` for this machine's), the
+    response store there stands behind it: a response another build, layer or worker computed
+    is read, not computed again, and the new ones are kept.
     ``greens_computed`` counts the responses this task computed.
     """
     spec = Sweep.from_dict(sweep)
@@ -151,7 +157,7 @@ def run_plate(sweep: SweepDict, i_t: int, i_l: int,
     task_cache = greens.MemoryCache(max_bytes=sys.maxsize)
     cache: greens.GreensCache = task_cache
     if responses is not None:
-        cache = LayeredCache(DiskGreensCache(responses), memory=task_cache)
+        cache = LayeredCache(DiskGreensCache(store_folder(responses)), memory=task_cache)
     points = {i_d: simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces,
                                   cache) for i_d in order}
     computed = cache.computed if isinstance(cache, LayeredCache) else len(task_cache)
@@ -273,16 +279,19 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 stored[kind] = stored.get(kind, True) and result["greens_computed"] == 0
                 # Timed again, warm: the first run of an installation compiles the numba kernels
                 # (minutes), which the workers then load from the cache; that is no plate's
-                # cost. Once without the store (a point's cost), once with it (a layer's), each
+                # cost. Once with the store (a layer's cost), once without it (a point's, unless
+                # the store held this plate's responses: a rebuild needs no more), each run
                 # building its plate as a worker does.
-                forget_plates()
-                t0 = time.perf_counter()
-                run_plate(spec, i_t, i_l, todo)
-                again = time.perf_counter() - t0
                 forget_plates()
                 t0 = time.perf_counter()
                 run_plate(spec, i_t, i_l, todo, store)
                 chain = time.perf_counter() - t0
+                again = chain
+                if result["greens_computed"] > 0:
+                    forget_plates()
+                    t0 = time.perf_counter()
+                    run_plate(spec, i_t, i_l, todo)
+                    again = time.perf_counter() - t0
                 costs[kind].append((sweep.thicknesses_m[i_t], again / len(todo),
                                     chain / len(todo)))
                 compile_s += max(0.0, first - again)
@@ -332,8 +341,9 @@ def build_table(
         (what an interruption does; for tests and chunked builds).
     command: the command line, recorded in the provenance.
     table_id: the table's id, recorded in the provenance (default: the file's stem when loaded).
-    plan: called with the :class:`BuildPlan` before the sweep runs: the first plate of each kind
-        is run here as a pilot (and kept), and the time of the rest estimated from it.
+    plan: called with the :class:`BuildPlan` before the sweep runs: three plates of each kind
+        (thinnest, middle, thickest) are run here as a pilot (and kept), and the time of the rest
+        estimated from them.
     responses: the plate responses' store (:mod:`.greens_cache`): True, the default folder; a
         folder (one the workers share, on a cluster); False, none (each task computes its own).
         The table is the same either way: a stored response is the computed one, bit for bit.
@@ -358,8 +368,10 @@ def build_table(
         sweep.scene_at(*ix)
     workers = default_workers() if workers is None else max(1, int(workers))
     runner = runner_label(workers, scheduler)
-    store = (str(cache_dir()) if responses is True else None if responses is False
-             else str(responses))
+    # the default store is each worker's own (its machine's); a folder named is made absolute,
+    # since workers elsewhere resolve a relative one against their own working folder
+    store = (DEFAULT_STORE if responses is True else None if responses is False
+             else str(Path(responses).resolve()))
     started = time.perf_counter()
     written = plates = 0
     spec = sweep.to_dict()

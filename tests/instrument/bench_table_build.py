@@ -54,10 +54,11 @@ def _sweep(tmp_path: Path, text: str, thicknesses: list[float], distances: list[
     return Sweep([base["chain"]["diameter"]], thicknesses, distances, scene=base)
 
 
-def _timed(sweep: Sweep, out: Path, store: Path, scheduler: str | None = None) -> float:
+def _timed(sweep: Sweep, out: Path, store: Path, scheduler: str | None = None,
+           slopes: bool = True) -> float:
     start = time.perf_counter()
     report = build_table(sweep, out, workers=default_workers(), scheduler=scheduler,
-                         responses=store)
+                         responses=store, slopes=slopes)
     assert report.complete
     return time.perf_counter() - start
 
@@ -69,7 +70,8 @@ def _layers(sweep: Sweep, stem: Path, store: Path) -> float:
     with local_cluster(default_workers()) as cluster:
         for tau in LAYERS_S:
             _timed(dataclasses.replace(sweep, scene=damped_scene(sweep.scene, tau)),
-                   stem.with_name(f"{stem.name}-{tau:g}.h5"), store, cluster.scheduler_address)
+                   stem.with_name(f"{stem.name}-{tau:g}.h5"), store, cluster.scheduler_address,
+                   slopes=False)  # as simulate_layer builds them
     return time.perf_counter() - start
 
 

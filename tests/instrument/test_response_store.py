@@ -78,7 +78,8 @@ def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(tmp_path
         store.store(key, one + i)
         os.utime(store.path(key), (1000.0 + i, 1000.0 + i))  # a, then b, then c
     assert store.load("a") is not None  # a is now the most recently used
-    store.store("d", one)
+    # a process checks the cap at its first store (and every PRUNE_EVERY after): another one
+    DiskGreensCache(tmp_path, cap_bytes=store.cap_bytes).store("d", one)
     kept = {p.stem for p in tmp_path.glob("*.npz")}
     assert "b" not in kept and {"a", "d"} <= kept
     assert store.info().bytes <= store.cap_bytes
@@ -184,3 +185,29 @@ def test_a_build_on_a_dask_cluster_of_separate_processes_is_the_serial_build(
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def test_the_default_store_is_each_workers_own(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """A task told "the default store" resolves it where it runs (its machine's folder), not a
+    path the building machine chose."""
+    from solitonde.instrument.tables.greens_cache import DEFAULT_STORE
+    from solitonde.instrument.tables.table_build import run_plate
+
+    monkeypatch.setenv("SOLITONDE_CACHE", str(tmp_path / "this-worker"))
+    result = run_plate(_sweep().to_dict(), 0, 0, None, DEFAULT_STORE)
+    assert result["greens_computed"] > 0
+    assert len(list((tmp_path / "this-worker" / "greens").glob("*.npz"))) == \
+        result["greens_computed"]
+
+
+def test_a_cap_that_is_no_size_warns_and_keeps_the_default(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from solitonde.instrument.tables.greens_cache import DEFAULT_MAX_MB, max_bytes
+
+    for bad in ("abc", "inf", "-5", "0"):
+        monkeypatch.setenv("SOLITONDE_CACHE_MAX_MB", bad)
+        with pytest.warns(UserWarning, match=f"SOLITONDE_CACHE_MAX_MB: '{bad}' is not a size"):
+            assert max_bytes() == DEFAULT_MAX_MB * 1_000_000
+    monkeypatch.setenv("SOLITONDE_CACHE_MAX_MB", "250")
+    assert max_bytes() == 250_000_000

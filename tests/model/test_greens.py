@@ -60,6 +60,14 @@ def test_key_depends_on_everything_the_response_depends_on() -> None:
     assert len({key, *others}) == 11
 
 
+def test_key_depends_on_the_model_code(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another version or an edit of the model (its source digest) is another key: a stored
+    response is only ever this code's."""
+    key = greens.response_key(_plate(), 1e-7)
+    monkeypatch.setattr(greens, "model_digest", lambda: "an-edited-model")
+    assert greens.response_key(_plate(), 1e-7) != key
+
+
 def test_cache_reuses_and_extends() -> None:
     """A stored response serves shorter requests; a longer request recomputes and replaces."""
     plate = _plate()
@@ -113,8 +121,8 @@ def test_simulate_uses_the_cache_it_is_given_and_no_other() -> None:
 
 
 def test_a_3d_plates_key_is_unchanged_by_the_mindlin_tier() -> None:
-    """Disk caches written before the Mindlin plate existed stay valid: a 3-D plate's key is
-    the same hash of the same description (no plate-theory field for it)."""
+    """A 3-D plate's key is the hash of its description with no plate-theory field (the Mindlin
+    plate's names itself), the model's code among it."""
     import hashlib
     import json
 
@@ -122,10 +130,11 @@ def test_a_3d_plates_key_is_unchanged_by_the_mindlin_tier() -> None:
     mesh = plate.mesh
     edges = hashlib.sha256(np.concatenate((mesh.x_edges, mesh.y_edges, mesh.z_edges))
                            .astype("<f8").tobytes()).hexdigest()[:16]
-    desc = {"contact_radius_m": float(mesh.contact_radius), "edges": edges, "version": 2,
+    desc = {"contact_radius_m": float(mesh.contact_radius), "edges": edges, "version": 3,
             "thickness_m": float(mesh.z_edges[-1]), "size_m": [0.3, 0.3],
             "distance_to_support_m": 0.05, "elements": list(mesh.elements),
             "order": list(mesh.order), "symmetry": True, "supports": "opposite_edges",
-            "material": [AL.youngs_modulus, AL.poisson_ratio, AL.density], "dt_s": 1e-7}
+            "material": [AL.youngs_modulus, AL.poisson_ratio, AL.density], "dt_s": 1e-7,
+            "code": greens.model_digest()}
     text = json.dumps(desc, sort_keys=True, separators=(",", ":"), default=repr)
     assert greens.response_key(plate, 1e-7) == hashlib.sha256(text.encode()).hexdigest()[:32]
