@@ -120,8 +120,23 @@ def start() -> None:
             _driver = subprocess.Popen(  # inherits NUMBA_CACHE_DIR, which jit_cache.configure set
                 [sys.executable, "-m", "solitonde.signal.precompile", str(_marker())],
                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                start_new_session=True)
+                start_new_session=True, env=_compile_env())
         _bridging = True
+
+
+def _compile_env() -> dict[str, str]:
+    """The background compile's environment: this process's, with numba's cache locators as
+    this process has them. The compile imports only this package, so it would otherwise file
+    the kernels under numba's own names, where this process (whose locators the application may
+    have set, :mod:`solitonde.model.jit_locator`) does not look for them."""
+    env = dict(os.environ)
+    caching = sys.modules.get("numba.core.caching")
+    if caching is not None:
+        classes = caching.CacheImpl._locator_classes
+        env["NUMBA_CACHE_LOCATOR_CLASSES"] = ",".join(
+            c.__name__ if c.__module__ == caching.__name__ else f"{c.__module__}.{c.__qualname__}"
+            for c in classes)
+    return env
 
 
 def current() -> types.ModuleType:

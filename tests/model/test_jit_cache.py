@@ -148,3 +148,16 @@ def test_a_clone_at_another_path_loads_the_compiled_kernels(package_copy: Path,
     assert first["file"] != there["file"] and there["file"].startswith(str(moved))
     assert first["hits"] == 0 and there["hits"] == 1, "the other clone compiled again"
     assert there["f"] == first["f"]
+
+
+def test_the_background_compile_files_the_kernels_where_this_process_looks() -> None:
+    """The extractor's background compile imports only solitonde.signal: it gets this process's
+    locators through its environment, ours first, so it files the kernels under the package's
+    names (not numba's path-keyed ones, where nothing would find them)."""
+    import numba  # noqa: F401  (loads numba's caching module: the locator is registered)
+    from solitonde.signal import kernel_choice
+
+    locators = kernel_choice._compile_env()["NUMBA_CACHE_LOCATOR_CLASSES"].split(",")
+    assert locators[0] == "solitonde.model.jit_locator.PackageLocator"
+    assert "UserProvidedCacheLocator" in locators[1:]
+    assert "NUMBA_CACHE_LOCATOR_CLASSES" not in os.environ  # this process's own: unchanged
