@@ -306,7 +306,8 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                        layer=responses is not None)
         for i_t, i_l, n in all_points if kinds[i_t, i_l] in costs)
     layer_lanes = 1 if scheduler is None and workers <= 1 else max(1, workers)
-    # a layer's plates come back fast: the driver writing them, one at a time, sets the pace
+    # a layer's plates come back fast and the driver writes them one at a time: measured on the
+    # tutorial's plate, a layer takes about its chains' time and its writes' together
     layer_writes = layers * len(all_points) * (float(np.median(write_s)) if write_s else 0.0)
     plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, costs,
                      time.perf_counter() - started, work / lanes, lanes, compile_s, layers,
