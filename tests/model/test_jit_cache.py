@@ -155,6 +155,7 @@ def test_the_background_compile_files_the_kernels_where_this_process_looks() -> 
     locators through its environment, ours first, so it files the kernels under the package's
     names (not numba's path-keyed ones, where nothing would find them)."""
     import numba  # noqa: F401  (loads numba's caching module: the locator is registered)
+
     from solitonde.signal import kernel_choice
 
     locators = kernel_choice._compile_env()["NUMBA_CACHE_LOCATOR_CLASSES"].split(",")
