@@ -84,13 +84,16 @@ class StoreInfo:
     max_bytes: int
 
 
+_STORES: dict[str, int] = {}
+"""Responses this process has stored, per folder (when to check the cap)."""
+
+
 class DiskGreensCache:
     """Responses as ``<key>.npz`` files (array ``response``) in one folder, under a size cap."""
 
     def __init__(self, folder: str | Path | None = None, cap_bytes: int | None = None) -> None:
         self.folder = Path(folder) if folder is not None else cache_dir()
         self.cap_bytes = max_bytes() if cap_bytes is None else int(cap_bytes)
-        self._stores = 0
 
     def path(self, key: str) -> Path:
         if not key.isalnum():
@@ -116,8 +119,9 @@ class DiskGreensCache:
                 np.savez(fh, response=np.asarray(response, dtype=float))
         except OSError:
             return  # a read-only or full disk must not stop a simulation: it stays in memory
-        self._stores += 1
-        if self._stores % PRUNE_EVERY == 1 or PRUNE_EVERY == 1:
+        # counted per folder for the process (a build makes a store object per plate)
+        n = _STORES[str(self.folder)] = _STORES.get(str(self.folder), 0) + 1
+        if n % PRUNE_EVERY == 1 or PRUNE_EVERY == 1:
             with contextlib.suppress(OSError):  # nor must a file another user owns
                 self.prune(keep=path)
 

@@ -22,6 +22,7 @@ import pytest
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
+from solitonde.instrument.tables import greens_cache
 from solitonde.instrument.tables.dissipation import damped_scene
 from solitonde.instrument.tables.greens_cache import DiskGreensCache
 from solitonde.instrument.tables.table import SCALAR_FEATURES, SECONDARY_FEATURES, ModelTable
@@ -69,7 +70,8 @@ def test_a_layer_and_a_rebuild_compute_no_response_again(tmp_path: Path) -> None
     _same_points(tmp_path / "layer.h5", tmp_path / "layer-alone.h5")
 
 
-def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(tmp_path: Path) -> None:
+def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Past the cap, the responses used longest ago go first; a load counts as a use."""
     one = np.arange(1000, dtype=float)  # about 8 kB on disk
     size = len(np.lib.format.header_data_from_array_1_0(one)) + one.nbytes
@@ -78,8 +80,9 @@ def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(tmp_path
         store.store(key, one + i)
         os.utime(store.path(key), (1000.0 + i, 1000.0 + i))  # a, then b, then c
     assert store.load("a") is not None  # a is now the most recently used
-    # a process checks the cap at its first store (and every PRUNE_EVERY after): another one
-    DiskGreensCache(tmp_path, cap_bytes=store.cap_bytes).store("d", one)
+    # a process checks the cap at its first store in a folder and every PRUNE_EVERY after
+    monkeypatch.setattr(greens_cache, "PRUNE_EVERY", 1)
+    store.store("d", one)
     kept = {p.stem for p in tmp_path.glob("*.npz")}
     assert "b" not in kept and {"a", "d"} <= kept
     assert store.info().bytes <= store.cap_bytes
