@@ -42,13 +42,7 @@ STALE_TMP_S = 3600.0
 
 DEFAULT_STORE = "<default>"
 """A store folder passed to another process as "its own default" (:func:`cache_dir` there: on a
-cluster, each machine's), never a path."""
-
-
-def store_folder(name: str | None) -> Path:
-    """The folder a store argument names: :data:`DEFAULT_STORE` or None, this process's
-    :func:`cache_dir`; else the path itself."""
-    return cache_dir() if name is None or name == DEFAULT_STORE else Path(name)
+cluster, each machine's), never a path; :class:`DiskGreensCache` takes it as None."""
 
 
 def cache_dir() -> Path:

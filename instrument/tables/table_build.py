@@ -41,7 +41,6 @@ from solitonde.instrument.tables.greens_cache import (
     DEFAULT_STORE,
     DiskGreensCache,
     LayeredCache,
-    store_folder,
 )
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.instrument.tables.sweep import Sweep
@@ -157,7 +156,8 @@ def run_plate(sweep: SweepDict, i_t: int, i_l: int,
     task_cache = greens.MemoryCache(max_bytes=sys.maxsize)
     cache: greens.GreensCache = task_cache
     if responses is not None:
-        cache = LayeredCache(DiskGreensCache(store_folder(responses)), memory=task_cache)
+        folder = None if responses == DEFAULT_STORE else responses
+        cache = LayeredCache(DiskGreensCache(folder), memory=task_cache)
     points = {i_d: simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces,
                                   cache) for i_d in order}
     computed = cache.computed if isinstance(cache, LayeredCache) else len(task_cache)
