@@ -12,7 +12,7 @@ import json
 from collections.abc import Iterable, Mapping
 from math import isfinite, sqrt
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypedDict, cast
 
 from pydantic import (
     BaseModel,
@@ -42,6 +42,20 @@ PLATE_MODELS = ("rigid", "halfspace", "infinite", "sem", "greens", "mindlin", "m
 the type checker need; tests/model/test_tiers.py holds the two and the tier registry together)."""
 SUPPORTS = ("opposite_edges", "all_edges", "none")
 MAX_PLATE_SIZE = 100.0  # m, per in-plane side; beyond it no mesh or Green's function is sane
+
+
+class SceneDict(TypedDict, total=False):
+    """A scene as files and tables hold it: a mapping of its sections, each ``{key: value}``
+    with the keys of the section's spec below. Not validated: :func:`scene_from_dict` checks
+    the values and names the first bad one."""
+
+    chain: dict[str, Any]
+    striker: dict[str, Any]
+    plate: dict[str, Any]
+    effects: dict[str, Any]
+    output: dict[str, Any]
+    sem: dict[str, Any]
+    solver: dict[str, Any]
 
 
 def _finite(value: float) -> float:
@@ -418,17 +432,17 @@ class Scene(_Section):
     def d_over_t(self) -> float:
         return self.chain.diameter / self.plate.thickness
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> SceneDict:
         """Plain JSON-ready dict with every field, defaults included."""
-        return self.model_dump(mode="json")
+        return cast(SceneDict, self.model_dump(mode="json"))
 
     def with_overrides(self, overrides: Iterable[str] | Mapping[str, Any]) -> Scene:
         """A new scene with dotted-key overrides applied and validated."""
         return scene_from_dict(apply_overrides(self.to_dict_explicit(), overrides))
 
-    def to_dict_explicit(self) -> dict[str, Any]:
+    def to_dict_explicit(self) -> SceneDict:
         """Dict of the fields that were set explicitly (keeps 'either/or' choices intact)."""
-        return self.model_dump(mode="json", exclude_unset=True)
+        return cast(SceneDict, self.model_dump(mode="json", exclude_unset=True))
 
 
 # Loading, overriding, validating -------------------------------------------------------------
@@ -503,7 +517,7 @@ def parse_value(text: str) -> Any:
 
 def apply_overrides(
     data: Mapping[str, Any], overrides: Iterable[str] | Mapping[str, Any]
-) -> dict[str, Any]:
+) -> SceneDict:
     """A deep copy of ``data`` with ``section.key=value`` overrides applied (not validated);
     ``section.key=null`` removes the key, so its default applies."""
     result = json.loads(json.dumps(dict(data)))
@@ -531,10 +545,10 @@ def apply_overrides(
             node.pop(parts[-1], None)
         else:
             node[parts[-1]] = value
-    return result
+    return cast(SceneDict, result)
 
 
-def load_scene_file(path: str | Path) -> dict[str, Any]:
+def load_scene_file(path: str | Path) -> SceneDict:
     """Read a YAML or JSON scene file into a dict (not yet validated)."""
     path = Path(path)
     try:
@@ -559,7 +573,7 @@ def load_scene_file(path: str | Path) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise SceneError("scene", f"{path.name} must hold a mapping of sections",
                          allowed="chain, striker, plate, effects, output")
-    return data
+    return cast(SceneDict, data)
 
 
 def load_scene(path: str | Path | None = None, overrides: Iterable[str] = ()) -> Scene:

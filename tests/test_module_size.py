@@ -17,10 +17,11 @@ FUNCTION_LINES = 100
 LONG_FUNCTIONS = {("model/dopri.py", "integrate_dopri5"),
                   ("model/sem_kernels.py", "_sumfact_elements"),
                   ("signal/pulses.py", "detect")}
-LOOSE_DICTS = 72
-"""Today's count, which may only fall; the aim is 60. What is left is mostly free-form (shot
-metadata, scenes, what a client states, OpenAPI fragments) and the response models' fields,
-where a type would change the published schema."""
+LOOSE_DICTS = 57
+"""Today's count, which may only fall (at most 60). What is left is free-form: shot metadata,
+what a client states of its chain, striker and calibration reference, the model's diagnostics
+and mesh description, OpenAPI fragments, and the response models' fields passed through as
+stored, where a type would change the published schema."""
 
 
 def _sources() -> list[Path]:

@@ -18,7 +18,6 @@ import re
 import shlex
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import typer
@@ -39,7 +38,7 @@ from solitonde.instrument.tables.sweep import (
 from solitonde.instrument.tables.table import ModelTable, TableError, TableSummary
 from solitonde.instrument.tables.table_build import BuildPlan, build_table, partial_path
 from solitonde.model.errors import SceneError
-from solitonde.model.scene import apply_overrides, load_scene_file, scene_from_dict
+from solitonde.model.scene import SceneDict, apply_overrides, load_scene_file, scene_from_dict
 from solitonde.signal.features import EXTRACTOR_VERSION
 
 DEFAULT_TABLE_PATH = DEFAULT_TABLE
@@ -159,7 +158,7 @@ def build_command(
         _fail(f"--out: {str(out)!r} exists{which}; give another --out, or --overwrite to "
               "replace it")
     try:
-        base: dict[str, Any] = load_scene_file(scene) if scene is not None else {}
+        base: SceneDict = load_scene_file(scene) if scene is not None else {}
         base = apply_overrides(base, set_)
         own_sphere = scene is not None or any(s.split("=")[0].strip() == "chain.diameter"
                                               for s in set_)

@@ -34,7 +34,7 @@ from solitonde.instrument.plotting import spread_labels
 from solitonde.instrument.studies.figures import new_figure, save_csv, save_json, save_png
 from solitonde.instrument.tables.measured import as_measured, detect_options
 from solitonde.model import greens
-from solitonde.model.scene import Scene, scene_from_dict
+from solitonde.model.scene import Scene, SceneDict, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.model.tiers import CONVOLVED_PLATE_MODELS, meshed
 from solitonde.signal.features import extract
@@ -177,7 +177,7 @@ class Config:
         return text + (f" sf{self.step_factor:g}" if self.step_factor not in (None, 0.9) else "")
 
     def scene(self, distance: float) -> Scene:
-        data: dict[str, Any] = {
+        data: SceneDict = {
             "chain": {"diameter": DIAMETER_M},
             "plate": {"thickness": THICKNESS_M, "distance_to_support": distance},
             "effects": {"plate_model": self.tier},
@@ -189,7 +189,7 @@ class Config:
             if self.preset == "resolved":
                 sem["contact_refinement"] = self.refinement
                 sem["mindlin_element_size"] = self.mindlin_size
-            data["sem"] = sem
+            data["sem"] = dict(sem)
         return scene_from_dict(data)
 
 

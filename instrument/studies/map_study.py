@@ -92,7 +92,7 @@ from solitonde.instrument.studies.map_scan import (
 )
 from solitonde.instrument.studies.validate_scores import ANSWERS
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.model.scene import apply_overrides
+from solitonde.model.scene import SceneDict, apply_overrides
 
 COMMON_SPREAD = 0.05
 TRUTH_PLATE_THEORIES = ("auto", "3d", "mindlin")
@@ -327,7 +327,7 @@ def run(table: ModelTable, n_scans: int, seed: int = 0, *, diameter_m: float | N
                               f"{', '.join(TRUTH_PLATE_THEORIES)}, got {truth_plate_theory!r}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise StudyInputError("workers", f"must be an integer >= 1, got {workers!r}")
-    base = dict(table.sweep.get("scene", {}))
+    base = SceneDict(**table.sweep.get("scene", {}))
     if truth_plate_theory != "auto":
         base = apply_overrides(base, {"sem.plate_theory": truth_plate_theory})
     measure = Measurer(base, measurements)

@@ -4,9 +4,9 @@ computes (:class:`Plan`): the full sweep or the coarse ``--quick`` one."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, TypedDict
+from typing import TypedDict
 
-from solitonde.model.scene import Scene, scene_from_dict
+from solitonde.model.scene import Scene, SceneDict, scene_from_dict
 
 PLATES_M = (2.29e-3, 3.18e-3, 4.83e-3)
 """The paper's three Al 6061 plates."""
@@ -78,11 +78,11 @@ def make_plan(quick: bool, preset: str = "resolved") -> Plan:
 def scene_for(diameter: float, thickness: float, distance: float = CENTRE_M,
               plate_model: str = "auto", sem: SemSettings | None = None) -> Scene:
     """The paper's scene with the given sphere, plate, position and plate model."""
-    data: dict[str, Any] = {
+    data: SceneDict = {
         "chain": {"diameter": diameter},
         "plate": {"thickness": thickness, "distance_to_support": distance},
         "effects": {"plate_model": plate_model},
     }
     if sem:
-        data["sem"] = sem
+        data["sem"] = dict(sem)
     return scene_from_dict(data)

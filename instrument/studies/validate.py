@@ -88,7 +88,7 @@ from solitonde.instrument.studies.validate_scores import (
 )
 from solitonde.instrument.tables.measured import as_measured
 from solitonde.instrument.tables.table import ModelTable
-from solitonde.model.scene import apply_overrides, scene_from_dict
+from solitonde.model.scene import SceneDict, apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.atomic import write_text
 from solitonde.signal.errors import WaveformError
@@ -110,7 +110,7 @@ class ValidationInputError(InstrumentError, ValueError):
 
 
 
-def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> dict[str, Any]:
+def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> SceneDict:
     return apply_overrides(dict(base), {
         "chain.diameter": d, "plate.thickness": t, "plate.distance_to_support": length,
         "effects.dissipation": True, "effects.damping": DAMPING_S,
@@ -227,7 +227,7 @@ class DrawKey(TypedDict):
     n: int
     seed: int
     diameters_m: list[float]
-    scene: dict[str, Any]  # the table's scene, as its sweep stores it
+    scene: SceneDict  # the table's scene, as its sweep stores it
     thickness_range_m: list[float]
     distance_range_m: list[float]
     damping_s: float
@@ -356,7 +356,7 @@ def _sizes(table: ModelTable, diameters: Sequence[float] | None) -> list[float]:
 
 
 def _bases(table: ModelTable, truth_plate_theory: str,
-           wrong_family: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
+           wrong_family: str | None) -> tuple[SceneDict, SceneDict]:
     """The scenes of the reference plates and of the truths: the table's, on the plate theory
     asked for, the truths on ``wrong_family``'s material where given."""
     if truth_plate_theory not in ("auto", "3d", "mindlin"):
@@ -410,7 +410,7 @@ def _draw(table: ModelTable, n: int, seed: int, l_far: float, draw_material: boo
                 l_ref=float(np.clip(REFERENCE_DISTANCE_M, l_axis[0], l_axis[-1])), l_far=l_far)
 
 
-def _draw_key(table: ModelTable, n: int, seed: int, sizes: list[float], base: dict[str, Any],
+def _draw_key(table: ModelTable, n: int, seed: int, sizes: list[float], base: SceneDict,
               shots: int, wrong_family: str | None, draw: Draw, near_support: bool) -> DrawKey:
     """What a stored measurements file must hold to be this run's."""
     t_axis, l_axis = table.axes["thickness_m"], table.axes["distance_m"]
@@ -453,7 +453,7 @@ def _measured(tasks: list[tuple[Any, ...]], key: DrawKey, measurements: str | Pa
     return measured, wall
 
 
-def _calibration(table: ModelTable, ref: MeasuredPlate, reference_base: dict[str, Any],
+def _calibration(table: ModelTable, ref: MeasuredPlate, reference_base: SceneDict,
                  sizes: list[float], draw: Draw, seed: int) -> tuple[Calibration, float]:
     """The calibration fitted on the reference plate and a second one, thinner (far from the
     supports: a cheap run), which shows how far the fitted factor and offset carry over between

@@ -65,6 +65,7 @@ from solitonde.instrument.tables.table import (
     read_layer,
     require_complete,
 )
+from solitonde.model.scene import SceneDict
 
 DEFAULT_DAMPINGS_S = (7e-8, 1.2e-7, 2e-7)
 """The slices' Kuwabara-Kono time constants, s, spaced about evenly in ln tau: chains losing up
@@ -88,17 +89,17 @@ def write_layer(fh: h5py.File, layer: DissipationLayer) -> None:
     group.create_dataset("status", data=np.asarray(layer.status, dtype=np.int8))
 
 
-def damped_scene(scene: Mapping[str, Any], damping_s: float) -> dict[str, Any]:
+def damped_scene(scene: Mapping[str, Any], damping_s: float) -> SceneDict:
     """A sweep's base scene (nested dict) with Kuwabara-Kono damping ``damping_s`` switched on."""
-    data = json.loads(json.dumps(dict(scene)))
+    data: SceneDict = json.loads(json.dumps(dict(scene)))
     effects = data.setdefault("effects", {})
     effects["dissipation"] = True
     effects["damping"] = float(damping_s)
     return data
 
 
-def _undamped(scene: Mapping[str, Any]) -> dict[str, Any]:
-    data = json.loads(json.dumps(dict(scene)))
+def _undamped(scene: Mapping[str, Any]) -> SceneDict:
+    data: SceneDict = json.loads(json.dumps(dict(scene)))
     effects = data.get("effects") or {}
     effects.pop("dissipation", None)
     effects.pop("damping", None)

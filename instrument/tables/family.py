@@ -49,21 +49,23 @@ class Family(TypedDict):
 def family_of_scene(scene: Any) -> Family:
     """The family of a validated scene (solitonde.model.scene.Scene)."""
     return {
-        "sphere_material": _properties(scene.chain.material),
-        "plate_material": _properties(scene.plate.material),
+        "sphere_material": material_properties(scene.chain.material),
+        "plate_material": material_properties(scene.plate.material),
         "plate_size_m": [float(s) for s in scene.plate.size],
         "supports": scene.plate.supports,
         "gravity": bool(scene.effects.gravity),
         "n_particles": int(scene.chain.n_particles),
         "sensor_index": int(scene.chain.sensor_index),
         "impact_velocity_m_s": float(scene.impact_velocity),
-        "striker_material": _properties(scene.striker.material
+        "striker_material": material_properties(scene.striker.material
                                         if scene.striker.material is not None
                                         else scene.chain.material),
     }
 
 
-def _properties(material: Any) -> MaterialProperties:
+def material_properties(material: Any) -> MaterialProperties:
+    """A material (a library name, a :class:`~solitonde.model.materials.Material` or a property
+    mapping) as its property mapping; ValueError naming the key at fault."""
     return cast(MaterialProperties, properties_from(material))
 
 

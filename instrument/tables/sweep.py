@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from solitonde.instrument.tables.table import SweepDict, TableError
-from solitonde.model.scene import Scene, apply_overrides, scene_from_dict
+from solitonde.model.scene import Scene, SceneDict, apply_overrides, scene_from_dict
 from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.signal.pulses import DetectKeywords
 
@@ -36,7 +36,7 @@ class Sweep:
     diameters_m: list[float]
     thicknesses_m: list[float]
     distances_m: list[float]
-    scene: dict[str, Any] = field(default_factory=dict)
+    scene: SceneDict = field(default_factory=lambda: SceneDict())
     traces: bool = False
     detect: DetectKeywords = field(default_factory=dict)
 

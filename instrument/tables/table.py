@@ -37,7 +37,7 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
-from solitonde.model.scene import PLATE_MODELS
+from solitonde.model.scene import PLATE_MODELS, SceneDict
 from solitonde.signal.pulses import DetectKeywords
 
 if TYPE_CHECKING:
@@ -135,7 +135,7 @@ class SweepDict(TypedDict):
     diameters_m: list[float]
     thicknesses_m: list[float]
     distances_m: list[float]
-    scene: dict[str, Any]
+    scene: SceneDict
     traces: bool
     detect: DetectKeywords
 
@@ -173,7 +173,7 @@ class TableProvenance(TypedDict, total=False):
     runner: str
     command: str | None
     machine: BuildMachine
-    scene_defaults: dict[str, Any]
+    scene_defaults: SceneDict
     """The base scene with every default spelled out (:meth:`Scene.to_dict`)."""
     table_id: str
     tiers: list[str]

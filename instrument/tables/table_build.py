@@ -37,6 +37,7 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.parallel import default_workers, run_tasks, runner_label
+from solitonde.instrument.tables.family import material_properties
 from solitonde.instrument.tables.greens_cache import (
     DEFAULT_STORE,
     DiskGreensCache,
@@ -453,18 +454,6 @@ SLOPE_STEP = 0.03
 grade's spread, so the slope is the secant over the range the inversion uses it for, and large
 against the extractor's run-to-run rounding on weak reflections."""
 
-def _material(plate: Mapping[str, Any]) -> dict[str, Any]:
-    """The plate material as a property mapping (a library name resolved)."""
-    from solitonde.model.materials import material_of
-
-    mat = plate["material"]
-    if isinstance(mat, Mapping):
-        return dict(mat)
-    m = material_of(mat, "plate.material")
-    return {"name": m.name, "youngs_modulus": m.youngs_modulus,
-            "poisson_ratio": m.poisson_ratio, "density": m.density}
-
-
 def simulate_slopes(sweep: Sweep) -> dict[str, np.ndarray]:
     """``{"tof_s": (D, t, 2), "arr": (D, t, 2)}`` for a table's sweep: the features' slopes along
     ``ln E'`` and ``ln rho`` at each sphere size and thickness, far from the supports; NaN where a
@@ -476,7 +465,7 @@ def simulate_slopes(sweep: Sweep) -> dict[str, np.ndarray]:
         for i_t in range(n_t):
             base = sweep.scene_at(i_d, i_t, far).model_dump(mode="json")
             base["effects"]["plate_model"] = "infinite"
-            base["plate"]["material"] = _material(base["plate"])
+            base["plate"]["material"] = material_properties(base["plate"]["material"])
             for k, key in enumerate(("youngs_modulus", "density")):
                 ends = []
                 for sign in (1.0, -1.0):
