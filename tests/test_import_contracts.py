@@ -1,4 +1,4 @@
-"""The layers of docs/explanation/architecture.md hold, as import-linter's contracts.
+"""The layers of docs/architecture.md hold, as import-linter's contracts.
 
 The linter runs on the folders laid out as one package (``tests/support/package_tree.py``) with the
 repository's configuration.

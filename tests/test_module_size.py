@@ -1,4 +1,4 @@
-"""One concept per module: the size limits of docs/explanation/architecture.md ("Modules and
+"""One concept per module: the size limits of docs/architecture.md ("Modules and
 functions"), measured on the source."""
 
 from __future__ import annotations
