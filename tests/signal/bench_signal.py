@@ -103,7 +103,7 @@ def test_throughput():
     assert all(f.tof_s is not None for f in feats)
     assert extract_batch(block[:50], DT).to_features() == feats
     print(f"\nsolitonde extract, per shot: {ours:,.0f} waveforms/s ({1e6 / ours:.0f} us per "
-          "10,000-sample shot, one core; target 5,000)")
+          "10,000-sample shot, one core; target 10,000)")
     print(f"solitonde extract_batch (2-D array, one thread): {batch:,.0f} waveforms/s "
           f"({1e6 / batch:.0f} us per shot)")
     print(f"numba kernel share of the per-shot time: {ours / kernel:.0%} "
