@@ -153,8 +153,8 @@ def test_bench_default_scene_and_rk45():
           f"{d['steps_rejected']} rejected, {d['rhs_evaluations']} RHS evaluations, peak error "
           f"{dp_err:.1e}, drift {d['energy_drift']:.1e}): {dp_min * 1e3:.3f} ms per simulate() "
           f"(median {dp_med * 1e3:.3f} ms; integration {dp_integ * 1e3:.3f} ms) -> speed-up at "
-          f"matched accuracy {rk_min / dp_min:.0f}x (medians {rk_med / dp_med:.0f}x, target >= 100x; "
-          f"integration only {rk_min / dp_integ:.0f}x); Verlet above "
+          f"matched accuracy {rk_min / dp_min:.0f}x (medians {rk_med / dp_med:.0f}x, "
+          f"target >= 100x; integration only {rk_min / dp_integ:.0f}x); Verlet above "
           f"{rk_min / coarse_min:.0f}x; load average {os.getloadavg()[0]:.1f} on "
           f"{os.cpu_count()} cores")
 
