@@ -58,8 +58,8 @@ def family_of_scene(scene: Any) -> Family:
         "sensor_index": int(scene.chain.sensor_index),
         "impact_velocity_m_s": float(scene.impact_velocity),
         "striker_material": material_properties(scene.striker.material
-                                        if scene.striker.material is not None
-                                        else scene.chain.material),
+                                                if scene.striker.material is not None
+                                                else scene.chain.material),
     }
 
 

@@ -36,7 +36,7 @@ class Sweep:
     diameters_m: list[float]
     thicknesses_m: list[float]
     distances_m: list[float]
-    scene: SceneDict = field(default_factory=lambda: SceneDict())
+    scene: SceneDict = field(default_factory=SceneDict)
     traces: bool = False
     detect: DetectKeywords = field(default_factory=dict)
 
