@@ -87,7 +87,10 @@ def test_a_scene_builds_its_own_sphere_size_and_the_plan_comes_first(tmp_path: P
                                            "--distances", "0.3,0.4", "--workers", "1",
                                            "--no-progress"])
     assert res.exit_code == 0, res.output
-    lines = res.output.splitlines()
+    # the plan says when its pilot compiled the kernels (over 10 s: a fresh cache on a busy
+    # machine), a line this test's order need not hold
+    lines = [line for line in res.output.splitlines()
+             if not line.startswith("  (the pilot first compiled")]
     assert lines[0] == "plan: 4 points = 1 sphere size x 2 thicknesses x 2 distances"
     assert lines[1].split(":")[1].strip() == "4.76"
     assert lines[2].split(":")[1].strip() == "3, 4"
