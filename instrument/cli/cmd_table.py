@@ -179,14 +179,13 @@ def build_command(
         from solitonde.signal import kernel_choice
 
         kernel_choice.start()
+        store = True if responses is None else responses
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
                              command=command, table_id=table_id,
                              plan=lambda p: typer.echo(plan_text(p), err=as_json),
-                             responses=True if responses is None else responses,
-                             layers=len(dissipation_layer))
+                             responses=store, layers=len(dissipation_layer))
         if report.complete and dissipation_layer:
-            _add_layer(out, dissipation_layer, [], workers, progress, as_json, scheduler,
-                       True if responses is None else responses)
+            _add_layer(out, dissipation_layer, [], workers, progress, as_json, scheduler, store)
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return

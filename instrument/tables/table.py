@@ -42,6 +42,7 @@ from solitonde.signal.pulses import DetectKeywords
 
 if TYPE_CHECKING:
     from solitonde.instrument.tables.family import Family
+    from solitonde.instrument.tables.table_file import Session
 
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
@@ -164,8 +165,8 @@ class TableProvenance(TypedDict, total=False):
 
     solitonde_version: str
     git_revision: str | None
-    sessions: list[Any]
-    """The build's sessions (resumed builds have several), as :mod:`.table_file` records them."""
+    sessions: list[Session]
+    """The build's sessions (resumed builds have several)."""
     built_at: str
     """ISO 8601, UTC."""
     build_wall_s: float
