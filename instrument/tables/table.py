@@ -42,7 +42,6 @@ from solitonde.signal.pulses import DetectKeywords
 
 if TYPE_CHECKING:
     from solitonde.instrument.tables.family import Family
-    from solitonde.instrument.tables.table_file import Session
 
 FORMAT = "solitonde-model-table"
 FORMAT_VERSION = 1
@@ -156,6 +155,15 @@ class StepRange(TypedDict):
 
     min: float
     max: float
+
+
+class Session(TypedDict):
+    """One build session (a resumed build has several), in the attribute ``sessions``."""
+
+    started_at: str
+    git_revision: str | None
+    runner: str
+    points_done_before: int
 
 
 class TableProvenance(TypedDict, total=False):

@@ -29,6 +29,7 @@ from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,
     SECONDARY_FEATURES,
     STATUS_PENDING,
+    Session,
     TableError,
     TableProvenance,
     reading_version_of,
@@ -71,15 +72,6 @@ class PlateResult(TypedDict):
     i_l: int
     points: dict[int, PointRecord]
     greens_computed: int
-
-
-class Session(TypedDict):
-    """One build session (a resumed build has several), in the attribute ``sessions``."""
-
-    started_at: str
-    git_revision: str | None
-    runner: str
-    points_done_before: int
 
 
 def partial_path(out: Path) -> Path:
