@@ -1,8 +1,9 @@
 """A table's features on the inversion's fine (log t, L) grid, and the model's (TOF, ARR) at one
 point read the same way.
 
-The table's features are interpolated linearly in log t and in L (the axes along which TOF and ARR
-vary smoothly) once per table and sphere size; with them the model error of each cell
+The table's features are interpolated in log t and in L (the axes along which TOF and ARR vary
+smoothly) once per table and sphere size: linearly, but TOF along thickness by a cubic spline
+where no support is in reach (:mod:`.thickness_spline`); with them the model error of each cell
 (:mod:`.model_error`) and the prior mass of each cell (uniform in log t and in L).
 """
 
@@ -23,6 +24,11 @@ from solitonde.instrument.inference.model_error import (
     REFLECTION_D_OVER_T,
     node_variance,
     node_variances,
+)
+from solitonde.instrument.inference.thickness_spline import (
+    read_columns,
+    spline_loo_variance,
+    spline_runs,
 )
 from solitonde.instrument.tables.table import STATUS_NO_REFLECTION, STATUS_OK, ModelTable
 
@@ -137,6 +143,7 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     ok = table.status[i_d] == STATUS_OK
     tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
     arr = np.where(ok, table.features["arr"][i_d], 0.0)
+    runs = spline_runs(table, i_d)
     diameter = float(table.axes["diameter_m"][i_d])
     beyond = (diameter / t_nodes > REFLECTION_D_OVER_T)[:, None]
     # no-reflection nodes there take floor-level features, given a reflection in their row to
@@ -156,7 +163,7 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
         diameter_m=diameter,
         thickness_m=t_f,
         distance_m=l_f,
-        tof_s=wt @ tof @ wl.T,
+        tof_s=read_columns(tof, wt, np.log(t_nodes), log_t, runs) @ wl.T,
         arr=wt @ arr @ wl.T,
         valid=valid,
         penalty=np.where(valid, 0.0, np.inf),
@@ -192,19 +199,22 @@ def predict(table: ModelTable, diameter_m: float, thickness_m: float,
         if not nodes[0] <= x <= nodes[-1]:
             raise InversionError(name, f"{x!r} m is outside the table "
                                  f"({nodes[0]:g}..{nodes[-1]:g} m)")
-    wt = _interp_matrix(np.log(t_nodes), np.array([math.log(thickness_m)]))
+    log_t = np.array([math.log(thickness_m)])
+    wt = _interp_matrix(np.log(t_nodes), log_t)
     wl = _interp_matrix(l_nodes, np.array([distance_m]))
     ok = table.status[i_d] == STATUS_OK
     if ((wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T)[0, 0]:
         raise InversionError("thickness_m", "the model detects no reflection next to this point")
     tof_n = np.where(ok, table.features["tof_s"][i_d], 0.0)
     arr_n = np.where(ok, table.features["arr"][i_d], 0.0)
-    tof = float((wt @ tof_n @ wl.T)[0, 0])
+    runs = spline_runs(table, i_d)
+    tof = float((read_columns(tof_n, wt, np.log(t_nodes), log_t, runs) @ wl.T)[0, 0])
     arr = float((wt @ arr_n @ wl.T)[0, 0])
     if not with_error:
         return tof, arr
     ct, cl = np.log(t_nodes), l_nodes
-    tof_var, arr_var = node_variance(tof_n, ok, ct, cl), node_variance(arr_n, ok, ct, cl)
+    tof_var = node_variance(tof_n, ok, ct, cl, spline_loo_variance(tof_n, ct, runs))
+    arr_var = node_variance(arr_n, ok, ct, cl)
     if table.model_variance is not None:
         tof_var = tof_var + np.where(ok, table.model_variance["tof_s"][i_d], 0.0)
         arr_var = arr_var + np.where(ok, table.model_variance["arr"][i_d], 0.0)

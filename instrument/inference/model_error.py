@@ -1,12 +1,14 @@
 """The model error the inversion adds to each table node: the table's own interpolation error
-(leave-one-out), the 2-D plate's error against the 3-D plate where a node was simulated on it, a
-variance the table carries (e.g. a fitted damping's), and the looseness of the floor nodes beyond
-:data:`REFLECTION_D_OVER_T`, whose "reflection" is a train at the detection floor."""
+(leave-one-out, of the spline where TOF is read by one), the 2-D plate's error against the 3-D
+plate where a node was simulated on it, a variance the table carries (e.g. a fitted damping's),
+and the looseness of the floor nodes beyond :data:`REFLECTION_D_OVER_T`, whose "reflection" is a
+train at the detection floor."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from solitonde.instrument.inference.thickness_spline import spline_loo_variance, spline_runs
 from solitonde.instrument.tables.table import ModelTable
 
 REFLECTION_D_OVER_T = 5.0
@@ -36,7 +38,7 @@ MINDLIN_PLATE_MODELS = ("mindlin", "mindlin_greens")
 
 
 def node_variance(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
-                   coord_l: np.ndarray) -> np.ndarray:
+                   coord_l: np.ndarray, along_t: np.ndarray | None = None) -> np.ndarray:
     """Variance of the table's interpolation error at each node, from leave-one-out.
 
     Along each axis, an interior node is predicted linearly from its two neighbours; linear
@@ -44,7 +46,8 @@ def node_variance(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
     itself (error ~ h^2 f''), so (LOO error / 4)^2 is the variance there. End nodes take their
     neighbour's value, nodes without valid neighbours the mean over the table; the two axes add.
     Rough regions (near a support, where guided waves make TOF and ARR oscillate with L) so get
-    large errors and smooth ones small errors.
+    large errors and smooth ones small errors. ``along_t``, where finite, replaces the variance
+    along thickness (the spline's, where TOF is read by one: :mod:`.thickness_spline`).
     """
     total = np.zeros(values.shape)
     for axis, c in ((0, coord_t), (1, coord_l)):
@@ -59,6 +62,8 @@ def node_variance(values: np.ndarray, valid: np.ndarray, coord_t: np.ndarray,
             e2[1:-1] = np.where(good, ((v[1:-1] - pred) / 4.0) ** 2, np.nan)
             e2[0], e2[-1] = e2[1], e2[-2]
         fill = float(np.nanmean(e2)) if np.isfinite(e2).any() else 0.0
+        if axis == 0 and along_t is not None:
+            e2 = np.where(np.isfinite(along_t), along_t, e2)
         total += np.moveaxis(np.where(np.isfinite(e2), e2, fill), 0, axis)
     return np.where(valid, total, 0.0)
 
@@ -73,9 +78,11 @@ def node_variances(table: ModelTable, i_d: int, tof: np.ndarray, arr: np.ndarray
     two_d = np.isin(table.plate_model[i_d], [table.plate_model_names.index(name)
                                              for name in MINDLIN_PLATE_MODELS
                                              if name in table.plate_model_names])
-    tof_var = (node_variance(tof, ok, np.log(t_nodes), l_nodes)
+    log_t = np.log(t_nodes)
+    along_t = spline_loo_variance(tof, log_t, spline_runs(table, i_d))
+    tof_var = (node_variance(tof, ok, log_t, l_nodes, along_t)
                + np.where(two_d, (PLATE_THEORY_TOF_REL_STD * tof) ** 2, 0.0))
-    arr_var = (node_variance(arr, ok, np.log(t_nodes), l_nodes)
+    arr_var = (node_variance(arr, ok, log_t, l_nodes)
                + np.where(two_d, (PLATE_THEORY_ARR_REL_STD * arr) ** 2, 0.0))
     if table.model_variance is not None:  # e.g. a fitted damping's uncertainty
         tof_var = tof_var + np.where(has, table.model_variance["tof_s"][i_d], 0.0)

@@ -62,24 +62,27 @@ def test_each_single_shot_of_the_scan_covers_the_plate_or_says_it_cannot_tell(pa
         assert _covers(t["ci95"], TRUTH_M), est
 
 
-def test_an_ambiguous_answer_is_printed_reading_by_reading_and_exits_0(tmp_path: Path) -> None:
-    """A plate of validate's draw (3.21 mm, 132 mm from the clamp; four shots at 40 dB, its
-    run's calibration): the data fit a sliver of thinner plate nearer to the clamp apart from
-    the main reading. `invert` prints both readings and exits 0 (an honest answer)."""
-    calibration = tmp_path / "cal.json"
-    calibration.write_text(json.dumps({"per_diameter": [{
-        "diameter_m": 0.00953, "arr_factor": 0.9996875574667673, "arr_factor_std": 0.0,
-        "tof_offset_s": -1.4756344730634745e-07, "tof_offset_std_s": 1.3761961291897474e-07,
-        "n_references": 2, "damping_s": 1.0375e-07, "damping_std_s": 3.5e-09}]}))
+def test_an_ambiguous_answer_is_printed_reading_by_reading_and_exits_0() -> None:
+    """The table's own features of a 4.99 mm plate 18.5 mm from the clamp, as the mean of five
+    shots: the data fit a sliver of thinner plate nearer to the clamp apart from the main
+    reading. `invert` prints both readings and exits 0 (an honest answer), and one of them holds
+    the plate."""
     result = CliRunner().invoke(build_cli(), [
-        "invert", "--diameter", "9.53e-3", "--tof", "5.662542560221536e-4",
-        "--tof-std", "1.8224106994786326e-07", "--arr", "0.2594018664987858",
-        "--arr-std", "0.000565480024671294", "--shots", "4", "--calibration",
-        str(calibration), "--table", str(DEFAULT_TABLE)])
+        "invert", "--diameter", "9.53e-3", "--tof", "5.084e-4", "--tof-std", "3e-7",
+        "--arr", "0.766", "--arr-std", "0.004", "--shots", "5", "--table", str(DEFAULT_TABLE),
+        "--json"])
     assert result.exit_code == 0, result.output
-    assert "thickness: AMBIGUOUS" in result.output
-    assert "reading 1 (weight" in result.output and "reading 2 (weight" in result.output
-    assert "another reading fits as well" in result.output
+    est = json.loads(result.output)
+    assert est["thickness_m"]["status"] == "ambiguous"
+    assert len(est["readings"]) == 2
+    assert any(_covers(r["thickness_m"]["ci95"], 4.99e-3) for r in est["readings"])
+    assert any("another reading fits as well" in w for w in est["warnings"])
+    text = CliRunner().invoke(build_cli(), [
+        "invert", "--diameter", "9.53e-3", "--tof", "5.084e-4", "--tof-std", "3e-7",
+        "--arr", "0.766", "--arr-std", "0.004", "--shots", "5", "--table", str(DEFAULT_TABLE)])
+    assert text.exit_code == 0
+    assert "thickness: AMBIGUOUS" in text.output
+    assert "reading 1 (weight" in text.output and "reading 2 (weight" in text.output
 
 
 def test_a_size_in_millimetres_is_refused_with_the_metres_it_means(tmp_path: Path) -> None:
