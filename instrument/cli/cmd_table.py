@@ -106,10 +106,15 @@ def plan_text(plan: BuildPlan) -> str:
         lines.append(f"  {plan.layers} dissipation layer{'s' * (plan.layers != 1)}: the plates' "
                      f"responses read from the store, only the chains run: "
                      f"{duration(plan.layers_eta_s)}")
-    total = plan.eta_s + plan.layers_eta_s
-    lines.append(f"  estimated time: {duration(total)} on {plan.workers} worker"
-                 f"{'s' * (plan.workers != 1)} (+ their start), after a "
-                 f"{duration(plan.pilot_wall_s)} pilot")
+    if plan.slopes_eta_s >= 0.5:
+        lines.append(f"  material slopes: {duration(plan.slopes_eta_s)}")
+    started = f" and the workers' {duration(plan.start_s)} start" if plan.start_s else ""
+    if abs(plan.slowdown - 1.0) >= 0.1:
+        lines.append(f"  (a plate takes {plan.slowdown:.2g}x the pilot's time with every worker "
+                     "busy: counted)")
+    lines.append(f"  estimated time: {duration(plan.remaining_s)} on {plan.workers} worker"
+                 f"{'s' * (plan.workers != 1)} after a {duration(plan.pilot_wall_s)} pilot"
+                 f"{started} ({duration(plan.elapsed_s + plan.remaining_s)} in all)")
     return "\n".join(lines)
 
 

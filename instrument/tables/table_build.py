@@ -21,6 +21,7 @@ file is built as ``<out>.partial`` and renamed onto ``<out>`` (``os.replace``) o
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import math
@@ -36,7 +37,12 @@ from typing import Any
 import h5py
 import numpy as np
 
-from solitonde.instrument.parallel import default_workers, run_tasks, runner_label
+from solitonde.instrument.parallel import (
+    default_workers,
+    local_cluster,
+    run_tasks,
+    runner_label,
+)
 from solitonde.instrument.tables.family import material_properties
 from solitonde.instrument.tables.greens_cache import (
     DEFAULT_STORE,
@@ -191,11 +197,15 @@ class BuildPlan:
     sphere sizes, in this process, kept in the table): ``costs[kind]`` holds ``(thickness_m,
     seconds a point, seconds a point of a dissipation layer)`` for each, timed warm, the second
     with the plate's responses read from the store (what a layer's point costs: only the chain).
-    A point's cost is read between them as a power of the thickness (thin plates cost several
-    times more, and the cost falls faster than one power law across the range).
+    The rest is timed by the model's own count of each plate's work
+    (:func:`solitonde.model.plan.plan`: steps times particles and plate dofs) at the pilots' rate
+    per kind, whole runs and chains on stored responses apart.
     ``compile_s`` is what the first runs took more (the numba kernels compiled, once per
-    installation). ``eta_s`` spreads the remaining points' cost, and ``layers_eta_s`` that of the
-    ``layers`` dissipation layers that follow, over the workers.
+    installation). ``start_s`` is what the workers took to start and load the model (a local
+    cluster's processes, each running one pilot plate), measured before the plan is made: paid
+    once more by the dissipation layers, which start their own. ``eta_s`` spreads the remaining
+    points' cost, ``layers_eta_s`` that of the ``layers`` dissipation layers that follow, over the
+    workers; ``slopes_eta_s`` is the material slopes' runs, in this process.
     """
 
     sweep: Sweep
@@ -209,6 +219,18 @@ class BuildPlan:
     compile_s: float = 0.0
     layers: int = 0
     layers_eta_s: float = 0.0
+    start_s: float = 0.0
+    slopes_eta_s: float = 0.0
+    elapsed_s: float = 0.0
+    """Seconds the build had run when the plan was made (the pilot, the workers' start)."""
+    slowdown: float = 1.0
+    """A plate's time on a worker with every worker busy over the pilot's alone (measured as the
+    workers start), by which the sweep's and the layers' estimates are scaled."""
+
+    @property
+    def remaining_s(self) -> float:
+        """Seconds the build should take from the plan on: the sweep, its layers, the slopes."""
+        return self.eta_s + self.layers_eta_s + self.slopes_eta_s
 
     @property
     def pilots(self) -> dict[str, float]:
@@ -224,6 +246,52 @@ def point_cost(pairs: Sequence[tuple[float, float, float]], thickness_m: float,
     pts = sorted({math.log(p[0]): math.log(max(p[col], 1e-9)) for p in pairs}.items())
     xs, ys = [p[0] for p in pts], [p[1] for p in pts]
     return math.exp(float(np.interp(math.log(thickness_m), xs, ys)))
+
+
+def plate_model_costs(sweep: Sweep, i_t: int, i_l: int) -> list[tuple[float, float]]:
+    """The model's own count of one plate's work per sphere size
+    (:func:`solitonde.model.plan.plan`): the whole run's, and the chain's alone (what is left when
+    the plate's response comes from the store). Exact step and dof counts: a plate's cost jumps
+    where the step, quantised to the sample period, halves (a 5 mm steel plate costs as much as a
+    4 mm one and twice a 6 mm one), which no smooth law in the thickness follows."""
+    from solitonde.model.plan import PLATE_DOF_WEIGHT, plan
+
+    out = []
+    for i_d in range(len(sweep.diameters_m)):
+        run = plan(sweep.scene_at(i_d, i_t, i_l))
+        out.append((run.cost,
+                    run.cost - PLATE_DOF_WEIGHT * float(run.plate_steps) * run.plate_dofs))
+    return out
+
+
+PilotTimes = dict[str, list[tuple[tuple[int, int], list[int], float, float]]]
+"""Per kind, each pilot plate's ``((i_t, i_l), sizes run, seconds whole, seconds chain only)``."""
+
+
+def _plate_seconds(sweep: Sweep, kinds: Mapping[tuple[int, int], str], timed: PilotTimes
+                   ) -> Callable[[int, int, Iterable[int], bool], float]:
+    """``seconds(i_t, i_l, sizes, chain_only)`` of any plate: its count by
+    :func:`plate_model_costs` at its kind's rate, seconds per unit of count over the pilots
+    (whole runs, and chains on stored responses, apart); 0 for a kind no pilot ran (all its
+    plates done before)."""
+    model = {key: plate_model_costs(sweep, *key) for key in kinds}
+
+    def counted(key: tuple[int, int], todo: Iterable[int], chain_only: bool) -> float:
+        return sum(model[key][i_d][1 if chain_only else 0] for i_d in todo)
+
+    rate = {kind: (sum(p[2] for p in plates) / max(sum(counted(k, todo, False)
+                                                      for k, todo, _, _ in plates), 1.0),
+                   sum(p[3] for p in plates) / max(sum(counted(k, todo, True)
+                                                      for k, todo, _, _ in plates), 1.0))
+            for kind, plates in timed.items()}
+
+    def seconds(i_t: int, i_l: int, todo: Iterable[int], chain_only: bool) -> float:
+        kind = kinds[i_t, i_l]
+        if kind not in rate:
+            return 0.0
+        return rate[kind][1 if chain_only else 0] * counted((i_t, i_l), todo, chain_only)
+
+    return seconds
 
 
 def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
@@ -244,10 +312,11 @@ def _ends(tasks: Sequence[tuple[int, int, list[int]]]) -> list[tuple[int, int, l
 
 
 def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
-           scheduler: str | None, responses: str | None, layers: int
-           ) -> tuple[BuildPlan, int, int]:
+           scheduler: str | None, responses: str | None, layers: int, slopes: bool
+           ) -> tuple[BuildPlan, int, int, tuple[tuple[int, int, list[int]], float]]:
     """Run the thinnest, a middle and the thickest pending plate of each kind here, write them,
-    and plan the rest; returns the plan, and the points and plates written."""
+    and plan the rest; returns the plan, the points and plates written, and the cheapest pilot
+    plate of the dearest kind with its seconds here (what each worker runs before the sweep)."""
     tasks = pending(fh, sweep)
     all_points = [(i_t, i_l, len(sweep.diameters_m)) for i_t, i_l in sweep.groups()]
     kinds = {(i_t, i_l): _kind(sweep, i_t, i_l) for i_t, i_l, _ in all_points}
@@ -259,6 +328,8 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
     write_s: list[float] = []  # the driver's time to write and flush a plate
     written = plates = 0
     compile_s = 0.0
+    warm: tuple[str, float, tuple[int, int, list[int]]] | None = None
+    timed: PilotTimes = {}
     started = time.perf_counter()
     by_kind: dict[str, list[tuple[int, int, list[int]]]] = {}
     for task in tasks:
@@ -295,25 +366,34 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                     again = time.perf_counter() - t0
                 costs[kind].append((sweep.thicknesses_m[i_t], again / len(todo),
                                     chain / len(todo)))
+                timed.setdefault(kind, []).append(((i_t, i_l), todo, again, chain))
                 compile_s += max(0.0, first - again)
+                if warm is None or (kind == "meshed") > (warm[0] == "meshed") or (
+                        kind == warm[0] and again < warm[1]):
+                    warm = (kind, again, (i_t, i_l, todo))
     rest = pending(fh, sweep)
     lanes = 1 if scheduler is None and workers <= 1 else max(1, min(workers, len(rest) or 1))
+    plate_s = _plate_seconds(sweep, kinds, timed)
     # a store that held the pilots' responses is taken to hold the rest (a rebuild): chains only
-    work = sum(len(todo) * point_cost(costs[kinds[i_t, i_l]], sweep.thicknesses_m[i_t],
-                                      layer=stored[kinds[i_t, i_l]] and responses is not None)
+    work = sum(plate_s(i_t, i_l, todo, stored[kinds[i_t, i_l]] and responses is not None)
                for i_t, i_l, todo in rest)
-    layer_work = layers * sum(
-        n * point_cost(costs[kinds[i_t, i_l]], sweep.thicknesses_m[i_t],
-                       layer=responses is not None)
-        for i_t, i_l, n in all_points if kinds[i_t, i_l] in costs)
+    layer_work = layers * sum(plate_s(i_t, i_l, range(n), responses is not None)
+                              for i_t, i_l, n in all_points)
     layer_lanes = 1 if scheduler is None and workers <= 1 else max(1, workers)
     # a layer's plates come back fast and the driver writes them one at a time: measured on the
     # tutorial's plate, a layer takes about its chains' time and its writes' together
     layer_writes = layers * len(all_points) * (float(np.median(write_s)) if write_s else 0.0)
+    # the slopes: four chains on the infinite plate per size and thickness, here, as far points
+    # cost (or a layer's chain where the sweep has none)
+    far = "dashpot" if "dashpot" in costs else next(iter(costs))
+    slope_runs = 4 * len(sweep.diameters_m) if slopes else 0
+    slopes_s = sum(slope_runs * point_cost(costs[far], t, layer=far != "dashpot")
+                   for t in sweep.thicknesses_m) if costs else 0.0
     plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, costs,
                      time.perf_counter() - started, work / lanes, lanes, compile_s, layers,
-                     layer_work / layer_lanes + layer_writes)
-    return plan, written, plates
+                     layer_work / layer_lanes + layer_writes, slopes_eta_s=slopes_s)
+    assert warm is not None  # the pilot ran at least one plate
+    return plan, written, plates, (warm[2], warm[1])
 
 
 def build_table(
@@ -386,21 +466,24 @@ def build_table(
     with h5py.File(part, "r+") as fh:
         start_session(fh, runner)
         eta = None
-        if plan is not None and max_plates is None and pending(fh, sweep):
-            the_plan, written, plates = _pilot(fh, sweep, spec, workers, scheduler, store,
-                                               layers)
-            eta = the_plan.eta_s
-            plan(the_plan)
-        tasks = pending(fh, sweep)
-        if max_plates is not None:
-            tasks = tasks[:max(0, max_plates)]
-        try:
-            more, more_plates = _run_plates(fh, spec, tasks, workers, scheduler, progress, eta,
-                                            on_plate, store)
-        finally:
-            fh.attrs["build_wall_s"] = (float(fh.attrs["build_wall_s"])
-                                        + time.perf_counter() - started)
-            fh.flush()
+        with contextlib.ExitStack() as stack:
+            sweep_scheduler = scheduler
+            if plan is not None and max_plates is None and pending(fh, sweep):
+                the_plan, written, plates, sweep_scheduler = _plan_build(
+                    fh, sweep, stack, workers, scheduler, store, layers, slopes)
+                eta = the_plan.eta_s
+                the_plan.elapsed_s = time.perf_counter() - started
+                plan(the_plan)
+            tasks = pending(fh, sweep)
+            if max_plates is not None:
+                tasks = tasks[:max(0, max_plates)]
+            try:
+                more, more_plates = _run_plates(fh, spec, tasks, workers, sweep_scheduler,
+                                                progress, eta, on_plate, store)
+            finally:
+                fh.attrs["build_wall_s"] = (float(fh.attrs["build_wall_s"])
+                                            + time.perf_counter() - started)
+                fh.flush()
         written, plates = written + more, plates + more_plates
         complete = bool(fh["done"][...].all())
         if complete:
@@ -412,6 +495,65 @@ def build_table(
         os.replace(part, out)
     return BuildReport(out if complete else part, complete, written, plates,
                        time.perf_counter() - started, runner)
+
+
+def _plan_build(fh: h5py.File, sweep: Sweep, stack: contextlib.ExitStack, workers: int,
+                scheduler: str | None, store: str | None, layers: int, slopes: bool
+                ) -> tuple[BuildPlan, int, int, str | None]:
+    """The pilot, then the workers started (a local cluster closed with ``stack``) and timed:
+    the plan, the points and plates the pilot wrote, and the scheduler the sweep runs on."""
+    spec = sweep.to_dict()
+    the_plan, written, plates, warm = _pilot(fh, sweep, spec, workers, scheduler, store, layers,
+                                             slopes)
+    if not pending(fh, sweep) or (scheduler is None and workers <= 1):
+        return the_plan, written, plates, scheduler
+    address, the_plan.start_s, the_plan.slowdown = _start_workers(stack, spec, warm,
+                                                                  the_plan.workers, scheduler)
+    the_plan.eta_s *= the_plan.slowdown
+    the_plan.layers_eta_s *= the_plan.slowdown
+    if layers and scheduler is None:
+        the_plan.layers_eta_s += the_plan.start_s  # the layers start their own local cluster
+    return the_plan, written, plates, address
+
+
+PARALLEL_SLOWDOWN_RANGE = (0.5, 4.0)
+"""Bounds on the measured ratio of a worker's time to the pilot's for the same plate: beyond
+them the measurement itself is taken to be disturbed."""
+
+
+def _warm_worker(spec: SweepDict, i_t: int, i_l: int, todo: list[int]) -> float:
+    """Run one (already written) plate twice: the first loads the model's kernels, the second is
+    timed with every worker busy alike; returns its seconds."""
+    run_plate(spec, i_t, i_l, todo)
+    forget_plates()
+    started = time.perf_counter()
+    run_plate(spec, i_t, i_l, todo)
+    forget_plates()
+    return time.perf_counter() - started
+
+
+def _start_workers(stack: contextlib.ExitStack, spec: SweepDict,
+                   warm: tuple[tuple[int, int, list[int]], float], workers: int,
+                   scheduler: str | None) -> tuple[str, float, float]:
+    """Start the sweep's local cluster (closed with ``stack``; an existing ``scheduler`` is
+    used as it is) and have every worker run the pilot plate ``warm`` at once: returns the
+    scheduler's address, the seconds taken (which the plan then counts as spent, not guessed),
+    and how much slower a plate runs with all workers busy than the pilot ran it alone (cores
+    that share a physical core or memory bandwidth run slower together)."""
+    from dask.distributed import Client
+
+    started = time.perf_counter()
+    if scheduler is None:
+        scheduler = str(stack.enter_context(local_cluster(workers)).scheduler_address)
+    (i_t, i_l, todo), alone = warm
+    with Client(scheduler, timeout="30s") as client:
+        futures = [client.submit(_warm_worker, spec, i_t, i_l, todo, workers=[address],
+                                 pure=False, allow_other_workers=False)
+                   for address in client.scheduler_info()["workers"]]
+        together = float(np.median(client.gather(futures)))
+    low, high = PARALLEL_SLOWDOWN_RANGE
+    slower = min(max(together / alone, low), high) if alone > 0 else 1.0
+    return scheduler, time.perf_counter() - started, slower
 
 
 def _run_plates(fh: h5py.File, spec: SweepDict, tasks: Sequence[tuple[int, int, list[int]]],

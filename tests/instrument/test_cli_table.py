@@ -168,3 +168,41 @@ def test_the_plan_counts_the_dissipation_layers(tmp_path: Path) -> None:
     assert any(line.startswith("  2 dissipation layers: the plates' responses read from the "
                                "store, only the chains run: ") for line in lines)
     assert any(line.startswith("  estimated time: ") for line in lines)
+
+
+def test_the_plan_times_each_plate_by_the_models_own_count() -> None:
+    """The model's step and dof counts set each plate's time: a 19.05 mm chain on a clamped 6 mm
+    steel plate runs half the plate steps of a 5 mm one (the step, quantised to the sample
+    period, doubles there), so it costs about half, while 4 and 5 mm cost alike; a smooth law
+    through pilots at 4, 6 and 8 mm put the 5 mm row at 60 % of what it took. Counted without
+    running anything (the plan builds the meshes only)."""
+    from solitonde.instrument.tables.sweep import Sweep
+    from solitonde.instrument.tables.table_build import plate_model_costs
+
+    sweep = Sweep([19.05e-3], [4e-3, 5e-3, 6e-3], [0.04], scene={
+        "plate": {"size": [0.6, 0.6], "material": "steel_structural",
+                  "supports": "opposite_edges"}})
+    (c4, _), = plate_model_costs(sweep, 0, 0)
+    (c5, chain5), = plate_model_costs(sweep, 1, 0)
+    (c6, chain6), = plate_model_costs(sweep, 2, 0)
+    assert c5 / c4 == pytest.approx(1.0, abs=0.1)
+    assert c5 / c6 == pytest.approx(2.0, rel=0.1)
+    assert 0 < chain6 < c6 and 0 < chain5 < c5  # the chain alone: what a stored response leaves
+
+
+def test_the_plan_says_what_it_counted() -> None:
+    """The plan's last line: the time still to come, what was spent before it, and the total;
+    a measured slowdown of busy workers is named."""
+    from solitonde.instrument.cli.cmd_table import plan_text
+    from solitonde.instrument.tables.sweep import Sweep
+    from solitonde.instrument.tables.table_build import BuildPlan
+
+    sweep = Sweep([9.53e-3], [3e-3], [0.3])
+    plan = BuildPlan(sweep, 1, 1, {"dashpot": 1}, {"dashpot": [(3e-3, 0.5, 0.1)]},
+                     pilot_wall_s=3.0, eta_s=60.0, workers=2, layers=1, layers_eta_s=20.0,
+                     start_s=4.0, slopes_eta_s=1.0, elapsed_s=8.0, slowdown=1.3)
+    lines = plan_text(plan).splitlines()
+    assert lines[-1] == ("  estimated time: 81 s on 2 workers after a 3 s pilot and the "
+                         "workers' 4 s start (89 s in all)")
+    assert "  material slopes: 1 s" in lines
+    assert "  (a plate takes 1.3x the pilot's time with every worker busy: counted)" in lines
