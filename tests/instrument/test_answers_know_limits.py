@@ -90,7 +90,7 @@ def test_steel_against_the_near_miss_steel_table_is_read_at_the_materials_edge(
     # a plate 7.6 % stiffer in E' than the table's bends like one (1.076)^(1/3) = 2.5 % thicker
     # (D ~ E' t^3): the material's mismatch alone can move the answer no further
     assert abs(est["thickness_m"]["median"] - TRUTH_M) < 0.025 * TRUTH_M
-    assert low <= TRUTH_M <= high or _at_material_edge(est)
+    assert high - low < 0.15 * TRUTH_M  # an answer, not the whole grade's range of readings
     assert est["fit"]["p_value"] > 1e-3
     assert est["material_spread"]["youngs_modulus_rel_sd"] > 0  # the library's, for A36 steel
     assert any(w.startswith("no calibration") for w in est["warnings"])
