@@ -470,7 +470,7 @@ def build_table(
             sweep_scheduler = scheduler
             if plan is not None and max_plates is None and pending(fh, sweep):
                 the_plan, written, plates, sweep_scheduler = _plan_build(
-                    fh, sweep, stack, workers, scheduler, store, layers, slopes)
+                    fh, sweep, spec, stack, workers, scheduler, store, layers, slopes)
                 eta = the_plan.eta_s
                 the_plan.elapsed_s = time.perf_counter() - started
                 plan(the_plan)
@@ -497,12 +497,11 @@ def build_table(
                        time.perf_counter() - started, runner)
 
 
-def _plan_build(fh: h5py.File, sweep: Sweep, stack: contextlib.ExitStack, workers: int,
-                scheduler: str | None, store: str | None, layers: int, slopes: bool
-                ) -> tuple[BuildPlan, int, int, str | None]:
+def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.ExitStack,
+                workers: int, scheduler: str | None, store: str | None, layers: int,
+                slopes: bool) -> tuple[BuildPlan, int, int, str | None]:
     """The pilot, then the workers started (a local cluster closed with ``stack``) and timed:
     the plan, the points and plates the pilot wrote, and the scheduler the sweep runs on."""
-    spec = sweep.to_dict()
     the_plan, written, plates, warm = _pilot(fh, sweep, spec, workers, scheduler, store, layers,
                                              slopes)
     if not pending(fh, sweep) or (scheduler is None and workers <= 1):
