@@ -220,6 +220,10 @@ def _calibration_lines(cal: Calibration) -> list[str]:
                      f"arr_factor {e['arr_factor']:.4f} "
                      f"+- {e['arr_factor_std']:.4f}, tof_offset {e['tof_offset_s'] * 1e6:.3f} "
                      f"+- {e['tof_offset_std_s'] * 1e6:.3f} us")
+        if "shot_scatter_dof" in e:
+            lines.append(f"  per-shot scatter of the references ({e['shot_scatter_dof']} degrees "
+                         f"of freedom): TOF {e['shot_tof_rel_std'] * 100:.2g} %, ARR "
+                         f"{e['shot_arr_std']:.2g}; single shots are read with it")
         for row in e.get("by_distance", []):
             lines.append(f"  at L = {row['distance_m'] * 1e3:.4g} mm "
                          f"({row.get('n_references', 1)} ref.): arr_factor "

@@ -42,6 +42,7 @@ from typing import Any, Literal, Required, TypedDict, cast
 import numpy as np
 
 from solitonde.instrument.errors import InstrumentError
+from solitonde.instrument.inference.shot_scatter import ShotScatter
 from solitonde.instrument.tables.dissipation import damped
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.atomic import write_text
@@ -111,6 +112,11 @@ class DiameterEntry(TypedDict, total=False):
     n_references: int
     damping_s: float
     damping_std_s: float
+    shot_tof_rel_std: float
+    shot_arr_std: float
+    shot_scatter_dof: int
+    """The references' per-shot scatter pooled (TOF relative, ARR absolute) and its degrees of
+    freedom: the rig's repeatability, which a single shot takes (:mod:`.shot_scatter`)."""
     by_distance: list[DistanceRow]
 
 
@@ -148,6 +154,9 @@ _PER_DIAMETER_KEYS: dict[str, Check] = {
     "n_references": _count,
     "damping_s": _nonnegative,
     "damping_std_s": _nonnegative,
+    "shot_tof_rel_std": _nonnegative,
+    "shot_arr_std": _nonnegative,
+    "shot_scatter_dof": _count,
 }
 
 # what a by_distance row may hold; distance_m, arr_factor and tof_offset_s are required
@@ -293,6 +302,15 @@ class Calibration:
                     return None
                 return float(entry["damping_s"]), float(entry.get("damping_std_s", 0.0))
         return None
+
+    def shot_scatter_by_size(self) -> dict[float, ShotScatter]:
+        """Per sphere size, the per-shot scatter measured on its reference shots, where the
+        calibration states it (all three keys)."""
+        return {d: {"shot_tof_rel_std": float(e["shot_tof_rel_std"]),
+                    "shot_arr_std": float(e["shot_arr_std"]),
+                    "shot_scatter_dof": int(e["shot_scatter_dof"])}
+                for d, e in self.per_diameter.items()
+                if all(k in e for k in ("shot_tof_rel_std", "shot_arr_std", "shot_scatter_dof"))}
 
     @property
     def has_damping(self) -> bool:

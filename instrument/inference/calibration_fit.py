@@ -21,6 +21,7 @@ from solitonde.instrument.inference.calibration import (
 )
 from solitonde.instrument.inference.fine_grid import predict
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary, InversionError
+from solitonde.instrument.inference.shot_scatter import pooled
 from solitonde.instrument.tables.dissipation import damped, slice_reads
 from solitonde.instrument.tables.table import ModelTable
 
@@ -171,6 +172,11 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
     random-effects estimate, ``*_transfer_*``): how far a factor and offset fitted on one plate
     carry over to another. One reference cannot show that and states the statistical part only.
 
+    The references' own scatter, pooled per size over those shot two or more times, is the
+    rig's per-shot repeatability (``shot_tof_rel_std``, ``shot_arr_std``,
+    ``shot_scatter_dof``): a single shot read with this calibration takes it instead of the
+    inversion's assumed spread (:mod:`.shot_scatter`).
+
     References of a size at two or more distances to the support (more than
     :data:`DISTINCT_DISTANCE_M` apart) also give the factor and offset per distance, combined
     the same way over the references at each (``by_distance``, nearest first): next to a clamp
@@ -218,6 +224,9 @@ def fit_calibration(table: ModelTable, references: Sequence[Reference]) -> Calib
         per[d] = _factor_offset(d, rows, measured[d], d in dampings)
         if d in dampings:
             per[d]["damping_s"], per[d]["damping_std_s"] = dampings[d]
+        rig = pooled([ref.summary for ref in groups[d]])
+        if rig is not None:
+            per[d].update(rig)
         # references at two or more distances: the factor and offset per distance too (the
         # damping stays the one fitted on all of them)
         distances = [ref.distance_m for ref in groups[d]]

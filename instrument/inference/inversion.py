@@ -7,8 +7,9 @@ independent Gaussian errors on the mean TOF and mean ARR of each sphere size:
 
     sigma_tof^2 = s_tof^2 / n + sigma_model_tof(t, L)^2,   likewise for ARR
 
-with s the shot scatter (or the stated defaults :data:`DEFAULT_TOF_REL_STD`,
-:data:`DEFAULT_ARR_STD` when not given; floored at :data:`MIN_TOF_STD_S`, :data:`MIN_ARR_STD`) and
+with s the shot scatter (where not given: the rig's, measured on the calibration's reference
+shots (:mod:`.shot_scatter`), else the assumed :data:`DEFAULT_TOF_REL_STD`,
+:data:`DEFAULT_ARR_STD`; floored at :data:`MIN_TOF_STD_S`, :data:`MIN_ARR_STD`) and
 sigma_model the table's own interpolation error where the cell lies (leave-one-out at each node
 along both axes, scaled to the grid spacing, interpolated like the features): large where TOF and
 ARR oscillate with L near a support, small where they are smooth; plus, at nodes simulated on the
@@ -80,6 +81,7 @@ from solitonde.instrument.inference.inversion_inputs import FeatureSummary, Inve
 from solitonde.instrument.inference.likelihood import deviance
 from solitonde.instrument.inference.model_error import FLOOR_ARR_MAX, REFLECTION_D_OVER_T
 from solitonde.instrument.inference.posterior import answer
+from solitonde.instrument.inference.shot_scatter import fill as fill_scatter
 from solitonde.instrument.tables.table import ModelTable
 
 
@@ -113,8 +115,9 @@ def invert(
 
     if isinstance(inputs, Mapping | FeatureSummary) or not inputs:
         raise InversionError("inputs", "give a non-empty list of per-sphere-size summaries")
-    items = [FeatureSummary.from_any(i) for i in inputs]
     cal = Calibration.from_any(calibration)
+    items, scatter_notes = fill_scatter([FeatureSummary.from_any(i) for i in inputs],
+                                        cal.shot_scatter_by_size() if cal else {})
     spread = dict(spread_of(table) if material_spread is None else material_spread)
     est = _invert_items(table, items, cal, return_posterior, spread)
     if est.out_of_range and len(items) >= 2:
@@ -125,6 +128,7 @@ def invert(
     stale = adequacy.reading_mismatch(table.reading_version)
     if stale is not None:
         est.warnings.append(stale)
+    est.warnings.extend(scatter_notes)
     return est
 
 

@@ -287,8 +287,12 @@ def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary | Mapping
     from solitonde.instrument.inference.material_spread import spread_of
 
     spread = dict(spread_of(table) if material_spread is None else material_spread)
-    dev = deviance(table, [FeatureSummary.from_any(i) for i in inputs],
-                   Calibration.from_any(calibration), spread, shared_calibration)
+    from solitonde.instrument.inference.shot_scatter import fill as fill_scatter
+
+    cal = Calibration.from_any(calibration)
+    items, _ = fill_scatter([FeatureSummary.from_any(i) for i in inputs],
+                            cal.shot_scatter_by_size() if cal else {})
+    dev = deviance(table, items, cal, spread, shared_calibration)
     return CellLikelihood(
         deviance=dev.total(), n_terms=dev.n_terms, grid=dev.grids[0],
         misfit=dev.misfit + dev.bound_misfit(),
