@@ -92,5 +92,6 @@ def fill(items: Sequence[FeatureSummary], scatter: dict[float, ShotScatter]
             f"D = {item.diameter_m * 1e3:.3g} mm: the per-shot scatter is the rig's, measured on "
             f"the calibration's reference shots (TOF {tof_rel * 100:.2g} %, ARR {arr:.2g}, from "
             f"{rig['shot_scatter_dof']} degrees of freedom, widened to Student's t), not the "
-            f"{DEFAULT_TOF_REL_STD:.0%} of TOF and {DEFAULT_ARR_STD:g} in ARR assumed without it")
+            f"{DEFAULT_TOF_REL_STD * 100:g} % of TOF and {DEFAULT_ARR_STD:g} in ARR assumed "
+            "without it")
     return out, notes
