@@ -16,6 +16,7 @@ factor's uncertainty stays in C, per position.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypedDict
@@ -38,6 +39,31 @@ LOG_BATCH = 8
 """Variances multiplied before one log. A variance lies between about 1e-19 s^2 (the TOF floor
 over 1e5 shots) and 1e2 (an ARR scatter of 10, the most an input may state): a product of 8
 stays between 1e-152 and 1e16, far from underflow and overflow."""
+
+
+Term = tuple[np.ndarray, np.ndarray, Any, Any, Any, Any, "np.ndarray | None"]
+"""One Gaussian term: the model and its variance per cell, the measured value, the calibration's
+scale, the variance added (scatter, calibration), a relative variance on the model, and the
+material's columns (None without a spread); the four middle ones numbers or rows over distance."""
+_NO_U = np.zeros((2, 1, 1))
+_NO_M = np.zeros((3, 1, 1))
+"""Placeholders for the material's arrays where there is no spread (the kernel ignores them)."""
+
+
+def use_compiled() -> bool:
+    """Whether the likelihood and the posterior take their compiled passes
+    (:mod:`.likelihood_kernel`, :mod:`.posterior_kernel`): where numba is loaded already (the
+    service, ``analyze``, the studies), they take a half to a third of an inversion's time. A
+    process that would import numba for its one inversion (``solitonde invert``) spends half a
+    second on the import, more than it saves, so there the numpy expressions run. Both give the
+    same numbers to the bit (tests/instrument/test_likelihood_kernel.py)."""
+    return "numba" in sys.modules
+
+
+def per_distance(x: Any, n_l: int) -> np.ndarray:
+    """A number, or a row over the grid's distance axis as :func:`calibration_along` gives it,
+    as one contiguous value per distance column (what the compiled kernels take)."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=float), (1, n_l))[0])
 
 
 class CellLikelihood(TypedDict):
@@ -111,6 +137,41 @@ class Deviance:
         r /= var
         self.misfit += r
         self.det *= var
+        self._counted()
+
+    def add_term_numpy(self, term: Term) -> None:
+        """One Gaussian term with numpy operations (what :meth:`add_term_compiled` does in one
+        pass)."""
+        model, model_var, obs, scale, s2, rel2, u = term
+        var, r = np.empty(self.shape), np.empty(self.shape)
+        unscaled = _variance_residual(model, obs, scale, s2, model_var, rel2, var, r)
+        if u is not None:
+            self.add_material(u if unscaled else u * scale, var, r)
+        self.add_term(r, var)
+
+    def add_term_compiled(self, term: Term) -> None:
+        """One Gaussian term in one compiled pass over the cells
+        (:func:`.likelihood_kernel.add_term`): what :func:`_variance_residual`,
+        :meth:`add_material` and :meth:`add_term` do, to the bit, without the residual and
+        variance arrays (which only the shared errors need)."""
+        from solitonde.instrument.inference.likelihood_kernel import add_term
+
+        model, model_var, obs, scale, s2, rel2, u = term
+        n_l = self.shape[1]
+        if u is not None and self.m_sum is None:
+            self.m_sum = np.zeros((3, *self.shape))
+        if u is not None and self.ur_sum is None:
+            self.ur_sum = np.zeros((2, *self.shape))
+        unscaled = bool(np.ndim(scale) == 0 and scale == 1.0)
+        add_term(model, model_var, _NO_U if u is None else u, per_distance(obs, n_l),
+                 per_distance(scale, n_l), per_distance(s2, n_l), per_distance(rel2, n_l),
+                 unscaled, bool(np.any(rel2)), u is not None, self.misfit, self.det,
+                 _NO_M if self.m_sum is None else self.m_sum,
+                 _NO_U if self.ur_sum is None else self.ur_sum)
+        self._counted()
+
+    def _counted(self) -> None:
+        """One more term in the variances' product: its log taken every :data:`LOG_BATCH`."""
         self.terms += 1
         if self.terms % LOG_BATCH == 0:
             self.logdet += np.log(self.det)
@@ -197,10 +258,9 @@ def _shared_offset(g: FineGrid, o_std: Any, r: np.ndarray, var: np.ndarray,
                        None if u_over is None else u_over * e)
 
 
-def _add_seen(dev: Deviance, table: ModelTable, item: FeatureSummary, g: FineGrid,
-              cal: Calibration | None, spread: Mapping[str, float] | None, share: bool,
-              var: np.ndarray, r: np.ndarray) -> None:
-    """A size's TOF and ARR terms (``var`` and ``r``: scratch arrays of the grid's shape)."""
+def _seen_terms(table: ModelTable, item: FeatureSummary, g: FineGrid, cal: Calibration | None,
+                spread: Mapping[str, float] | None, share: bool) -> list[Term]:
+    """A seen size's TOF and ARR terms (with ``share``, the TOF offset's uncertainty left out)."""
     from solitonde.instrument.inference.material_spread import sensitivity
 
     # numbers, or rows over the grid's distance axis where the calibration follows distance
@@ -208,19 +268,26 @@ def _add_seen(dev: Deviance, table: ModelTable, item: FeatureSummary, g: FineGri
     s_tof, s_arr = item.sigmas()
     u_pair = (sensitivity(table, g, spread, (REFLECTION_D_OVER_T, FLOOR_ARR_MAX)) if spread
               else None)
-    for k, (model, obs, scale, s2, model_var, rel2) in enumerate((
-        (g.tof_s, item.tof_s - offset, 1.0, s_tof**2 + (0.0 if share else o_std**2),
-         g.model_tof_var, 0.0),
-        (g.arr, item.arr, factor, s_arr**2, g.model_arr_var, f_std**2),
-    )):
+    assert item.tof_s is not None  # seen
+    return [(g.tof_s, g.model_tof_var, item.tof_s - offset, 1.0,
+             s_tof**2 + (0.0 if share else o_std**2), 0.0, None if u_pair is None else u_pair[0]),
+            (g.arr, g.model_arr_var, item.arr, factor, s_arr**2, f_std**2,
+             None if u_pair is None else u_pair[1])]
+
+
+def _add_shared(dev: Deviance, terms: list[Term], g: FineGrid, cal: Calibration | None,
+                var: np.ndarray, r: np.ndarray) -> None:
+    """A seen size's two terms term by term, keeping the TOF offset's error out of C as a shared
+    error (``var`` and ``r``: scratch arrays of the grid's shape)."""
+    o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])[3]
+    for k, (model, model_var, obs, scale, s2, rel2, u) in enumerate(terms):
         unscaled = _variance_residual(model, obs, scale, s2, model_var, rel2, var, r)
         u_over = None
-        if u_pair is not None:
-            u_over = dev.add_material(u_pair[k] if unscaled else u_pair[k] * scale, var, r)
-        if share and k == 0 and np.any(o_std > 0):
+        if u is not None:
+            u_over = dev.add_material(u if unscaled else u * scale, var, r)
+        if k == 0 and np.any(o_std > 0):
             dev.shared.append(_shared_offset(g, o_std, r, var, u_over))
         dev.add_term(r, var)
-    dev.penalty += g.penalty
 
 
 def _apply_woodbury(dev: Deviance) -> None:
@@ -235,6 +302,13 @@ def _apply_woodbury(dev: Deviance) -> None:
     for n_e, err in enumerate(shared):
         dev.shared_q[n_e, n_e] = err.q
     if dev.m_sum is None or dev.ur_sum is None:
+        return
+    if not shared and use_compiled():  # one pass; the numbers are the same to the bit
+        from solitonde.instrument.inference.likelihood_kernel import woodbury
+
+        det = np.empty(dev.shape)
+        woodbury(dev.m_sum, dev.ur_sum, dev.penalty, dev.misfit, det)
+        dev.logdet += np.log(det, out=det)
         return
     quad, logdet_m = solve2(dev.m_sum, dev.ur_sum)
     ok = np.isfinite(dev.penalty)
@@ -262,8 +336,17 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
     for item, g in zip(items, grids, strict=True):
         if item.hidden:
             dev.add_bound(_hidden_term(item, g, cal))
+            continue
+        terms = _seen_terms(table, item, g, cal, spread, shared_calibration)
+        dev.penalty += g.penalty
+        if shared_calibration:
+            _add_shared(dev, terms, g, cal, var, r)
         else:
-            _add_seen(dev, table, item, g, cal, spread, shared_calibration, var, r)
+            for term in terms:
+                if use_compiled():
+                    dev.add_term_compiled(term)
+                else:
+                    dev.add_term_numpy(term)
     dev.close_logs()
     _apply_woodbury(dev)
     return dev

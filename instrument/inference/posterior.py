@@ -16,7 +16,7 @@ from solitonde.instrument.inference.calibration import Calibration, calibration_
 from solitonde.instrument.inference.estimate import Estimate, out_of_range, second_reading
 from solitonde.instrument.inference.fine_grid import FineGrid
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
-from solitonde.instrument.inference.likelihood import Deviance
+from solitonde.instrument.inference.likelihood import Deviance, per_distance, use_compiled
 from solitonde.instrument.inference.marginals import summarise_marginal
 from solitonde.instrument.inference.woodbury import material_shift
 
@@ -86,11 +86,23 @@ def _strict_explained(est: Estimate, dev: Deviance, post: np.ndarray,
             continue
         factor, offset, f_std, o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])
         s_tof, s_arr = item.sigmas()
-        strict = ((item.tof_s - offset - g.tof_s) ** 2
-                  / (s_tof**2 + o_std**2 + g.model_tof_var_strict)
-                  + (item.arr - factor * g.arr) ** 2
-                  / (s_arr**2 + factor**2 * g.model_arr_var_strict + (f_std * g.arr) ** 2))
-        out[item.diameter_m] = float(np.sum(post[strict <= _chi2_limit_at(2, 1e-3)]))
+        assert item.tof_s is not None and item.arr is not None  # seen
+        if not use_compiled():
+            strict = ((item.tof_s - offset - g.tof_s) ** 2
+                      / (s_tof**2 + o_std**2 + g.model_tof_var_strict)
+                      + (item.arr - factor * g.arr) ** 2
+                      / (s_arr**2 + factor**2 * g.model_arr_var_strict + (f_std * g.arr) ** 2))
+            out[item.diameter_m] = float(np.sum(post[strict <= _chi2_limit_at(2, 1e-3)]))
+            continue
+        from solitonde.instrument.inference.posterior_kernel import strict_mask
+
+        n_l = g.distance_m.size
+        explained = strict_mask(g.tof_s, g.arr, g.model_tof_var_strict, g.model_arr_var_strict,
+                                per_distance(item.tof_s - offset, n_l),
+                                per_distance(s_tof**2 + o_std**2, n_l), item.arr,
+                                per_distance(factor, n_l), per_distance(f_std, n_l), s_arr**2,
+                                _chi2_limit_at(2, 1e-3))
+        out[item.diameter_m] = float(np.sum(post[explained]))
     return out
 
 
@@ -100,9 +112,16 @@ def _adequacy_inputs(est: Estimate, dev: Deviance, post: np.ndarray, finite: np.
     """What the adequacy check reads: the effective number of parameters the data fix (the
     posterior mean of the deviance over its minimum, Spiegelhalter et al.'s p_D), the material's
     shift and, per seen size, the posterior's weight on floor cells."""
-    deviance = dev.misfit + dev.logdet + dev.bound_terms
-    d_best = float(deviance[i_best])
-    est.extra["p_d"] = float(np.sum(post[finite] * (deviance[finite] - d_best)))
+    d_best = float(dev.misfit[i_best] + dev.logdet[i_best] + dev.bound_terms[i_best])
+    if use_compiled():
+        from solitonde.instrument.inference.posterior_kernel import weighted_excess
+
+        excess = weighted_excess(post, dev.misfit, dev.logdet, dev.bound_terms, finite, d_best,
+                                 int(np.count_nonzero(finite)))
+    else:
+        deviance = dev.misfit + dev.logdet + dev.bound_terms
+        excess = post[finite] * (deviance[finite] - d_best)
+    est.extra["p_d"] = float(np.sum(excess))
     if dev.m_sum is not None and dev.ur_sum is not None:
         est.extra["material_shift_sd"] = material_shift(dev.m_sum, dev.ur_sum, post)
     est.extra["floor_mass"] = {

@@ -1,0 +1,90 @@
+"""The compiled likelihood and posterior passes against the numpy expressions they stand for, to
+the bit: every term's chi^2, variance product and material sums, Woodbury's correction, the strict
+chi^2 mask and p_D, with and without a calibration that follows the distance, with and without the
+material's spread, for one and for three sphere sizes. (A process without numba loaded takes the
+numpy expressions: the answer must not depend on which.)"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import solitonde.instrument.inference.likelihood as lk
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion import invert
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
+from solitonde.instrument.inference.material_spread import spread_of
+from solitonde.instrument.tables import bundled
+from solitonde.instrument.tables.table import ModelTable
+
+CALIBRATION = {
+    "arr_factor": 0.97, "tof_offset_s": 2e-6,
+    "per_diameter": [{
+        "diameter_m": 9.53e-3, "arr_factor": 0.96, "tof_offset_s": 3e-6, "arr_factor_std": 0.01,
+        "tof_offset_std_s": 4e-7,
+        "by_distance": [
+            {"distance_m": 0.005, "arr_factor": 0.95, "tof_offset_s": 5e-6,
+             "arr_factor_std": 0.02, "tof_offset_std_s": 6e-7},
+            {"distance_m": 0.457, "arr_factor": 0.97, "tof_offset_s": 3e-6,
+             "arr_factor_std": 0.01, "tof_offset_std_s": 3e-7}]}]}
+
+
+@pytest.fixture(scope="module")
+def table() -> ModelTable:
+    return ModelTable.load(bundled.default_table())
+
+
+def _inputs(table: ModelTable, sizes: tuple[float, ...], t: float, at: float
+            ) -> list[FeatureSummary]:
+    out = []
+    for k, d in enumerate(sizes):
+        tof, arr = predict(table, d, t, at)
+        out.append(FeatureSummary(d, tof * (1 + 2e-3 * (k - 1)), arr * 0.97, 3e-7, 0.004, 5))
+    return out
+
+
+@pytest.mark.parametrize("sizes", [(9.53e-3,), (4.76e-3, 9.53e-3, 19.05e-3)])
+@pytest.mark.parametrize("calibration", [None, CALIBRATION], ids=["plain", "by_distance"])
+@pytest.mark.parametrize("spread", [True, False], ids=["material", "exact"])
+def test_the_compiled_deviance_is_numpys_to_the_bit(table: ModelTable, sizes: tuple[float, ...],
+                                                    calibration: dict | None, spread: bool,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    from solitonde.instrument.inference.calibration import Calibration
+
+    cal = Calibration.from_any(calibration)
+    material = spread_of(table) if spread else None
+    for t, at in ((3.1e-3, 0.012), (4.4e-3, 0.3)):
+        items = _inputs(table, sizes, t, at)
+        assert lk.use_compiled()  # numba is loaded in the test process
+        compiled = lk.deviance(table, items, cal, material)
+        with monkeypatch.context() as m:
+            m.setattr(lk, "use_compiled", lambda: False)
+            reference = lk.deviance(table, items, cal, material)
+        for name in ("misfit", "logdet", "det", "penalty"):
+            assert np.array_equal(getattr(compiled, name), getattr(reference, name)), name
+        if spread:
+            assert np.array_equal(compiled.m_sum, reference.m_sum)  # type: ignore[arg-type]
+            assert np.array_equal(compiled.ur_sum, reference.ur_sum)  # type: ignore[arg-type]
+
+
+def test_an_answer_is_the_same_to_the_bit_either_way(table: ModelTable,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """The whole answer, p_D and the strict share included, on answers that rest on floor cells
+    (a 19.05 mm sphere on a 2 mm plate) with a calibration that follows the distance: the
+    compiled passes give what the numpy expressions give."""
+    import solitonde.instrument.inference.posterior as posterior
+    from solitonde.instrument.inference.calibration import Calibration
+
+    cal = Calibration.from_any(CALIBRATION)
+    for t, at in ((2.0e-3, 0.2), (2.1e-3, 0.35)):
+        items = _inputs(table, (9.53e-3, 19.05e-3), t, at)
+        compiled = invert(table, items, cal, return_posterior=True)
+        with monkeypatch.context() as m:
+            m.setattr(lk, "use_compiled", lambda: False)
+            m.setattr(posterior, "use_compiled", lambda: False)
+            reference = invert(table, items, cal, return_posterior=True)
+        assert compiled.extra["strict_explained"], "the 19.05 mm size rests on floor cells"
+        assert compiled.extra == reference.extra
+        assert compiled.to_dict() == reference.to_dict()
+        assert np.array_equal(compiled.posterior["density"],  # type: ignore[index]
+                              reference.posterior["density"])  # type: ignore[index]
