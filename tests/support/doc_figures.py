@@ -28,6 +28,9 @@ COMMANDS: dict[str, str] = {
     **{f"validate-seed{s}": f"{VALIDATE} --n 200 --seed {s}" for s in (0, 1, 2)},
     **{f"validate-near-support-seed{s}":
        f"{VALIDATE} --n 60 --shots 1 --near-support 0.05 --seed {s}" for s in (0, 1, 2)},
+    **{f"validate-near-support-3d-seed{s}":
+       f"{VALIDATE} --n 60 --shots 1 --near-support 0.05 --truth-plate-theory 3d --workers 2 "
+       f"--seed {s}" for s in (0, 1, 2)},
     **{f"validate-map-seed{s}":
        f"solitonde validate-map --scans 30 --seed {s} --no-sequential --workers 2 --json"
        for s in (0, 1, 2)},
