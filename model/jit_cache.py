@@ -42,7 +42,9 @@ PREFIX = "solitonde-"
 """Leaf folders start with this; an inherited ``NUMBA_CACHE_DIR`` with it is one of ours."""
 
 KERNEL_PACKAGES = ("solitonde.model", "solitonde.signal")
-"""Every numba kernel and everything a kernel can inline lives in these two packages."""
+"""Every numba kernel that can inline code of another module lives in these two packages. The
+inference's kernels (``solitonde.instrument.inference.*_kernel``) call nothing outside their own
+file, so numba's check of that file keeps their cache true without them."""
 
 
 def source_digest(packages: tuple[str, ...] = KERNEL_PACKAGES) -> str:
