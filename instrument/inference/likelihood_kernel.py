@@ -1,17 +1,20 @@
-"""A Gaussian term of the likelihood over every fine cell in one compiled pass.
+"""A Gaussian term of the likelihood over every fine cell in one compiled pass; and Woodbury's
+correction for the material's spread.
 
 A term (a sphere size's TOF or ARR): its variance, residual, chi^2 share, the variances'
 product and, with a material spread, its share of Woodbury's ``U^T D^-1 U`` and ``U^T D^-1 r``
 (:mod:`.likelihood`). As numpy operations the same arithmetic walks the 114,000-cell grid about
-twenty times per term and allocates as many temporaries; here it walks it once. (One pass over
-all terms, the terms a tuple of arrays, ran slower: numba indexes such a tuple through a
-branch per access.) The operations and their order per cell are numpy's
-(``_variance_residual``, ``Deviance.add_material``, ``Deviance.add_term`` in
-:mod:`.likelihood`), so the numbers are the same to the bit.
+twenty times per term and allocates as many temporaries; here it walks it once. (Tried and
+slower: one pass over all terms, their arrays a tuple, which numba indexes through a branch per
+access; one pass over a size's two terms, 30 times slower as numba compiled it.) The
+operations and their order per cell are numpy's (``_variance_residual``,
+``Deviance.add_material``, ``Deviance.add_term`` in :mod:`.likelihood`), so the numbers are the
+same to the bit; division follows numpy's rules (``error_model="numpy"``: a zero variance gives
+inf, not an exception).
 
-The kernel calls nothing outside this module, so numba's own check of this file's timestamp
-keeps its cache true (the package-wide cache key of :mod:`solitonde.model.jit_cache` is for the
-kernels that inline across modules).
+The kernels call nothing outside this module, so numba's own check of this file's timestamp
+keeps their cache true (the package-wide cache key of :mod:`solitonde.model.jit_cache` is for
+the kernels that inline across modules).
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def add_term(model: np.ndarray, model_var: np.ndarray, u: np.ndarray, obs: np.ndarray,
              scale: np.ndarray, s2: np.ndarray, rel2: np.ndarray, unscaled: bool, has_rel: bool,
              has_u: bool, misfit: np.ndarray, det: np.ndarray, m3: np.ndarray, ur: np.ndarray
@@ -65,7 +68,7 @@ def add_term(model: np.ndarray, model_var: np.ndarray, u: np.ndarray, obs: np.nd
             det[i, j] *= v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def woodbury(m3: np.ndarray, ur: np.ndarray, penalty: np.ndarray, misfit: np.ndarray,
              det: np.ndarray) -> None:
     """The material's rank-2 covariance applied per cell (:func:`.woodbury.solve2`'s closed

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def strict_mask(tof: np.ndarray, arr: np.ndarray, tof_var: np.ndarray, arr_var: np.ndarray,
                 tof_obs: np.ndarray, tof_var_add: np.ndarray, arr_obs: float,
                 factor: np.ndarray, f_std: np.ndarray, arr_var_add: float, limit: float
@@ -38,7 +38,7 @@ def strict_mask(tof: np.ndarray, arr: np.ndarray, tof_var: np.ndarray, arr_var: 
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def weighted_excess(post: np.ndarray, misfit: np.ndarray, logdet: np.ndarray,
                     bound: np.ndarray, finite: np.ndarray, best: float, count: int
                     ) -> np.ndarray:
