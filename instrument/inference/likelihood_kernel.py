@@ -6,7 +6,7 @@ product and, with a material spread, its share of Woodbury's ``U^T D^-1 U`` and 
 (:mod:`.likelihood`). As numpy operations the same arithmetic walks the 114,000-cell grid about
 twenty times per term and allocates as many temporaries; here it walks it once. (Tried and
 slower: one pass over all terms, their arrays a tuple, which numba indexes through a branch per
-access; one pass over a size's two terms, 30 times slower as numba compiled it.) The
+access; one pass over a size's two terms, ten times slower as numba compiled it.) The
 operations and their order per cell are numpy's (``_variance_residual``,
 ``Deviance.add_material``, ``Deviance.add_term`` in :mod:`.likelihood`), so the numbers are the
 same to the bit; division follows numpy's rules (``error_model="numpy"``: a zero variance gives
