@@ -368,10 +368,9 @@ def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary | Mapping
     ``shared_b`` (errors, t, L) and ``shared_q`` (errors, errors, t, L) give the deviance at
     errors ``eta``: ``deviance - 2 b.eta + eta^T Q eta`` (likewise ``misfit``)."""
     from solitonde.instrument.inference.material_spread import spread_of
-
-    spread = dict(spread_of(table) if material_spread is None else material_spread)
     from solitonde.instrument.inference.shot_scatter import fill as fill_scatter
 
+    spread = dict(spread_of(table) if material_spread is None else material_spread)
     cal = Calibration.from_any(calibration)
     items, _ = fill_scatter([FeatureSummary.from_any(i) for i in inputs],
                             cal.shot_scatter_by_size() if cal else {})
