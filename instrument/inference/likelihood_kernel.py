@@ -89,3 +89,13 @@ def woodbury(m3: np.ndarray, ur: np.ndarray, penalty: np.ndarray, misfit: np.nda
             b1 = ur[1, i, j]
             misfit[i, j] -= (a11 * b0 * b0 - 2.0 * a01 * b0 * b1 + a00 * b1 * b1) / d
             det[i, j] = d
+
+
+def warm() -> None:
+    """Load (on a fresh install: compile) both kernels, on one cell with the argument types the
+    likelihood passes."""
+    one, three = np.ones((1, 1)), np.zeros((3, 1, 1))
+    row = np.ones(1)
+    add_term(one, one, np.zeros((2, 1, 1)), row, row, row, row, True, False, True, np.zeros((1, 1)),
+             np.ones((1, 1)), three, np.zeros((2, 1, 1)))
+    woodbury(three, np.zeros((2, 1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.ones((1, 1)))

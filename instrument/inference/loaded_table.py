@@ -12,8 +12,6 @@ import threading
 from pathlib import Path
 from typing import cast
 
-import numpy as np
-
 from solitonde.instrument.errors import MessageError
 from solitonde.instrument.inference.fine_grid import fine_grid
 from solitonde.instrument.tables.table import ModelTable, TableSummary
@@ -22,20 +20,19 @@ from solitonde.signal.json_ready import json_ready
 log = logging.getLogger("solitonde.instrument")
 
 
-def _first_inversion(table: ModelTable) -> None:
-    """One inversion at the first table node with a reflection: loads the inversion's compiled
-    passes (:mod:`.likelihood_kernel`, :mod:`.posterior_kernel`) where numba is loaded."""
-    from solitonde.instrument.inference.inversion import invert
-    from solitonde.instrument.inference.inversion_inputs import FeatureSummary
-    from solitonde.instrument.tables.table import STATUS_OK
+def _load_kernels() -> None:
+    """Load the inversion's compiled passes (:mod:`.likelihood_kernel`, :mod:`.posterior_kernel`)
+    where numba is loaded (where it is not, the inversion runs without them)."""
+    from solitonde.instrument.inference.likelihood import use_compiled
 
     try:
-        i_d, i_t, i_l = (int(k[0]) for k in np.nonzero(table.status == STATUS_OK))
-        invert(table, [FeatureSummary(float(table.axes["diameter_m"][i_d]),
-                                      float(table.features["tof_s"][i_d, i_t, i_l]),
-                                      float(table.features["arr"][i_d, i_t, i_l]))])
+        if use_compiled():
+            from solitonde.instrument.inference import likelihood_kernel, posterior_kernel
+
+            likelihood_kernel.warm()
+            posterior_kernel.warm()
     except Exception as exc:  # only a speed-up: the first request then loads them itself
-        log.warning("model table: the inversion's warm-up failed: %s", exc)
+        log.warning("model table: loading the inversion's compiled passes failed: %s", exc)
 
 
 class EstimateUnavailable(MessageError, RuntimeError):
@@ -76,15 +73,14 @@ class LoadedTable:
     def _warm_up(self) -> None:
         """Build the inversion's fine grids now, not in the first request that needs them, and
         start loading (on a fresh install: compiling, about 2 s) the inversion's compiled passes
-        in the background with one inversion at a table node: the service is ready meanwhile,
-        and a request that needs them before they are loaded waits only for the rest."""
+        in the background: the service is ready meanwhile, and a request that needs them before
+        they are loaded waits only for the rest."""
         for i in range(len(self.model.axes["diameter_m"])):
             try:
                 fine_grid(self.model, i)
             except Exception as exc:  # a sphere size the inversion cannot use: say so, go on
                 log.warning("model table: no inversion grid for diameter index %d: %s", i, exc)
-        threading.Thread(target=_first_inversion, args=(self.model,), daemon=True,
-                         name="inversion warm-up").start()
+        threading.Thread(target=_load_kernels, daemon=True, name="inversion warm-up").start()
 
     @property
     def loaded(self) -> bool:

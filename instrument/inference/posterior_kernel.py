@@ -53,3 +53,11 @@ def weighted_excess(post: np.ndarray, misfit: np.ndarray, logdet: np.ndarray,
                 out[k] = post[i, j] * (((misfit[i, j] + logdet[i, j]) + bound[i, j]) - best)
                 k += 1
     return out
+
+
+def warm() -> None:
+    """Load (on a fresh install: compile) both kernels, on one cell with the argument types the
+    posterior passes."""
+    one, row = np.ones((1, 1)), np.ones(1)
+    strict_mask(one, one, one, one, row, row, 1.0, row, row, 1.0, 1.0)
+    weighted_excess(one, one, one, one, np.ones((1, 1), dtype=np.bool_), 0.0, 1)
