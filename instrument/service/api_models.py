@@ -373,6 +373,14 @@ class CalibrationEntry(Strict):
                                     "Kuwabara-Kono time constant, s: the table is read at it "
                                     "(needs a table with a dissipation layer)")
     damping_std_s: float | None = Field(None, ge=0, le=1e-3)
+    shot_tof_rel_std: float | None = Field(
+        None, ge=0, le=1.0, description="the references' per-shot TOF scatter, pooled, relative "
+        "to the TOF: an input without tof_std_s is read with it (widened to Student's t)")
+    shot_arr_std: float | None = Field(
+        None, ge=0, le=10.0, description="the references' per-shot ARR scatter, pooled: an "
+        "input without arr_std is read with it")
+    shot_scatter_dof: int | None = Field(None, ge=1, le=10_000_000, description="the pooled "
+                                         "scatter's degrees of freedom, sum(shots - 1)")
     by_distance: list[DistanceEntry] | None = Field(
         None, min_length=2, max_length=64, description="the factor and offset fitted at each "
         "reference distance (references near a support and far from it), sorted by distance: "

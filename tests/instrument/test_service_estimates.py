@@ -128,3 +128,30 @@ def test_invert_takes_the_per_size_calibration_file_calibrate_writes(client: Tes
     cal["per_diameter"] = [{"diameter_m": TABLE_DIAMETER, "arr_factor": -1}]
     r = client.post("/v1/invert", json={"inputs": halved, "calibration": cal})
     assert r.status_code == 422 and "per_diameter" in r.json()["field"]
+
+
+def test_invert_reads_a_single_shot_with_the_calibrations_rig_scatter(client: TestClient,
+                                                                      table_path: Path) -> None:
+    """A calibration that carries the references' per-shot scatter (``shot_*``) reads an input
+    without a stated scatter with it, over REST as in Python, and says so; stated, it is kept."""
+    from solitonde.instrument.inference.inversion import invert
+    from solitonde.instrument.tables.table import ModelTable
+
+    body = client.post("/v1/measurements", json={"shots": simulated_shots(4.0e-3)}).json()
+    (agg,) = body["aggregates"]
+    one = {"diameter_m": agg["sphere_diameter"], "tof_s": agg["tof_s"]["mean"],
+           "arr": agg["arr"]["mean"]}
+    cal = {"arr_factor": 1.0, "tof_offset_s": 0.0, "per_diameter": [
+        {"diameter_m": TABLE_DIAMETER, "arr_factor": 1.0, "tof_offset_s": 0.0,
+         "shot_tof_rel_std": 5e-4, "shot_arr_std": 0.004, "shot_scatter_dof": 8}]}
+    rest = client.post("/v1/invert", json={"inputs": [one], "calibration": cal})
+    assert rest.status_code == 200, rest.text
+    est = rest.json()["estimate"]
+    assert any("measured on the calibration's reference shots" in w for w in est["warnings"])
+    local = invert(ModelTable.load(table_path), [one], cal).to_dict()
+    assert est["thickness_m"] == local["thickness_m"]
+    assumed = client.post("/v1/invert", json={"inputs": [one]}).json()["estimate"]
+    assert not any("reference shots" in w for w in assumed["warnings"])
+    stated = {**one, "tof_std_s": 1e-6, "arr_std": 0.01, "n_shots": 1}
+    kept = client.post("/v1/invert", json={"inputs": [stated], "calibration": cal}).json()
+    assert not any("reference shots" in w for w in kept["estimate"]["warnings"])
