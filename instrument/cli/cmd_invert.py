@@ -1,8 +1,9 @@
 """`solitonde invert`: thickness and distance to the support from TOF and ARR.
 
 One ``--tof/--arr/--diameter`` triple per sphere size (repeat the options, in the same order, to
-combine sizes). Without ``--tof-std``/``--arr-std`` the inversion's stated defaults are used
-(1 % of TOF, 0.03 in ARR per shot).
+combine sizes). Without ``--tof-std``/``--arr-std`` the rig's per-shot scatter is used where
+``--calibration`` measured it on its references, else the inversion's stated defaults (1 % of
+TOF, 0.03 in ARR per shot).
 
 Exit status: 0 with an answer (bounds included), 1 when the answer is ``inconsistent`` or
 ``out_of_range`` (printed in full, with the reason on stderr), 2 for bad options.
@@ -53,8 +54,10 @@ def invert_command(
     arr: list[float] = typer.Option(..., "--arr", help="mean amplitude ratio (repeat)"),
     diameter: list[float] = typer.Option(..., "--diameter", help="sphere diameter, m (repeat)",
                                          callback=sphere_sizes),
-    tof_std: list[float] = typer.Option([], "--tof-std", help="shot scatter of TOF, s"),
-    arr_std: list[float] = typer.Option([], "--arr-std", help="shot scatter of ARR"),
+    tof_std: list[float] = typer.Option([], "--tof-std", help="shot scatter of TOF, s (default: "
+                                        "the calibration's measured one, else 1 % of TOF)"),
+    arr_std: list[float] = typer.Option([], "--arr-std", help="shot scatter of ARR (default: "
+                                        "the calibration's measured one, else 0.03)"),
     shots: list[int] = typer.Option([], "--shots", help="number of shots averaged"),
     table: list[Path] = typer.Option([], "--table", help="model table or folder of tables "
                                      "(repeat for several plate families; default: "
