@@ -151,6 +151,28 @@ def test_one_group_reaching_beyond_widens_the_interval_and_a_slight_reach_does_n
     assert LR_LEVELS[1] < 0.5  # the ridge's plateau is inside the 95 % set
 
 
+def test_a_one_sided_bound_moved_by_under_one_percent_is_left_and_a_longer_reach_widens_it(
+        ) -> None:
+    """An "at most" answer whose profile's 95 % set ends 0.5 % past its bound keeps its bound
+    (and gets no "another reading"); one whose profile runs on 5 % past it is widened to there."""
+    n = 800
+    log_t = np.log(np.geomspace(1.5e-3, 6e-3, n))
+    bound = 2.0e-3
+    answer = ParameterEstimate(None, None, (None, 1.9e-3), (None, bound), "upper_bound_only")
+    distance = ParameterEstimate(None, None, (0.1, None), (0.05, None), "lower_bound_only")
+    for past, widened in ((0.005, False), (0.05, True)):
+        end = np.log(bound) + past
+        profile = np.where(log_t <= end, 1.0, np.exp(-0.5 * ((log_t - end) / 0.002) ** 2))
+        t, l_axis, post, w_t, w_l = _ridge_case(profile, np.full(n, 0.3))
+        got, _, readings = ridge.resolve(answer, distance, t, l_axis, post, w_t, w_l, profile,
+                                         lower_physical=True)
+        assert readings == [] and got.status == "upper_bound_only"
+        if widened:
+            assert got.ci95[1] == pytest.approx(bound * np.exp(past), rel=0.01)
+        else:
+            assert got.ci95 == answer.ci95
+
+
 def test_the_service_answers_with_the_reading_that_holds_the_truth(tmp_path: Path) -> None:
     """POST /v1/invert with a near-clamp case and its calibration: the answer holds the truth
     and carries the warning, as the command line's does."""
