@@ -303,14 +303,20 @@ class Calibration:
                 return float(entry["damping_s"]), float(entry.get("damping_std_s", 0.0))
         return None
 
+    def shot_scatter(self, diameter_m: float) -> ShotScatter | None:
+        """The per-shot scatter measured on a sphere size's reference shots, or None where the
+        calibration does not state it (all three keys)."""
+        e = self._entry(diameter_m)
+        if e is None or not all(k in e for k in ("shot_tof_rel_std", "shot_arr_std",
+                                                 "shot_scatter_dof")):
+            return None
+        return {"shot_tof_rel_std": float(e["shot_tof_rel_std"]),
+                "shot_arr_std": float(e["shot_arr_std"]),
+                "shot_scatter_dof": int(e["shot_scatter_dof"])}
+
     def shot_scatter_by_size(self) -> dict[float, ShotScatter]:
-        """Per sphere size, the per-shot scatter measured on its reference shots, where the
-        calibration states it (all three keys)."""
-        return {d: {"shot_tof_rel_std": float(e["shot_tof_rel_std"]),
-                    "shot_arr_std": float(e["shot_arr_std"]),
-                    "shot_scatter_dof": int(e["shot_scatter_dof"])}
-                for d, e in self.per_diameter.items()
-                if all(k in e for k in ("shot_tof_rel_std", "shot_arr_std", "shot_scatter_dof"))}
+        """:meth:`shot_scatter` of every sphere size that states it."""
+        return {d: rig for d in self.per_diameter if (rig := self.shot_scatter(d)) is not None}
 
     @property
     def has_damping(self) -> bool:

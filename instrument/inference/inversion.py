@@ -82,6 +82,7 @@ from solitonde.instrument.inference.likelihood import deviance
 from solitonde.instrument.inference.model_error import FLOOR_ARR_MAX, REFLECTION_D_OVER_T
 from solitonde.instrument.inference.posterior import answer
 from solitonde.instrument.inference.shot_scatter import fill as fill_scatter
+from solitonde.instrument.inference.shot_scatter import none_stated
 from solitonde.instrument.tables.table import ModelTable
 
 
@@ -117,7 +118,7 @@ def invert(
         raise InversionError("inputs", "give a non-empty list of per-sphere-size summaries")
     cal = Calibration.from_any(calibration)
     items, scatter_notes = fill_scatter([FeatureSummary.from_any(i) for i in inputs],
-                                        cal.shot_scatter_by_size() if cal else {})
+                                        cal.shot_scatter if cal else none_stated)
     spread = dict(spread_of(table) if material_spread is None else material_spread)
     est = _invert_items(table, items, cal, return_posterior, spread)
     if est.out_of_range and len(items) >= 2:

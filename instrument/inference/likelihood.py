@@ -369,11 +369,12 @@ def cell_likelihood(table: ModelTable, inputs: Sequence[FeatureSummary | Mapping
     errors ``eta``: ``deviance - 2 b.eta + eta^T Q eta`` (likewise ``misfit``)."""
     from solitonde.instrument.inference.material_spread import spread_of
     from solitonde.instrument.inference.shot_scatter import fill as fill_scatter
+    from solitonde.instrument.inference.shot_scatter import none_stated
 
     spread = dict(spread_of(table) if material_spread is None else material_spread)
     cal = Calibration.from_any(calibration)
     items, _ = fill_scatter([FeatureSummary.from_any(i) for i in inputs],
-                            cal.shot_scatter_by_size() if cal else {})
+                            cal.shot_scatter if cal else none_stated)
     dev = deviance(table, items, cal, spread, shared_calibration)
     return CellLikelihood(
         deviance=dev.total(), n_terms=dev.n_terms, grid=dev.grids[0],

@@ -18,7 +18,7 @@ fifty. Fewer than :data:`MIN_DOF` degrees of freedom give no value (the assumed 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TypedDict
 
@@ -61,6 +61,11 @@ def pooled(references: Sequence[FeatureSummary]) -> ShotScatter | None:
             "shot_scatter_dof": dof}
 
 
+def none_stated(diameter_m: float) -> None:
+    """The ``scatter_for`` of no calibration: no size has a measured scatter."""
+    return None
+
+
 def widening(dof: int) -> float:
     """The factor on a pooled standard deviation with ``dof`` degrees of freedom that gives a
     Gaussian the 95 % width of Student's t."""
@@ -69,15 +74,16 @@ def widening(dof: int) -> float:
     return float(student_t.ppf(0.975, dof)) / Z_95
 
 
-def fill(items: Sequence[FeatureSummary], scatter: dict[float, ShotScatter]
+def fill(items: Sequence[FeatureSummary],
+         scatter_for: Callable[[float], ShotScatter | None]
          ) -> tuple[list[FeatureSummary], list[str]]:
-    """``items`` with the rig's scatter where a seen size states none (``scatter`` by sphere
-    size, as :meth:`~.calibration.Calibration.shot_scatter_by_size` gives it), and one note per
-    size so read."""
+    """``items`` with the rig's scatter where a seen size states none (``scatter_for``: a
+    sphere size's, as :meth:`~.calibration.Calibration.shot_scatter` gives it, None where there
+    is none), and one note per size so read."""
     out: list[FeatureSummary] = []
     notes: list[str] = []
     for item in items:
-        rig = next((v for d, v in scatter.items() if abs(d - item.diameter_m) <= 0.01 * d), None)
+        rig = scatter_for(item.diameter_m)
         if (rig is None or item.hidden or item.tof_s is None
                 or (item.tof_std_s is not None and item.arr_std is not None)):
             out.append(item)

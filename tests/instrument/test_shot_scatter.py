@@ -118,9 +118,9 @@ def test_the_calibration_file_keeps_the_scatter_and_refuses_a_bad_one(
 def test_a_stated_scatter_is_kept() -> None:
     rig = {D_M: {"shot_tof_rel_std": 1e-3, "shot_arr_std": 0.01, "shot_scatter_dof": 8}}
     stated = FeatureSummary(D_M, 5e-4, 0.5, 2e-7, 0.002, 3)
-    items, notes = fill([stated], rig)  # type: ignore[arg-type]
+    items, notes = fill([stated], rig.get)  # type: ignore[arg-type]
     assert items == [stated] and notes == []
-    items, notes = fill([FeatureSummary(D_M, 5e-4, 0.5)], rig)  # type: ignore[arg-type]
+    items, notes = fill([FeatureSummary(D_M, 5e-4, 0.5)], rig.get)  # type: ignore[arg-type]
     assert items[0].tof_std_s == pytest.approx(1e-3 * widening(8) * 5e-4)
     assert items[0].arr_std == pytest.approx(0.01 * widening(8))
     assert len(notes) == 1 and "measured on the calibration's reference shots" in notes[0]
