@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypedDict
@@ -140,8 +141,8 @@ class Deviance:
         self._counted()
 
     def add_term_numpy(self, term: Term) -> None:
-        """One Gaussian term with numpy operations (what :meth:`add_term_compiled` does in one
-        pass)."""
+        """One Gaussian term with numpy operations (what :meth:`add_terms_compiled` does for
+        every term in one pass)."""
         model, model_var, obs, scale, s2, rel2, u = term
         var, r = np.empty(self.shape), np.empty(self.shape)
         unscaled = _variance_residual(model, obs, scale, s2, model_var, rel2, var, r)
@@ -149,26 +150,32 @@ class Deviance:
             self.add_material(u if unscaled else u * scale, var, r)
         self.add_term(r, var)
 
-    def add_term_compiled(self, term: Term) -> None:
-        """One Gaussian term in one compiled pass over the cells
-        (:func:`.likelihood_kernel.add_term`): what :func:`_variance_residual`,
-        :meth:`add_material` and :meth:`add_term` do, to the bit, without the residual and
-        variance arrays (which only the shared errors need)."""
-        from solitonde.instrument.inference.likelihood_kernel import add_term
+    def add_terms_compiled(self, terms: Sequence[Term], stacks: StackCache) -> None:
+        """Gaussian terms, each batch of the variances' product in one compiled pass
+        (:func:`.likelihood_kernel.add_terms`): what :meth:`add_term_numpy` does term by term,
+        to the bit, without the residual and variance arrays (which only the shared errors
+        need). ``stacks`` keeps each set of terms' arrays stacked, so a set asked for again is
+        not copied again."""
+        from solitonde.instrument.inference.likelihood_kernel import add_terms
 
-        model, model_var, obs, scale, s2, rel2, u = term
         n_l = self.shape[1]
-        if u is not None and self.m_sum is None:
-            self.m_sum = np.zeros((3, *self.shape))
-        if u is not None and self.ur_sum is None:
-            self.ur_sum = np.zeros((2, *self.shape))
-        unscaled = bool(np.ndim(scale) == 0 and scale == 1.0)
-        add_term(model, model_var, _NO_U if u is None else u, per_distance(obs, n_l),
-                 per_distance(scale, n_l), per_distance(s2, n_l), per_distance(rel2, n_l),
-                 unscaled, bool(np.any(rel2)), u is not None, self.misfit, self.det,
-                 _NO_M if self.m_sum is None else self.m_sum,
-                 _NO_U if self.ur_sum is None else self.ur_sum)
-        self._counted()
+        while terms:
+            room = LOG_BATCH - self.terms % LOG_BATCH  # the chunk ends at a log's batch
+            chunk, terms = terms[:room], terms[room:]
+            has_u = chunk[0][6] is not None
+            if has_u and self.m_sum is None:
+                self.m_sum = np.zeros((3, *self.shape))
+            if has_u and self.ur_sum is None:
+                self.ur_sum = np.zeros((2, *self.shape))
+            models, model_vars, us = stacks.get(chunk)
+            rows = [np.stack([per_distance(t[k], n_l) for t in chunk]) for k in (2, 3, 4, 5)]
+            unscaled = np.array([bool(np.ndim(t[3]) == 0 and t[3] == 1.0) for t in chunk])
+            has_rel = np.array([bool(np.any(t[5])) for t in chunk])
+            add_terms(models, model_vars, us, *rows, unscaled, has_rel, has_u, self.misfit,
+                      self.det, _NO_M if self.m_sum is None else self.m_sum,
+                      _NO_U if self.ur_sum is None else self.ur_sum)
+            for _ in chunk:
+                self._counted()
 
     def _counted(self) -> None:
         """One more term in the variances' product: its log taken every :data:`LOG_BATCH`."""
@@ -207,6 +214,44 @@ class Deviance:
             return sum((np.maximum(b - 2.0 * math.log(2.0), 0.0) for b in self.bound_list),
                        np.zeros(self.shape))
         return sum(max(0.0, float(b[at]) - 2.0 * math.log(2.0)) for b in self.bound_list)
+
+
+STACKS_KEPT = 4
+"""Sets of terms whose stacked arrays a table keeps (:class:`StackCache`)."""
+
+
+class StackCache:
+    """Terms' per-cell arrays stacked along a first axis, as :meth:`Deviance.add_terms_compiled`
+    passes them, kept for the last :data:`STACKS_KEPT` sets of terms of one table (the service
+    inverts the same sizes again and again; a stack of three sizes' terms is about 20 MB).
+    A set is known by the identity of its arrays, which the entry holds, so an id is never
+    reused while its entry lives. Safe for the service's threads."""
+
+    def __init__(self) -> None:
+        self.kept: dict[tuple[int, ...], tuple[list[np.ndarray], tuple[np.ndarray, ...]]] = {}
+        self.lock = threading.Lock()
+
+    def get(self, terms: Sequence[Term]) -> tuple[np.ndarray, ...]:
+        """(models, model variances, material columns) of ``terms``, each stacked; the columns
+        a placeholder without a material spread."""
+        arrays = [a for t in terms for a in (t[0], t[1], t[6]) if a is not None]
+        key = tuple(id(a) for a in arrays)
+        with self.lock:
+            hit = self.kept.pop(key, None)
+        if hit is None:
+            us = (np.stack([t[6] for t in terms]) if terms[0][6] is not None
+                  else np.zeros((len(terms), 2, 1, 1)))
+            hit = (arrays, (np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]), us))
+        with self.lock:
+            self.kept[key] = hit  # the newest last
+            while len(self.kept) > STACKS_KEPT:
+                del self.kept[next(iter(self.kept))]
+        return hit[1]
+
+    @staticmethod
+    def of(table: ModelTable) -> StackCache:
+        """The table's own cache."""
+        return table._cache.setdefault("term_stacks", StackCache())  # type: ignore[no-any-return]
 
 
 def _hidden_term(item: FeatureSummary, g: FineGrid, cal: Calibration | None) -> np.ndarray:
@@ -333,6 +378,7 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
     dev = Deviance.empty(grids, n_terms)
     var = np.empty(dev.shape)
     r = np.empty(dev.shape)
+    seen: list[Term] = []
     for item, g in zip(items, grids, strict=True):
         if item.hidden:
             dev.add_bound(_hidden_term(item, g, cal))
@@ -341,12 +387,13 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
         dev.penalty += g.penalty
         if shared_calibration:
             _add_shared(dev, terms, g, cal, var, r)
+        elif use_compiled():
+            seen += terms
         else:
             for term in terms:
-                if use_compiled():
-                    dev.add_term_compiled(term)
-                else:
-                    dev.add_term_numpy(term)
+                dev.add_term_numpy(term)
+    if seen:  # every size's terms in one pass
+        dev.add_terms_compiled(seen, StackCache.of(table))
     dev.close_logs()
     _apply_woodbury(dev)
     return dev

@@ -1,12 +1,12 @@
-"""A Gaussian term of the likelihood over every fine cell in one compiled pass; and Woodbury's
+"""The likelihood's Gaussian terms over every fine cell in one compiled pass; and Woodbury's
 correction for the material's spread.
 
 A term (a sphere size's TOF or ARR): its variance, residual, chi^2 share, the variances'
 product and, with a material spread, its share of Woodbury's ``U^T D^-1 U`` and ``U^T D^-1 r``
 (:mod:`.likelihood`). As numpy operations the same arithmetic walks the 114,000-cell grid about
-twenty times per term and allocates as many temporaries; here it walks it once. (Tried and
-slower: one pass over all terms, their arrays a tuple, which numba indexes through a branch per
-access; one pass over a size's two terms, ten times slower as numba compiled it.) The
+twenty times per term and allocates as many temporaries; here every term is added in one pass,
+row by row of the grid. (Tried and slower: the terms inside each cell's loop, which does not
+vectorise; their arrays a tuple, which numba indexes through a branch per access.) The
 operations and their order per cell are numpy's (``_variance_residual``,
 ``Deviance.add_material``, ``Deviance.add_term`` in :mod:`.likelihood`), so the numbers are the
 same to the bit; division follows numpy's rules (``error_model="numpy"``: a zero variance gives
@@ -24,48 +24,60 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy")
-def add_term(model: np.ndarray, model_var: np.ndarray, u: np.ndarray, obs: np.ndarray,
-             scale: np.ndarray, s2: np.ndarray, rel2: np.ndarray, unscaled: bool, has_rel: bool,
-             has_u: bool, misfit: np.ndarray, det: np.ndarray, m3: np.ndarray, ur: np.ndarray
-             ) -> None:
-    """Add one term to ``misfit`` (chi^2), ``det`` (the variances' product) and, where
+def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: np.ndarray,
+              scale: np.ndarray, s2: np.ndarray, rel2: np.ndarray, unscaled: np.ndarray,
+              has_rel: np.ndarray, has_u: bool, misfit: np.ndarray, det: np.ndarray,
+              m3: np.ndarray, ur: np.ndarray) -> None:
+    """Add K terms to ``misfit`` (chi^2), ``det`` (the variances' product) and, where
     ``has_u``, to ``m3`` (``U^T D^-1 U``'s upper entries) and ``ur`` (``U^T D^-1 r``).
 
-    ``model``, ``model_var`` (n_t, n_l): the model's value and variance per cell; ``u``
-    (2, n_t, n_l): the material's columns before the calibration's scale; per distance column
-    (n_l): ``obs`` the measured value, ``scale`` the calibration's factor, ``s2`` the scatter's
-    and calibration's variance, ``rel2`` a relative variance on the model; ``unscaled``: the
-    scale is 1 everywhere (the model enters as it is); ``has_rel``: some ``rel2`` is not 0."""
+    The per-term arrays are stacked along a first axis of length K: ``models``, ``model_vars``
+    (K, n_t, n_l), the model's value and variance per cell; ``us`` (K, 2, n_t, n_l) the
+    material's columns before the calibration's scale (read only where ``has_u``). Per distance
+    column, rows (K, n_l): ``obs`` the measured value, ``scale`` the calibration's factor,
+    ``s2`` the scatter's and calibration's variance, ``rel2`` a relative variance on the model.
+    Flags (K,): ``unscaled``, the scale is 1 everywhere (the model enters as it is);
+    ``has_rel``, some ``rel2`` is not 0.
+
+    Thickness row by thickness row: a row's sums stay in the cache while every term is added
+    to them, so they cross memory once instead of once per term, and the loop over a row's
+    cells, its flags fixed, vectorises (the divisions as well)."""
+    n_k = models.shape[0]
     n_t, n_l = misfit.shape
     for i in range(n_t):
-        for j in range(n_l):
-            m = model[i, j]
-            if unscaled:
-                v = model_var[i, j] + s2[j]
-                r = obs[j] - m
-            else:
-                sc = scale[j]
-                v = model_var[i, j] * (sc * sc)
-                v += s2[j]
-                r = m * -sc
-                r += obs[j]
-            if has_rel:
-                v += (m * m) * rel2[j]
-            if has_u:
-                u0 = u[0, i, j]
-                u1 = u[1, i, j]
-                if not unscaled:
-                    u0 = u0 * scale[j]
-                    u1 = u1 * scale[j]
-                c0 = u0 / v
-                c1 = u1 / v
-                ur[0, i, j] += c0 * r
-                ur[1, i, j] += c1 * r
-                m3[0, i, j] += c0 * u0
-                m3[1, i, j] += c0 * u1
-                m3[2, i, j] += c1 * u1
-            misfit[i, j] += (r * r) / v
-            det[i, j] *= v
+        for k in range(n_k):
+            model, model_var = models[k, i], model_vars[k, i]
+            ob, sc_k, s2_k, rel2_k = obs[k], scale[k], s2[k], rel2[k]
+            plain, rel = unscaled[k], has_rel[k]
+            mis, prod = misfit[i], det[i]
+            for j in range(n_l):
+                m = model[j]
+                if plain:
+                    v = model_var[j] + s2_k[j]
+                    r = ob[j] - m
+                else:
+                    sc = sc_k[j]
+                    v = model_var[j] * (sc * sc)
+                    v += s2_k[j]
+                    r = m * -sc
+                    r += ob[j]
+                if rel:
+                    v += (m * m) * rel2_k[j]
+                if has_u:
+                    u0 = us[k, 0, i, j]
+                    u1 = us[k, 1, i, j]
+                    if not plain:
+                        u0 = u0 * sc_k[j]
+                        u1 = u1 * sc_k[j]
+                    c0 = u0 / v
+                    c1 = u1 / v
+                    ur[0, i, j] += c0 * r
+                    ur[1, i, j] += c1 * r
+                    m3[0, i, j] += c0 * u0
+                    m3[1, i, j] += c0 * u1
+                    m3[2, i, j] += c1 * u1
+                mis[j] += (r * r) / v
+                prod[j] *= v
 
 
 @njit(cache=True, error_model="numpy")
@@ -92,10 +104,11 @@ def woodbury(m3: np.ndarray, ur: np.ndarray, penalty: np.ndarray, misfit: np.nda
 
 
 def warm() -> None:
-    """Load (on a fresh install: compile) both kernels, on one cell with the argument types the
+    """Load (on a fresh install: compile) the kernels, on one cell with the argument types the
     likelihood passes."""
-    one, three = np.ones((1, 1)), np.zeros((3, 1, 1))
-    row = np.ones(1)
-    add_term(one, one, np.zeros((2, 1, 1)), row, row, row, row, True, False, True, np.zeros((1, 1)),
-             np.ones((1, 1)), three, np.zeros((2, 1, 1)))
+    three = np.zeros((3, 1, 1))
     woodbury(three, np.zeros((2, 1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.ones((1, 1)))
+    rows, flags = np.ones((1, 1)), np.ones(1, dtype=np.bool_)  # flags as numpy bools
+    add_terms(np.ones((1, 1, 1)), np.ones((1, 1, 1)), np.zeros((1, 2, 1, 1)), rows, rows, rows,
+              rows, flags, flags, True, np.zeros((1, 1)), np.ones((1, 1)), np.zeros((3, 1, 1)),
+              np.zeros((2, 1, 1)))

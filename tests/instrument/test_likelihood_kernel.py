@@ -88,3 +88,36 @@ def test_an_answer_is_the_same_to_the_bit_either_way(table: ModelTable,
         assert compiled.to_dict() == reference.to_dict()
         assert np.array_equal(compiled.posterior["density"],  # type: ignore[index]
                               reference.posterior["density"])  # type: ignore[index]
+
+
+@pytest.mark.parametrize("batch", [1, 4, 5])
+def test_terms_split_at_the_logs_batches_are_numpys_to_the_bit(
+        table: ModelTable, batch: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Six terms (three sizes) with the variances' product logged every 1, 4 or 5 terms: the
+    compiled pass takes them in chunks that end where a log is taken, as the numpy path does."""
+    material = spread_of(table)
+    items = _inputs(table, (4.76e-3, 9.53e-3, 19.05e-3), 3.1e-3, 0.012)
+    monkeypatch.setattr(lk, "LOG_BATCH", batch)
+    compiled = lk.deviance(table, items, None, material)
+    with monkeypatch.context() as m:
+        m.setattr(lk, "use_compiled", lambda: False)
+        reference = lk.deviance(table, items, None, material)
+    for name in ("misfit", "logdet", "det", "m_sum", "ur_sum"):
+        assert np.array_equal(getattr(compiled, name), getattr(reference, name)), name
+
+
+def test_a_tables_stacked_terms_are_kept_for_a_few_sets_of_sizes(table: ModelTable) -> None:
+    """The stacked arrays of a set of sizes are made once and reused while the set is among the
+    last few asked for; an older set is dropped (the cache stays bounded)."""
+    material = spread_of(table)
+    stacks = lk.StackCache.of(table)
+    sets = [(4.76e-3,), (9.53e-3,), (19.05e-3,), (4.76e-3, 9.53e-3), (9.53e-3, 19.05e-3)]
+    first = lk.deviance(table, _inputs(table, sets[0], 3.1e-3, 0.3), None, material)
+    kept = next(reversed(stacks.kept.values()))[1]
+    again = lk.deviance(table, _inputs(table, sets[0], 3.1e-3, 0.3), None, material)
+    assert next(reversed(stacks.kept.values()))[1] is kept  # reused, not stacked again
+    assert np.array_equal(first.misfit, again.misfit)
+    for sizes in sets[1:]:
+        lk.deviance(table, _inputs(table, sizes, 3.1e-3, 0.3), None, material)
+    assert len(stacks.kept) == lk.STACKS_KEPT
+    assert all(entry[1] is not kept for entry in stacks.kept.values())
