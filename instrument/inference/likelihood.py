@@ -239,8 +239,8 @@ class StackCache:
         with self.lock:
             hit = self.kept.pop(key, None)
         if hit is None:
-            us = (np.stack([t[6] for t in terms]) if terms[0][6] is not None
-                  else np.zeros((len(terms), 2, 1, 1)))
+            columns = [t[6] for t in terms if t[6] is not None]
+            us = np.stack(columns) if columns else np.zeros((len(terms), 2, 1, 1))
             hit = (arrays, (np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]), us))
         with self.lock:
             self.kept[key] = hit  # the newest last
@@ -251,7 +251,8 @@ class StackCache:
     @staticmethod
     def of(table: ModelTable) -> StackCache:
         """The table's own cache."""
-        return table._cache.setdefault("term_stacks", StackCache())  # type: ignore[no-any-return]
+        cache: StackCache = table._cache.setdefault("term_stacks", StackCache())
+        return cache
 
 
 def _hidden_term(item: FeatureSummary, g: FineGrid, cal: Calibration | None) -> np.ndarray:
