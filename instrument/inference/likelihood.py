@@ -168,11 +168,12 @@ class Deviance:
             if has_u and self.ur_sum is None:
                 self.ur_sum = np.zeros((2, *self.shape))
             models, model_vars, us = stacks.get(chunk)
-            rows = [np.stack([per_distance(t[k], n_l) for t in chunk]) for k in (2, 3, 4, 5)]
+            obs, scale, s2, rel2 = (np.stack([per_distance(t[k], n_l) for t in chunk])
+                                    for k in (2, 3, 4, 5))
             unscaled = np.array([bool(np.ndim(t[3]) == 0 and t[3] == 1.0) for t in chunk])
             has_rel = np.array([bool(np.any(t[5])) for t in chunk])
-            add_terms(models, model_vars, us, *rows, unscaled, has_rel, has_u, self.misfit,
-                      self.det, _NO_M if self.m_sum is None else self.m_sum,
+            add_terms(models, model_vars, us, obs, scale, s2, rel2, unscaled, has_rel, has_u,
+                      self.misfit, self.det, _NO_M if self.m_sum is None else self.m_sum,
                       _NO_U if self.ur_sum is None else self.ur_sum)
             for _ in chunk:
                 self._counted()
