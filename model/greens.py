@@ -147,6 +147,8 @@ def compute_response(plate: ElasticPlate | MindlinPlate, dt: float, n_steps: int
     Equivalently the patch-weighted vertical displacement (z up, :meth:`ElasticPlate.
     run_contact_load`) under a unit +z contact force (on a half model the mesh carries half).
     """
+    if n_steps == 0:  # no step after the load: the plate is at rest
+        return np.zeros(1)
     force = np.zeros(n_steps)
     force[0] = 1.0
     return plate.run_contact_load(force, dt)[0].copy()
@@ -154,9 +156,11 @@ def compute_response(plate: ElasticPlate | MindlinPlate, dt: float, n_steps: int
 
 def contact_response(
     plate: ElasticPlate | MindlinPlate, dt: float, n_steps: int,
-    cache: GreensCache | None = None
+    cache: GreensCache | None = None, spare: int = 0,
 ) -> tuple[np.ndarray, bool, float]:
-    """The response g of at least ``n_steps + 1`` samples, from the cache when it holds one.
+    """The response g of at least ``n_steps + 1`` samples, from the cache when it holds one;
+    computed, it runs ``spare`` steps longer (and is kept so), for runs that need a little
+    more of the same plate's response.
 
     Returns (g, came from cache, seconds spent computing).
     """
@@ -166,10 +170,52 @@ def contact_response(
     if stored is not None and stored.size >= n_steps + 1:
         return np.ascontiguousarray(stored[: n_steps + 1]), True, 0.0
     start = time.perf_counter()
-    g = compute_response(plate, dt, n_steps)
+    g = compute_response(plate, dt, n_steps + spare)
     spent = time.perf_counter() - start
     cache.store(key, g)
     return g, False, spent
+
+
+@njit(cache=True)
+def first_load_step(rec: ChainRecord, h: float, r: int, n_sub: int, n_samples: int) -> int:
+    """The first plate step at which the chain loads the plate: its bottom force departs from
+    the static load beyond :func:`integrate_greens`' round-off tolerance (-1 if it never does
+    within the run). Until then the plate stays at rest and the chain moves alone, so this
+    runs the chain alone, on copies of its state, exactly as :func:`integrate_greens` does up
+    to that step: the response is needed only for the steps after it."""
+    u, v, pk = rec.u.copy(), rec.v.copy(), rec.pk.copy()
+    n = u.size - 1
+    inv_m, inv_m0 = 1.0 / rec.m, 1.0 / rec.m0
+    dt = h / r
+    f = np.empty(n)
+    acc = np.empty(n + 1)
+    vpc = np.empty(n + 1)
+    tol = 1e-12 * rec.f_static
+    f_bottom, power = chain_start(u, v, 0.0, rec.a_s, rec.a_0, rec.a_b, inv_m, inv_m0, rec.g,
+                                  rec.tau, f, acc, vpc)
+    if abs(0.5 * (f_bottom - rec.f_static)) > tol:
+        return 0
+    for step in range(n_sub * (n_samples - 1)):
+        f_bottom, power, _ = chain_substeps(
+            u, v, acc, f, vpc, 0.0, 0.0, r, dt, rec.a_s, rec.a_0, rec.a_b, inv_m, inv_m0, rec.g,
+            rec.tau, rec.sensor, power, step * h, pk)
+        if abs(f_bottom - rec.f_static) > tol:
+            return step + 1
+        if not np.isfinite(f_bottom):
+            return step + 1  # the run itself stops here
+    return -1
+
+
+def response_steps(first: int, steps: int) -> tuple[int, int]:
+    """(steps of response needed, spare steps to compute) for a run of ``steps`` plate steps
+    whose chain first loads the plate at step ``first`` (:func:`first_load_step`): the force
+    acts from then on, so the response is read up to ``steps - first`` steps after a load.
+    Computed, it runs a tenth of the steps before the load longer, so that a run of the same
+    plate whose load comes a little earlier finds it in the cache (a damped chain's viscous
+    force reaches the plate a few steps before the elastic one's)."""
+    if first < 0:
+        return 0, 0
+    return steps - first, first // 10
 
 
 @njit(cache=True)
@@ -195,8 +241,8 @@ def integrate_greens(
     acc = np.empty(n + 1)
     vpc = np.empty(n + 1)
     steps = n_sub * (n_samples - 1)
-    length = response.size
-    if length < steps + 1:
+    length = response.size  # at least steps + 1 - (the first loaded step)
+    if length < 1:
         return RUN_SHORT_RESPONSE, 0, 0.0, 0.0, 0.0
     rev = response[::-1].copy()  # rev[length - 1 - j] = response[j]
     fdyn = np.zeros(steps + 1)
@@ -208,6 +254,8 @@ def integrate_greens(
     first = -1
     if abs(fdyn[0]) > tol:
         first = 0
+        if length < steps + 1:
+            return RUN_SHORT_RESPONSE, 0, 0.0, 0.0, 0.0
 
     dissipated = 0.0
     plate_work = 0.0
@@ -238,6 +286,8 @@ def integrate_greens(
             fdyn[step] = f_bottom - f_static
             if first < 0 and abs(fdyn[step]) > tol:
                 first = step
+                if length < steps + 1 - first:
+                    return RUN_SHORT_RESPONSE, k + 1, w, plate_work, dissipated
     if not pk[PK_BOT_F] >= 0.0:
         return RUN_NONFINITE, n_samples, w, plate_work, dissipated
     return RUN_OK, n_samples, w, plate_work, dissipated

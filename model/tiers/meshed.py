@@ -19,7 +19,13 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import SceneError
-from ..greens import GreensCache, contact_response, integrate_greens
+from ..greens import (
+    GreensCache,
+    contact_response,
+    first_load_step,
+    integrate_greens,
+    response_steps,
+)
 from ..materials import Material
 from ..mesh import plate_mesh
 from ..mindlin import MindlinPlate, build_mindlin_plate
@@ -197,7 +203,10 @@ class GreensBoundary(_PlateTier):
     def integrate(self, record: ChainRecord, plan: StepPlan) -> ChainRun:
         h, r, per_sample = self.steps(plan)
         n_plate = per_sample * (plan.n_samples - 1)
-        response, cached, spent = contact_response(self.plate, h, n_plate, self.cache)
+        # the plate is at rest until the pulse reaches it: its response is needed from then on
+        first = first_load_step(record, float(h), int(r), int(per_sample), int(plan.n_samples))
+        needed, spare = response_steps(first, n_plate)
+        response, cached, spent = contact_response(self.plate, h, needed, self.cache, spare)
         start = time.perf_counter()
         with single_threaded_blas():
             status, done, w, plate_work, dissipated = integrate_greens(

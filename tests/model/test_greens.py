@@ -138,3 +138,38 @@ def test_a_3d_plates_key_is_unchanged_by_the_mindlin_tier() -> None:
             "code": greens.model_digest()}
     text = json.dumps(desc, sort_keys=True, separators=(",", ":"), default=repr)
     assert greens.response_key(plate, 1e-7) == hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
+def test_a_run_reads_the_response_only_after_the_chain_loads_the_plate(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plate is at rest until the pulse reaches it, so a run computes its response only from
+    the chain's first load on (a sixth to a third of a run is the pulse's way down the chain),
+    and a tenth of that lead longer. Any response that long gives the run to the bit; one step
+    shorter is not taken from the cache but computed again."""
+    import solitonde.model.tiers.meshed as meshed
+    from solitonde.model.scene import load_scene
+    from solitonde.model.simulate import simulate
+
+    scene = load_scene(None, ["plate.size=[0.3,0.3]", "plate.distance_to_support=0.05",
+                              "plate.thickness=3.18e-3", "sem.elements=[8,8,1]",
+                              "sem.elements_per_wavelength=0",
+                              "effects.plate_model=mindlin_greens"])
+    firsts = []
+
+    def spy(*args: object) -> int:
+        firsts.append(greens.first_load_step(*args))  # type: ignore[arg-type]
+        return firsts[-1]
+
+    monkeypatch.setattr(meshed, "first_load_step", spy)
+    cache = greens.MemoryCache()
+    first_run = simulate(scene, greens_cache=cache)
+    steps, first = first_run.diagnostics["plate_steps"], firsts[0]
+    assert 0.15 * steps < first < 0.35 * steps
+    (key, stored), = cache._items.items()
+    assert stored.size == steps - first + first // 10 + 1
+    for length, reused in ((steps - first + 1, True), (steps - first, False)):
+        trimmed = greens.MemoryCache()
+        trimmed.store(key, stored[:length])
+        again = simulate(scene, greens_cache=trimmed)
+        assert again.diagnostics["greens_cached"] is reused, length
+        assert again.samples.tobytes() == first_run.samples.tobytes()
