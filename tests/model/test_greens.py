@@ -144,7 +144,7 @@ def test_a_run_reads_the_response_only_after_the_chain_loads_the_plate(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The plate is at rest until the pulse reaches it, so a run computes its response only from
     the chain's first load on (a sixth to a third of a run is the pulse's way down the chain),
-    and a tenth of that lead longer. Any response that long gives the run to the bit; one step
+    and a quarter of that lead longer. Any response that long gives the run to the bit; one step
     shorter is not taken from the cache but computed again."""
     import solitonde.model.tiers.meshed as meshed
     from solitonde.model.scene import load_scene
@@ -166,7 +166,7 @@ def test_a_run_reads_the_response_only_after_the_chain_loads_the_plate(
     steps, first = first_run.diagnostics["plate_steps"], firsts[0]
     assert 0.15 * steps < first < 0.35 * steps
     (key, stored), = cache._items.items()
-    assert stored.size == steps - first + first // 10 + 1
+    assert stored.size == steps - first + first // 4 + 1
     for length, reused in ((steps - first + 1, True), (steps - first, False)):
         trimmed = greens.MemoryCache()
         trimmed.store(key, stored[:length])
