@@ -116,12 +116,26 @@ class Deviance:
     shared: list[SharedError] = field(default_factory=list)
     shared_b: np.ndarray = field(default_factory=lambda: np.zeros(0))
     shared_q: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pristine: bool = False
+    """``misfit`` and ``det`` not yet filled: the compiled pass starts their sums itself."""
 
     @classmethod
-    def empty(cls, grids: list[FineGrid], n_terms: int) -> Deviance:
+    def empty(cls, grids: list[FineGrid], n_terms: int, compiled: bool = False) -> Deviance:
+        """No term added yet; ``compiled``: for :meth:`add_terms_compiled`, which fills the
+        sums as it adds the first terms (:meth:`settle` fills them if it adds none)."""
         shape = grids[0].tof_s.shape
-        return cls(grids, n_terms, misfit=np.zeros(shape), bound_terms=np.zeros(shape),
-                   logdet=np.zeros(shape), det=np.ones(shape), penalty=np.zeros(shape))
+        sums = (np.empty(shape), np.empty(shape)) if compiled else (np.zeros(shape),
+                                                                     np.ones(shape))
+        return cls(grids, n_terms, misfit=sums[0], bound_terms=np.zeros(shape),
+                   logdet=np.zeros(shape), det=sums[1], penalty=np.zeros(shape),
+                   pristine=compiled)
+
+    def settle(self) -> None:
+        """The sums of a likelihood to which no compiled term was added: none."""
+        if self.pristine:
+            self.misfit.fill(0.0)
+            self.det.fill(1.0)
+            self.pristine = False
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -163,18 +177,21 @@ class Deviance:
             room = LOG_BATCH - self.terms % LOG_BATCH  # the chunk ends at a log's batch
             chunk, terms = terms[:room], terms[room:]
             has_u = chunk[0][6] is not None
+            fresh = self.pristine
+            new = np.empty if fresh else np.zeros  # a fresh pass starts every sum itself
             if has_u and self.m_sum is None:
-                self.m_sum = np.zeros((3, *self.shape))
+                self.m_sum = new((3, *self.shape))
             if has_u and self.ur_sum is None:
-                self.ur_sum = np.zeros((2, *self.shape))
+                self.ur_sum = new((2, *self.shape))
             models, model_vars, us = stacks.get(chunk)
             obs, scale, s2, rel2 = (np.stack([per_distance(t[k], n_l) for t in chunk])
                                     for k in (2, 3, 4, 5))
             unscaled = np.array([bool(np.ndim(t[3]) == 0 and t[3] == 1.0) for t in chunk])
             has_rel = np.array([bool(np.any(t[5])) for t in chunk])
             add_terms(models, model_vars, us, obs, scale, s2, rel2, unscaled, has_rel, has_u,
-                      self.misfit, self.det, _NO_M if self.m_sum is None else self.m_sum,
+                      fresh, self.misfit, self.det, _NO_M if self.m_sum is None else self.m_sum,
                       _NO_U if self.ur_sum is None else self.ur_sum)
+            self.pristine = False
             for _ in chunk:
                 self._counted()
 
@@ -322,11 +339,12 @@ def _seen_terms(table: ModelTable, item: FeatureSummary, g: FineGrid, cal: Calib
              None if u_pair is None else u_pair[1])]
 
 
-def _add_shared(dev: Deviance, terms: list[Term], g: FineGrid, cal: Calibration | None,
-                var: np.ndarray, r: np.ndarray) -> None:
+def _add_shared(dev: Deviance, terms: list[Term], g: FineGrid, cal: Calibration | None
+                ) -> None:
     """A seen size's two terms term by term, keeping the TOF offset's error out of C as a shared
-    error (``var`` and ``r``: scratch arrays of the grid's shape)."""
+    error."""
     o_std = calibration_along(cal, g.diameter_m, g.distance_m[None, :])[3]
+    var, r = np.empty(dev.shape), np.empty(dev.shape)
     for k, (model, model_var, obs, scale, s2, rel2, u) in enumerate(terms):
         unscaled = _variance_residual(model, obs, scale, s2, model_var, rel2, var, r)
         u_over = None
@@ -377,9 +395,8 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
     table = calibrated_table(table, cal)
     grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
     n_terms = 2 * sum(not i.hidden for i in items) + sum(i.hidden for i in items)
-    dev = Deviance.empty(grids, n_terms)
-    var = np.empty(dev.shape)
-    r = np.empty(dev.shape)
+    compiled = use_compiled() and not shared_calibration
+    dev = Deviance.empty(grids, n_terms, compiled)
     seen: list[Term] = []
     for item, g in zip(items, grids, strict=True):
         if item.hidden:
@@ -388,14 +405,15 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
         terms = _seen_terms(table, item, g, cal, spread, shared_calibration)
         dev.penalty += g.penalty
         if shared_calibration:
-            _add_shared(dev, terms, g, cal, var, r)
-        elif use_compiled():
+            _add_shared(dev, terms, g, cal)
+        elif compiled:
             seen += terms
         else:
             for term in terms:
                 dev.add_term_numpy(term)
     if seen:  # every size's terms in one pass
         dev.add_terms_compiled(seen, StackCache.of(table))
+    dev.settle()
     dev.close_logs()
     _apply_woodbury(dev)
     return dev

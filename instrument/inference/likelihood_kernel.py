@@ -26,10 +26,11 @@ from numba import njit
 @njit(cache=True, error_model="numpy")
 def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: np.ndarray,
               scale: np.ndarray, s2: np.ndarray, rel2: np.ndarray, unscaled: np.ndarray,
-              has_rel: np.ndarray, has_u: bool, misfit: np.ndarray, det: np.ndarray,
-              m3: np.ndarray, ur: np.ndarray) -> None:
+              has_rel: np.ndarray, has_u: bool, fresh: bool, misfit: np.ndarray,
+              det: np.ndarray, m3: np.ndarray, ur: np.ndarray) -> None:
     """Add K terms to ``misfit`` (chi^2), ``det`` (the variances' product) and, where
-    ``has_u``, to ``m3`` (``U^T D^-1 U``'s upper entries) and ``ur`` (``U^T D^-1 r``).
+    ``has_u``, to ``m3`` (``U^T D^-1 U``'s upper entries) and ``ur`` (``U^T D^-1 r``); with
+    ``fresh``, the sums start here (0, and 1 for the product: the arrays need no filling).
 
     The per-term arrays are stacked along a first axis of length K: ``models``, ``model_vars``
     (K, n_t, n_l), the model's value and variance per cell; ``us`` (K, 2, n_t, n_l) the
@@ -45,6 +46,12 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
     n_k = models.shape[0]
     n_t, n_l = misfit.shape
     for i in range(n_t):
+        if fresh:
+            misfit[i] = 0.0
+            det[i] = 1.0
+            if has_u:
+                m3[:, i] = 0.0
+                ur[:, i] = 0.0
         for k in range(n_k):
             model, model_var = models[k, i], model_vars[k, i]
             ob, sc_k, s2_k, rel2_k = obs[k], scale[k], s2[k], rel2[k]
@@ -110,5 +117,5 @@ def warm() -> None:
     woodbury(three, np.zeros((2, 1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.ones((1, 1)))
     rows, flags = np.ones((1, 1)), np.ones(1, dtype=np.bool_)  # flags as numpy bools
     add_terms(np.ones((1, 1, 1)), np.ones((1, 1, 1)), np.zeros((1, 2, 1, 1)), rows, rows, rows,
-              rows, flags, flags, True, np.zeros((1, 1)), np.ones((1, 1)), np.zeros((3, 1, 1)),
-              np.zeros((2, 1, 1)))
+              rows, flags, flags, True, True, np.zeros((1, 1)), np.ones((1, 1)),
+              np.zeros((3, 1, 1)), np.zeros((2, 1, 1)))

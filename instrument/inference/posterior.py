@@ -124,8 +124,8 @@ def _adequacy_inputs(est: Estimate, dev: Deviance, post: np.ndarray, finite: np.
     est.extra["p_d"] = float(np.sum(excess))
     if dev.m_sum is not None and dev.ur_sum is not None:
         est.extra["material_shift_sd"] = material_shift(dev.m_sum, dev.ur_sum, post)
-    est.extra["floor_mass"] = {
-        i.diameter_m: float(np.sum(post * g.floor_weight))
+    est.extra["floor_mass"] = {  # a dot product: no grid-sized temporary
+        i.diameter_m: float(np.dot(post.ravel(), g.floor_weight.ravel()))
         for i, g in zip(items, dev.grids, strict=True) if not i.hidden}
     est.extra["strict_explained"] = _strict_explained(est, dev, post, items, cal)
 
