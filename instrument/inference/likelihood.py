@@ -147,9 +147,10 @@ class Deviance:
         self.bound_list.append(term)
 
     def add_term(self, r: np.ndarray, var: np.ndarray) -> None:
-        """One Gaussian term: residual ``r`` (squared in place) over variance ``var``."""
+        """One Gaussian term: residual ``r`` (squared in place) over variance ``var`` (times its
+        reciprocal, as the compiled pass divides once per cell and term)."""
         r *= r
-        r /= var
+        r *= np.divide(1.0, var)
         self.misfit += r
         self.det *= var
         self._counted()
@@ -205,7 +206,7 @@ class Deviance:
     def add_material(self, u: np.ndarray, var: np.ndarray, r: np.ndarray) -> np.ndarray:
         """One term's share of ``U^T D^-1 r`` and ``U^T D^-1 U``; returns ``U^T D^-1`` (per
         component) for the shared errors."""
-        u_over = u / var
+        u_over = u * np.divide(1.0, var)
         ur = u_over * r
         self.ur_sum = ur if self.ur_sum is None else self.ur_sum + ur
         if self.m_sum is None:

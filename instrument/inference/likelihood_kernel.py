@@ -42,7 +42,7 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
 
     Thickness row by thickness row: a row's sums stay in the cache while every term is added
     to them, so they cross memory once instead of once per term, and the loop over a row's
-    cells, its flags fixed, vectorises (the divisions as well)."""
+    cells, its flags fixed, vectorises. One division per cell and term, its reciprocal multiplied."""
     n_k = models.shape[0]
     n_t, n_l = misfit.shape
     for i in range(n_t):
@@ -70,20 +70,21 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
                     r += ob[j]
                 if rel:
                     v += (m * m) * rel2_k[j]
+                iv = 1.0 / v  # one division: three would bound the pass
                 if has_u:
                     u0 = us[k, 0, i, j]
                     u1 = us[k, 1, i, j]
                     if not plain:
                         u0 = u0 * sc_k[j]
                         u1 = u1 * sc_k[j]
-                    c0 = u0 / v
-                    c1 = u1 / v
+                    c0 = u0 * iv
+                    c1 = u1 * iv
                     ur[0, i, j] += c0 * r
                     ur[1, i, j] += c1 * r
                     m3[0, i, j] += c0 * u0
                     m3[1, i, j] += c0 * u1
                     m3[2, i, j] += c1 * u1
-                mis[j] += (r * r) / v
+                mis[j] += (r * r) * iv
                 prod[j] *= v
 
 
