@@ -88,6 +88,10 @@ class MemoryCache:
     def store(self, key: str, response: np.ndarray) -> None:
         array = np.array(response, dtype=float)
         with self._lock:
+            kept = self._items.get(key)
+            if kept is not None and kept.size >= array.size:  # a longer one serves both
+                self._items.move_to_end(key)
+                return
             old = self._items.pop(key, None)
             if old is not None:
                 self._bytes -= old.nbytes
@@ -227,8 +231,11 @@ def integrate_greens(
     The same scheme as the coupled ``sem`` driver (plate step ``h``, ``r`` chain steps per plate
     step, ``n_sub`` plate steps per sample), the plate's drift to step s + 1 being the convolution
     of the force history up to step s with ``response``. Terms before the first change of the
-    bottom force (beyond round-off of the static load) are zero and skipped. Returns (status,
-    samples recorded, final w, work done on the plate J, dissipated energy J).
+    bottom force (beyond round-off of the static load) are zero and skipped, so ``response``
+    needs ``steps + 1 - first`` samples (``first``: that step, :func:`first_load_step`; one
+    sample when the plate is never loaded); a shorter one stops the run at that step with
+    ``RUN_SHORT_RESPONSE``. Returns (status, samples recorded, final w, work done on the
+    plate J, dissipated energy J).
     """
     u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
     f_static, tau, sensor, pk = rec.f_static, rec.tau, rec.sensor, rec.pk

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypedDict
@@ -131,7 +132,8 @@ class Deviance:
                    pristine=compiled)
 
     def settle(self) -> None:
-        """The sums of a likelihood to which no compiled term was added: none."""
+        """Fill ``misfit`` (0) and ``det`` (1) if no compiled pass has started them yet, so that
+        they hold the sums of the terms added so far: none."""
         if self.pristine:
             self.misfit.fill(0.0)
             self.det.fill(1.0)
@@ -149,6 +151,7 @@ class Deviance:
     def add_term(self, r: np.ndarray, var: np.ndarray) -> None:
         """One Gaussian term: residual ``r`` (squared in place) over variance ``var`` (times its
         reciprocal, as the compiled pass divides once per cell and term)."""
+        self.settle()
         r *= r
         r *= np.divide(1.0, var)
         self.misfit += r
@@ -177,7 +180,8 @@ class Deviance:
         while terms:
             room = LOG_BATCH - self.terms % LOG_BATCH  # the chunk ends at a log's batch
             chunk, terms = terms[:room], terms[room:]
-            has_u = chunk[0][6] is not None
+            has_u = chunk[0][6] is not None  # a material spread gives every term its columns
+            assert all((t[6] is not None) == has_u for t in chunk)
             fresh = self.pristine
             new = np.empty if fresh else np.zeros  # a fresh pass starts every sum itself
             if has_u and self.m_sum is None:
@@ -237,6 +241,9 @@ class Deviance:
 
 STACKS_KEPT = 4
 """Sets of terms whose stacked arrays a table keeps (:class:`StackCache`)."""
+_Stacked = tuple[list[np.ndarray], tuple[np.ndarray, ...]]
+"""A :class:`StackCache` entry: the terms' own arrays (held, so their ids stay theirs) and the
+stacks."""
 
 
 class StackCache:
@@ -247,7 +254,7 @@ class StackCache:
     reused while its entry lives. Safe for the service's threads."""
 
     def __init__(self) -> None:
-        self.kept: dict[tuple[int, ...], tuple[list[np.ndarray], tuple[np.ndarray, ...]]] = {}
+        self.kept: OrderedDict[tuple[int, ...], _Stacked] = OrderedDict()
         self.lock = threading.Lock()
 
     def get(self, terms: Sequence[Term]) -> tuple[np.ndarray, ...]:
@@ -256,15 +263,17 @@ class StackCache:
         arrays = [a for t in terms for a in (t[0], t[1], t[6]) if a is not None]
         key = tuple(id(a) for a in arrays)
         with self.lock:
-            hit = self.kept.pop(key, None)
+            hit = self.kept.get(key)
+            if hit is not None:
+                self.kept.move_to_end(key)  # the newest last
         if hit is None:
             columns = [t[6] for t in terms if t[6] is not None]
             us = np.stack(columns) if columns else np.zeros((len(terms), 2, 1, 1))
             hit = (arrays, (np.stack([t[0] for t in terms]), np.stack([t[1] for t in terms]), us))
-        with self.lock:
-            self.kept[key] = hit  # the newest last
-            while len(self.kept) > STACKS_KEPT:
-                del self.kept[next(iter(self.kept))]
+            with self.lock:
+                self.kept[key] = hit
+                while len(self.kept) > STACKS_KEPT:
+                    self.kept.popitem(last=False)
         return hit[1]
 
     @staticmethod

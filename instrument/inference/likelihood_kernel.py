@@ -42,7 +42,8 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
 
     Thickness row by thickness row: a row's sums stay in the cache while every term is added
     to them, so they cross memory once instead of once per term, and the loop over a row's
-    cells, its flags fixed, vectorises. One division per cell and term, its reciprocal multiplied."""
+    cells, its flags fixed, vectorises. One division per cell and term, its reciprocal
+    multiplied."""
     n_k = models.shape[0]
     n_t, n_l = misfit.shape
     for i in range(n_t):

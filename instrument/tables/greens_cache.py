@@ -107,6 +107,9 @@ class DiskGreensCache:
 
     def store(self, key: str, response: np.ndarray) -> None:
         path = self.path(key)
+        kept = self.load(key)  # another process may have stored a longer one meanwhile
+        if kept is not None and kept.size >= np.asarray(response).size:
+            return
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(path) as tmp, tmp.open("wb") as fh:

@@ -204,18 +204,24 @@ class GreensBoundary(_PlateTier):
         h, r, per_sample = self.steps(plan)
         n_plate = per_sample * (plan.n_samples - 1)
         # the plate is at rest until the pulse reaches it: its response is needed from then on
+        start = time.perf_counter()
         first = first_load_step(record, float(h), int(r), int(per_sample), int(plan.n_samples))
+        probe = time.perf_counter() - start
         needed, spare = response_steps(first, n_plate)
-        response, cached, spent = contact_response(self.plate, h, needed, self.cache, spare)
+        if first < 0:  # the pulse never reaches the plate within the record
+            response, cached, spent = np.zeros(1), False, 0.0
+        else:
+            response, cached, spent = contact_response(self.plate, h, needed, self.cache, spare)
         start = time.perf_counter()
         with single_threaded_blas():
             status, done, w, plate_work, dissipated = integrate_greens(
                 record, float(h), int(r), int(per_sample), int(plan.n_samples), response)
         wall = time.perf_counter() - start
         extra = self._extra(h, r, per_sample, plan)
-        extra.update({"greens_cached": cached, "greens_compute_s": spent, "chain_wall_s": wall})
-        return ChainRun(status, done, plate_work, dissipated, record.pk, wall + spent, extra,
-                        w_end=w)
+        extra.update({"greens_cached": cached, "greens_compute_s": spent, "chain_wall_s": wall,
+                      "greens_probe_s": probe})
+        return ChainRun(status, done, plate_work, dissipated, record.pk, wall + spent + probe,
+                        extra, w_end=w)
 
 
 TIERS = (

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -109,7 +111,7 @@ def test_simulate_uses_the_cache_it_is_given_and_no_other() -> None:
                              "sem": {"elements": [2, 2, 1], "order": [2, 2, 1],
                                      "contact_refinement": 0},
                              "plate": {"distance_to_support": 0.05},
-                             "output": {"duration": 2e-4}})
+                             "output": {"duration": 5e-4}})
     before = len(greens.PROCESS_CACHE)
     mine = greens.MemoryCache()
     first = simulate(scene, greens_cache=mine)
@@ -173,3 +175,34 @@ def test_a_run_reads_the_response_only_after_the_chain_loads_the_plate(
         again = simulate(scene, greens_cache=trimmed)
         assert again.diagnostics["greens_cached"] is reused, length
         assert again.samples.tobytes() == first_run.samples.tobytes()
+
+
+def test_a_run_the_pulse_never_reaches_stores_no_response() -> None:
+    """A record that ends before the pulse reaches the plate needs no response: none is computed
+    or stored, and the trace is the chain's alone."""
+    from solitonde.model.scene import scene_from_dict
+    from solitonde.model.simulate import simulate
+
+    scene = scene_from_dict({"effects": {"plate_model": "greens"},
+                             "sem": {"elements": [2, 2, 1], "order": [2, 2, 1],
+                                     "contact_refinement": 0},
+                             "plate": {"distance_to_support": 0.05},
+                             "output": {"duration": 2e-4}})
+    mine = greens.MemoryCache()
+    run = simulate(scene, greens_cache=mine)
+    assert len(mine) == 0 and run.diagnostics["greens_compute_s"] == 0.0
+    assert np.isfinite(run.samples).all()
+
+
+@pytest.mark.parametrize("make", [greens.MemoryCache, DiskGreensCache], ids=["memory", "disk"])
+def test_a_store_keeps_the_longer_of_two_responses(make: type, tmp_path: Path) -> None:
+    """Runs of one plate need responses of different lengths (each from its chain's first
+    load on): a shorter one stored after a longer one (another process, another layer) must not
+    replace it, a longer one does."""
+    cache = make(tmp_path) if make is DiskGreensCache else make()
+    long, short = np.arange(10.0), np.arange(6.0)
+    cache.store("k", long)
+    cache.store("k", short)
+    np.testing.assert_array_equal(cache.load("k"), long)
+    cache.store("k", np.arange(12.0))
+    assert cache.load("k").size == 12
