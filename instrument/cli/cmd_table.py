@@ -104,7 +104,8 @@ def plan_text(plan: BuildPlan) -> str:
                      ", once per installation)")
     if plan.layers:
         lines.append(f"  {plan.layers} dissipation layer{'s' * (plan.layers != 1)}: the plates' "
-                     f"responses read from the store, only the chains run: "
+                     f"responses read from the store, only the chains run (damped: "
+                     f"{plan.damped_factor:.2g}x the elastic chain's time): "
                      f"{duration(plan.layers_eta_s)}")
     if plan.slopes_eta_s >= 0.5:
         lines.append(f"  material slopes: {duration(plan.slopes_eta_s)}")

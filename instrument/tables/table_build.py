@@ -32,9 +32,9 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import h5py
 import numpy as np
@@ -45,6 +45,7 @@ from solitonde.instrument.parallel import (
     run_tasks,
     runner_label,
 )
+from solitonde.instrument.tables.dissipation import DEFAULT_DAMPINGS_S, damped_scene
 from solitonde.instrument.tables.family import material_properties
 from solitonde.instrument.tables.greens_cache import (
     DEFAULT_STORE,
@@ -207,7 +208,8 @@ class BuildPlan:
     cluster's processes, each running one pilot plate), measured before the plan is made: paid
     once more by the dissipation layers, which start their own. ``eta_s`` spreads the remaining
     points' cost, ``layers_eta_s`` that of the ``layers`` dissipation layers that follow, over the
-    workers; ``slopes_eta_s`` is the material slopes' runs, in this process.
+    workers, each with the driver's writes of its plates (one at a time, on the same cores);
+    ``slopes_eta_s`` is the material slopes' runs, in this process.
     """
 
     sweep: Sweep
@@ -225,9 +227,13 @@ class BuildPlan:
     slopes_eta_s: float = 0.0
     elapsed_s: float = 0.0
     """Seconds the build had run when the plan was made (the pilot, the workers' start)."""
+    damped_factor: float = 1.0
+    """A damped chain's time over the elastic one's on the pilot's plates (the layers' chains are
+    damped), by which the layers' estimate is scaled."""
     slowdown: float = 1.0
     """A plate's time on a worker with every worker busy over the pilot's alone (measured as the
-    workers start), by which the sweep's and the layers' estimates are scaled."""
+    workers start, each running a pilot plate as the pilot ran it: reading its responses from
+    the store where the pilot did), by which the sweep's and the layers' estimates are scaled."""
 
     @property
     def remaining_s(self) -> float:
@@ -313,9 +319,18 @@ def _ends(tasks: Sequence[tuple[int, int, list[int]]]) -> list[tuple[int, int, l
     return out
 
 
+class WarmPlate(NamedTuple):
+    """A pilot plate every worker runs before the sweep, and how the pilot timed it here: its
+    seconds, and the response store it read (None: it computed its responses)."""
+
+    task: tuple[int, int, list[int]]
+    seconds: float
+    store: str | None
+
+
 def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
            scheduler: str | None, responses: str | None, layers: int, slopes: bool
-           ) -> tuple[BuildPlan, int, int, tuple[tuple[int, int, list[int]], float]]:
+           ) -> tuple[BuildPlan, int, int, WarmPlate]:
     """Run the thinnest, a middle and the thickest pending plate of each kind here, write them,
     and plan the rest; returns the plan, the points and plates written, and the cheapest pilot
     plate of the dearest kind with its seconds here (what each worker runs before the sweep)."""
@@ -330,7 +345,12 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
     write_s: list[float] = []  # the driver's time to write and flush a plate
     written = plates = 0
     compile_s = 0.0
-    warm: tuple[str, float, tuple[int, int, list[int]]] | None = None
+    warm: tuple[str, WarmPlate] | None = None
+    # a layer's chain is damped (Kuwabara-Kono), which costs more than the elastic chain: the
+    # pilot times one at the bundled layers' middle time constant (the cost hardly follows it)
+    damped = (replace(sweep, scene=damped_scene(sweep.scene, DEFAULT_DAMPINGS_S[1])).to_dict()
+              if layers else None)
+    chains: list[tuple[float, float]] = []  # (elastic, damped) chains' seconds per pilot plate
     timed: PilotTimes = {}
     started = time.perf_counter()
     by_kind: dict[str, list[tuple[int, int, list[int]]]] = {}
@@ -360,8 +380,14 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 t0 = time.perf_counter()
                 run_plate(spec, i_t, i_l, todo, store)
                 chain = time.perf_counter() - t0
-                again = chain
+                if damped is not None:
+                    forget_plates()
+                    t0 = time.perf_counter()
+                    run_plate(damped, i_t, i_l, todo, store)
+                    chains.append((chain, time.perf_counter() - t0))
+                again, again_store = chain, responses  # (not the scratch: dropped after)
                 if result["greens_computed"] > 0:
+                    again_store = None
                     forget_plates()
                     t0 = time.perf_counter()
                     run_plate(spec, i_t, i_l, todo)
@@ -371,20 +397,24 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 timed.setdefault(kind, []).append(((i_t, i_l), todo, again, chain))
                 compile_s += max(0.0, first - again)
                 if warm is None or (kind == "meshed") > (warm[0] == "meshed") or (
-                        kind == warm[0] and again < warm[1]):
-                    warm = (kind, again, (i_t, i_l, todo))
+                        kind == warm[0] and again < warm[1].seconds):
+                    warm = (kind, WarmPlate((i_t, i_l, todo), again, again_store))
     rest = pending(fh, sweep)
     lanes = 1 if scheduler is None and workers <= 1 else max(1, min(workers, len(rest) or 1))
     plate_s = _plate_seconds(sweep, kinds, timed)
     # a store that held the pilots' responses is taken to hold the rest (a rebuild): chains only
     work = sum(plate_s(i_t, i_l, todo, stored[kinds[i_t, i_l]] and responses is not None)
                for i_t, i_l, todo in rest)
-    layer_work = layers * sum(plate_s(i_t, i_l, range(n), responses is not None)
-                              for i_t, i_l, n in all_points)
+    damped_factor = (sum(c[1] for c in chains) / sum(c[0] for c in chains)
+                     if chains and sum(c[0] for c in chains) > 0 else 1.0)
+    layer_work = layers * damped_factor * sum(plate_s(i_t, i_l, range(n), responses is not None)
+                                              for i_t, i_l, n in all_points)
     layer_lanes = 1 if scheduler is None and workers <= 1 else max(1, workers)
-    # a layer's plates come back fast and the driver writes them one at a time: measured on the
-    # tutorial's plate, a layer takes about its chains' time and its writes' together
-    layer_writes = layers * len(all_points) * (float(np.median(write_s)) if write_s else 0.0)
+    # the driver writes the plates one at a time, on the cores the workers use: measured on the
+    # tutorial's plate, a layer (whose plates come back fast) takes about its chains' time and
+    # its writes' together, and so does a rebuild
+    write = float(np.median(write_s)) if write_s else 0.0
+    layer_writes = layers * len(all_points) * write
     # the slopes: four chains on the infinite plate per size and thickness, here, as far points
     # cost (or a layer's chain where the sweep has none)
     far = "dashpot" if "dashpot" in costs else next(iter(costs))
@@ -392,10 +422,11 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
     slopes_s = sum(slope_runs * point_cost(costs[far], t, layer=far != "dashpot")
                    for t in sweep.thicknesses_m) if costs else 0.0
     plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, costs,
-                     time.perf_counter() - started, work / lanes, lanes, compile_s, layers,
-                     layer_work / layer_lanes + layer_writes, slopes_eta_s=slopes_s)
+                     time.perf_counter() - started, work / lanes + len(rest) * write, lanes,
+                     compile_s, layers, layer_work / layer_lanes + layer_writes,
+                     slopes_eta_s=slopes_s, damped_factor=damped_factor)
     assert warm is not None  # the pilot ran at least one plate
-    return plan, written, plates, (warm[2], warm[1])
+    return plan, written, plates, warm[1]
 
 
 def build_table(
@@ -518,43 +549,90 @@ def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.
 
 
 PARALLEL_SLOWDOWN_RANGE = (0.5, 4.0)
-"""Bounds on the measured ratio of a worker's time to the pilot's for the same plate: beyond
-them the measurement itself is taken to be disturbed."""
+"""Bounds on the measured ratio of a worker's time for a plate with every worker busy to its
+time alone: beyond them the measurement itself is taken to be disturbed."""
 
 
-def _warm_worker(spec: SweepDict, i_t: int, i_l: int, todo: list[int]) -> float:
-    """Run one (already written) plate twice: the first loads the model's kernels, the second is
-    timed with every worker busy alike; returns its seconds."""
-    run_plate(spec, i_t, i_l, todo)
+WARM_TIMING_S = 0.5
+"""The pilot plate is timed again, for at least this many seconds with every worker busy, one
+task a run as the sweep runs its plates, and half as long here, with the workers idle. A plate
+read from the store takes 20-100 ms: one run per worker against the pilot's one run here
+measured 0.8-1.1x where the sweep's plates ran 1.4x. A plate runs about 1.3x slower in a worker
+than here even alone (the worker's own messages share its process), and what a stream of short
+tasks adds shows only in such a stream."""
+
+
+def _load_plate(spec: SweepDict, i_t: int, i_l: int, todo: list[int],
+                store: str | None = None) -> None:
+    """Run one (already written) plate to load the model's kernels in this worker."""
+    run_plate(spec, i_t, i_l, todo, store)
     forget_plates()
+
+
+def _timed_plate(spec: SweepDict, i_t: int, i_l: int, todo: list[int],
+                 store: str | None = None) -> float:
+    """Run one (already written) plate as the pilot timed it (with ``store``, or computing its
+    responses); returns its seconds."""
     started = time.perf_counter()
-    run_plate(spec, i_t, i_l, todo)
+    run_plate(spec, i_t, i_l, todo, store)
     forget_plates()
     return time.perf_counter() - started
 
 
 def _start_workers(stack: contextlib.ExitStack, spec: SweepDict,
-                   warm: tuple[tuple[int, int, list[int]], float], workers: int,
+                   warm: WarmPlate, workers: int,
                    scheduler: str | None) -> tuple[str, float, float]:
     """Start the sweep's local cluster (closed with ``stack``; an existing ``scheduler`` is
-    used as it is) and have every worker run the pilot plate ``warm`` at once: returns the
+    used as it is), have every worker load the model on the pilot plate ``warm``, then run that
+    plate as a stream of tasks on every worker at once (:data:`WARM_TIMING_S`): returns the
     scheduler's address, the seconds taken (which the plan then counts as spent, not guessed),
-    and how much slower a plate runs with all workers busy than the pilot ran it alone (cores
-    that share a physical core or memory bandwidth run slower together)."""
+    and how much slower a plate runs in the sweep than here alone (cores that share a physical
+    core or memory bandwidth run slower together; a worker runs slower than this process, and
+    short tasks share the cores with their messages)."""
     from dask.distributed import Client
 
     started = time.perf_counter()
     if scheduler is None:
         scheduler = str(stack.enter_context(local_cluster(workers)).scheduler_address)
-    (i_t, i_l, todo), alone = warm
+    task = (spec, *warm.task, warm.store)
     with Client(scheduler, timeout="30s") as client:
-        futures = [client.submit(_warm_worker, spec, i_t, i_l, todo, workers=[address],
-                                 pure=False, allow_other_workers=False)
-                   for address in client.scheduler_info()["workers"]]
-        together = float(np.median(client.gather(futures)))
+        addresses = list(client.scheduler_info()["workers"])
+        client.gather([client.submit(_load_plate, *task, workers=[address], pure=False,
+                                     allow_other_workers=False) for address in addresses])
+        alone = _repeat_here(task, WARM_TIMING_S / 2)
+        together = _stream(client, task, addresses, WARM_TIMING_S)
     low, high = PARALLEL_SLOWDOWN_RANGE
     slower = min(max(together / alone, low), high) if alone > 0 else 1.0
     return scheduler, time.perf_counter() - started, slower
+
+
+def _repeat_here(task: tuple[Any, ...], seconds: float) -> float:
+    """The median seconds of a plate run here, again and again for at least ``seconds`` (and
+    twice)."""
+    times: list[float] = []
+    started = time.perf_counter()
+    while len(times) < 2 or time.perf_counter() - started < seconds:
+        times.append(_timed_plate(*task))
+    return float(np.median(times))
+
+
+def _stream(client: Any, task: tuple[Any, ...], addresses: list[str], seconds: float) -> float:
+    """The median seconds of a plate run as a stream of tasks, two in flight per worker at
+    ``addresses``, for at least ``seconds`` (and two runs a worker)."""
+    from dask.distributed import as_completed
+
+    def submit() -> Any:
+        return client.submit(_timed_plate, *task, workers=addresses, pure=False,
+                             allow_other_workers=False)
+
+    started = time.perf_counter()
+    runs = as_completed([submit() for _ in range(2 * len(addresses))])
+    times = []
+    for future in runs:
+        times.append(future.result())
+        if time.perf_counter() - started < seconds:
+            runs.add(submit())
+    return float(np.median(times))
 
 
 def _run_plates(fh: h5py.File, spec: SweepDict, tasks: Sequence[tuple[int, int, list[int]]],

@@ -3,6 +3,7 @@ resume (exit 130), instead of a traceback with exit 1."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -165,8 +166,10 @@ def test_the_plan_counts_the_dissipation_layers(tmp_path: Path) -> None:
     lines = res.output.splitlines()
     meshed = next(line for line in lines if "near a support" in line)
     assert " s a point at 3 mm, " in meshed and meshed.endswith(" s a point at 5 mm")
-    assert any(line.startswith("  2 dissipation layers: the plates' responses read from the "
-                               "store, only the chains run: ") for line in lines)
+    layer = next(line for line in lines if "dissipation layers" in line)
+    assert re.fullmatch(r"  2 dissipation layers: the plates' responses read from the store, "
+                        r"only the chains run \(damped: [0-9.]+x the elastic chain's time\): "
+                        r"[0-9.]+ (s|min)", layer), layer
     assert any(line.startswith("  estimated time: ") for line in lines)
 
 
@@ -200,8 +203,11 @@ def test_the_plan_says_what_it_counted() -> None:
     sweep = Sweep([9.53e-3], [3e-3], [0.3])
     plan = BuildPlan(sweep, 1, 1, {"dashpot": 1}, {"dashpot": [(3e-3, 0.5, 0.1)]},
                      pilot_wall_s=3.0, eta_s=60.0, workers=2, layers=1, layers_eta_s=20.0,
-                     start_s=4.0, slopes_eta_s=1.0, elapsed_s=8.0, slowdown=1.3)
+                     start_s=4.0, slopes_eta_s=1.0, elapsed_s=8.0, slowdown=1.3,
+                     damped_factor=1.4)
     lines = plan_text(plan).splitlines()
+    assert ("  1 dissipation layer: the plates' responses read from the store, only the chains "
+            "run (damped: 1.4x the elastic chain's time): 20 s") in lines
     assert lines[-1] == ("  estimated time: 81 s on 2 workers after a 3 s pilot and the "
                          "workers' 4 s start (89 s in all)")
     assert "  material slopes: 1 s" in lines

@@ -22,7 +22,7 @@ import pytest
 from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
-from solitonde.instrument.tables import greens_cache
+from solitonde.instrument.tables import greens_cache, table_build
 from solitonde.instrument.tables.dissipation import damped_scene
 from solitonde.instrument.tables.greens_cache import DiskGreensCache
 from solitonde.instrument.tables.table import SCALAR_FEATURES, SECONDARY_FEATURES, ModelTable
@@ -68,6 +68,40 @@ def test_a_layer_and_a_rebuild_compute_no_response_again(tmp_path: Path) -> None
     assert _build(damped, tmp_path / "layer-alone.h5", False) == elastic
     _same_points(tmp_path / "a.h5", tmp_path / "again.h5")
     _same_points(tmp_path / "layer.h5", tmp_path / "layer-alone.h5")
+
+
+def test_the_workers_time_the_pilot_plate_as_the_pilot_timed_it(tmp_path: Path,
+                                                                monkeypatch) -> None:
+    """The plan's slowdown compares a worker's time for a pilot plate with the pilot's own: in
+    a rebuild the pilot read the plate's responses from the store, so the workers read them
+    too (computing them instead made every rebuild's plan 4 times too slow, the clamp); in a
+    first build both compute them."""
+    sweep = Sweep([4.76e-3], [3e-3], [0.0], scene=FAST)
+    store = str(tmp_path / "store")
+
+    def warm_plate(name: str) -> table_build.WarmPlate:
+        with h5py.File(tmp_path / name, "w") as fh:
+            table_build.create(fh, sweep)
+            return table_build._pilot(fh, sweep, sweep.to_dict(), 2, None, store, 0, False)[3]
+
+    first = warm_plate("first.h5")
+    assert first.store is None and first.seconds > 0
+    rebuild = warm_plate("rebuild.h5")
+    assert rebuild.store == store and rebuild.task == first.task
+    computed: list[int] = []
+    run_plate = table_build.run_plate
+
+    def counted(*args: object) -> dict:
+        result = run_plate(*args)  # type: ignore[arg-type]
+        computed.append(result["greens_computed"])
+        return result  # type: ignore[return-value]
+
+    monkeypatch.setattr(table_build, "run_plate", counted)
+    for run in (table_build._load_plate, table_build._timed_plate):
+        run(sweep.to_dict(), *rebuild.task, rebuild.store)
+    assert computed == [0, 0]  # both runs read the stored responses, as the rebuild's pilot did
+    assert table_build._timed_plate(sweep.to_dict(), *first.task, first.store) > 0
+    assert computed[2:] == [1]  # and a first build's computes them, as its pilot did
 
 
 def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(
