@@ -180,6 +180,16 @@ def contact_response(
     return g, False, spent
 
 
+def stored_response(plate: ElasticPlate | MindlinPlate, dt: float,
+                    cache: GreensCache | None = None) -> np.ndarray | None:
+    """The response the cache holds for ``plate`` at step ``dt`` (whatever its length), or
+    None: a run can start on it before it knows how much it needs (:func:`integrate_greens`
+    says when it is too short)."""
+    cache = PROCESS_CACHE if cache is None else cache
+    stored = cache.load(response_key(plate, dt))
+    return None if stored is None else np.ascontiguousarray(stored, dtype=float)
+
+
 @njit(cache=True)
 def first_load_step(rec: ChainRecord, h: float, r: int, n_sub: int, n_samples: int) -> int:
     """The first plate step at which the chain loads the plate: its bottom force departs from
@@ -234,8 +244,9 @@ def integrate_greens(
     bottom force (beyond round-off of the static load) are zero and skipped, so ``response``
     needs ``steps + 1 - first`` samples (``first``: that step, :func:`first_load_step`; one
     sample when the plate is never loaded); a shorter one stops the run at that step with
-    ``RUN_SHORT_RESPONSE``. Returns (status, samples recorded, final w, work done on the
-    plate J, dissipated energy J).
+    ``RUN_SHORT_RESPONSE``. A longer one is read only that far: the run is the same, to the
+    bit, as on exactly those samples. Returns (status, samples recorded, final w, work done on
+    the plate J, dissipated energy J).
     """
     u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
     f_static, tau, sensor, pk = rec.f_static, rec.tau, rec.sensor, rec.pk
@@ -248,10 +259,10 @@ def integrate_greens(
     acc = np.empty(n + 1)
     vpc = np.empty(n + 1)
     steps = n_sub * (n_samples - 1)
-    length = response.size  # at least steps + 1 - (the first loaded step)
-    if length < 1:
+    if response.size < 1:
         return RUN_SHORT_RESPONSE, 0, 0.0, 0.0, 0.0
-    rev = response[::-1].copy()  # rev[length - 1 - j] = response[j]
+    length = 0  # the samples read, steps + 1 - first, once the first loaded step is known
+    rev = np.empty(0)  # then the first ``length`` samples reversed: rev[length - 1 - j] = g[j]
     fdyn = np.zeros(steps + 1)
     tol = 1e-12 * f_static
 
@@ -261,8 +272,10 @@ def integrate_greens(
     first = -1
     if abs(fdyn[0]) > tol:
         first = 0
-        if length < steps + 1:
+        length = steps + 1
+        if response.size < length:
             return RUN_SHORT_RESPONSE, 0, 0.0, 0.0, 0.0
+        rev = response[:length][::-1].copy()
 
     dissipated = 0.0
     plate_work = 0.0
@@ -293,8 +306,10 @@ def integrate_greens(
             fdyn[step] = f_bottom - f_static
             if first < 0 and abs(fdyn[step]) > tol:
                 first = step
-                if length < steps + 1 - first:
+                length = steps + 1 - first
+                if response.size < length:
                     return RUN_SHORT_RESPONSE, k + 1, w, plate_work, dissipated
+                rev = response[:length][::-1].copy()
     if not pk[PK_BOT_F] >= 0.0:
         return RUN_NONFINITE, n_samples, w, plate_work, dissipated
     return RUN_OK, n_samples, w, plate_work, dissipated

@@ -146,8 +146,10 @@ def test_a_run_reads_the_response_only_after_the_chain_loads_the_plate(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The plate is at rest until the pulse reaches it, so a run computes its response only from
     the chain's first load on (a sixth to a third of a run is the pulse's way down the chain),
-    and a quarter of that lead longer. Any response that long gives the run to the bit; one step
-    shorter is not taken from the cache but computed again."""
+    and a quarter of that lead longer. Any response that long gives the run to the bit, run on at
+    once (the run finds the first load itself: no chain-only probe); one step shorter stops
+    that run, which then starts again from the chain's first state, probes and computes the
+    response again, to the same trace."""
     import solitonde.model.tiers.meshed as meshed
     from solitonde.model.scene import load_scene
     from solitonde.model.simulate import simulate
@@ -169,12 +171,17 @@ def test_a_run_reads_the_response_only_after_the_chain_loads_the_plate(
     assert 0.15 * steps < first < 0.35 * steps
     (key, stored), = cache._items.items()
     assert stored.size == steps - first + first // 4 + 1
-    for length, reused in ((steps - first + 1, True), (steps - first, False)):
+    for length, reused in ((stored.size, True), (steps - first + 1, True),
+                           (steps - first, False)):
         trimmed = greens.MemoryCache()
         trimmed.store(key, stored[:length])
+        probes = len(firsts)
         again = simulate(scene, greens_cache=trimmed)
         assert again.diagnostics["greens_cached"] is reused, length
+        assert len(firsts) == probes + (not reused)
+        assert (again.diagnostics["greens_probe_s"] == 0.0) is reused
         assert again.samples.tobytes() == first_run.samples.tobytes()
+        assert again.truth == first_run.truth
 
 
 def test_a_run_the_pulse_never_reaches_stores_no_response() -> None:
