@@ -54,6 +54,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from solitonde.instrument.tables.sweep import damped_scene
 from solitonde.instrument.tables.table import (
     LAYER,
     LAYER_FEATURES,
@@ -87,15 +88,6 @@ def write_layer(fh: h5py.File, layer: DissipationLayer) -> None:
     for name, values in layer.features.items():
         group.create_dataset(name, data=np.asarray(values, dtype=float))
     group.create_dataset("status", data=np.asarray(layer.status, dtype=np.int8))
-
-
-def damped_scene(scene: Mapping[str, Any], damping_s: float) -> SceneDict:
-    """A sweep's base scene (nested dict) with Kuwabara-Kono damping ``damping_s`` switched on."""
-    data: SceneDict = json.loads(json.dumps(dict(scene)))
-    effects = data.setdefault("effects", {})
-    effects["dissipation"] = True
-    effects["damping"] = float(damping_s)
-    return data
 
 
 def _undamped(scene: Mapping[str, Any]) -> SceneDict:

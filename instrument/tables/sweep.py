@@ -4,6 +4,7 @@ point starts from, and the default table's grid."""
 from __future__ import annotations
 
 import copy
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -123,3 +124,12 @@ def default_thicknesses_m() -> list[float]:
 
 def default_sweep() -> Sweep:
     return Sweep(list(PAPER_DIAMETERS_M), default_thicknesses_m(), default_distances_m())
+
+
+def damped_scene(scene: Mapping[str, Any], damping_s: float) -> SceneDict:
+    """A sweep's base scene (nested dict) with Kuwabara-Kono damping ``damping_s`` switched on."""
+    data: SceneDict = json.loads(json.dumps(dict(scene)))
+    effects = data.setdefault("effects", {})
+    effects["dissipation"] = True
+    effects["damping"] = float(damping_s)
+    return data

@@ -1,12 +1,12 @@
 """Build the model table: a sweep over (D, t, L) simulated in parallel, written by one process.
 
-Work is cut into one task per plate, ``(t, L)``: a task simulates every sphere size on its plate,
-the largest first (the longest record), with a task-local cache of plate responses in front of the
-on-disk response store (:mod:`.greens_cache`). On the 3-D plate (``greens``) the response depends
-on the plate, its mesh, the position and the step, not on the sphere, so the smaller spheres reuse
-the prefix of the largest one's response where it is long enough (a response is computed from the
-chain's first load of the plate on: a smaller sphere's shorter record after a shorter way down its
-chain usually fits, else it computes its own). The mesh around the chain follows the contact
+Work is cut into one task per plate, ``(t, L)`` (:mod:`.plate_task`): a task simulates every
+sphere size on its plate, the largest first (the longest record), with a task-local cache of plate
+responses in front of the on-disk response store (:mod:`.greens_cache`). On the 3-D plate
+(``greens``) the response depends on the plate, its mesh, the position and the step, not on the
+sphere, so the smaller spheres reuse the prefix of the largest one's response where it is long
+enough (a response is computed from the chain's first load of the plate on: a smaller sphere's
+shorter record after a shorter way down its chain usually fits, else it computes its own). The mesh around the chain follows the contact
 radius, and the Mindlin plate's mesh (``mindlin_greens``) each size's flexural wavelength, so
 sizes whose meshes differ compute a response each. The store keeps every response for the
 dissipation layers (the damping acts in the chain, not the plate) and for any later build of the
@@ -28,7 +28,6 @@ import copy
 import json
 import math
 import os
-import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -45,29 +44,20 @@ from solitonde.instrument.parallel import (
     run_tasks,
     runner_label,
 )
-from solitonde.instrument.tables.dissipation import DEFAULT_DAMPINGS_S, damped_scene
 from solitonde.instrument.tables.family import material_properties
 from solitonde.instrument.tables.greens_cache import (
     DEFAULT_STORE,
-    DiskGreensCache,
-    LayeredCache,
 )
-from solitonde.instrument.tables.measured import as_measured, detect_options
-from solitonde.instrument.tables.sweep import Sweep
+from solitonde.instrument.tables.plate_task import run_plate, simulate_point
+from solitonde.instrument.tables.sweep import Sweep, damped_scene
 from solitonde.instrument.tables.table import (
     MATERIAL_SLOPES,
-    MAX_SECONDARY,
-    SCALAR_FEATURES,
     SLOPE_COMPONENTS,
-    STATUS_FAILED,
-    STATUS_NO_REFLECTION,
-    STATUS_OK,
     SweepDict,
     TableError,
 )
 from solitonde.instrument.tables.table_file import (
     PlateResult,
-    PointRecord,
     check_partial,
     create,
     partial_path,
@@ -76,102 +66,9 @@ from solitonde.instrument.tables.table_file import (
     start_session,
     write_plate,
 )
-from solitonde.model import greens
-from solitonde.model.errors import SceneError, SimulationError
-from solitonde.model.greens import GreensCache
-from solitonde.model.scene import Scene, scene_from_dict
-from solitonde.model.simulate import SimulationResult, simulate
+from solitonde.model.scene import scene_from_dict
 from solitonde.model.tiers import MESHED_PLATE_MODELS, resolve_plate_model
 from solitonde.model.tiers.meshed import forget_plates
-from solitonde.signal import kernel_choice
-from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import Features, extract
-from solitonde.signal.pulses import FLAGS
-
-# One point ----------------------------------------------------------------------------------
-
-
-def point_record(features: Features | None, result: SimulationResult | None,
-                 error: str | None, traces: bool) -> PointRecord:
-    """The per-point values written to the table."""
-    diag = result.diagnostics if result is not None else {}
-    nan = math.nan
-    rec: PointRecord = {
-        "tof_s": nan, "arr": nan, "incident_time_s": nan, "incident_peak_N": nan,
-        "reflected_peak_N": nan, "snr_db": nan, "arr_upper_bound": nan,
-        "secondary_times_s": [nan] * MAX_SECONDARY, "secondary_ratios": [nan] * MAX_SECONDARY,
-        "flags": 0, "error": error or "",
-        "plate_model": result.plate_model if result is not None else "unknown",
-        "wall_s": float(diag.get("wall_s", nan)) if result else nan,
-        "energy_drift": float(diag.get("energy_drift", nan)) if result else nan,
-        "dt_s": float(diag.get("dt_s", nan)) if result else nan,
-        "mesh": diag.get("mesh") if result else None,
-        "trace": None, "status": STATUS_FAILED,
-    }
-    if traces and result is not None:
-        rec["trace"] = (float(result.t0), float(result.dt), np.asarray(result.samples, dtype=float))
-    if features is None:
-        return rec
-    for k in SCALAR_FEATURES:
-        value = getattr(features, k)
-        rec[k] = math.nan if value is None else float(value)
-    rec["secondary_times_s"] = _padded(features.secondary_times_s)
-    rec["secondary_ratios"] = _padded(features.secondary_ratios)
-    rec["flags"] = sum(1 << FLAGS.index(f) for f in features.flags if f in FLAGS)
-    ok = features.tof_s is not None and features.arr is not None
-    rec["status"] = STATUS_OK if ok else STATUS_NO_REFLECTION
-    return rec
-
-
-def _padded(values: Iterable[float]) -> list[float]:
-    """The first :data:`MAX_SECONDARY` values, NaN-padded to that length."""
-    vals = list(values)[:MAX_SECONDARY]
-    return vals + [math.nan] * (MAX_SECONDARY - len(vals))
-
-
-def simulate_point(scene: Scene, detect: Mapping[str, Any] | None = None,
-                   traces: bool = False, greens_cache: GreensCache | None = None
-                   ) -> PointRecord:
-    """Simulate one scene and extract its features as from a measurement."""
-    try:
-        result = simulate(scene, greens_cache=greens_cache)
-    except (SimulationError, SceneError) as exc:
-        return point_record(None, None, f"simulation: {exc}", traces)
-    # a table's points are read by the compiled extractor only (never the interpreted kernels
-    # that bridge a background compile): the same bits whenever the table is built
-    kernel_choice.finish()
-    try:
-        features = extract(as_measured(result), **{**detect_options(scene), **dict(detect or {})})
-    except WaveformError as exc:
-        return point_record(None, result, f"features: {exc}", traces)
-    return point_record(features, result, None, traces)
-
-
-def run_plate(sweep: SweepDict, i_t: int, i_l: int,
-              diameters: Sequence[int] | None = None, responses: str | None = None
-              ) -> PlateResult:
-    """One task: every sphere size (largest first) on plate ``(i_t, i_l)``.
-
-    The sizes share a task-local cache of plate responses: where the response does not depend on
-    the sphere (the 3-D plate's), the largest sphere's record is the longest and its response
-    covers the others; the Mindlin plate computes one response per distinct mesh. With
-    ``responses`` (a folder, or :data:`~.greens_cache.DEFAULT_STORE` for this machine's), the
-    response store there stands behind it: a response another build, layer or worker computed
-    is read, not computed again, and the new ones are kept.
-    ``greens_computed`` counts the responses this task computed.
-    """
-    spec = Sweep.from_dict(sweep)
-    order = sorted(range(len(spec.diameters_m)) if diameters is None else diameters, reverse=True)
-    # This task's responses, dropped when it ends; unbounded, so that its size counts them.
-    task_cache = greens.MemoryCache(max_bytes=sys.maxsize)
-    cache: greens.GreensCache = task_cache
-    if responses is not None:
-        folder = None if responses == DEFAULT_STORE else responses
-        cache = LayeredCache(DiskGreensCache(folder), memory=task_cache)
-    points = {i_d: simulate_point(spec.scene_at(i_d, i_t, i_l), spec.detect, spec.traces,
-                                  cache) for i_d in order}
-    computed = cache.computed if isinstance(cache, LayeredCache) else len(task_cache)
-    return {"i_t": i_t, "i_l": i_l, "points": points, "greens_computed": computed}
 
 
 @dataclass
@@ -319,6 +216,11 @@ def _ends(tasks: Sequence[tuple[int, int, list[int]]]) -> list[tuple[int, int, l
     return out
 
 
+LAYER_TIMING_DAMPING_S = 1.2e-7
+"""The damping at which the pilot times a dissipation layer's chain: the bundled layers' middle
+time constant (:data:`.dissipation.DEFAULT_DAMPINGS_S`; the chain's cost hardly follows it)."""
+
+
 class WarmPlate(NamedTuple):
     """A pilot plate every worker runs before the sweep, and how the pilot timed it here: its
     seconds, and the response store it read (None: it computed its responses)."""
@@ -346,9 +248,8 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
     written = plates = 0
     compile_s = 0.0
     warm: tuple[str, WarmPlate] | None = None
-    # a layer's chain is damped (Kuwabara-Kono), which costs more than the elastic chain: the
-    # pilot times one at the bundled layers' middle time constant (the cost hardly follows it)
-    damped = (replace(sweep, scene=damped_scene(sweep.scene, DEFAULT_DAMPINGS_S[1])).to_dict()
+    # a layer's chain is damped (Kuwabara-Kono), which costs more than the elastic chain
+    damped = (replace(sweep, scene=damped_scene(sweep.scene, LAYER_TIMING_DAMPING_S)).to_dict()
               if layers else None)
     chains: list[tuple[float, float]] = []  # (elastic, damped) chains' seconds per pilot plate
     timed: PilotTimes = {}

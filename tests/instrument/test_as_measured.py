@@ -17,7 +17,7 @@ from solitonde.instrument.cli.main import build_app as build_cli
 from solitonde.instrument.service.app import build_app
 from solitonde.instrument.service.settings import Settings
 from solitonde.instrument.tables.measured import MIN_PRETRIGGER, PRETRIGGER_FRACTION, as_measured
-from solitonde.instrument.tables.table_build import simulate_point
+from solitonde.instrument.tables.plate_task import simulate_point
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate
 

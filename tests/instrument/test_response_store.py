@@ -23,8 +23,8 @@ from typer.testing import CliRunner
 
 from solitonde.instrument.cli.main import build_app
 from solitonde.instrument.tables import greens_cache, table_build
-from solitonde.instrument.tables.dissipation import damped_scene
 from solitonde.instrument.tables.greens_cache import DiskGreensCache
+from solitonde.instrument.tables.sweep import damped_scene
 from solitonde.instrument.tables.table import SCALAR_FEATURES, SECONDARY_FEATURES, ModelTable
 from solitonde.instrument.tables.table_build import Sweep, build_table
 
@@ -89,7 +89,7 @@ def test_the_workers_time_the_pilot_plate_as_the_pilot_timed_it(tmp_path: Path,
     rebuild = warm_plate("rebuild.h5")
     assert rebuild.store == store and rebuild.task == first.task
     computed: list[int] = []
-    run_plate = table_build.run_plate
+    run_plate = table_build.run_plate  # the name the pilot and the workers' timing call
 
     def counted(*args: object) -> dict:
         result = run_plate(*args)  # type: ignore[arg-type]
@@ -229,7 +229,7 @@ def test_the_default_store_is_each_workers_own(tmp_path: Path,
     """A task told "the default store" resolves it where it runs (its machine's folder), not a
     path the building machine chose."""
     from solitonde.instrument.tables.greens_cache import DEFAULT_STORE
-    from solitonde.instrument.tables.table_build import run_plate
+    from solitonde.instrument.tables.plate_task import run_plate
 
     monkeypatch.setenv("SOLITONDE_CACHE", str(tmp_path / "this-worker"))
     result = run_plate(_sweep().to_dict(), 0, 0, None, DEFAULT_STORE)

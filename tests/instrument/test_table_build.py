@@ -13,6 +13,7 @@ import pytest
 from solitonde.instrument.inference.inversion import invert
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.tables.measured import as_measured, detect_options
+from solitonde.instrument.tables.plate_task import run_plate
 from solitonde.instrument.tables.table import (
     SCALAR_FEATURES,
     SECONDARY_FEATURES,
@@ -24,7 +25,6 @@ from solitonde.instrument.tables.table_build import (
     Sweep,
     build_table,
     partial_path,
-    run_plate,
 )
 from solitonde.model.scene import scene_from_dict
 from solitonde.model.simulate import simulate

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from solitonde.instrument.tables import table_build
-from solitonde.instrument.tables.table import ModelTable
+from solitonde.instrument.tables import plate_task
+from solitonde.instrument.tables.table import STATUS_OK, ModelTable
 from solitonde.model.scene import apply_overrides, scene_from_dict
 
 
@@ -17,6 +17,6 @@ def simulated_at(table: ModelTable, diameter_m: float, thickness_m: float, dista
     scene = scene_from_dict(apply_overrides(dict(table.sweep["scene"]), {
         "chain.diameter": diameter_m, "plate.thickness": thickness_m,
         "plate.distance_to_support": distance_m, **overrides}))
-    point = table_build.simulate_point(scene, table.sweep.get("detect"))
-    assert point["status"] == table_build.STATUS_OK, point["error"]
+    point = plate_task.simulate_point(scene, table.sweep.get("detect"))
+    assert point["status"] == STATUS_OK, point["error"]
     return point
