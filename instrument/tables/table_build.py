@@ -6,9 +6,10 @@ responses in front of the on-disk response store (:mod:`.greens_cache`). On the 
 (``greens``) the response depends on the plate, its mesh, the position and the step, not on the
 sphere, so the smaller spheres reuse the prefix of the largest one's response where it is long
 enough (a response is computed from the chain's first load of the plate on: a smaller sphere's
-shorter record after a shorter way down its chain usually fits, else it computes its own). The mesh around the chain follows the contact
-radius, and the Mindlin plate's mesh (``mindlin_greens``) each size's flexural wavelength, so
-sizes whose meshes differ compute a response each. The store keeps every response for the
+shorter record after a shorter way down its chain usually fits, else it computes its own). The
+mesh around the chain follows the contact radius, and the Mindlin plate's mesh
+(``mindlin_greens``) each size's flexural wavelength, so sizes whose meshes differ compute a
+response each. The store keeps every response for the
 dissipation layers (the damping acts in the chain, not the plate) and for any later build of the
 same plates, which then runs only the chains. Far from the supports ``auto`` picks the infinite
 plate and a task costs milliseconds.
