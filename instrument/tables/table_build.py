@@ -129,9 +129,10 @@ class BuildPlan:
     """A damped chain's time over the elastic one's on the pilot's plates (the layers' chains are
     damped), by which the layers' estimate is scaled."""
     slowdown: float = 1.0
-    """A plate's time on a worker with every worker busy over the pilot's alone (measured as the
-    workers start, each running a pilot plate as the pilot ran it: reading its responses from
-    the store where the pilot did), by which the sweep's and the layers' estimates are scaled."""
+    """A plate's time on the workers, run as a stream of tasks with every worker busy, over its
+    time here alone (measured as the workers start, on a pilot plate run as the pilot ran it:
+    from the store where the pilot read it), by which the sweep's and the layers' estimates are
+    scaled."""
 
     @property
     def remaining_s(self) -> float:

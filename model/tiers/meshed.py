@@ -246,6 +246,7 @@ class GreensBoundary(_PlateTier):
     def _result(self, record: ChainRecord, plan: StepPlan, status: int, done: int, w: float,
                 plate_work: float, dissipated: float, wall: float, cached: bool, spent: float,
                 probe: float) -> ChainRun:
+        """The run with its diagnostics (what the response cost: computed, probed, read)."""
         h, r, per_sample = self.steps(plan)
         extra = self._extra(h, r, per_sample, plan)
         extra.update({"greens_cached": cached, "greens_compute_s": spent, "chain_wall_s": wall,
