@@ -280,21 +280,12 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 # the store held this plate's responses: a rebuild needs no more), each run
                 # building its plate as a worker does.
                 forget_plates()
-                t0 = time.perf_counter()
-                run_plate(spec, i_t, i_l, todo, store)
-                chain = time.perf_counter() - t0
+                chain = _timed_plate(spec, i_t, i_l, todo, store)
                 if damped is not None:
-                    forget_plates()
-                    t0 = time.perf_counter()
-                    run_plate(damped, i_t, i_l, todo, store)
-                    chains.append((chain, time.perf_counter() - t0))
+                    chains.append((chain, _timed_plate(damped, i_t, i_l, todo, store)))
                 again, again_store = chain, responses  # (not the scratch: dropped after)
                 if result["greens_computed"] > 0:
-                    again_store = None
-                    forget_plates()
-                    t0 = time.perf_counter()
-                    run_plate(spec, i_t, i_l, todo)
-                    again = time.perf_counter() - t0
+                    again, again_store = _timed_plate(spec, i_t, i_l, todo), None
                 costs[kind].append((sweep.thicknesses_m[i_t], again / len(todo),
                                     chain / len(todo)))
                 timed.setdefault(kind, []).append(((i_t, i_l), todo, again, chain))
@@ -308,8 +299,8 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
     # a store that held the pilots' responses is taken to hold the rest (a rebuild): chains only
     work = sum(plate_s(i_t, i_l, todo, stored[kinds[i_t, i_l]] and responses is not None)
                for i_t, i_l, todo in rest)
-    damped_factor = (sum(c[1] for c in chains) / sum(c[0] for c in chains)
-                     if chains and sum(c[0] for c in chains) > 0 else 1.0)
+    elastic_chains = sum(c[0] for c in chains)
+    damped_factor = sum(c[1] for c in chains) / elastic_chains if elastic_chains > 0 else 1.0
     layer_work = layers * damped_factor * sum(plate_s(i_t, i_l, range(n), responses is not None)
                                               for i_t, i_l, n in all_points)
     layer_lanes = 1 if scheduler is None and workers <= 1 else max(1, workers)
@@ -465,13 +456,6 @@ than here even alone (the worker's own messages share its process), and what a s
 tasks adds shows only in such a stream."""
 
 
-def _load_plate(spec: SweepDict, i_t: int, i_l: int, todo: list[int],
-                store: str | None = None) -> None:
-    """Run one (already written) plate to load the model's kernels in this worker."""
-    run_plate(spec, i_t, i_l, todo, store)
-    forget_plates()
-
-
 def _timed_plate(spec: SweepDict, i_t: int, i_l: int, todo: list[int],
                  store: str | None = None) -> float:
     """Run one (already written) plate as the pilot timed it (with ``store``, or computing its
@@ -500,7 +484,8 @@ def _start_workers(stack: contextlib.ExitStack, spec: SweepDict,
     task = (spec, *warm.task, warm.store)
     with Client(scheduler, timeout="30s") as client:
         addresses = list(client.scheduler_info()["workers"])
-        client.gather([client.submit(_load_plate, *task, workers=[address], pure=False,
+        # one run each loads the model's kernels in that worker
+        client.gather([client.submit(_timed_plate, *task, workers=[address], pure=False,
                                      allow_other_workers=False) for address in addresses])
         alone = _repeat_here(task, WARM_TIMING_S / 2)
         together = _stream(client, task, addresses, WARM_TIMING_S)

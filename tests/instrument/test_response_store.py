@@ -97,8 +97,8 @@ def test_the_workers_time_the_pilot_plate_as_the_pilot_timed_it(tmp_path: Path,
         return result  # type: ignore[return-value]
 
     monkeypatch.setattr(table_build, "run_plate", counted)
-    for run in (table_build._load_plate, table_build._timed_plate):
-        run(sweep.to_dict(), *rebuild.task, rebuild.store)
+    for _ in range(2):
+        table_build._timed_plate(sweep.to_dict(), *rebuild.task, rebuild.store)
     assert computed == [0, 0]  # both runs read the stored responses, as the rebuild's pilot did
     assert table_build._timed_plate(sweep.to_dict(), *first.task, first.store) > 0
     assert computed[2:] == [1]  # and a first build's computes them, as its pilot did
