@@ -18,7 +18,7 @@ from solitonde.instrument.inference.fine_grid import FineGrid
 from solitonde.instrument.inference.inversion_inputs import FeatureSummary
 from solitonde.instrument.inference.likelihood import Deviance, per_distance, use_compiled
 from solitonde.instrument.inference.marginals import summarise_marginal
-from solitonde.instrument.inference.woodbury import material_shift
+from solitonde.instrument.inference.woodbury import material_shift, weighted_sum
 
 OUT_OF_RANGE_TAIL = 1e-6
 """Tail probability of the best chi^2 beyond which no table point explains the data."""
@@ -124,8 +124,8 @@ def _adequacy_inputs(est: Estimate, dev: Deviance, post: np.ndarray, finite: np.
     est.extra["p_d"] = float(np.sum(excess))
     if dev.m_sum is not None and dev.ur_sum is not None:
         est.extra["material_shift_sd"] = material_shift(dev.m_sum, dev.ur_sum, post)
-    est.extra["floor_mass"] = {  # a dot product: no grid-sized temporary
-        i.diameter_m: float(np.dot(post.ravel(), g.floor_weight.ravel()))
+    est.extra["floor_mass"] = {  # a sum of products: no grid-sized temporary
+        i.diameter_m: weighted_sum(post, g.floor_weight)
         for i, g in zip(items, dev.grids, strict=True) if not i.hidden}
     est.extra["strict_explained"] = _strict_explained(est, dev, post, items, cal)
 
