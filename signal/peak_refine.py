@@ -137,19 +137,56 @@ def _poly_peak_into(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: floa
     b = min(c + h, hi)
     if b - a < 6 or a >= c or b <= c:
         return
-    m = np.zeros((5, 5))
-    rhs = np.zeros(5)
-    pw = np.empty(5)
+    # The sums of u^(k+q) and u^k y, one scalar each, so they stay in registers: the same
+    # products added in the same order as a loop over a 5x5 array (u^0 = 1 multiplies exactly,
+    # and m[k, q] and m[q, k] add the same products, since a product commutes exactly).
+    m01 = m02 = m03 = m04 = m11 = m12 = m13 = m14 = 0.0
+    m22 = m23 = m24 = m33 = m34 = m44 = 0.0
+    r0 = r1 = r2 = r3 = r4 = 0.0
     inv_h = 1.0 / h
     for i in range(a, b + 1):
-        u = (i - c) * inv_h
-        pw[0] = 1.0
-        for k in range(1, 5):
-            pw[k] = pw[k - 1] * u
-        for k in range(5):
-            rhs[k] += pw[k] * y[i]
-            for q in range(5):
-                m[k, q] += pw[k] * pw[q]
+        p1 = (i - c) * inv_h
+        p2 = p1 * p1
+        p3 = p2 * p1
+        p4 = p3 * p1
+        yi = y[i]
+        r0 += yi
+        r1 += p1 * yi
+        r2 += p2 * yi
+        r3 += p3 * yi
+        r4 += p4 * yi
+        m01 += p1
+        m02 += p2
+        m03 += p3
+        m04 += p4
+        m11 += p1 * p1
+        m12 += p1 * p2
+        m13 += p1 * p3
+        m14 += p1 * p4
+        m22 += p2 * p2
+        m23 += p2 * p3
+        m24 += p2 * p4
+        m33 += p3 * p3
+        m34 += p3 * p4
+        m44 += p4 * p4
+    m = np.empty((5, 5))
+    m[0, 0] = float(b - a + 1)
+    m[0, 1] = m[1, 0] = m01
+    m[0, 2] = m[2, 0] = m02
+    m[0, 3] = m[3, 0] = m03
+    m[0, 4] = m[4, 0] = m04
+    m[1, 1] = m11
+    m[1, 2] = m[2, 1] = m12
+    m[1, 3] = m[3, 1] = m13
+    m[1, 4] = m[4, 1] = m14
+    m[2, 2] = m22
+    m[2, 3] = m[3, 2] = m23
+    m[2, 4] = m[4, 2] = m24
+    m[3, 3] = m33
+    m[3, 4] = m[4, 3] = m34
+    m[4, 4] = m44
+    rhs = np.empty(5)
+    rhs[0], rhs[1], rhs[2], rhs[3], rhs[4] = r0, r1, r2, r3, r4
     _quartic_peak(m, rhs, c, h, a, b, sigma, curvature, out)
 
 
