@@ -16,7 +16,7 @@ from typing import Any
 
 from .errors import SceneError, SimulationError
 from .mindlin import SHEAR_FACTOR
-from .scene import STANDARD_GRAVITY, Scene
+from .scene import Scene, SceneConstants
 from .tiers import (
     CONVOLVED_PLATE_MODELS,
     DOPRI5_PLATE_MODELS,
@@ -50,9 +50,11 @@ def _peak_force_bound(a: float, e_kin: float, f_static: float) -> float:
 
 
 def choose_time_step(
-    scene: Scene, boundary: BottomBoundary, steps_per_period: int = STEPS_PER_PERIOD
+    scene: Scene, boundary: BottomBoundary, steps_per_period: int = STEPS_PER_PERIOD,
+    constants: SceneConstants | None = None,
 ) -> tuple[float, int]:
-    """Integration step and steps per sample.
+    """Integration step and steps per sample (``constants``: the scene's, when the caller has
+    them at hand; computed here when None).
 
     The step is a fixed fraction of the shortest oscillation period the chain can have: at the
     largest force any contact can reach (all the striker's energy in one contact on top of its
@@ -72,19 +74,19 @@ def choose_time_step(
     steps/period on the default scene; tests/model/bench_chain.py). The step is then shrunk so that
     a whole number ``n_sub`` of steps fits in one sample interval: samples fall on steps.
     """
-    m = scene.sphere_mass
-    g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
+    c = constants if constants is not None else scene.constants()
+    m, g, a_s = c.sphere_mass, c.gravity, c.a_s
     n = scene.chain.n_particles
-    e_kin = 0.5 * scene.striker_mass * scene.impact_velocity**2
-    f_s = _peak_force_bound(scene.a_s, e_kin, max(n - 1, 0) * m * g)
+    e_kin = 0.5 * c.striker_mass * c.impact_velocity**2
+    f_s = _peak_force_bound(a_s, e_kin, max(n - 1, 0) * m * g)
     f_b = _peak_force_bound(boundary.a_bottom, e_kin, n * m * g)
-    k_s = 1.5 * scene.a_s ** (2.0 / 3.0) * f_s ** (1.0 / 3.0)
+    k_s = 1.5 * a_s ** (2.0 / 3.0) * f_s ** (1.0 / 3.0)
     k_b = 1.5 * boundary.a_bottom ** (2.0 / 3.0) * f_b ** (1.0 / 3.0)
     omega = 2.0 * math.sqrt(max(k_s, k_b) / m)
-    if scene.striker_differs:  # its own contact and mass may be the stiffest pair
-        f_0 = _peak_force_bound(scene.a_0, e_kin, 0.0)
-        k_0 = 1.5 * scene.a_0 ** (2.0 / 3.0) * f_0 ** (1.0 / 3.0)
-        omega = 2.0 * math.sqrt(max(k_s, k_b, k_0) / min(m, scene.striker_mass))
+    if c.striker_differs:  # its own contact and mass may be the stiffest pair
+        f_0 = _peak_force_bound(c.a_0, e_kin, 0.0)
+        k_0 = 1.5 * c.a_0 ** (2.0 / 3.0) * f_0 ** (1.0 / 3.0)
+        omega = 2.0 * math.sqrt(max(k_s, k_b, k_0) / min(m, c.striker_mass))
     dt_max = 2.0 * math.pi / (omega * steps_per_period)
     rate = boundary.max_rate(k_b)
     if rate > 0.0:
@@ -113,20 +115,22 @@ def auto_duration(scene: Scene, plate_model: str | None = None) -> float:
     microseconds instead of an ODE solve per run.
     """
     name = plate_model if plate_model is not None else resolve_plate_model(scene)[0]
+    c = scene.constants()
     if name in STATIC_PLATE_MODELS:
         a_bottom, z = make_boundary(scene, (name, "")).a_bottom, math.inf
     else:
-        a_bottom, z = scene.a_p, scene.plate_impedance
-    return _auto_duration(scene, scene.sphere_mass, scene.a_s, a_bottom, z)
+        a_bottom, z = c.a_p, c.plate_impedance
+    return _auto_duration(scene, c, a_bottom, z)
 
 
-def _auto_duration(scene: Scene, m: float, a_s: float, a_p: float, z: float) -> float:
-    """:func:`auto_duration` with the constants at hand: ``a_p`` the bottom contact's Hertz
-    constant, ``z`` the plate impedance (inf: a wall, lambda = 0)."""
+def _auto_duration(scene: Scene, c: SceneConstants, a_p: float, z: float) -> float:
+    """:func:`auto_duration` with the scene's constants ``c`` at hand: ``a_p`` the bottom
+    contact's Hertz constant, ``z`` the plate impedance (inf: a wall, lambda = 0)."""
     from . import zener
 
-    d = scene.chain.diameter
-    v_in = zener.incident_velocity(scene)
+    d, m, a_s = scene.chain.diameter, c.sphere_mass, c.a_s
+    v_in = zener.incident_velocity_from(
+        c.impact_velocity, (c.striker_mass, m) if c.striker_differs else None)
     e, tau_c = zener.restitution_and_contact_time_one(zener.inelasticity_from(m, a_p, v_in, z))
     # e -> 0 sends Eq. 15's reflected trip to infinity; below e = 0.01 the reflection carries
     # ARR < 0.4 % and the record ends when a wave at 1 % of v_in would be back.
@@ -215,9 +219,11 @@ def plan(
     *,
     budget: float = math.inf,
     steps_per_period: int = STEPS_PER_PERIOD,
+    constants: SceneConstants | None = None,
 ) -> RunPlan:
     """The plan of a run of ``scene`` on ``boundary`` (built here when None and its cost floor
-    fits ``budget``).
+    fits ``budget``); ``constants``: the scene's (:meth:`Scene.constants`), when the caller has
+    them at hand.
 
     Raises SceneError for a solver that cannot run the scene's plate model (before any mesh).
     ``cost = chain steps x (particles + 1) + PLATE_DOF_WEIGHT x plate steps x plate dofs``, plus
@@ -227,12 +233,13 @@ def plan(
         name, reason = boundary.name, boundary.reason
     else:
         name, reason = check_solver(scene) or resolve_plate_model(scene)
+    c = constants if constants is not None else scene.constants()
     if scene.output.duration != "auto":
         duration = float(scene.output.duration)
     elif boundary is not None:
         static = boundary.name in STATIC_PLATE_MODELS
-        duration = _auto_duration(scene, scene.sphere_mass, scene.a_s, boundary.a_bottom,
-                                  math.inf if static else scene.plate_impedance)
+        duration = _auto_duration(scene, c, boundary.a_bottom,
+                                  math.inf if static else c.plate_impedance)
     else:
         duration = auto_duration(scene, name)
     interval = 1.0 / scene.output.sample_rate
@@ -250,7 +257,7 @@ def plan(
                            0, particles, dofs, floor, "floor (before the plate mesh is built)")
     if boundary is None:
         boundary = make_boundary(scene, (name, reason))
-    dt, n_sub = choose_time_step(scene, boundary, steps_per_period)
+    dt, n_sub = choose_time_step(scene, boundary, steps_per_period, c)
     if integrator == "dopri5":
         # The step adapts to rtol; samples come from the dense output, not from steps.
         run_dt, run_sub = interval, 1

@@ -12,7 +12,7 @@ import json
 from collections.abc import Iterable, Mapping
 from math import isfinite, sqrt
 from pathlib import Path
-from typing import Annotated, Any, Literal, TypedDict, cast
+from typing import Annotated, Any, Literal, NamedTuple, TypedDict, cast
 
 from pydantic import (
     BaseModel,
@@ -394,9 +394,7 @@ class Scene(_Section):
         """Whether the striker is not simply one more of the chain's spheres."""
         if self.striker.material is None:
             return False
-        a, b = self.striker_material, self.sphere_material
-        return ((a.youngs_modulus, a.poisson_ratio, a.density)
-                != (b.youngs_modulus, b.poisson_ratio, b.density))
+        return _differ(self.striker_material, self.sphere_material)
 
     @property
     def striker_mass(self) -> float:
@@ -432,6 +430,29 @@ class Scene(_Section):
     def d_over_t(self) -> float:
         return self.chain.diameter / self.plate.thickness
 
+    def constants(self) -> SceneConstants:
+        """The derived constants a run reads, each computed once (the properties above, by the
+        same formulas: the values are identical). Each property looks the materials up again,
+        and a material given by properties is validated anew on every lookup; a run that reads
+        the masses and Hertz constants a dozen times asks for them here once."""
+        d = self.chain.diameter
+        sphere, plate = self.sphere_material, self.plate_material
+        m, a_s = sphere_mass(d, sphere), hertz_sphere_sphere(d, sphere)
+        striker = (sphere if self.striker.material is None
+                   else material_of(self.striker.material, "striker.material"))
+        differs = striker is not sphere and _differ(striker, sphere)
+        return SceneConstants(
+            sphere_mass=m,
+            a_s=a_s,
+            striker_differs=differs,
+            striker_mass=sphere_mass(d, striker) if differs else m,
+            a_0=hertz_two_spheres(d, striker, sphere) if differs else a_s,
+            a_p=hertz_sphere_flat(d, sphere, plate),
+            plate_impedance=plate_impedance(self.plate.thickness, plate),
+            impact_velocity=self.striker.impact_velocity,
+            gravity=STANDARD_GRAVITY if self.effects.gravity else 0.0,
+        )
+
     def to_dict(self) -> SceneDict:
         """Plain JSON-ready dict with every field, defaults included."""
         return cast(SceneDict, self.model_dump(mode="json"))
@@ -443,6 +464,33 @@ class Scene(_Section):
     def to_dict_explicit(self) -> SceneDict:
         """Dict of the fields that were set explicitly (keeps 'either/or' choices intact)."""
         return cast(SceneDict, self.model_dump(mode="json", exclude_unset=True))
+
+
+def _differ(a: Material, b: Material) -> bool:
+    """Whether two materials differ in what the contact laws read (E, nu, rho)."""
+    return ((a.youngs_modulus, a.poisson_ratio, a.density)
+            != (b.youngs_modulus, b.poisson_ratio, b.density))
+
+
+class SceneConstants(NamedTuple):
+    """A scene's derived constants in SI units, as :meth:`Scene.constants` computes them once for
+    a run (a snapshot: it does not follow later changes to the scene). A named tuple: immutable,
+    and built in a fraction of a frozen dataclass's time, which counts at a run's scale.
+
+    sphere_mass, a_s: m and the sphere-sphere Hertz constant. striker_differs, striker_mass, a_0:
+    as the properties of those names. a_p: the sphere-on-plate Hertz constant. plate_impedance:
+    Zener's Z. impact_velocity: v_imp. gravity: g, 0 when ``effects.gravity`` is off.
+    """
+
+    sphere_mass: float
+    a_s: float
+    striker_differs: bool
+    striker_mass: float
+    a_0: float
+    a_p: float
+    plate_impedance: float
+    impact_velocity: float
+    gravity: float
 
 
 # Loading, overriding, validating -------------------------------------------------------------

@@ -22,7 +22,7 @@ from .errors import SimulationError
 from .greens import GreensCache
 from .plan import MAX_SAMPLES, MAX_STEPS, STEPS_PER_PERIOD, RunPlan, check_solver, plan
 from .record import ChainRecord, chain_record
-from .scene import STANDARD_GRAVITY, Scene
+from .scene import Scene, SceneConstants
 from .status import RUN_OK, RUN_SHORT_RESPONSE, RUN_STEP_BUDGET, RUN_STEP_TOO_SMALL
 from .tiers import ChainRun, StepPlan, make_boundary
 
@@ -129,10 +129,11 @@ def simulate(
     solver = scene.solver
     adaptive = solver.integrator == "dopri5"
     boundary = make_boundary(scene, check_solver(scene), greens_cache)
-    planned = plan(scene, boundary, steps_per_period=steps_per_period)
+    constants = scene.constants()  # once: every step below reads them
+    planned = plan(scene, boundary, steps_per_period=steps_per_period, constants=constants)
     _check_budget(planned, adaptive, max_steps, max_samples)
     n_samples, interval = planned.n_samples, planned.interval_s
-    record = _start_record(scene, boundary.a_bottom, n_samples)
+    record = _start_record(scene, constants, boundary.a_bottom, n_samples)
     step_plan = StepPlan(planned.dt_s, planned.n_sub, n_samples, integrator=solver.integrator,
                          rtol=solver.rtol, max_steps=max_steps)
     run = boundary.integrate(record, step_plan)
@@ -142,13 +143,13 @@ def simulate(
     if adaptive:
         steps = int(run.extra["steps_accepted"])
         dt = interval * (n_samples - 1) / max(steps, 1)
-    truth, valid = _truth(scene, run)
+    truth, valid = _truth(scene, constants, run)
     auto = scene.output.duration == "auto"
     diagnostics: dict[str, Any] = {
         # auto: the record was meant to pass the reflection; say so only when one was found
         "status": ("reflection_passed" if valid else "reflection_not_found") if auto
                   else "duration_reached",
-        **_energy(scene, run, record.energy, adaptive),
+        **_energy(constants, run, record.energy, adaptive),
         "integrator": solver.integrator,
         **({"rtol": solver.rtol} if adaptive else {}),
         "steps": steps,
@@ -197,29 +198,28 @@ def _check_budget(planned: RunPlan, adaptive: bool, max_steps: int, max_samples:
         )
 
 
-def _start_record(scene: Scene, a_bottom: float, n_samples: int) -> ChainRecord:
+def _start_record(
+    scene: Scene, c: SceneConstants, a_bottom: float, n_samples: int
+) -> ChainRecord:
     """The chain at the instant of impact and room for ``n_samples`` samples (and the traces
-    when the scene asks for them)."""
+    when the scene asks for them); ``c`` the scene's constants."""
     n = scene.chain.n_particles
-    m = scene.sphere_mass
-    a_s = scene.a_s
-    g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
+    m, g, a_s = c.sphere_mass, c.gravity, c.a_s
     tau = scene.effects.damping if scene.effects.dissipation else 0.0
-    u, v = initial_state(n, m, g, a_s, a_bottom, scene.impact_velocity)
+    u, v = initial_state(n, m, g, a_s, a_bottom, c.impact_velocity)
     rows = n_samples if scene.output.traces else 0
     return chain_record(
         u, v, u.copy(), m, g, a_s, a_bottom, n * m * g, tau, scene.chain.sensor_index,
         np.empty(n_samples), np.empty(n_samples), np.empty((rows, n + 1)),
         np.empty((rows, n + 1)), np.empty((rows, n + 1)), np.empty(rows), new_peak_tracker(),
-        scene.striker_mass, scene.a_0,
+        c.striker_mass, c.a_0,
     )
 
 
-def _truth(scene: Scene, run: ChainRun) -> tuple[dict[str, float], bool]:
+def _truth(scene: Scene, c: SceneConstants, run: ChainRun) -> tuple[dict[str, float], bool]:
     """The model's own peaks (see :class:`SimulationResult`), and whether the sensor told the
-    incident and the reflected pulse apart."""
-    g = STANDARD_GRAVITY if scene.effects.gravity else 0.0
-    static_sensor = (scene.chain.sensor_index - 0.5) * scene.sphere_mass * g
+    incident and the reflected pulse apart; ``c`` the scene's constants."""
+    static_sensor = (scene.chain.sensor_index - 0.5) * c.sphere_mass * c.gravity
     pk = run.peaks.tolist()
     inc_f, ref_f = pk[PK_INC_F], pk[PK_REF_F]
     rise_inc, rise_ref = inc_f - static_sensor, ref_f - static_sensor
@@ -241,12 +241,14 @@ def _truth(scene: Scene, run: ChainRun) -> tuple[dict[str, float], bool]:
     return truth, valid
 
 
-def _energy(scene: Scene, run: ChainRun, balance: np.ndarray, adaptive: bool) -> dict[str, float]:
+def _energy(
+    c: SceneConstants, run: ChainRun, balance: np.ndarray, adaptive: bool
+) -> dict[str, float]:
     """The energy balance's diagnostics: drift and final error relative to the energy in play,
-    that scale, and the energy that left the chain."""
+    that scale, and the energy that left the chain (``c`` the scene's constants)."""
     # Relative to the energy in play: the striker's, or what left the chain if that is more
     # (with gravity a chain that keeps sinking into an infinite plate feeds it without end).
-    e_scale = max(0.5 * scene.striker_mass * scene.impact_velocity**2,
+    e_scale = max(0.5 * c.striker_mass * c.impact_velocity**2,
                   abs(run.plate_work) + run.dissipated)
     if adaptive:
         # dopri5's samples interpolate the balance between step ends: drift is measured there.

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from math import exp, gamma, isfinite, log1p, pi, sqrt
 from pathlib import Path
 from typing import Any
@@ -177,6 +177,17 @@ class _ChebTable:
     anchor_e: float  # e and tau_c at ASYMPTOTIC_LAMBDA, where the large-lambda law starts
     anchor_tau: float
 
+    @cached_property
+    def log_e_rows(self) -> tuple[tuple[float, ...], ...]:
+        """``log_e`` as Python floats, one tuple a panel: the scalar Clenshaw sum of
+        :func:`restitution_and_contact_time_one` reads them without converting a row per call."""
+        return tuple(tuple(row) for row in self.log_e.tolist())
+
+    @cached_property
+    def log_tau_rows(self) -> tuple[tuple[float, ...], ...]:
+        """``log_tau`` as Python floats, one tuple a panel (as :attr:`log_e_rows`)."""
+        return tuple(tuple(row) for row in self.log_tau.tolist())
+
 
 def _table_settings() -> dict[str, float]:
     return {"lambda_max": TABLE_LAMBDA_MAX, "panels": TABLE_PANELS, "degree": TABLE_DEGREE,
@@ -303,11 +314,11 @@ def restitution_and_contact_time_one(lam: float) -> tuple[float, float]:
     x = log1p(lam)
     panel = min(int(x / width), TABLE_PANELS - 1)
     t = 2.0 * (x - panel * width) / width - 1.0
-    return (exp(_clenshaw_scalar(table.log_e[panel].tolist(), t)),
-            exp(_clenshaw_scalar(table.log_tau[panel].tolist(), t)))
+    return (exp(_clenshaw_scalar(table.log_e_rows[panel], t)),
+            exp(_clenshaw_scalar(table.log_tau_rows[panel], t)))
 
 
-def _clenshaw_scalar(coef: list[float], t: float) -> float:
+def _clenshaw_scalar(coef: tuple[float, ...], t: float) -> float:
     """sum_k coef[k] T_k(t) for one point."""
     b1 = b2 = 0.0
     for c in reversed(coef[1:]):
@@ -339,14 +350,24 @@ def time_scale(mass: float, a_p: float, v_in: float) -> float:
 def incident_velocity(scene: Scene) -> float:
     """v_in = 0.682 v_imp: the particle velocity the solitary wave brings to the plate, m/s
     (an estimate for a striker unlike the chain's spheres, see below)."""
-    v_in = CHATTERJEE_RATIO * scene.impact_velocity
     if scene.striker_differs:
+        return incident_velocity_from(scene.impact_velocity,
+                                      (scene.striker_mass, scene.sphere_mass))
+    return incident_velocity_from(scene.impact_velocity)
+
+
+def incident_velocity_from(v_imp: float, masses: tuple[float, float] | None = None) -> float:
+    """:func:`incident_velocity` from plain numbers: the impact velocity and, for a striker unlike
+    the chain's spheres, ``masses`` = (the striker's m0, the spheres' m); None: the striker is
+    one of the spheres."""
+    v_in = CHATTERJEE_RATIO * v_imp
+    if masses is not None:
+        m0, m = masses
         # No closed form: Chatterjee's 0.682 is for a striker identical to the chain's spheres.
         # Scaled by the velocity 2 m0 / (m0 + m) v_imp that a free elastic collision gives the
         # first sphere, never above the identical striker's: an estimate that errs towards a
         # slower, weaker wave, i.e. a longer record (auto duration) and a longer critical distance
         # (the auto tier), both on the safe side.
-        m0, m = scene.striker_mass, scene.sphere_mass
         v_in *= min(1.0, 2.0 * m0 / (m0 + m))
     return v_in
 
