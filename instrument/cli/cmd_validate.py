@@ -56,7 +56,7 @@ def validate_command(
     truth_plate_theory: str = typer.Option(
         "auto", "--truth-plate-theory", help="plate theory of the simulated truths near a support "
         "(sem.plate_theory: auto, 3d, mindlin): 3d checks a table built on the Mindlin plate "
-        "against 3-D plates"),
+        "against 3-D plates, meshed with the Mindlin plate's in-plane elements"),
     wrong_family: str | None = typer.Option(
         None, "--wrong-family", help="simulate the truths on a plate of this library material "
         "(e.g. steel_structural against the aluminium table): how often the answer is flagged "

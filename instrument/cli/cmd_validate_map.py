@@ -46,7 +46,8 @@ def validate_map_command(
     truth_plate_theory: str = typer.Option("auto", "--truth-plate-theory", help="the "
                                            "simulated plates' sem.plate_theory: auto (the "
                                            "table's own tiers), 3d (the 3-D plate next to a "
-                                           "support, where the table holds the 2-D plate), "
+                                           "support, where the table holds the 2-D plate, "
+                                           "with the 2-D plate's in-plane elements), "
                                            "mindlin"),
     workers: int = typer.Option(1, "--workers", help="simulate the scans' positions this "
                                 "many at a time"),

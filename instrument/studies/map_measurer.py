@@ -56,6 +56,11 @@ class Measurer:
                                       f"simulated on another scene (its sem.plate_theory "
                                       f"{_plate_theory(stored or {})!r}, this study's "
                                       f"{_plate_theory(self.base)!r}); give another file")
+            if _plate_theory(self.base) == "3d" and data.get("truth_mesh") != single.TRUTH_MESH:
+                raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
+                                      "simulated on the 3-D plate's default mesh, coarser than "
+                                      "the truths' (the flexural-wavelength rule); give "
+                                      "another file")
             if reading != EXTRACTOR_VERSION:
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions read "
                                       f"with the extractor's reading {reading}, this solitonde "
@@ -94,8 +99,11 @@ class Measurer:
     def save(self) -> None:
         if self.path is None:
             return
-        write_text(self.path, json.dumps({"scene": self.base, "positions": self.cache,
-                                          "reading_version": EXTRACTOR_VERSION}))
+        data: dict[str, Any] = {"scene": self.base, "positions": self.cache,
+                                "reading_version": EXTRACTOR_VERSION}
+        if _plate_theory(self.base) == "3d":
+            data["truth_mesh"] = single.TRUTH_MESH
+        write_text(self.path, json.dumps(data))
 
 
 def _plate_theory(scene: Mapping[str, Any]) -> str:

@@ -114,6 +114,17 @@ def test_the_measurements_file_keeps_its_scene_and_refuses_another(tmp_path, mon
     assert map_study.Measurer(auto, path).cache == m.cache
     with pytest.raises(map_study.StudyInputError, match=r"its sem.plate_theory 'auto'"):
         map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)
+    # truths on the 3-D plate: kept with their mesh, and a file from before it is refused
+    three_d = {"sem": {"plate_theory": "3d"}}
+    m3 = map_study.Measurer(three_d, tmp_path / "m3.json")
+    m3.prefetch([(9.53e-3, 3e-3, 0.01, 1)], workers=1)
+    m3.save()
+    assert map_study.Measurer(three_d, tmp_path / "m3.json").cache == m3.cache
+    old = json.loads((tmp_path / "m3.json").read_text())
+    del old["truth_mesh"]
+    (tmp_path / "m3.json").write_text(json.dumps(old))
+    with pytest.raises(map_study.StudyInputError, match=r"the 3-D plate's default mesh"):
+        map_study.Measurer(three_d, tmp_path / "m3.json")
 
 
 @pytest.mark.parametrize(("kwargs", "field"), [({"truth_plate_theory": "2d"}, "truth_plate_theory"),

@@ -272,3 +272,30 @@ def test_validate_simulates_each_plate_on_its_drawn_material(tiny: Path, tmp_pat
     (pd,), (px,) = (m["plates"][1:] for m in measured.values())  # [0]: the reference plate
     sd, sx = (next(iter(p["summaries"].values())) for p in (pd, px))
     assert sd["arr"] != sx["arr"] and sd["tof_s"] != sx["tof_s"]
+
+
+def test_truths_on_the_3d_plate_are_meshed_as_finely_as_the_mindlin_plate(tiny: Path) -> None:
+    """``--truth-plate-theory 3d``: a thin plate's truth takes the Mindlin plate's in-plane
+    elements (the flexural-wavelength rule), not the 3-D plate's default 16 x 16, which does
+    not resolve its flexural waves; a thick plate keeps the default; the other truths are as
+    the table's scene says. The stored draw's key names the mesh, so shots simulated on the
+    coarser 3-D plate are never reused."""
+    from solitonde.instrument.studies.validate import TRUTH_MESH, _draw, _draw_key, _scene_dict
+    from solitonde.model.scene import apply_overrides, scene_from_dict
+    from solitonde.model.tiers.meshed import mindlin_elements
+
+    base_3d = apply_overrides({}, {"sem.plate_theory": "3d"})
+    thin = _scene_dict(base_3d, 9.53e-3, 1.99e-3, 0.047)
+    expected = mindlin_elements(scene_from_dict(apply_overrides(
+        {}, {"chain.diameter": 9.53e-3, "plate.thickness": 1.99e-3})))
+    assert thin["sem"]["elements"] == list(expected)
+    assert expected[0] > 16 and expected[1] > 16  # thinner than the default mesh resolves
+    thick = _scene_dict(base_3d, 9.53e-3, 12e-3, 0.047)
+    assert thick["sem"]["elements"] == [16, 16, 1]
+    assert "elements" not in _scene_dict({}, 9.53e-3, 1.99e-3, 0.047).get("sem", {})
+    assert scene_from_dict(thin).sem.plate_theory == "3d"
+    table = ModelTable.load(tiny)
+    draw = _draw(table, 1, 0, 0.457, False)
+    keys = [_draw_key(table, 1, 0, [9.53e-3], base, 1, None, draw, False)
+            for base in (base_3d, {})]
+    assert keys[0]["truth_mesh"] == TRUTH_MESH and "truth_mesh" not in keys[1]
