@@ -68,14 +68,26 @@ def _rate(fn, count: int, chunk: int = 10, repeats: int = 5) -> float:
     return count / sum(best)
 
 
-@pytest.mark.bench
-def test_throughput():
-    """Waveforms per second (best of 5 per block of shots) for solitonde and the scipy baseline."""
+@pytest.fixture
+def one_core():
+    """This process on one core, numba on one thread, for the test; both given back after it
+    (the benchmarks that follow in the same process time their own parallel work)."""
     import numba
 
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+    threads = numba.get_num_threads()
+    if cores is not None:
+        os.sched_setaffinity(0, {sorted(cores)[0]})
     numba.set_num_threads(1)
+    yield
+    numba.set_num_threads(threads)
+    if cores is not None:
+        os.sched_setaffinity(0, cores)
+
+
+@pytest.mark.bench
+def test_throughput(one_core):
+    """Waveforms per second (best of 5 per block of shots) for solitonde and the scipy baseline."""
     shots = _shots()
     block = np.stack([w.samples for w in shots])
     sos = butter(4, 100e3, fs=1 / DT, output="sos")
