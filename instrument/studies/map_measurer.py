@@ -8,7 +8,7 @@ import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -22,6 +22,17 @@ from solitonde.instrument.studies.validate_scores import MeasuredPlate, Measured
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.atomic import write_text
 from solitonde.signal.features import EXTRACTOR_VERSION
+
+
+class MeasurementsFile(TypedDict):
+    """A study's kept positions as its file holds them: the scene they were simulated on, each
+    position's measured sizes (:meth:`Measurer.key`), the extractor's reading and, for truths on
+    the 3-D plate, how that plate was meshed (:data:`.validate.TRUTH_MESH`)."""
+
+    scene: Mapping[str, Any]
+    positions: dict[str, dict[str, MeasuredSize | None]]
+    reading_version: int
+    truth_mesh: NotRequired[str]
 
 
 class StudyInputError(InstrumentError, ValueError):
@@ -99,8 +110,8 @@ class Measurer:
     def save(self) -> None:
         if self.path is None:
             return
-        data: dict[str, Any] = {"scene": self.base, "positions": self.cache,
-                                "reading_version": EXTRACTOR_VERSION}
+        data: MeasurementsFile = {"scene": self.base, "positions": self.cache,
+                                  "reading_version": EXTRACTOR_VERSION}
         if _plate_theory(self.base) == "3d":
             data["truth_mesh"] = single.TRUTH_MESH
         write_text(self.path, json.dumps(data))
