@@ -300,6 +300,10 @@ def simulate_command(
         Console().print(_table(data))
         if "shots" in data:
             Console().print(_shots_line(data["shots"], data["acquisition"]), highlight=False)
+    mesh = data.get("mesh")
+    coarse = mesh.get("coarse") if isinstance(mesh, dict) else None
+    if coarse:
+        typer.echo(f"warning: {coarse}", err=True)
     for line in failed:
         typer.echo(line, err=True)
     if failed:

@@ -84,3 +84,29 @@ def test_an_output_that_cannot_be_written_is_an_error_after_the_result(runner, t
     assert list(json.loads(res.stdout))[:12] == KEYS
     assert "error: --plot: cannot write" in res.stderr
     assert [p.name for p in tmp_path.iterdir()] == ["afile"]
+
+
+def test_a_3d_plate_coarser_than_the_wavelength_rule_is_said_to_be(runner):
+    """The 3-D plate takes ``sem.elements`` as given; where they are fewer than the flexural
+    wavelength asks (what the Mindlin plate would take), the JSON's mesh says so under
+    ``coarse`` and the text run warns on stderr, naming the elements that resolve it. A
+    Mindlin run of the same plate, and a 3-D mesh as fine as the rule, say nothing."""
+    from solitonde.model.tiers.meshed import coarse_3d_note, mindlin_elements
+
+    near = ["--set", "plate.distance_to_support=0.02", "--set", "sem.order=[2,2,2]"]
+    res = runner.invoke(build_app(), ["simulate", *near, "--set", "sem.plate_theory=3d",
+                                      "--set", "sem.elements=[4,4,1]"])
+    assert res.exit_code == 0, res.output
+    wanted = mindlin_elements(scene_from_dict({"plate": {"distance_to_support": 0.02}}))
+    assert (f"warning: the 3-D plate's sem.elements 4 x 4 are fewer than the flexural-wavelength"
+            f" rule gives this plate ({wanted[0]} x {wanted[1]}") in res.stderr
+    assert f"sem.elements [{wanted[0]}, {wanted[1]}, 1] resolves them" in res.stderr
+    res = runner.invoke(build_app(), ["simulate", *near, "--set", "sem.plate_theory=mindlin",
+                                      "--json"])
+    assert res.exit_code == 0, res.output
+    assert "coarse" not in json.loads(res.stdout)["mesh"] and "warning" not in res.stderr
+    fine = scene_from_dict({"plate": {"distance_to_support": 0.02},
+                            "sem": {"plate_theory": "3d", "elements": list(wanted)}})
+    assert coarse_3d_note(fine) is None
+    thick = scene_from_dict({"plate": {"thickness": 12e-3}, "sem": {"plate_theory": "3d"}})
+    assert coarse_3d_note(thick) is None  # the default 16 x 16 resolves a 12 mm plate
