@@ -61,13 +61,14 @@ class Measurer:
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
                                       f"study wrote ({exc}); delete it or give another") from None
-            if (stored is None and _plate_theory(self.base) != "auto") or (
+            if (stored is None and single.plate_theory(self.base) != "auto") or (
                     stored is not None and stored != json.loads(json.dumps(self.base))):
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
                                       f"simulated on another scene (its sem.plate_theory "
-                                      f"{_plate_theory(stored or {})!r}, this study's "
-                                      f"{_plate_theory(self.base)!r}); give another file")
-            if _plate_theory(self.base) == "3d" and data.get("truth_mesh") != single.TRUTH_MESH:
+                                      f"{single.plate_theory(stored or {})!r}, this study's "
+                                      f"{single.plate_theory(self.base)!r}); give another file")
+            if (single.plate_theory(self.base) == "3d"
+                    and data.get("truth_mesh") != single.TRUTH_MESH):
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions "
                                       "simulated on the 3-D plate's default mesh, coarser than "
                                       "the truths' (the flexural-wavelength rule); give "
@@ -112,13 +113,9 @@ class Measurer:
             return
         data: MeasurementsFile = {"scene": self.base, "positions": self.cache,
                                   "reading_version": EXTRACTOR_VERSION}
-        if _plate_theory(self.base) == "3d":
+        if single.plate_theory(self.base) == "3d":
             data["truth_mesh"] = single.TRUTH_MESH
         write_text(self.path, json.dumps(data))
-
-
-def _plate_theory(scene: Mapping[str, Any]) -> str:
-    return str((scene.get("sem") or {}).get("plate_theory", "auto"))
 
 
 def _measure_keyed(base: Mapping[str, Any], diameters: Sequence[float], t: float,

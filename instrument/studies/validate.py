@@ -116,6 +116,11 @@ flexural wavelength, as many as the Mindlin plate takes (``sem.elements_per_wave
 the 3-D plate's default ``sem.elements``."""
 
 
+def plate_theory(scene: Mapping[str, Any]) -> str:
+    """A scene dict's ``sem.plate_theory`` ("auto" where it names none)."""
+    return str((scene.get("sem") or {}).get("plate_theory", "auto"))
+
+
 def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> SceneDict:
     """The scene of one plate and sphere size; on the 3-D plate with the Mindlin plate's
     in-plane elements (:data:`TRUTH_MESH`).
@@ -128,7 +133,7 @@ def _scene_dict(base: Mapping[str, Any], d: float, t: float, length: float) -> S
         "chain.diameter": d, "plate.thickness": t, "plate.distance_to_support": length,
         "effects.dissipation": True, "effects.damping": DAMPING_S,
     })
-    if scene.get("sem", {}).get("plate_theory") == "3d":
+    if plate_theory(scene) == "3d":
         from solitonde.model.tiers.meshed import mindlin_elements
 
         scene = apply_overrides(scene, {
@@ -443,7 +448,7 @@ def _draw_key(table: ModelTable, n: int, seed: int, sizes: list[float], base: Sc
                     "reading_version": EXTRACTOR_VERSION}
     if near_support:  # absent from the default draw's key: its files stay valid
         key["near_support_m"] = draw.l_far
-    if base.get("sem", {}).get("plate_theory") == "3d":  # truths on the resolved 3-D plate
+    if plate_theory(base) == "3d":  # truths on the resolved 3-D plate
         key["truth_mesh"] = TRUTH_MESH
     return key
 
