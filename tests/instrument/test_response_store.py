@@ -104,6 +104,15 @@ def test_the_workers_time_the_pilot_plate_as_the_pilot_timed_it(tmp_path: Path,
     assert computed[2:] == [1]  # and a first build's computes them, as its pilot did
 
 
+def test_busy_workers_are_never_counted_faster_than_the_pilot() -> None:
+    """The plan scales its estimate by the workers' time over the pilot's: a ratio under 1 is
+    the timing disturbed (it made plans a third short), one over 4 too; in between it counts."""
+    assert table_build.parallel_slowdown(0.62, 1.0) == 1.0
+    assert table_build.parallel_slowdown(1.3, 1.0) == pytest.approx(1.3)
+    assert table_build.parallel_slowdown(9.0, 1.0) == 4.0
+    assert table_build.parallel_slowdown(1.0, 0.0) == 1.0
+
+
 def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Past the cap, the responses used longest ago go first; a load counts as a use."""
