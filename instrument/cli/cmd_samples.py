@@ -174,10 +174,12 @@ def make_scan(out_dir: Path, seed: int = 20261125) -> list[ScanTruth]:
     brings it: plain files that name nothing (``scan_<position>_shot<k>.csv``, force in N),
     a campaign manifest (``campaign.csv``) that says which file is where, and ``truth.tsv``.
 
-    Each position is one simulation (the auto tier: Green's functions of the 3-D plate near the
-    edge) with the chain at distance x from the edge; its shots differ by their noise (40 dB,
-    1 % drift, 12 bits). The model's chain stands on the plate's centre line, so y only places
-    the position on the map; the free edges at y = 0 and y = 0.914 m are far from every y used.
+    Each position is one simulation with the chain at distance x from the edge, on the auto
+    tier: today the Mindlin plate's Green's functions near the edge; the bundled files were
+    written when auto chose the 3-D plate's, on its default 16 x 16 elements (``truth.tsv``'s
+    ``plate_model`` says which). Its shots differ by their noise (40 dB, 1 % drift, 12 bits).
+    The model's chain stands on the plate's centre line, so y only places the position on the
+    map; the free edges at y = 0 and y = 0.914 m are far from every y used.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
