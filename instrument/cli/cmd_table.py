@@ -17,6 +17,7 @@ import json
 import re
 import shlex
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -83,8 +84,9 @@ def _mm(values: list[float]) -> str:
     return ", ".join(f"{v * 1e3:.4g}" for v in values)
 
 
-def plan_text(plan: BuildPlan) -> str:
-    """The plan as the command prints it before the sweep."""
+def plan_text(plan: BuildPlan, before_s: float = 0.0) -> str:
+    """The plan as the command prints it before the sweep; ``before_s``, the seconds the
+    command ran before the build began (its start and imports), counts in the total."""
     sw = plan.sweep
     n_d, n_t, n_l = sw.shape
     done = n_d * n_t * n_l - plan.points_todo
@@ -115,8 +117,16 @@ def plan_text(plan: BuildPlan) -> str:
                      "busy: counted)")
     lines.append(f"  estimated time: {duration(plan.remaining_s)} on {plan.workers} worker"
                  f"{'s' * (plan.workers != 1)} after a {duration(plan.pilot_wall_s)} pilot"
-                 f"{started} ({duration(plan.elapsed_s + plan.remaining_s)} in all)")
+                 f"{started} ({duration(before_s + plan.elapsed_s + plan.remaining_s)} in all)")
     return "\n".join(lines)
+
+
+def _process_seconds() -> float:
+    """Seconds since this process started (its interpreter's start and imports: about a
+    second, which a user's clock counts and the build's own does not)."""
+    import psutil
+
+    return max(0.0, time.time() - psutil.Process().create_time())
 
 
 def _fail(message: str) -> None:
@@ -186,9 +196,10 @@ def build_command(
 
         kernel_choice.start()
         store = True if responses is None else responses
+        before = _process_seconds()
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
                              command=command, table_id=table_id,
-                             plan=lambda p: typer.echo(plan_text(p), err=as_json),
+                             plan=lambda p: typer.echo(plan_text(p, before), err=as_json),
                              responses=store, layers=len(dissipation_layer))
         if report.complete and dissipation_layer:
             _add_layer(out, dissipation_layer, [], workers, progress, as_json, scheduler, store)

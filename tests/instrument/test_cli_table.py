@@ -211,4 +211,6 @@ def test_the_plan_says_what_it_counted() -> None:
     assert lines[-1] == ("  estimated time: 81 s on 2 workers after a 3 s pilot and the "
                          "workers' 4 s start (89 s in all)")
     assert "  material slopes: 1 s" in lines
+    # the seconds the command ran before its build began count in the total
+    assert plan_text(plan, before_s=2.0).splitlines()[-1].endswith("(1.5 min in all)")
     assert "  (a plate takes 1.3x the pilot's time with every worker busy: counted)" in lines
