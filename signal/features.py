@@ -22,12 +22,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 
 from .errors import WaveformError
 from .kernels import TRUNC_SPAN
+from .outliers import FLAT_LEVEL, MIN_SHOTS, level, modified_z
 from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
@@ -36,10 +37,6 @@ EXTRACTOR_VERSION = 2
 table's features compare with shots read the same way only. 2: the incident and the reflection
 read on the slow trend of the record cut 2.5 FWHM after the reflection (the same reading however
 long the record runs on); 1: on the whole record's trend (tables built before 2026-11-27)."""
-
-OUTLIER_Z = 3.5
-"""Modified z-score (0.6745 |x - median| / MAD) above which a shot is rejected
-(Iglewicz-Hoaglin)."""
 
 
 NUMBER = {"kind": "number"}
@@ -260,32 +257,18 @@ REJECTING = {
 row names (with that feature's value, none for a series) and the reason."""
 
 
-def _modified_z(values: np.ndarray) -> np.ndarray:
-    """Iglewicz-Hoaglin modified z-scores ``0.6745 |x - median| / MAD`` over the finite values.
-
-    When more than half the values are equal the MAD is 0; the score then uses the mean absolute
-    deviation, ``|x - median| / (1.253314 MeanAD)`` (their recommendation), so a lone outlier
-    among identical values is still caught. All values equal: every score 0. A non-finite value
-    scores inf.
-    """
-    finite = np.isfinite(values)
-    z = np.full(values.shape, np.inf)
-    if not finite.any():
-        return z
-    x = values[finite]
-    med = np.median(x)
-    dev = np.abs(x - med)
-    mad = np.median(dev)
-    if mad > 0:
-        z[finite] = 0.6745 * dev / mad
-    else:
-        mean_ad = dev.mean()
-        z[finite] = dev / (1.253314 * mean_ad) if mean_ad > 0 else 0.0
-    return z
+def _level_note(outlier_z: object, flat: bool, n: int) -> str:
+    """What the rejection level of :func:`aggregate` was, for its reason."""
+    if outlier_z != "auto":
+        return " (the level asked for)"
+    if flat:
+        return " (most shots read the same value: the mean absolute deviation's level)"
+    return f" (the level 1 % of sets of {n} good shots cross)"
 
 
 def aggregate(
-    features: Sequence[Features], outlier_z: float | None = OUTLIER_Z, min_for_rejection: int = 4
+    features: Sequence[Features], outlier_z: float | Literal["auto"] | None = "auto",
+    min_for_rejection: int = MIN_SHOTS,
 ) -> Aggregate:
     """Mean, standard deviation and count per feature over repeated shots, with outliers reported.
 
@@ -298,8 +281,10 @@ def aggregate(
     (and its ARR bound) holds only for a chain it was not recorded on; and one flagged
     ``unsteady_baseline``, whose level jumped between the pulses. A shot is rejected when
     its TOF or ARR has a modified z-score above ``outlier_z`` among the shots with a reflection
-    (only with at least ``min_for_rejection`` of them; ``None`` turns rejection off). Rejected
-    shots are listed, never dropped silently.
+    (only with at least ``min_for_rejection`` of them; ``None`` turns rejection off). The
+    default, ``"auto"``, is the level for that many shots that sets of good shots cross in 1 %
+    of sets (:func:`.outliers.level`; :data:`.outliers.FLAT_LEVEL` where most values are
+    equal). Rejected shots are listed, never dropped silently.
     """
     if not features:
         raise WaveformError("features", "nothing to aggregate", "at least one shot's features")
@@ -318,19 +303,22 @@ def aggregate(
     with_ref = [i for i, f in enumerate(features)
                 if f.tof_s is not None and f.arr is not None and i not in dropped]
     no_ref = [i for i in range(n) if i not in set(with_ref) and i not in dropped]
-    if outlier_z is not None and len(with_ref) >= min_for_rejection:
+    testable = min_for_rejection if outlier_z != "auto" else max(min_for_rejection, MIN_SHOTS)
+    if outlier_z is not None and len(with_ref) >= testable:
         for name in ("tof_s", "arr"):
             values = np.array([getattr(features[i], name) for i in with_ref])
-            z = _modified_z(values)
+            z, flat = modified_z(values)
+            cut = (outlier_z if outlier_z != "auto" else
+                   FLAT_LEVEL if flat else level(len(with_ref)))
+            why = f"modified z-score > {cut:.3g}{_level_note(outlier_z, flat, len(with_ref))}"
             for i, zi, vi in zip(with_ref, z, values, strict=True):
-                if zi > outlier_z and i not in dropped:
+                if zi > cut and i not in dropped:
                     dropped.add(i)
                     finite = bool(np.isfinite(vi))
                     rejected.append({
                         "index": i, "feature": name, "value": float(vi) if finite else None,
                         "modified_z": float(zi) if finite else None,
-                        "reason": (f"modified z-score > {outlier_z:g}" if finite
-                                   else "not a finite number"),
+                        "reason": why if finite else "not a finite number",
                     })
     kept = [i for i in range(n) if i not in dropped]
     stats: dict[str, Stat] = {}
