@@ -39,6 +39,13 @@ read on the slow trend of the record cut 2.5 FWHM after the reflection (the same
 long the record runs on); 1: on the whole record's trend (tables built before 2026-11-27)."""
 
 
+AGGREGATE_VERSION = 2
+"""How :func:`aggregate` rejects outliers, as a number stored measurements record (a study keeps
+each position's aggregate, not its shots, so a file aggregated another way is not reused).
+2: the level per number of shots (:mod:`.outliers`); 1: a fixed modified z-score of 3.5
+(files written before 2026-11-29)."""
+
+
 NUMBER = {"kind": "number"}
 """A float every shot with a pulse has."""
 OPTIONAL = {"kind": "optional"}

@@ -21,7 +21,7 @@ from solitonde.instrument.studies import validate as single
 from solitonde.instrument.studies.validate_scores import MeasuredPlate, MeasuredSize
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.signal.atomic import write_text
-from solitonde.signal.features import EXTRACTOR_VERSION
+from solitonde.signal.features import AGGREGATE_VERSION, EXTRACTOR_VERSION
 
 
 class MeasurementsFile(TypedDict):
@@ -32,6 +32,7 @@ class MeasurementsFile(TypedDict):
     scene: Mapping[str, Any]
     positions: dict[str, dict[str, MeasuredSize | None]]
     reading_version: int
+    aggregate_version: NotRequired[int]
     truth_mesh: NotRequired[str]
 
 
@@ -43,8 +44,8 @@ class Measurer:
     """Simulated positions, measured as :func:`.validate.measure_plate` measures them; kept
     in a file (optional) so that a study can be re-scored without simulating again. The file
     records the scene its positions were simulated on (the truths' plate theory among it) and
-    the extractor's reading they were read with: a file of another scene or reading is refused,
-    not mixed in."""
+    the extractor's reading and the rule that summarised their repeated shots: a file of another
+    scene, reading or rule is refused, not mixed in."""
 
     def __init__(self, base: Mapping[str, Any], path: str | Path | None) -> None:
         self.base = dict(base)
@@ -58,6 +59,7 @@ class Measurer:
                 # files written before the scene was recorded hold the table's own tiers
                 stored = data.get("scene")
                 reading = int(data.get("reading_version", 1))
+                rule = int(data.get("aggregate_version", 1))
             except (OSError, ValueError, KeyError, TypeError) as exc:
                 raise StudyInputError("measurements", f"{str(self.path)!r} is not a file this "
                                       f"study wrote ({exc}); delete it or give another") from None
@@ -77,6 +79,12 @@ class Measurer:
                 raise StudyInputError("measurements", f"{str(self.path)!r} holds positions read "
                                       f"with the extractor's reading {reading}, this solitonde "
                                       f"reads with {EXTRACTOR_VERSION}; give another file")
+            if rule != AGGREGATE_VERSION:
+                raise StudyInputError("measurements", f"{str(self.path)!r} holds positions whose "
+                                      f"repeated shots were summarised by rule {rule} (before "
+                                      "the outlier level depended on the number of shots), "
+                                      f"this solitonde by rule {AGGREGATE_VERSION}; give "
+                                      "another file")
         self.simulated = 0
         self.wall_s = 0.0
 
@@ -112,7 +120,8 @@ class Measurer:
         if self.path is None:
             return
         data: MeasurementsFile = {"scene": self.base, "positions": self.cache,
-                                  "reading_version": EXTRACTOR_VERSION}
+                                  "reading_version": EXTRACTOR_VERSION,
+                                  "aggregate_version": AGGREGATE_VERSION}
         if single.plate_theory(self.base) == "3d":
             data["truth_mesh"] = single.TRUTH_MESH
         write_text(self.path, json.dumps(data))

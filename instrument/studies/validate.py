@@ -92,7 +92,7 @@ from solitonde.model.scene import SceneDict, apply_overrides, scene_from_dict
 from solitonde.model.simulate import simulate
 from solitonde.signal.atomic import write_text
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import EXTRACTOR_VERSION, aggregate
+from solitonde.signal.features import AGGREGATE_VERSION, EXTRACTOR_VERSION, aggregate
 from solitonde.signal.synth import degrade
 
 DAMPING_S = 1e-7
@@ -260,6 +260,7 @@ class DrawKey(TypedDict):
     wrong_family: str | None
     material_spread_drawn: dict[str, float] | None
     reading_version: Any
+    aggregate_version: int
     near_support_m: NotRequired[float]
     truth_mesh: NotRequired[str]
 
@@ -445,7 +446,8 @@ def _draw_key(table: ModelTable, n: int, seed: int, sizes: list[float], base: Sc
                     "distance_range_m": [float(l_axis[0]), float(l_axis[-1])],
                     "damping_s": DAMPING_S, "shots": shots, "snr_db": SNR_DB,
                     "wrong_family": wrong_family, "material_spread_drawn": draw.spread,
-                    "reading_version": EXTRACTOR_VERSION}
+                    "reading_version": EXTRACTOR_VERSION,
+                    "aggregate_version": AGGREGATE_VERSION}
     if near_support:  # absent from the default draw's key: its files stay valid
         key["near_support_m"] = draw.l_far
     if plate_theory(base) == "3d":  # truths on the resolved 3-D plate

@@ -109,8 +109,13 @@ def test_the_measurements_file_keeps_its_scene_and_refuses_another(tmp_path, mon
     with pytest.raises(map_study.StudyInputError,
                        match=r"read with the extractor's reading 1, this solitonde reads with 2"):
         map_study.Measurer(auto, path)
+    # one written before the outlier level depended on the number of shots: refused
+    path.write_text(json.dumps({"positions": m.cache, "reading_version": 2, "scene": auto}))
+    with pytest.raises(map_study.StudyInputError, match=r"summarised by rule 1 .* by rule 2"):
+        map_study.Measurer(auto, path)
     # one written before the scene was recorded holds the table's own tiers
-    path.write_text(json.dumps({"positions": m.cache, "reading_version": 2}))
+    path.write_text(json.dumps({"positions": m.cache, "reading_version": 2,
+                                "aggregate_version": 2}))
     assert map_study.Measurer(auto, path).cache == m.cache
     with pytest.raises(map_study.StudyInputError, match=r"its sem.plate_theory 'auto'"):
         map_study.Measurer({"sem": {"plate_theory": "3d"}}, path)

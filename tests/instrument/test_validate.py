@@ -13,6 +13,7 @@ from solitonde.instrument.cli.main import build_app
 from solitonde.instrument.studies.validate import validate
 from solitonde.instrument.tables.table import ModelTable
 from solitonde.instrument.tables.table_build import Sweep, build_table
+from solitonde.signal.features import AGGREGATE_VERSION
 
 FAST = {"sem": {"elements": [6, 6, 1], "order": [2, 2, 2]}}
 
@@ -45,6 +46,14 @@ def test_validation_scores_and_calibration(tiny: Path, tmp_path: Path) -> None:
     again = validate(table, 6, seed=2, workers=1, measurements=store)
     assert again.metrics["thickness_error_median"] == m["thickness_error_median"]
     assert again.metrics["simulation_wall_s"] == m["simulation_wall_s"]  # reused, not rerun
+    # shots summarised by the fixed outlier level of before: simulated again, not reused
+    old = json.loads(store.read_text())
+    assert old["key"]["aggregate_version"] == AGGREGATE_VERSION
+    old["key"]["aggregate_version"] = 1
+    store.write_text(json.dumps(old))
+    redone = validate(table, 6, seed=2, workers=1, measurements=store)
+    assert redone.metrics["simulation_wall_s"] != m["simulation_wall_s"]
+    assert json.loads(store.read_text())["key"]["aggregate_version"] == AGGREGATE_VERSION
 
 
 def test_validate_cli_json_keys(tiny: Path) -> None:
