@@ -628,12 +628,35 @@ def _print(console: Console, rows: list[ShotRow], aggs: list[PositionAggregate],
         console.print(table)
         if note:
             console.print(note, style="dim", highlight=False)
+    for line in _outlier_lines(aggs):
+        console.print(line, highlight=False, soft_wrap=True)
     for sk in skipped:
         console.print(f"skipped: {Path(sk['source']).name} channel {sk['channel']}: "
                       f"{sk['reason']}", highlight=False)
     for e in errors:
         where = e["source"] + (f" shot {e['shot']}" if e.get("shot") is not None else "")
         console.print(f"[red]failed: {where}: {e['error']}[/red]")
+
+
+OUTLIER_FEATURES = {"tof_s": ("TOF", 1e6, " us"), "arr": ("ARR", 1.0, "")}
+"""How an outlier's feature reads in :func:`_outlier_lines`: name, scale and unit."""
+
+
+def _outlier_lines(aggs: list[PositionAggregate]) -> list[str]:
+    """One line per shot left out of its position's mean as an outlier: which shot, its value and
+    why. (A shot rejected for a flag shows the flag in the shots' table.)"""
+    lines = []
+    for a in aggs:
+        for rej in a["rejected"]:
+            if rej["feature"] not in OUTLIER_FEATURES:
+                continue
+            name, scale, unit = OUTLIER_FEATURES[rej["feature"]]
+            value = "not a number" if rej["value"] is None else f"{rej['value'] * scale:.5g}{unit}"
+            where = ", ".join(str(x) for x in (a["plate_id"], a["position"]) if x is not None)
+            lines.append(f"outlier left out: {Path(str(rej.get('source'))).name} shot "
+                         f"{rej.get('shot')}{f' ({where})' if where else ''}: {name} {value}, "
+                         f"{rej['reason']}")
+    return lines
 
 
 def register(app: typer.Typer) -> None:

@@ -199,3 +199,27 @@ def test_format_takes_every_file_and_empty_selection_is_named(tmp_path):
     result = CliRunner().invoke(build_app(), ["analyze", str(empty), "--json"])
     assert result.exit_code == 2  # a usage error: nothing to analyse where the user pointed
     assert str(empty) in result.stderr and "no files" in result.stderr
+
+
+def test_analyze_names_an_outlier_it_leaves_out(tmp_path):
+    """Four good shots and one whose reflection was read 100 us late, at one position: the
+    aggregate keeps four, and the text names the fifth shot, its TOF and the level it crossed;
+    the same shots without the late one lose none (the level is set for four shots)."""
+    rng = np.random.default_rng(3)
+
+    def shot(reflection_s: float) -> Waveform:
+        trace = pulse_train(1800, 5e-7, [(150e-6, 30.0, 80e-6), (reflection_s, 15.0, 85e-6)])
+        return Waveform(0.0, 5e-7, degrade(trace, 40.0, rng, 30.0),
+                        metadata={"plate_id": "P1", "position": "A"})
+
+    io.write(tmp_path / "good.csv", [shot(650e-6) for _ in range(4)])
+    io.write(tmp_path / "late.csv", [shot(750e-6)])
+    result = CliRunner().invoke(build_app(), ["analyze", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if line.startswith("outlier left out")]
+    assert len(lines) == 1, result.output
+    assert lines[0].startswith("outlier left out: late.csv shot 0 (P1, A): TOF 600")
+    assert lines[0].endswith("(the level 1 % of sets of 5 good shots cross)")
+    (tmp_path / "late.csv").unlink()
+    again = CliRunner().invoke(build_app(), ["analyze", str(tmp_path), "--json"])
+    assert json.loads(again.stdout)["aggregates"][0]["rejected"] == []
