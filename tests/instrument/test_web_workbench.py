@@ -167,6 +167,46 @@ def test_a_refused_upload_says_why_on_the_page(server, tmp_path):
             browser.close()
 
 
+def test_a_shot_left_out_as_an_outlier_is_marked_on_the_page(server):
+    """Five shots at one position, the fifth's reflection 10 us late (its gap held 20 samples
+    longer): the service leaves it out of the mean, and the page's measurement row says so,
+    with the shot and the level in the mark's title."""
+    import numpy as np
+
+    sync_playwright = _playwright()
+    rng = np.random.default_rng(5)
+    w = signal_io.read(SAMPLE)[0]
+    gap = int(round((400e-6 - w.t0) / w.dt))  # between the incident (137 us) and the reflection
+    noise = 0.003 * float(np.max(w.samples))
+    shots = []
+    for k in range(5):
+        samples = w.samples + rng.normal(0.0, noise, w.samples.size)
+        if k == 4:
+            samples = np.concatenate([samples[:gap], np.repeat(samples[gap], 20),
+                                      samples[gap:-20]])
+        shots.append({"t0": w.t0, "dt": w.dt, "samples": samples.tolist(), "units": "N"})
+    r = httpx.post(f"{server}/v1/measurements", timeout=120, json={
+        "shots": shots, "metadata": {"plate_id": "OUT-1", "position": "B1",
+                                     "sphere_diameter": 9.53e-3}})
+    assert r.status_code == 201, r.text
+    rejected = r.json()["aggregates"][0]["rejected"]
+    assert [(x["index"], x["feature"]) for x in rejected] == [(4, "tof_s")], rejected
+    errors: list[str] = []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        try:
+            page = _watched_page(browser, errors, 900)
+            page.goto(server + "/#plate=OUT-1")
+            mark = page.locator("#measurements tbody tr span.outlier")
+            mark.wait_for(timeout=30_000)
+            assert mark.inner_text() == "outlier x1"
+            title = mark.get_attribute("title")
+            assert title.startswith("shot 4: TOF modified z-score > 26.6"), title
+        finally:
+            browser.close()
+    assert not errors, errors
+
+
 def _stored_with_readings(store_path: Path) -> int:
     """A store holding one measurement whose estimate is ``ambiguous``: two readings along the
     thickness-distance ridge and their warning, as the inversion writes them (a real shot of the

@@ -324,6 +324,16 @@ async function showPlate(plateId) {
       span.textContent = `${name} x${count}`;
       flags.appendChild(span);
     }
+    // shots left out of the mean as outliers (a flagged shot's rejection shows as its flag)
+    const outliers = (agg.rejected || []).filter(r => r.feature === "tof_s" || r.feature === "arr");
+    if (outliers.length) {
+      const span = document.createElement("span");
+      span.className = "flag outlier";
+      span.textContent = `outlier x${outliers.length}`;
+      span.title = outliers.map(r => `shot ${r.index}: ${r.feature === "tof_s" ? "TOF" : "ARR"} ` +
+        `${r.reason}`).join("\n");
+      flags.appendChild(span);
+    }
     const est = m.estimate || {};
     const answerCell = cell(row, answer(est.thickness_m, false));
     const notes = estimateNotes(m.estimate);
