@@ -176,7 +176,7 @@ def test_a_shot_left_out_as_an_outlier_is_marked_on_the_page(server):
     sync_playwright = _playwright()
     rng = np.random.default_rng(5)
     w = signal_io.read(SAMPLE)[0]
-    gap = int(round((400e-6 - w.t0) / w.dt))  # between the incident (137 us) and the reflection
+    gap = round((400e-6 - w.t0) / w.dt)  # between the incident (137 us) and the reflection
     noise = 0.003 * float(np.max(w.samples))
     shots = []
     for k in range(5):
