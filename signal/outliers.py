@@ -1,19 +1,19 @@
-"""Which of a position's repeated shots is an outlier: modified z-scores and the level, per
-number of shots, above which one is rejected.
+"""Which of a position's repeated shots is an outlier: modified z-scores and the level, per number
+of shots, above which one is rejected.
 
 Iglewicz and Hoaglin's modified z-score, ``0.6745 |x - median| / MAD``, reads as a number of
 standard deviations on Gaussian data, and their level of 3.5 suits large samples. A lab repeats
-a shot three to ten times, and there the MAD of so few values is itself a wild estimate: on
-good shots (Gaussian, no outlier) a fixed 3.5 rejected at least one shot, on TOF or ARR, in 31 %
-of sets of 4, 37 % of 5 and 23 % of 10. Each such rejection throws away a good reading and, on
-average, narrows the stated scatter (a sample variance kept at 0.82 of the true one for sets
-of 5). So the level depends on the number of shots: it is the score that the largest of ``n``
-good shots' scores exceeds in ``1 - sqrt(0.99)`` of sets, so that a set read on two independent
+a shot three to ten times, and there the MAD of so few values is itself a wild estimate: on good
+shots (Gaussian, no outlier) a fixed 3.5 rejected at least one shot, on TOF or ARR, in 31 % of
+sets of 4, 37 % of 5 and 23 % of 10. Each such rejection throws away a good reading and, on
+average, narrows the stated scatter (a sample variance kept at 0.82 of the true one for sets of
+5). So the level depends on the number of shots: it is the score that the largest of ``n`` good
+shots' scores exceeds in ``1 - sqrt(0.99)`` of sets, so that a set read on two independent
 features loses a good shot in 1 % of sets (:data:`LEVELS`, by Monte Carlo:
-``tests/support/outlier_levels.py``). A misread shot (the reflection taken on a secondary pulse,
-a trigger's slip) lies tens to hundreds of standard deviations off and is still rejected; a
-shot a few standard deviations off, among few, stays in and widens the stated scatter instead,
-which is what its evidence supports.
+``tests/support/outlier_levels.py``). A misread shot (the reflection taken on a secondary pulse)
+lies tens to hundreds of standard deviations off and is still rejected; a shot a few standard
+deviations off, among few, stays in and widens the stated scatter instead, which is what its
+evidence supports.
 """
 
 from __future__ import annotations
@@ -50,8 +50,9 @@ absolute deviation, which no set of Gaussian values produces): Iglewicz and Hoag
 def level(n: int) -> float:
     """The modified z-score above which one of ``n`` (at least :data:`MIN_SHOTS`) shots is an
     outlier. Beyond the table, the larger of its last level and the level the MAD would need if
-    it were exact (the Gaussian's two-sided quantile for ``n`` values), which bounds the rate by
-    :data:`REJECTION_RATE` from above as n grows."""
+    it were exact (the Gaussian's two-sided quantile for ``n`` values): the rate stays under
+    :data:`REJECTION_RATE` (0.45 % at 60 shots) and tends to it as the MAD settles (from a few
+    thousand shots on)."""
     if n < MIN_SHOTS:
         raise ValueError(f"the outlier level needs at least {MIN_SHOTS} shots, got {n}")
     if n in LEVELS:
