@@ -28,7 +28,7 @@ import numpy as np
 
 from .errors import WaveformError
 from .kernels import TRUNC_SPAN
-from .outliers import FLAT_LEVEL, MIN_SHOTS, level, modified_z
+from .outliers import MIN_SHOTS, cutoff, modified_z
 from .pulses import Detection, DetectOptions, detect
 from .waveform import Waveform
 
@@ -264,15 +264,6 @@ REJECTING = {
 row names (with that feature's value, none for a series) and the reason."""
 
 
-def _level_note(outlier_z: object, flat: bool, n: int) -> str:
-    """What the rejection level of :func:`aggregate` was, for its reason."""
-    if outlier_z != "auto":
-        return " (the level asked for)"
-    if flat:
-        return " (most shots read the same value: the mean absolute deviation's level)"
-    return f" (the level 1 % of sets of {n} good shots cross)"
-
-
 def aggregate(
     features: Sequence[Features], outlier_z: float | Literal["auto"] | None = "auto",
     min_for_rejection: int = MIN_SHOTS,
@@ -315,9 +306,7 @@ def aggregate(
         for name in ("tof_s", "arr"):
             values = np.array([getattr(features[i], name) for i in with_ref])
             z, flat = modified_z(values)
-            cut = (outlier_z if outlier_z != "auto" else
-                   FLAT_LEVEL if flat else level(len(with_ref)))
-            why = f"modified z-score > {cut:.3g}{_level_note(outlier_z, flat, len(with_ref))}"
+            cut, why = cutoff(outlier_z, len(with_ref), flat)
             for i, zi, vi in zip(with_ref, z, values, strict=True):
                 if zi > cut and i not in dropped:
                     dropped.add(i)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from statistics import NormalDist
+from typing import Literal
 
 import numpy as np
 
@@ -59,6 +60,19 @@ def level(n: int) -> float:
         return LEVELS[n]
     per_value = -math.expm1(math.log1p(-PER_FEATURE_RATE) / n)
     return max(LEVELS[max(LEVELS)], NormalDist().inv_cdf(1.0 - per_value / 2.0))
+
+
+def cutoff(asked: float | Literal["auto"], n: int, flat: bool) -> tuple[float, str]:
+    """The score above which one of ``n`` shots is rejected, and the reason a rejected one
+    states: the level ``asked`` for, or with ``"auto"`` :func:`level` (:data:`FLAT_LEVEL` where
+    :func:`modified_z` fell back on the mean absolute deviation, ``flat``)."""
+    if asked != "auto":
+        return asked, f"modified z-score > {asked:.3g} (the level asked for)"
+    if flat:
+        return FLAT_LEVEL, (f"modified z-score > {FLAT_LEVEL:.3g} (most shots read the same "
+                            "value: the mean absolute deviation's level)")
+    cut = level(n)
+    return cut, f"modified z-score > {cut:.3g} (the level 1 % of sets of {n} good shots cross)"
 
 
 def modified_z(values: np.ndarray) -> tuple[np.ndarray, bool]:

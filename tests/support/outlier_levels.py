@@ -12,12 +12,12 @@ digits; the quantile's own sampling error at a million sets is about 1 %).
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
+from solitonde.signal.outliers import PER_FEATURE_RATE
+
 N_MAX = 40
-PER_FEATURE = 1.0 - math.sqrt(0.99)
 
 
 def largest_scores(rng: np.random.Generator, n: int, sets: int, chunk: int = 200_000) -> np.ndarray:
@@ -37,7 +37,7 @@ def main() -> None:
     opts = parser.parse_args()
     rng = np.random.default_rng(opts.seed)
     for n in range(4, N_MAX + 1):
-        level = float(np.quantile(largest_scores(rng, n, opts.sets), 1.0 - PER_FEATURE))
+        level = float(np.quantile(largest_scores(rng, n, opts.sets), 1.0 - PER_FEATURE_RATE))
         print(f"    {n}: {level:.3g},", flush=True)
 
 
