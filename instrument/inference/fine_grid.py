@@ -1,7 +1,8 @@
 """A table's features on the inversion's fine (log t, L) grid, and the model's (TOF, ARR) at one
 point read the same way.
 
-The table's features are interpolated in log t and in L (the axes along which TOF and ARR vary
+The table's features, with each row's near-support plate at its far-field plate's level
+(:mod:`.tier_match`), are interpolated in log t and in L (the axes along which TOF and ARR vary
 smoothly) once per table and sphere size: linearly, but TOF along thickness by a cubic spline
 where no support is in reach (:mod:`.thickness_spline`); with them the model error of each cell
 (:mod:`.model_error`) and the prior mass of each cell (uniform in log t and in L).
@@ -30,6 +31,7 @@ from solitonde.instrument.inference.thickness_spline import (
     spline_loo_variance,
     spline_runs,
 )
+from solitonde.instrument.inference.tier_match import matched_features
 from solitonde.instrument.tables.table import STATUS_NO_REFLECTION, STATUS_OK, ModelTable
 
 FINE_THICKNESS_STEPS = 32
@@ -141,8 +143,9 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
     wt = _interp_matrix(np.log(t_nodes), log_t)
     wl = _interp_matrix(l_nodes, l_f)
     ok = table.status[i_d] == STATUS_OK
-    tof = np.where(ok, table.features["tof_s"][i_d], 0.0)
-    arr = np.where(ok, table.features["arr"][i_d], 0.0)
+    tof_read, arr_read = matched_features(table, i_d)
+    tof = np.where(ok, tof_read, 0.0)
+    arr = np.where(ok, arr_read, 0.0)
     runs = spline_runs(table, i_d)
     diameter = float(table.axes["diameter_m"][i_d])
     beyond = (diameter / t_nodes > REFLECTION_D_OVER_T)[:, None]
@@ -175,7 +178,7 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
         weight_l=_cell_widths(l_f),
         floor_weight=wt @ floor @ wl.T,
         reflect_weight=(h := wt @ ok.astype(float) @ wl.T),
-        arr_reflecting=np.divide(wt @ np.where(ok, table.features["arr"][i_d], 0.0) @ wl.T, h,
+        arr_reflecting=np.divide(wt @ np.where(ok, arr_read, 0.0) @ wl.T, h,
                                  out=np.zeros_like(h), where=h > 1e-12),
     )
     table._cache[key] = grid
@@ -205,8 +208,9 @@ def predict(table: ModelTable, diameter_m: float, thickness_m: float,
     ok = table.status[i_d] == STATUS_OK
     if ((wt > 1e-12).astype(float) @ (~ok).astype(float) @ (wl > 1e-12).astype(float).T)[0, 0]:
         raise InversionError("thickness_m", "the model detects no reflection next to this point")
-    tof_n = np.where(ok, table.features["tof_s"][i_d], 0.0)
-    arr_n = np.where(ok, table.features["arr"][i_d], 0.0)
+    tof_read, arr_read = matched_features(table, i_d)
+    tof_n = np.where(ok, tof_read, 0.0)
+    arr_n = np.where(ok, arr_read, 0.0)
     runs = spline_runs(table, i_d)
     tof = float((read_columns(tof_n, wt, np.log(t_nodes), log_t, runs) @ wl.T)[0, 0])
     arr = float((wt @ arr_n @ wl.T)[0, 0])

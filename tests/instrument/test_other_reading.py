@@ -66,9 +66,12 @@ def test_a_thickness_that_fits_as_well_next_to_a_clamp_is_not_left_out(
     else:
         assert est.thickness_m.status == "constrained"
         assert _covers(est.thickness_m.ci95, t_true), est.to_dict()
-        # reached below the marginal's interval, which missed, and says why
+        # reached below the marginal's interval and says why: the 5.39 mm plate's marginal
+        # misses it; the 4.78 mm plate's, read with the Mindlin nodes at the dashpot's level,
+        # holds it by 15 um
         widened = est.extra["ridge_widened"]
-        assert widened["marginal_ci95"][0] > t_true >= widened["ci95"][0]
+        assert t_true >= widened["ci95"][0]
+        assert (widened["marginal_ci95"][0] > t_true) == (t_true > 5e-3)
     warning = next(w for w in est.warnings if w.startswith("another reading fits as well"))
     lo, hi = est.thickness_m.ci95
     assert f"{lo * 1e3:.3g}-{hi * 1e3:.3g} mm" in warning

@@ -63,13 +63,13 @@ def test_each_single_shot_of_the_scan_covers_the_plate_or_says_it_cannot_tell(pa
 
 
 def test_an_ambiguous_answer_is_printed_reading_by_reading_and_exits_0() -> None:
-    """The table's own features of a 4.99 mm plate 18.5 mm from the clamp, as the mean of five
+    """The table's own features of a 4.99 mm plate 19.5 mm from the clamp, as the mean of five
     shots: the data fit a sliver of thinner plate nearer to the clamp apart from the main
     reading. `invert` prints both readings and exits 0 (an honest answer), and one of them holds
     the plate."""
     result = CliRunner().invoke(build_cli(), [
-        "invert", "--diameter", "9.53e-3", "--tof", "5.084e-4", "--tof-std", "3e-7",
-        "--arr", "0.766", "--arr-std", "0.004", "--shots", "5", "--table", str(DEFAULT_TABLE),
+        "invert", "--diameter", "9.53e-3", "--tof", "5.090e-4", "--tof-std", "3e-7",
+        "--arr", "0.755", "--arr-std", "0.004", "--shots", "5", "--table", str(DEFAULT_TABLE),
         "--json"])
     assert result.exit_code == 0, result.output
     est = json.loads(result.output)
@@ -78,8 +78,8 @@ def test_an_ambiguous_answer_is_printed_reading_by_reading_and_exits_0() -> None
     assert any(_covers(r["thickness_m"]["ci95"], 4.99e-3) for r in est["readings"])
     assert any("another reading fits as well" in w for w in est["warnings"])
     text = CliRunner().invoke(build_cli(), [
-        "invert", "--diameter", "9.53e-3", "--tof", "5.084e-4", "--tof-std", "3e-7",
-        "--arr", "0.766", "--arr-std", "0.004", "--shots", "5", "--table", str(DEFAULT_TABLE)])
+        "invert", "--diameter", "9.53e-3", "--tof", "5.090e-4", "--tof-std", "3e-7",
+        "--arr", "0.755", "--arr-std", "0.004", "--shots", "5", "--table", str(DEFAULT_TABLE)])
     assert text.exit_code == 0
     assert "thickness: AMBIGUOUS" in text.output
     assert "reading 1 (weight" in text.output and "reading 2 (weight" in text.output
