@@ -29,6 +29,8 @@ from solitonde.instrument.inference.material_spread import (
     spread_of,
     spread_source,
 )
+from solitonde.instrument.inference.tier_match import TierMatchRow
+from solitonde.instrument.inference.tier_match import summary as tier_summary
 from solitonde.instrument.service.settings import DEFAULT_TABLE
 from solitonde.instrument.tables.sweep import (
     PAPER_DIAMETERS_M,
@@ -238,6 +240,7 @@ class TableInfo(TableSummary):
     the spread comes from)."""
 
     material_spread: dict[str, float | str]
+    tier_match: list[TierMatchRow]
 
 
 def info_command(
@@ -251,7 +254,8 @@ def info_command(
         _fail(str(exc))
         return
     spread, source = spread_of(table), spread_source(table)
-    data: TableInfo = {**table.summary(), "material_spread": {**spread, "source": source}}
+    data: TableInfo = {**table.summary(), "material_spread": {**spread, "source": source},
+                       "tier_match": tier_summary(table)}
     if as_json:
         typer.echo(json.dumps(data, indent=2))
         return
@@ -262,6 +266,13 @@ def info_command(
         typer.echo(f"  {name}: {axis['n']} values, mm: {vals}")
     typer.echo(f"  status: {data['status_counts']}")
     typer.echo(f"  plate models: {data['plate_models']}")
+    for row in data["tier_match"]:
+        typer.echo(f"  tier levels, D {row['diameter_m'] * 1e3:.4g} mm: " + (
+            f"{row['rows_matched']} of {row['rows']} rows' meshed nodes read at the dashpot's "
+            f"level where the two meet (TOF x{row['tof_factor'][0]:.4f}-"
+            f"{row['tof_factor'][1]:.4f}, ARR x{row['arr_factor'][0]:.4f}-"
+            f"{row['arr_factor'][1]:.4f})" if row["tof_factor"] and row["arr_factor"] else
+            "no row matched (as simulated)"))
     layer = data["dissipation_layer"]
     typer.echo("  dissipation layer: " + ("none (`solitonde table dissipation` adds one)"
                                           if layer is None else

@@ -10,11 +10,14 @@ step the 2-D plate's error cannot explain, or whose reflection is weak, keeps it
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 from table_points import simulated_at
+from typer.testing import CliRunner
 
+from solitonde.instrument.cli.main import build_app as build_cli
 from solitonde.instrument.inference.fine_grid import fine_grid, predict
 from solitonde.instrument.inference.model_error import (
     FLOOR_ARR_MAX,
@@ -93,6 +96,38 @@ def test_a_step_the_plate_error_cannot_explain_is_left_alone(table):
     np.testing.assert_array_equal(row_factors(beyond, i_d)[i_t], [1.0, 1.0])
     np.testing.assert_array_equal(matched_features(beyond, i_d)[1][i_t],
                                   beyond.features["arr"][i_d, i_t])
+    # a step the other way (the dashpot's ARR below the Mindlin plate's) is not the 2-D plate's
+    other_way = _with_step(table, i_d, i_t, (1.0 - 0.5 * MATCH_ARR_REL_MAX) / base)
+    np.testing.assert_array_equal(row_factors(other_way, i_d)[i_t], [1.0, 1.0])
+
+
+def test_the_bundled_small_spheres_reversed_steps_keep_their_levels(table):
+    """4.76 mm spheres on 4.55 and 4.99 mm plates: the dashpot's ARR sits below the Mindlin
+    plate's where they meet, while the 3-D plate's sits above it (0.78 % at 30 mm, 0.74 % at
+    50 mm): the dashpot's own error, which a match would carry to the support."""
+    i_d = table.diameter_index(4.76e-3)
+    factors = row_factors(table, i_d)
+    for thickness in (4.547e-3, 4.987e-3):
+        i_t = int(np.argmin(abs(table.axes["thickness_m"] - thickness)))
+        a, b = _boundary(table, i_d, i_t)
+        step = table.features["arr"][i_d, i_t, b] / table.features["arr"][i_d, i_t, a]
+        assert 1.0 - MATCH_ARR_REL_MAX < step < 1.0  # within the error, the other way
+        np.testing.assert_array_equal(factors[i_t], [1.0, 1.0])
+
+
+def test_table_info_says_which_rows_are_read_at_the_dashpots_level(table):
+    runner = CliRunner()
+    text = runner.invoke(build_cli(), ["table", "info", str(bundled.default_table())])
+    assert text.exit_code == 0, text.output
+    assert ("tier levels, D 9.53 mm: 7 of 16 rows' meshed nodes read at the dashpot's level"
+            in text.output)
+    assert "tier levels, D 19.05 mm: no row matched" in text.output
+    data = json.loads(runner.invoke(build_cli(), ["table", "info", "--json",
+                                                  str(bundled.default_table())]).output)
+    (row,) = [r for r in data["tier_match"] if r["diameter_m"] == DIAMETER_M]
+    factors = row_factors(table, table.diameter_index(DIAMETER_M))
+    assert row["rows_matched"] == int((factors != 1.0).any(axis=1).sum()) == 7
+    assert row["tof_factor"][1] < 1.0 < row["arr_factor"][0]
 
 
 def test_a_weak_reflection_keeps_its_levels(table):
