@@ -28,13 +28,13 @@ Only a step the 2-D plate's own offset explains is matched: the dashpot's TOF sh
 higher, as the 3-D plate's are, by at most twice the 2-D plate's error
 (:data:`~.model_error.PLATE_THEORY_TOF_REL_STD`, ``..._ARR_REL_STD``), where the reflection is a
 clear pulse at both nodes (ARR at least :data:`~.model_error.FLOOR_ARR_MAX`). A step the other way
-is the dashpot's own error: with 4.76 mm spheres on 4.55 and 4.99 mm plates (D/t about 1, where
-Zener's single sphere leaves out the plate's local give) the dashpot's ARR sits 0.7-1.1 % below the
-Mindlin plate's, while the 3-D plate's sits 0.7-0.8 % above it, as at 3.14 mm, where the step has
-the usual sign and the match brings the read to 0.3 % of the 3-D plate. Between weaker reflections
-the step wanders in sign from row to row (a weak pulse's shape, not the plate's offset: the 3-D
-plate at 2.61 mm, 30 mm read ARR 2.4 % above the Mindlin node where that row's step says 1 %
-below), so such rows keep their levels. The 2-D plate's error term stays in full on every meshed
+is not the plate's offset: with 4.76 mm spheres on 4.55 and 4.99 mm plates it is measured from a
+last Mindlin node (80 mm) that stands 1.5-2 % above the row's flat part (55-70 mm; against that part
+the step has the usual sign), and the 3-D plate at 30 mm reads the dashpot's level (ARR 0.8372
+against 0.8377), so matching to that node would move the read away from it. Between weaker
+reflections the step wanders in sign from row to row (a weak pulse's shape, not the plate's offset:
+the 3-D plate at 2.61 mm, 30 mm read ARR 2.4 % above the Mindlin node where that row's step says 1
+% below), so such rows keep their levels. The 2-D plate's error term stays in full on every meshed
 node: it covers what the match leaves (at the draws' extremes 0.4 of the step in TOF and 1.4 in
 ARR) and the rows it does not match.
 """
