@@ -78,9 +78,7 @@ def node_variances(table: ModelTable, i_d: int, tof: np.ndarray, arr: np.ndarray
     error at nodes simulated on it, and the table's own variance at nodes with features
     (``has``: measured, or filled in at the floor)."""
     t_nodes, l_nodes = table.axes["thickness_m"], table.axes["distance_m"]
-    two_d = np.isin(table.plate_model[i_d], [table.plate_model_names.index(name)
-                                             for name in MINDLIN_PLATE_MODELS
-                                             if name in table.plate_model_names])
+    two_d = table.simulated_on(i_d, MINDLIN_PLATE_MODELS)
     log_t = np.log(t_nodes)
     along_t = spline_loo_variance(tof, log_t, spline_runs(table, i_d))
     tof_var = (node_variance(tof, ok, log_t, l_nodes, along_t)

@@ -41,9 +41,7 @@ def spline_runs(table: ModelTable, i_d: int) -> np.ndarray:
     key = f"spline_runs:{i_d}"
     if (cached := table._cache.get(key)) is not None:
         return cached
-    smooth_codes = [table.plate_model_names.index(name) for name in SMOOTH_PLATE_MODELS
-                    if name in table.plate_model_names]
-    smooth = np.isin(table.plate_model[i_d], smooth_codes) & (table.status[i_d] == STATUS_OK)
+    smooth = table.simulated_on(i_d, SMOOTH_PLATE_MODELS) & (table.status[i_d] == STATUS_OK)
     runs = np.zeros((smooth.shape[1], 2), dtype=int)
     for j in range(smooth.shape[1]):
         best, start = (0, 0), None

@@ -64,10 +64,6 @@ RAMP_END = 3.0
 """The step is applied from L = RAMP_START t, in full from L = RAMP_END t (:func:`ramp`)."""
 
 
-def _indices(table: ModelTable, names: tuple[str, ...]) -> list[int]:
-    return [table.plate_model_names.index(n) for n in names if n in table.plate_model_names]
-
-
 def row_factors(table: ModelTable, i_d: int) -> np.ndarray:
     """(n_t, 2): the factors on TOF and ARR of each thickness row's meshed nodes for sphere size
     ``i_d``; 1 where the row is not matched (no step between adjacent meshed and far nodes that
@@ -79,8 +75,8 @@ def row_factors(table: ModelTable, i_d: int) -> np.ndarray:
         return cached
     factors = np.ones((table.axes["thickness_m"].size, 2))
     ok = table.status[i_d] == STATUS_OK
-    meshed = np.isin(table.plate_model[i_d], _indices(table, MESHED_MODELS)) & ok
-    far = np.isin(table.plate_model[i_d], _indices(table, FAR_MODELS)) & ok
+    meshed = table.simulated_on(i_d, MESHED_MODELS) & ok
+    far = table.simulated_on(i_d, FAR_MODELS) & ok
     tof, arr = table.features["tof_s"][i_d], table.features["arr"][i_d]
     for i in range(factors.shape[0]):
         near, beyond = np.flatnonzero(meshed[i]), np.flatnonzero(far[i])
@@ -110,7 +106,7 @@ def matched_features(table: ModelTable, i_d: int) -> tuple[np.ndarray, np.ndarra
     if cached is not None:
         return cached
     factors = row_factors(table, i_d)
-    meshed = np.isin(table.plate_model[i_d], _indices(table, MESHED_MODELS))
+    meshed = table.simulated_on(i_d, MESHED_MODELS)
     share = np.where(meshed, ramp(table.axes["distance_m"][None, :]
                                   / table.axes["thickness_m"][:, None]), 0.0)
     tof = table.features["tof_s"][i_d] * (1.0 + share * (factors[:, :1] - 1.0))

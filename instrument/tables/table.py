@@ -28,7 +28,7 @@ import itertools
 import json
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypedDict
@@ -354,6 +354,12 @@ class ModelTable:
             )
             table._cache["sha256"] = digest
             return table
+
+    def simulated_on(self, i_d: int, models: Sequence[str]) -> np.ndarray:
+        """(n_t, n_l) mask of sphere size ``i_d``'s nodes simulated on one of the plate
+        ``models`` (names of :attr:`plate_model_names`; names the table lacks match nothing)."""
+        codes = [self.plate_model_names.index(m) for m in models if m in self.plate_model_names]
+        return np.isin(self.plate_model[i_d], codes)
 
     def diameter_index(self, diameter: float, rel_tol: float = 0.01) -> int:
         """Index of ``diameter`` (m) on the diameter axis.
