@@ -211,10 +211,10 @@ def test_sensor_only_sampling_matches_traces(data):
     velocities when damped); with traces every particle. Readings, peaks, the energy balance and
     the drift are the same either way, to rounding.
 
-    Readings and balance are compared to 1e-11 of their scale, five decades below the drift the integrator
-    itself makes here (5e-6): the two runs are bit-equal on most machines, but one CI machine
-    gave a 2e-13 relative difference in the balance, which is rounding in the state, not a
-    change of the solve."""
+    Readings and balance are compared to 1e-11 of their scale, five decades below the drift
+    the integrator itself makes here (5e-6): the two runs are bit-equal on most machines, but
+    one CI machine gave a 2e-13 relative difference in the balance, which is rounding in the
+    state, not a change of the solve."""
     off = _dopri(data, 1e-7)
     on = _dopri({**data, "output": {"traces": True}}, 1e-7)
     np.testing.assert_allclose(off.samples, on.samples, rtol=0, atol=1e-11 * on.samples.max())
