@@ -1,6 +1,6 @@
 """Vectorised extrema of float arrays: ``llvm.maxnum``/``llvm.minnum`` as numba intrinsics, and the
-largest, smallest and first-largest of an array with them (numba's own ``max`` does not
-vectorise). Used by :mod:`.kernels` and :mod:`.robust`.
+largest, smallest, first-largest and first-smallest of an array with them (numba's own ``max``
+does not vectorise). Used by :mod:`.kernels` and :mod:`.robust`.
 """
 
 from __future__ import annotations
@@ -71,6 +71,16 @@ def vmin(a: np.ndarray) -> float:
 def vargmax(a: np.ndarray) -> int:
     """Index of the first largest value, as ``np.argmax`` (vectorised maximum, then a scan)."""
     m = vmax(a)
+    i = 0
+    while a[i] != m:
+        i += 1
+    return i
+
+
+@njit(cache=True, inline="always")
+def vargmin(a: np.ndarray) -> int:
+    """Index of the first smallest value, as ``np.argmin`` (vectorised minimum, then a scan)."""
+    m = vmin(a)
     i = 0
     while a[i] != m:
         i += 1

@@ -43,6 +43,7 @@ def test_extrema_equal_numpy(n):
         assert K.vmax(x) == x.max()
         assert K.vmin(x) == x.min()
         assert K.vargmax(x) == int(np.argmax(x))  # first of equal maxima, as numpy
+        assert K.vargmin(x) == int(np.argmin(x))
 
 
 @pytest.mark.parametrize("n", [40, 41, 333, 5000])
