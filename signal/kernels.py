@@ -137,7 +137,7 @@ def first_invalid(x: np.ndarray) -> int:
     return i
 
 
-SKIP_BLOCK = 16
+SKIP_BLOCK = 32
 """Samples the peak search tests at once before walking them one by one."""
 
 
