@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .extrema import vargmax
 from .pulse_fit import solve_spd
 
 LADDER = (0.005, 0.02, 0.08, 0.25)
@@ -57,34 +58,38 @@ def pre_impact_baseline(y: np.ndarray, n_pre: int) -> np.ndarray:
         return out
     m = float(n_pre)
     mean_i = 0.5 * (m - 1.0)
+    # Each sum is added in sample order; sums that share a loop are independent chains of
+    # additions, which run side by side.
     sy = 0.0
+    sxx = 0.0
     for i in range(n_pre):
         sy += y[i]
-    mean_y = sy / m
-    sxx = 0.0
-    sxy = 0.0
-    for i in range(n_pre):
         d = i - mean_i
         sxx += d * d
-        sxy += d * (y[i] - mean_y)
+    mean_y = sy / m
+    sxy = 0.0
+    for i in range(n_pre):
+        sxy += (i - mean_i) * (y[i] - mean_y)
     slope = sxy / sxx
     rss = 0.0
-    for i in range(n_pre):
+    acc = 0.0  # the squared means of the residuals over whole blocks
+    blocks = n_pre // NOISE_BLOCK
+    for k in range(blocks):
+        bm = 0.0
+        for i in range(k * NOISE_BLOCK, (k + 1) * NOISE_BLOCK):
+            e = y[i] - mean_y - slope * (i - mean_i)
+            rss += e * e
+            bm += e
+        bm /= NOISE_BLOCK
+        acc += bm * bm
+    for i in range(blocks * NOISE_BLOCK, n_pre):
         e = y[i] - mean_y - slope * (i - mean_i)
         rss += e * e
     se = np.sqrt(rss / (m - 2.0) / sxx)
     out[2] = 1.0
     white = rss / (m - 2.0)
-    blocks = n_pre // NOISE_BLOCK
     coloured = white
     if blocks >= 4:
-        acc = 0.0
-        for k in range(blocks):
-            bm = 0.0
-            for i in range(k * NOISE_BLOCK, (k + 1) * NOISE_BLOCK):
-                bm += y[i] - mean_y - slope * (i - mean_i)
-            bm /= NOISE_BLOCK
-            acc += bm * bm
         coloured = max(white, NOISE_BLOCK * acc / blocks)
     out[3] = np.sqrt(coloured)
     if abs(slope) > SLOPE_SIGMAS * se:
@@ -296,10 +301,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     # A reflection split in two humps: the ladder follows the template into one of them, the
     # other may be higher. A narrowest window on the pulse's highest sample that reads a clearly
     # higher top replaces the narrow rungs.
-    top_i = lo
-    for i in range(lo, hi + 1):
-        if y[i] > y[top_i]:
-            top_i = i
+    top_i = lo + vargmax(y[lo : hi + 1])
     first = 0
     while first < nl and est[first, 4] == 0:
         first += 1
