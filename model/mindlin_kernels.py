@@ -288,9 +288,14 @@ def _mindlin_44(u: np.ndarray, conn: np.ndarray, geom: np.ndarray, dx: np.ndarra
     ue = np.zeros(3 * nen * lanes)
     f = np.zeros(9 * nen * lanes)
     cst = np.ones(3 * lanes + 3 * nen)
-    cst[3 * lanes:3 * lanes + nen] = dx.ravel()
-    cst[3 * lanes + nen:3 * lanes + 2 * nen] = dy.ravel()
-    cst[3 * lanes + 2 * nen:] = w2
+    for i in range(n1):
+        for m in range(n1):
+            cst[3 * lanes + n1 * i + m] = dx[i, m]
+    for j in range(n2):
+        for m in range(n2):
+            cst[3 * lanes + nen + n2 * j + m] = dy[j, m]
+    for a in range(nen):
+        cst[3 * lanes + 2 * nen + a] = w2[a]
     ne = conn.shape[0]
     for e0 in range(0, ne, lanes):
         nb = min(lanes, ne - e0)
