@@ -12,6 +12,11 @@ with k_xx = theta_x,x, k_yy = theta_y,y, k_xy = theta_x,y + theta_y,x, and appli
 derivatives. That is (Ku) = B^T C B u of the element matrices in :mod:`solitonde.model.mindlin`,
 at about 1,700 multiply-adds per element of order 4 instead of 5,625 for the dense 75 x 75
 matrix.
+
+Order [4, 4] (every mesh the tiers build) has a kernel of its own that runs these operations on
+16 elements at a time, each lane of a vector one element, and adds the results onto the nodes
+element by element in order: the same result, bit for bit, as one element at a time, 2.5-3.5
+times faster with AVX-512 (1.6 with SSE2 alone). Other orders go one element at a time.
 """
 
 from __future__ import annotations
@@ -184,6 +189,8 @@ def _resultants_block(ue: np.ndarray, cst: np.ndarray, bend: float, nu: float, s
     half = 0.5 * (1.0 - nu)
     for j in range(n2):
         for i in range(n1):
+            # a from the loop indices, not a running count: the compiler then sees the lane
+            # loop's indices as affine and non-negative, and vectorises it
             a = n1 * j + i
             q = 3 * a * lanes
             for el in range(lanes):
@@ -276,9 +283,10 @@ def _mindlin_44(u: np.ndarray, conn: np.ndarray, geom: np.ndarray, dx: np.ndarra
     the issue of its ~1,700 scalar multiply-adds per element).
 
     Work arrays hold one row of ``LANES`` values per quantity: ``ue`` the block's 75 dofs (then
-    its results), ``f`` the resultants fx, fy and fq (75 rows each, fq in rows 3 a + 1 and
-    3 a + 2, beside the dofs theta it meets), ``cst`` [rx, ry, jac] per lane, then dx, dy, w2.
-    Each lane loop reads two arrays and writes a third: few run-time overlap checks.
+    its results), ``f`` the resultants fx, fy and fq (75 rows each; fq in rows 3 a + 1 and
+    3 a + 2, so that all of a node's stores lie at fixed distances, which the compiler can
+    check), ``cst`` [rx, ry, jac] per lane, then dx, dy and w2. Each lane loop reads two arrays
+    and writes a third: few run-time overlap checks.
     """
     n1 = 5
     n2 = 5
@@ -287,7 +295,7 @@ def _mindlin_44(u: np.ndarray, conn: np.ndarray, geom: np.ndarray, dx: np.ndarra
     # zeros: a short last block computes on finite values that it never scatters
     ue = np.zeros(3 * nen * lanes)
     f = np.zeros(9 * nen * lanes)
-    cst = np.ones(3 * lanes + 3 * nen)
+    cst = np.ones(3 * lanes + 3 * nen)  # by loops: numba compiles a slice copy for seconds
     for i in range(n1):
         for m in range(n1):
             cst[3 * lanes + n1 * i + m] = dx[i, m]
