@@ -141,6 +141,14 @@ def _poly(p: np.ndarray, i: int, x: float) -> float:
     return p[0, i] + x * (p[1, i] + x * (p[2, i] + x * (p[3, i] + x * p[4, i])))
 
 
+@njit(cache=True, inline="always")
+def _difference(p: np.ndarray, i: int, j: int) -> tuple[float, float, float, float, float]:
+    """Coefficients (powers of theta) of component i minus component j of the dense output ``p``
+    (5 x M): the polynomial of an overlap or an approach rate, one Horner chain instead of two."""
+    return (p[0, i] - p[0, j], p[1, i] - p[1, j], p[2, i] - p[2, j], p[3, i] - p[3, j],
+            p[4, i] - p[4, j])
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _sample_sensor(
     p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
@@ -149,35 +157,44 @@ def _sample_sensor(
     """Sensor readings of samples k0 .. k0 + cnt - 1 at step fractions ``th[:cnt]`` (``a_up``:
     the constant of the sensor's upper contact, the striker's when the sensor is particle 1).
 
-    Evaluates only what a reading needs (traces off): the positions of particles sensor - 1,
-    sensor, sensor + 1 (the bottom contact instead when the sensor is particle N), u[N] and w
-    for the bottom force (into ``f_bot[:cnt]``, for the peak tracker), and the velocities of the
-    sensor's neighbours only when the contacts are damped (tau > 0).
+    Evaluates only what a reading needs (traces off): the overlaps of the sensor's two contacts
+    (the lower one the bottom contact when the sensor is particle N) and of the bottom contact
+    (into ``f_bot[:cnt]``, for the peak tracker), and the approach rates of the sensor's contacts
+    only when they are damped (tau > 0). Each is one polynomial in theta, the difference of two
+    components' coefficients, taken once per step; the loops over the samples then have no
+    branches and vectorise.
     """
     np1 = n + 1
     iw = 2 * np1
     up = sensor - 1
     last = sensor == n
-    damped = tau > 0.0
-    for s in range(cnt):
-        x = th[s]
-        fb = hertz(a_b, _poly(p, n, x) - _poly(p, iw, x))
-        u_up = _poly(p, up, x)
-        u_mid = _poly(p, sensor, x)
-        rate_up = 0.0
-        if damped:
-            v_mid = _poly(p, np1 + sensor, x)
-            rate_up = _poly(p, np1 + up, x) - v_mid
-        above = sphere_contact(a_up, tau, u_up - u_mid, rate_up)
-        if last:
-            below = fb
-        else:
-            rate_dn = 0.0
-            if damped:
-                rate_dn = v_mid - _poly(p, np1 + sensor + 1, x)
-            below = sphere_contact(a_s, tau, u_mid - _poly(p, sensor + 1, x), rate_dn)
-        samples[k0 + s] = 0.5 * (above + below)
-        f_bot[s] = fb
+    a_dn = a_b if last else a_s
+    b0, b1, b2, b3, b4 = _difference(p, n, iw)  # u[N] - w
+    c0, c1, c2, c3, c4 = _difference(p, up, sensor)  # the contact above the sensor
+    d0, d1, d2, d3, d4 = _difference(p, sensor, iw if last else sensor + 1)  # the one below
+    if tau > 0.0:
+        r0, r1, r2, r3, r4 = _difference(p, np1 + up, np1 + sensor)
+        q0, q1, q2, q3, q4 = 0.0, 0.0, 0.0, 0.0, 0.0
+        if not last:
+            q0, q1, q2, q3, q4 = _difference(p, np1 + sensor, np1 + sensor + 1)
+        # The bottom contact is elastic: at rate 0 the Kuwabara-Kono force is Hertz's exactly.
+        for s in range(cnt):
+            x = th[s]
+            fb = hertz(a_b, b0 + x * (b1 + x * (b2 + x * (b3 + x * b4))))
+            above = kuwabara_kono(a_up, tau, c0 + x * (c1 + x * (c2 + x * (c3 + x * c4))),
+                                  r0 + x * (r1 + x * (r2 + x * (r3 + x * r4))))[0]
+            below = kuwabara_kono(a_dn, tau, d0 + x * (d1 + x * (d2 + x * (d3 + x * d4))),
+                                  q0 + x * (q1 + x * (q2 + x * (q3 + x * q4))))[0]
+            samples[k0 + s] = 0.5 * (above + below)
+            f_bot[s] = fb
+    else:
+        for s in range(cnt):
+            x = th[s]
+            fb = hertz(a_b, b0 + x * (b1 + x * (b2 + x * (b3 + x * b4))))
+            above = hertz(a_up, c0 + x * (c1 + x * (c2 + x * (c3 + x * c4))))
+            below = hertz(a_dn, d0 + x * (d1 + x * (d2 + x * (d3 + x * d4))))
+            samples[k0 + s] = 0.5 * (above + below)
+            f_bot[s] = fb
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -464,60 +481,71 @@ def _track_indices(n: int, sensor: int) -> np.ndarray:
 
 
 @njit(**_STEP)
+def _grown(
+    hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The step history at twice its capacity, its steps copied."""
+    n_hist = hist_t.size
+    grown_t = np.empty(2 * n_hist)
+    grown_h = np.empty(2 * n_hist)
+    grown_c = np.empty((2 * n_hist, 5, _TRACK))
+    grown_t[:n_hist] = hist_t
+    grown_h[:n_hist] = hist_h
+    grown_c[:n_hist] = hist_c
+    return grown_t, grown_h, grown_c
+
+
+@njit(**_STEP)
 def _keep(
     hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray, n_hist: int, t: float, h: float,
     rc: np.ndarray, track_idx: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Append step (t, h) and its tracked dense-output components; returns the (possibly grown)
-    history arrays."""
-    cap = hist_t.size
-    if n_hist == cap:
-        cap *= 2
-        grown_t = np.empty(cap)
-        grown_h = np.empty(cap)
-        grown_c = np.empty((cap, 5, _TRACK))
-        grown_t[:n_hist] = hist_t[:n_hist]
-        grown_h[:n_hist] = hist_h[:n_hist]
-        grown_c[:n_hist] = hist_c[:n_hist]
-        hist_t, hist_h, hist_c = grown_t, grown_h, grown_c
+) -> None:
+    """Store step (t, h) and its tracked dense-output components as entry ``n_hist`` (below
+    the history's capacity, see :func:`_grown`)."""
     hist_t[n_hist] = t
     hist_h[n_hist] = h
     for c in range(_TRACK):
         for p in range(5):
             hist_c[n_hist, p, c] = rc[p, track_idx[c]]
-    return hist_t, hist_h, hist_c
 
 
 @njit(**_STEP)
 def _emit(
-    rec: ChainRecord, pw: np.ndarray, th: np.ndarray, scratch: np.ndarray, n: int,
-    first: int, stop: int, t: float, h: float, last: bool, interval: float, n_samples: int,
-    e_prev: float, e_new: float,
+    pw: np.ndarray, th: np.ndarray, scratch: np.ndarray, f_bot: np.ndarray, first: int,
+    stop: int, t: float, h: float, last: bool, interval: float, n_samples: int, e_prev: float,
+    e_new: float, n: int, a_s: float, a_b: float, tau: float, sensor: int, a_0: float,
+    samples: np.ndarray, energy: np.ndarray, pk: np.ndarray, u_trace: np.ndarray,
+    v_trace: np.ndarray, f_trace: np.ndarray, w_trace: np.ndarray,
 ) -> int:
     """Samples first .. stop - 1 from the step [t, t + h] (dense output ``pw``), in blocks of at
     most _BLOCK; the energy balance interpolated between the step ends. Returns the sample index
-    at which a reading was not finite (+1), or 0 when all were."""
-    traces = rec.u_trace.shape[0] > 0
-    f_bot = scratch[scratch.shape[0] - 1]
+    at which a reading was not finite (+1), or 0 when all were.
+
+    Takes the record's arrays one by one, not the record: each use of a field of the record
+    inside the loops would take and drop a reference to its array (two atomic operations per
+    sample, about half the sampling's cost when measured).
+    """
+    traces = u_trace.shape[0] > 0
+    a_up = a_0 if sensor == 1 else a_s
     next_k = first
     while next_k < stop:
         cnt = min(stop - next_k, _BLOCK)
         for c in range(cnt):
-            kk = next_k + c
-            th[c] = 1.0 if (last and kk == n_samples - 1) else (kk * interval - t) / h
+            th[c] = ((next_k + c) * interval - t) / h
+        if last and next_k + cnt == n_samples:
+            th[cnt - 1] = 1.0  # the run's last sample is the last step's end
         if traces:
-            _sample_block(pw, th, cnt, next_k, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
-                          scratch, rec.samples, rec.u_trace, rec.v_trace, rec.f_trace,
-                          rec.w_trace, rec.a_0)
+            _sample_block(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, scratch, samples,
+                          u_trace, v_trace, f_trace, w_trace, a_0)
         else:
-            _sample_sensor(pw, th, cnt, next_k, n, rec.a_s, rec.a_b, rec.tau, rec.sensor,
-                           rec.samples, f_bot, rec.a_0 if rec.sensor == 1 else rec.a_s)
+            _sample_sensor(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, samples, f_bot, a_up)
+        for c in range(cnt):
+            energy[next_k + c] = (1.0 - th[c]) * e_prev + th[c] * e_new
         for c in range(cnt):
             kk = next_k + c
-            rec.energy[kk] = (1.0 - th[c]) * e_prev + th[c] * e_new
-            if not np.isfinite(rec.samples[kk]):
+            if not np.isfinite(samples[kk]):
                 return kk + 1
-            track_peaks(rec.pk, kk * interval, interval, rec.samples[kk], f_bot[c])
+            track_peaks(pk, kk * interval, interval, samples[kk], f_bot[c])
         next_k += cnt
     return 0
 
@@ -571,14 +599,18 @@ def integrate_dopri5(  # noqa: C901
     accepted steps, rejected steps, right-hand-side evaluations, largest |balance - start| over
     the step ends J).
     """
+    # The record's fields once, into locals: the loop below reads only these.
     u, v, u0, m, g, a_s, a_b = rec.u, rec.v, rec.u0, rec.m, rec.g, rec.a_s, rec.a_b
+    tau, sensor, m0, a_0 = rec.tau, rec.sensor, rec.m0, rec.a_0
+    samples, energy, pk = rec.samples, rec.energy, rec.pk
+    u_trace, v_trace, f_trace, w_trace = rec.u_trace, rec.v_trace, rec.f_trace, rec.w_trace
+    traces = u_trace.shape[0] > 0
     n = u.size - 1
     np1 = n + 1
     size = 2 * np1 + 3
-    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, rec.tau, rec.a_0 / a_s,
-              1.0 / rec.m0)
+    ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, tau, a_0 / a_s, 1.0 / m0)
     t_end = (n_samples - 1) * interval
-    atol = _tolerances(u, v, rec.m0, rec.a_0, rtol)  # the striker: the largest speed
+    atol = _tolerances(u, v, m0, a_0, rtol)  # the striker: the largest speed
 
     y = np.empty(size)
     y[:np1] = u
@@ -592,10 +624,10 @@ def integrate_dopri5(  # noqa: C901
     rc = np.empty((5, size))
     pw = np.empty((5, size))
     th = np.empty(_BLOCK)
-    scratch = np.empty((10 if rec.u_trace.shape[0] > 0 else 1, _BLOCK))
+    scratch = np.empty((10 if traces else 1, _BLOCK))
     f_bot = scratch[scratch.shape[0] - 1]
     f = np.empty(max(n, 1))
-    track_idx = _track_indices(n, rec.sensor)
+    track_idx = _track_indices(n, sensor)
     hist_t = np.empty(256)
     hist_h = np.empty(256)
     hist_c = np.empty((256, 5, _TRACK))
@@ -611,21 +643,21 @@ def integrate_dopri5(  # noqa: C901
         for j in range(1, 5):
             pw[j, i] = 0.0
     th[0] = 0.0
-    if rec.u_trace.shape[0] > 0:
-        _sample_block(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, scratch, rec.samples,
-                      rec.u_trace, rec.v_trace, rec.f_trace, rec.w_trace, rec.a_0)
+    if traces:
+        _sample_block(pw, th, 1, 0, n, a_s, a_b, tau, sensor, scratch, samples, u_trace,
+                      v_trace, f_trace, w_trace, a_0)
     else:
-        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, rec.tau, rec.sensor, rec.samples, f_bot,
-                       rec.a_0 if rec.sensor == 1 else a_s)
-    e_start = _balance(y, n, u0, m, g, a_s, a_b, rec.m0, rec.a_0)
-    rec.energy[0] = e_start
+        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, tau, sensor, samples, f_bot,
+                       a_0 if sensor == 1 else a_s)
+    e_start = _balance(y, n, u0, m, g, a_s, a_b, m0, a_0)
+    energy[0] = e_start
     e_prev = e_start
     deviation = 0.0
-    if not (np.isfinite(rec.samples[0]) and np.isfinite(e_start)):
+    if not (np.isfinite(samples[0]) and np.isfinite(e_start)):
         return RUN_NONFINITE, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
     if n_samples == 1:
-        rec.pk[PK_BOT_F] = f_bot[0]
-        rec.pk[PK_BOT_T] = 0.0
+        pk[PK_BOT_F] = f_bot[0]
+        pk[PK_BOT_T] = 0.0
         return RUN_OK, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
 
     h = _initial_step(ode, f, y, k0, y1, k1, atol, rtol, t_end)
@@ -692,11 +724,13 @@ def integrate_dopri5(  # noqa: C901
 
         # Accepted: dense output of [t, t + h], kept for the peak refinement.
         _dense_coefficients(y, y1, h, k0, k2, k3, k4, k5, k6, rc, size)
-        hist_t, hist_h, hist_c = _keep(hist_t, hist_h, hist_c, n_hist, t, h, rc, track_idx)
+        if n_hist == hist_t.size:  # grown apart from the store: a rare branch
+            hist_t, hist_h, hist_c = _grown(hist_t, hist_h, hist_c)
+        _keep(hist_t, hist_h, hist_c, n_hist, t, h, rc, track_idx)
         n_hist += 1
 
         t_new = t_end if last else t + h
-        e_new = _balance(y1, n, u0, m, g, a_s, a_b, rec.m0, rec.a_0)
+        e_new = _balance(y1, n, u0, m, g, a_s, a_b, m0, a_0)
         if not np.isfinite(e_new):
             return (RUN_NONFINITE, next_k, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
                     accepted + 1, rejected, nfev, deviation)
@@ -708,8 +742,9 @@ def integrate_dopri5(  # noqa: C901
             stop += 1
         if stop > next_k:
             _powers(rc, pw)
-            bad = _emit(rec, pw, th, scratch, n, next_k, stop, t, h, last, interval, n_samples,
-                        e_prev, e_new)
+            bad = _emit(pw, th, scratch, f_bot, next_k, stop, t, h, last, interval, n_samples,
+                        e_prev, e_new, n, a_s, a_b, tau, sensor, a_0, samples, energy, pk,
+                        u_trace, v_trace, f_trace, w_trace)
             if bad > 0:
                 return (RUN_NONFINITE, bad, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
                         accepted + 1, rejected, nfev, deviation)
@@ -733,7 +768,7 @@ def integrate_dopri5(  # noqa: C901
     for i in range(np1):
         u[i] = y[i]
         v[i] = y[np1 + i]
-    if not rec.pk[PK_BOT_F] >= 0.0:
+    if not pk[PK_BOT_F] >= 0.0:
         return (RUN_NONFINITE, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted,
                 rejected, nfev, deviation)
     _refine_peaks(rec, interval, t_end, hist_t, hist_h, hist_c, n_hist, n)
