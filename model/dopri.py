@@ -45,7 +45,7 @@ from math import exp, log, sqrt
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import literal_unroll, njit
 
 from .chain import (
     PK_BOT_F,
@@ -91,6 +91,13 @@ EXPO = 0.2 - 0.75 * BETA
 #: but not "no NaN/inf", so the finiteness checks stay meaningful.
 FASTMATH = {"reassoc", "contract", "nsz"}
 
+# Rows of the driver's work array (see integrate_dopri5): the state and its 5th-order update,
+# the stages k0 .. k6, atol, the dense output in Hairer's form (_RC, 5 rows) and in powers of
+# theta (_PW, 5 rows), a block's step fractions, sensor readings and bottom forces, and the RHS's
+# scratch (the last row).
+_Y, _Y1, _K0, _K1, _K2, _K3, _K4, _K5, _K6, _ATOL = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+_RC, _PW, _TH, _OUT, _FBOT, _F, _ROWS = 10, 15, 20, 21, 22, 23, 24
+
 # Samples evaluated together (see _sample_block).
 _BLOCK = 64
 
@@ -100,39 +107,43 @@ _TRACK = 8
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _rhs(
-    y: np.ndarray, n: int, inv_m: float, g: float, a_s: float, a_b: float, inv_z: float,
-    f_static: float, tau: float, a0_scale: float, inv_m0: float, f: np.ndarray, dy: np.ndarray,
+    ws: np.ndarray, src: int, dst: int, n: int, inv_m: float, g: float, a_s: float, a_b: float,
+    inv_z: float, f_static: float, tau: float, a0_scale: float, inv_m0: float,
 ) -> None:
-    """dy = y'(y); ``f`` (len n) receives the sphere contact forces as scratch. The striker:
-    ``a0_scale`` its contact constant over the chain's (1.0 for one of the chain's spheres),
-    ``inv_m0`` 1 / its mass."""
+    """Row ``dst`` of the work array ``ws`` = y'(row ``src``); row _F receives the sphere contact
+    forces as scratch. The striker: ``a0_scale`` its contact constant over the chain's (1.0 for
+    one of the chain's spheres), ``inv_m0`` 1 / its mass. One array, not three (see _KERNEL).
+    """
+    y, dy = src, dst
+    fr = _F
     np1 = n + 1
     power = 0.0
     if tau > 0.0:
         for j in range(n):
-            f[j], lost = kuwabara_kono(a_s, tau, y[j] - y[j + 1], y[np1 + j] - y[np1 + j + 1])
+            ws[fr, j], lost = kuwabara_kono(a_s, tau, ws[y, j] - ws[y, j + 1],
+                                            ws[y, np1 + j] - ws[y, np1 + j + 1])
             power += lost
         if a0_scale != 1.0:  # the striker's contact dissipates at its own constant
-            rate = y[np1] - y[np1 + 1]
-            power += (a0_scale - 1.0) * kuwabara_kono(a_s, tau, y[0] - y[1], rate)[1]
+            rate = ws[y, np1] - ws[y, np1 + 1]
+            power += (a0_scale - 1.0) * kuwabara_kono(a_s, tau, ws[y, 0] - ws[y, 1], rate)[1]
     else:
         for j in range(n):
-            f[j] = hertz(a_s, y[j] - y[j + 1])
-    f[0] *= a0_scale  # both force laws are linear in the contact constant
-    f_b = hertz(a_b, y[n] - y[2 * np1])
+            ws[fr, j] = hertz(a_s, ws[y, j] - ws[y, j + 1])
+    ws[fr, 0] *= a0_scale  # both force laws are linear in the contact constant
+    f_b = hertz(a_b, ws[y, n] - ws[y, 2 * np1])
     for i in range(np1):
-        dy[i] = y[np1 + i]
+        ws[dy, i] = ws[y, np1 + i]
     if n == 0:
-        dy[np1] = g - f_b * inv_m0
+        ws[dy, np1] = g - f_b * inv_m0
     else:
-        dy[np1] = g - f[0] * inv_m0
+        ws[dy, np1] = g - ws[fr, 0] * inv_m0
         for i in range(1, n):
-            dy[np1 + i] = g + (f[i - 1] - f[i]) * inv_m
-        dy[np1 + n] = g + (f[n - 1] - f_b) * inv_m
+            ws[dy, np1 + i] = g + (ws[fr, i - 1] - ws[fr, i]) * inv_m
+        ws[dy, np1 + n] = g + (ws[fr, n - 1] - f_b) * inv_m
     w_dot = (f_b - f_static) * inv_z
-    dy[2 * np1] = w_dot
-    dy[2 * np1 + 1] = f_b * w_dot
-    dy[2 * np1 + 2] = power
+    ws[dy, 2 * np1] = w_dot
+    ws[dy, 2 * np1 + 1] = f_b * w_dot
+    ws[dy, 2 * np1 + 2] = power
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -142,59 +153,62 @@ def _poly(p: np.ndarray, i: int, x: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def _difference(p: np.ndarray, i: int, j: int) -> tuple[float, float, float, float, float]:
-    """Coefficients (powers of theta) of component i minus component j of the dense output ``p``
-    (5 x M): the polynomial of an overlap or an approach rate, one Horner chain instead of two."""
-    return (p[0, i] - p[0, j], p[1, i] - p[1, j], p[2, i] - p[2, j], p[3, i] - p[3, j],
-            p[4, i] - p[4, j])
+def _difference(ws: np.ndarray, i: int, j: int) -> tuple[float, float, float, float, float]:
+    """Coefficients (powers of theta) of component i minus component j of the dense output in
+    rows _PW .. _PW + 4 of ``ws``: the polynomial of an overlap or an approach rate, one Horner
+    chain instead of two."""
+    return (ws[_PW, i] - ws[_PW, j], ws[_PW + 1, i] - ws[_PW + 1, j],
+            ws[_PW + 2, i] - ws[_PW + 2, j], ws[_PW + 3, i] - ws[_PW + 3, j],
+            ws[_PW + 4, i] - ws[_PW + 4, j])
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
 def _sample_sensor(
-    p: np.ndarray, th: np.ndarray, cnt: int, k0: int, n: int, a_s: float, a_b: float,
-    tau: float, sensor: int, samples: np.ndarray, f_bot: np.ndarray, a_up: float,
+    ws: np.ndarray, cnt: int, n: int, a_s: float, a_b: float, tau: float, sensor: int,
+    a_up: float,
 ) -> None:
-    """Sensor readings of samples k0 .. k0 + cnt - 1 at step fractions ``th[:cnt]`` (``a_up``:
-    the constant of the sensor's upper contact, the striker's when the sensor is particle 1).
+    """Sensor readings at the step fractions ``ws[_TH, :cnt]`` from the dense output in rows
+    _PW .. _PW + 4 of the work array, into ``ws[_OUT, :cnt]``, and the bottom forces (for the
+    peak tracker) into ``ws[_FBOT, :cnt]`` (``a_up``: the constant of the sensor's upper
+    contact, the striker's when the sensor is particle 1).
 
     Evaluates only what a reading needs (traces off): the overlaps of the sensor's two contacts
-    (the lower one the bottom contact when the sensor is particle N) and of the bottom contact
-    (into ``f_bot[:cnt]``, for the peak tracker), and the approach rates of the sensor's contacts
-    only when they are damped (tau > 0). Each is one polynomial in theta, the difference of two
-    components' coefficients, taken once per step; the loops over the samples then have no
-    branches and vectorise.
+    (the lower one the bottom contact when the sensor is particle N) and of the bottom contact,
+    and the approach rates of the sensor's contacts only when they are damped (tau > 0). Each is
+    one polynomial in theta, the difference of two components' coefficients, taken once per
+    step; the loops over the samples then have no branches and vectorise.
     """
     np1 = n + 1
     iw = 2 * np1
     up = sensor - 1
     last = sensor == n
     a_dn = a_b if last else a_s
-    b0, b1, b2, b3, b4 = _difference(p, n, iw)  # u[N] - w
-    c0, c1, c2, c3, c4 = _difference(p, up, sensor)  # the contact above the sensor
-    d0, d1, d2, d3, d4 = _difference(p, sensor, iw if last else sensor + 1)  # the one below
+    b0, b1, b2, b3, b4 = _difference(ws, n, iw)  # u[N] - w
+    c0, c1, c2, c3, c4 = _difference(ws, up, sensor)  # the contact above the sensor
+    d0, d1, d2, d3, d4 = _difference(ws, sensor, iw if last else sensor + 1)  # the one below
     if tau > 0.0:
-        r0, r1, r2, r3, r4 = _difference(p, np1 + up, np1 + sensor)
+        r0, r1, r2, r3, r4 = _difference(ws, np1 + up, np1 + sensor)
         q0, q1, q2, q3, q4 = 0.0, 0.0, 0.0, 0.0, 0.0
         if not last:
-            q0, q1, q2, q3, q4 = _difference(p, np1 + sensor, np1 + sensor + 1)
+            q0, q1, q2, q3, q4 = _difference(ws, np1 + sensor, np1 + sensor + 1)
         # The bottom contact is elastic: at rate 0 the Kuwabara-Kono force is Hertz's exactly.
         for s in range(cnt):
-            x = th[s]
+            x = ws[_TH, s]
             fb = hertz(a_b, b0 + x * (b1 + x * (b2 + x * (b3 + x * b4))))
             above = kuwabara_kono(a_up, tau, c0 + x * (c1 + x * (c2 + x * (c3 + x * c4))),
                                   r0 + x * (r1 + x * (r2 + x * (r3 + x * r4))))[0]
             below = kuwabara_kono(a_dn, tau, d0 + x * (d1 + x * (d2 + x * (d3 + x * d4))),
                                   q0 + x * (q1 + x * (q2 + x * (q3 + x * q4))))[0]
-            samples[k0 + s] = 0.5 * (above + below)
-            f_bot[s] = fb
+            ws[_OUT, s] = 0.5 * (above + below)
+            ws[_FBOT, s] = fb
     else:
         for s in range(cnt):
-            x = th[s]
+            x = ws[_TH, s]
             fb = hertz(a_b, b0 + x * (b1 + x * (b2 + x * (b3 + x * b4))))
             above = hertz(a_up, c0 + x * (c1 + x * (c2 + x * (c3 + x * c4))))
             below = hertz(a_dn, d0 + x * (d1 + x * (d2 + x * (d3 + x * d4))))
-            samples[k0 + s] = 0.5 * (above + below)
-            f_bot[s] = fb
+            ws[_OUT, s] = 0.5 * (above + below)
+            ws[_FBOT, s] = fb
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model="numpy")
@@ -257,15 +271,6 @@ def _sample_block(
         samples[k0 + s] = 0.5 * reading
         f_trace[k0 + s, n] = fb
         w_trace[k0 + s] = w
-
-
-@njit(cache=True)
-def _balance(y: np.ndarray, n: int, u0: np.ndarray, m: float, g: float, a_s: float,
-             a_b: float, m0: float, a_0: float) -> float:
-    """Energy balance of state ``y``: chain energy (as chain_energy) + plate work + dissipated."""
-    np1 = n + 1
-    return (chain_energy(y[:np1], y[np1:2 * np1], u0, y[2 * np1], m, g, a_s, a_b, m0, a_0)
-            + y[2 * np1 + 1] + y[2 * np1 + 2])
 
 
 @njit(cache=True)
@@ -365,122 +370,145 @@ class Ode(NamedTuple):
     inv_m0: float
 
 
-# The steps of integrate_dopri5. Each is inlined into the driver (numba IR inlining), so the
-# driver compiles as one function, under its own flags, exactly as when the steps were written
-# in its body.
+# The kernels of integrate_dopri5 that the loop calls (not inlined). Each takes one array, the
+# work array (see _work_array), and the driver keeps its other arrays in locals: numba takes and
+# drops a reference to every array a call or an inlined helper receives (atomic operations on
+# the array's reference count), and it prunes those pairs only in a function that handles one
+# array. Measured on the default scene, these updates took about a third of the run.
+_KERNEL: dict[str, Any] = {"cache": True, "fastmath": FASTMATH, "error_model": "numpy"}
+
+# Helpers that run once per run, inlined into the driver (numba IR inlining).
 _STEP: dict[str, Any] = {"cache": True, "inline": "always", "fastmath": FASTMATH,
                          "error_model": "numpy"}
 
 
 @njit(**_STEP)
-def _tolerances(u: np.ndarray, v: np.ndarray, m: float, a_s: float, rtol: float) -> np.ndarray:
-    """atol per component: rtol x (dynamic overlap, impact velocity, overlap, kinetic energy)."""
+def _work_array(size: int) -> np.ndarray:
+    """The driver's work array: _ROWS rows of at least max(size, _BLOCK) numbers, each row
+    starting on a 64-byte boundary.
+
+    numba aligns new arrays to 32 bytes only; a 512-bit load from a row 32 bytes off a cache line
+    straddles two lines, and whether that happened depended on where the allocator put the
+    array (run-to-run differences of 15 % in the driver's time were measured).
+    """
+    stride = (max(size, _BLOCK) + 7) // 8 * 8
+    buf = np.empty(_ROWS * stride + 8)
+    start = (-(buf.ctypes.data // 8)) % 8
+    return buf[start:start + _ROWS * stride].reshape((_ROWS, stride))
+
+
+@njit(**_STEP)
+def _tolerances(
+    u: np.ndarray, v: np.ndarray, m: float, a_s: float, rtol: float, atol: np.ndarray,
+) -> None:
+    """atol per component into ``atol``: rtol x (dynamic overlap, impact velocity, overlap,
+    kinetic energy)."""
     np1 = u.size
     v_imp = 1e-9
     for i in range(np1):
         v_imp = max(v_imp, abs(v[i]))
     e_kin = 0.5 * m * v_imp * v_imp
     overlap = (2.5 * e_kin / a_s) ** 0.4
-    atol = np.empty(2 * np1 + 3)
     atol[:np1] = rtol * overlap
     atol[np1:2 * np1] = rtol * v_imp
     atol[2 * np1] = rtol * overlap
-    atol[2 * np1 + 1:] = rtol * e_kin
-    return atol
+    atol[2 * np1 + 1:2 * np1 + 3] = rtol * e_kin
 
 
 @njit(**_STEP)
-def _initial_step(
-    ode: Ode, f: np.ndarray, y: np.ndarray, k0: np.ndarray, y1: np.ndarray, k1: np.ndarray,
-    atol: np.ndarray, rtol: float, t_end: float,
-) -> float:
-    """Hairer's HINIT with RMS norms as scipy's select_initial_step (one RHS evaluation)."""
-    size = y.size
+def _initial_step(ode: Ode, ws: np.ndarray, rtol: float, t_end: float) -> float:
+    """Hairer's HINIT with RMS norms as scipy's select_initial_step (one RHS evaluation), from
+    the state in row _Y and its derivative in row _K0 (rows _Y1 and _K1 are overwritten)."""
+    size = 2 * ode.n + 5
     d0 = 0.0
     d1 = 0.0
     for i in range(size):
-        sc = atol[i] + rtol * abs(y[i])
-        d0 += (y[i] / sc) ** 2
-        d1 += (k0[i] / sc) ** 2
+        sc = ws[_ATOL, i] + rtol * abs(ws[_Y, i])
+        d0 += (ws[_Y, i] / sc) ** 2
+        d1 += (ws[_K0, i] / sc) ** 2
     d0 = sqrt(d0 / size)
     d1 = sqrt(d1 / size)
     h = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     h = min(h, t_end)
     for i in range(size):
-        y1[i] = y[i] + h * k0[i]
-    _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k1)
+        ws[_Y1, i] = ws[_Y, i] + h * ws[_K0, i]
+    _rhs(ws, _Y1, _K1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static,
+         ode.tau, ode.a0_scale, ode.inv_m0)
     d2 = 0.0
     for i in range(size):
-        sc = atol[i] + rtol * abs(y[i])
-        d2 += ((k1[i] - k0[i]) / sc) ** 2
+        sc = ws[_ATOL, i] + rtol * abs(ws[_Y, i])
+        d2 += ((ws[_K1, i] - ws[_K0, i]) / sc) ** 2
     d2 = sqrt(d2 / size) / h
     h1 = max(1e-6, h * 1e-3) if d1 <= 1e-15 and d2 <= 1e-15 else (0.01 / max(d1, d2)) ** 0.2
     return min(100.0 * h, h1, t_end)
 
 
-@njit(**_STEP)
+@njit(**_KERNEL)
 def _error_norm(
-    y: np.ndarray, y1: np.ndarray, h: float, k0: np.ndarray, k2: np.ndarray, k3: np.ndarray,
-    k4: np.ndarray, k5: np.ndarray, k6: np.ndarray, atol: np.ndarray, rtol: float, size: int,
+    ws: np.ndarray, iy: int, iy1: int, ik0: int, ik6: int, h: float, rtol: float, size: int,
 ) -> float:
     """scipy's error norm: RMS of err_i / (atol_i + rtol max(|y_i|, |y1_i|)) over the ``size``
-    components."""
+    components (rows of ``ws``: y ``iy``, y1 ``iy1``, k0 ``ik0``, k6 ``ik6``)."""
     err = 0.0
     for i in range(size):
-        r = h * (E1 * k0[i] + E3 * k2[i] + E4 * k3[i] + E5 * k4[i] + E6 * k5[i]
-                 + E7 * k6[i]) / (atol[i] + rtol * max(abs(y[i]), abs(y1[i])))
+        r = h * (E1 * ws[ik0, i] + E3 * ws[_K2, i] + E4 * ws[_K3, i] + E5 * ws[_K4, i]
+                 + E6 * ws[_K5, i] + E7 * ws[ik6, i]) / (
+            ws[_ATOL, i] + rtol * max(abs(ws[iy, i]), abs(ws[iy1, i])))
         err += r * r
     return sqrt(err / size)
 
 
-@njit(**_STEP)
-def _dense_coefficients(
-    y: np.ndarray, y1: np.ndarray, h: float, k0: np.ndarray, k2: np.ndarray, k3: np.ndarray,
-    k4: np.ndarray, k5: np.ndarray, k6: np.ndarray, rc: np.ndarray, size: int,
+@njit(**_KERNEL)
+def _dense_output(
+    ws: np.ndarray, iy: int, iy1: int, ik0: int, ik6: int, h: float, i: int,
 ) -> None:
-    """Dense output coefficients of the accepted step (Hairer's CONTD5) into ``rc`` (5 x size)."""
-    for i in range(size):
-        dy = y1[i] - y[i]
-        bspl = h * k0[i] - dy
-        rc[0, i] = y[i]
-        rc[1, i] = dy
-        rc[2, i] = bspl
-        rc[3, i] = dy - h * k6[i] - bspl
-        rc[4, i] = h * (D1 * k0[i] + D3 * k2[i] + D4 * k3[i] + D5 * k4[i]
-                        + D6 * k5[i] + D7 * k6[i])
+    """Dense output of component i over the accepted step (rows of ``ws`` as in
+    :func:`_error_norm`): Hairer's CONTD5 coefficients into rows _RC .. _RC + 4 (for the peak
+    refinement), and the same polynomial in powers of theta into rows _PW .. _PW + 4 (for Horner
+    evaluation)."""
+    dy = ws[iy1, i] - ws[iy, i]
+    bspl = h * ws[ik0, i] - dy
+    r3 = dy - h * ws[ik6, i] - bspl
+    r4 = h * (D1 * ws[ik0, i] + D3 * ws[_K2, i] + D4 * ws[_K3, i] + D5 * ws[_K4, i]
+              + D6 * ws[_K5, i] + D7 * ws[ik6, i])
+    ws[_RC, i] = ws[iy, i]
+    ws[_RC + 1, i] = dy
+    ws[_RC + 2, i] = bspl
+    ws[_RC + 3, i] = r3
+    ws[_RC + 4, i] = r4
+    ws[_PW, i] = ws[iy, i]
+    ws[_PW + 1, i] = dy + bspl
+    ws[_PW + 2, i] = r3 + r4 - bspl
+    ws[_PW + 3, i] = -r3 - 2.0 * r4
+    ws[_PW + 4, i] = r4
+
+
+@njit(**_KERNEL)
+def _dense_outputs(
+    ws: np.ndarray, iy: int, iy1: int, ik0: int, ik6: int, h: float, size: int,
+    tracked: tuple[int, int, int, int, int, int, int, int],
+) -> None:
+    """:func:`_dense_output` of every component (``size`` > 0: traces on), or else only of the
+    ``tracked`` ones, all that the sensor reading and the peak refinement read (a fifth of the
+    components on the default scene)."""
+    if size > 0:
+        for i in range(size):
+            _dense_output(ws, iy, iy1, ik0, ik6, h, i)
+    else:
+        for i in literal_unroll(tracked):
+            _dense_output(ws, iy, iy1, ik0, ik6, h, i)
 
 
 @njit(**_STEP)
-def _powers(rc: np.ndarray, pw: np.ndarray) -> None:
-    """The dense output as a polynomial in powers of theta (for Horner evaluation)."""
-    for i in range(rc.shape[1]):
-        pw[0, i] = rc[0, i]
-        pw[1, i] = rc[1, i] + rc[2, i]
-        pw[2, i] = rc[3, i] + rc[4, i] - rc[2, i]
-        pw[3, i] = -rc[3, i] - 2.0 * rc[4, i]
-        pw[4, i] = rc[4, i]
-
-
-@njit(**_STEP)
-def _track_indices(n: int, sensor: int) -> np.ndarray:
+def _track_indices(n: int, sensor: int) -> tuple[int, int, int, int, int, int, int, int]:
     """Components kept for the peak refinement: u[s-1], u[s], u[s+1], u[N], w, v[s-1], v[s],
-    v[s+1] (indices clipped to the chain)."""
+    v[s+1] (indices clipped to the chain); a tuple, not an array (see _KERNEL)."""
     np1 = n + 1
     below = min(sensor + 1, n)
-    idx = np.empty(_TRACK, dtype=np.int64)
-    idx[0] = sensor - 1
-    idx[1] = sensor
-    idx[2] = below
-    idx[3] = n
-    idx[4] = 2 * np1
-    idx[5] = np1 + sensor - 1
-    idx[6] = np1 + sensor
-    idx[7] = np1 + below
-    return idx
+    return (sensor - 1, sensor, below, n, 2 * np1, np1 + sensor - 1, np1 + sensor, np1 + below)
 
 
-@njit(**_STEP)
+@njit(cache=True)
 def _grown(
     hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -493,61 +521,6 @@ def _grown(
     grown_h[:n_hist] = hist_h
     grown_c[:n_hist] = hist_c
     return grown_t, grown_h, grown_c
-
-
-@njit(**_STEP)
-def _keep(
-    hist_t: np.ndarray, hist_h: np.ndarray, hist_c: np.ndarray, n_hist: int, t: float, h: float,
-    rc: np.ndarray, track_idx: np.ndarray,
-) -> None:
-    """Store step (t, h) and its tracked dense-output components as entry ``n_hist`` (below
-    the history's capacity, see :func:`_grown`)."""
-    hist_t[n_hist] = t
-    hist_h[n_hist] = h
-    for c in range(_TRACK):
-        for p in range(5):
-            hist_c[n_hist, p, c] = rc[p, track_idx[c]]
-
-
-@njit(**_STEP)
-def _emit(
-    pw: np.ndarray, th: np.ndarray, scratch: np.ndarray, f_bot: np.ndarray, first: int,
-    stop: int, t: float, h: float, last: bool, interval: float, n_samples: int, e_prev: float,
-    e_new: float, n: int, a_s: float, a_b: float, tau: float, sensor: int, a_0: float,
-    samples: np.ndarray, energy: np.ndarray, pk: np.ndarray, u_trace: np.ndarray,
-    v_trace: np.ndarray, f_trace: np.ndarray, w_trace: np.ndarray,
-) -> int:
-    """Samples first .. stop - 1 from the step [t, t + h] (dense output ``pw``), in blocks of at
-    most _BLOCK; the energy balance interpolated between the step ends. Returns the sample index
-    at which a reading was not finite (+1), or 0 when all were.
-
-    Takes the record's arrays one by one, not the record: each use of a field of the record
-    inside the loops would take and drop a reference to its array (two atomic operations per
-    sample, about half the sampling's cost when measured).
-    """
-    traces = u_trace.shape[0] > 0
-    a_up = a_0 if sensor == 1 else a_s
-    next_k = first
-    while next_k < stop:
-        cnt = min(stop - next_k, _BLOCK)
-        for c in range(cnt):
-            th[c] = ((next_k + c) * interval - t) / h
-        if last and next_k + cnt == n_samples:
-            th[cnt - 1] = 1.0  # the run's last sample is the last step's end
-        if traces:
-            _sample_block(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, scratch, samples,
-                          u_trace, v_trace, f_trace, w_trace, a_0)
-        else:
-            _sample_sensor(pw, th, cnt, next_k, n, a_s, a_b, tau, sensor, samples, f_bot, a_up)
-        for c in range(cnt):
-            energy[next_k + c] = (1.0 - th[c]) * e_prev + th[c] * e_new
-        for c in range(cnt):
-            kk = next_k + c
-            if not np.isfinite(samples[kk]):
-                return kk + 1
-            track_peaks(pk, kk * interval, interval, samples[kk], f_bot[c])
-        next_k += cnt
-    return 0
 
 
 @njit(**_STEP)
@@ -605,62 +578,66 @@ def integrate_dopri5(  # noqa: C901
     samples, energy, pk = rec.samples, rec.energy, rec.pk
     u_trace, v_trace, f_trace, w_trace = rec.u_trace, rec.v_trace, rec.f_trace, rec.w_trace
     traces = u_trace.shape[0] > 0
+    a_up = a_0 if sensor == 1 else a_s  # the constant of the sensor's upper contact
     n = u.size - 1
     np1 = n + 1
     size = 2 * np1 + 3
     ode = Ode(n, 1.0 / m, g, a_s, a_b, inv_z, rec.f_static, tau, a_0 / a_s, 1.0 / m0)
     t_end = (n_samples - 1) * interval
-    atol = _tolerances(u, v, m0, a_0, rtol)  # the striker: the largest speed
 
-    y = np.empty(size)
-    y[:np1] = u
-    y[np1:2 * np1] = v
-    y[2 * np1] = w
-    y[2 * np1 + 1] = 0.0
-    y[2 * np1 + 2] = 0.0
-    y1 = np.empty(size)
-    k0, k1, k2, k3 = np.empty(size), np.empty(size), np.empty(size), np.empty(size)
-    k4, k5, k6 = np.empty(size), np.empty(size), np.empty(size)
-    rc = np.empty((5, size))
-    pw = np.empty((5, size))
-    th = np.empty(_BLOCK)
-    scratch = np.empty((10 if traces else 1, _BLOCK))
-    f_bot = scratch[scratch.shape[0] - 1]
-    f = np.empty(max(n, 1))
+    # The vectors of a step are rows of one work array (see _KERNEL and _work_array): y and y1
+    # (the 5th-order solution), k0 .. k6 (k0 = y'(y), k6 = y'(y1)), atol, the dense output, the
+    # step fractions of a block of samples, their readings and bottom forces, and the RHS's
+    # scratch. y and y1, k0 and k6 trade rows at every accepted step.
+    ws = _work_array(size)
+    iy, iy1, ik0, ik6 = _Y, _Y1, _K0, _K6
+    _tolerances(u, v, m0, a_0, rtol, ws[_ATOL])  # the striker: the largest speed
+    for i in range(np1):
+        ws[_Y, i] = u[i]
+        ws[_Y, np1 + i] = v[i]
+    ws[_Y, 2 * np1] = w
+    ws[_Y, 2 * np1 + 1] = 0.0
+    ws[_Y, 2 * np1 + 2] = 0.0
+    # Positions and velocities of both state rows, for the energy balance.
+    u_a, v_a = ws[_Y, :np1], ws[_Y, np1:2 * np1]
+    u_b, v_b = ws[_Y1, :np1], ws[_Y1, np1:2 * np1]
+    scratch = np.empty((10 if traces else 1, _BLOCK))  # _sample_block's work space
     track_idx = _track_indices(n, sensor)
     hist_t = np.empty(256)
     hist_h = np.empty(256)
     hist_c = np.empty((256, 5, _TRACK))
     n_hist = 0
 
-    _rhs(y, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-         ode.a0_scale, ode.inv_m0, f, k0)
+    _rhs(ws, iy, ik0, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static,
+         ode.tau, ode.a0_scale, ode.inv_m0)
     nfev = 1
 
     # Sample 0 is the initial state (a constant "interpolant").
     for i in range(size):
-        pw[0, i] = y[i]
+        ws[_PW, i] = ws[_Y, i]
         for j in range(1, 5):
-            pw[j, i] = 0.0
-    th[0] = 0.0
+            ws[_PW + j, i] = 0.0
+    ws[_TH, 0] = 0.0
     if traces:
-        _sample_block(pw, th, 1, 0, n, a_s, a_b, tau, sensor, scratch, samples, u_trace,
-                      v_trace, f_trace, w_trace, a_0)
+        _sample_block(ws[_PW:_PW + 5], ws[_TH], 1, 0, n, a_s, a_b, tau, sensor, scratch,
+                      samples, u_trace, v_trace, f_trace, w_trace, a_0)
+        ws[_FBOT, 0] = scratch[9, 0]
     else:
-        _sample_sensor(pw, th, 1, 0, n, a_s, a_b, tau, sensor, samples, f_bot,
-                       a_0 if sensor == 1 else a_s)
-    e_start = _balance(y, n, u0, m, g, a_s, a_b, m0, a_0)
+        _sample_sensor(ws, 1, n, a_s, a_b, tau, sensor, a_up)
+        samples[0] = ws[_OUT, 0]
+    e_start = (chain_energy(u_a, v_a, u0, ws[_Y, 2 * np1], m, g, a_s, a_b, m0, a_0)
+               + ws[_Y, 2 * np1 + 1] + ws[_Y, 2 * np1 + 2])
     energy[0] = e_start
     e_prev = e_start
     deviation = 0.0
     if not (np.isfinite(samples[0]) and np.isfinite(e_start)):
-        return RUN_NONFINITE, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
+        return RUN_NONFINITE, 1, w, 0.0, 0.0, 0, 0, nfev, deviation
     if n_samples == 1:
-        pk[PK_BOT_F] = f_bot[0]
+        pk[PK_BOT_F] = ws[_FBOT, 0]
         pk[PK_BOT_T] = 0.0
-        return RUN_OK, 1, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], 0, 0, nfev, deviation
+        return RUN_OK, 1, w, 0.0, 0.0, 0, 0, nfev, deviation
 
-    h = _initial_step(ode, f, y, k0, y1, k1, atol, rtol, t_end)
+    h = _initial_step(ode, ws, rtol, t_end)
     nfev += 1
     t = 0.0
     next_k = 1
@@ -669,12 +646,13 @@ def integrate_dopri5(  # noqa: C901
     log_fac_old = log(1e-4)  # Hairer's facold, kept as its logarithm
     last_rejected = False
     h_min = 1e-14 * t_end
+    iw = 2 * np1  # w, then W and D
     while next_k < n_samples:
         if accepted + rejected >= max_steps:
-            return (RUN_STEP_BUDGET, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
+            return (RUN_STEP_BUDGET, next_k, ws[iy, iw], ws[iy, iw + 1], ws[iy, iw + 2],
                     accepted, rejected, nfev, deviation)
         if h < h_min:
-            return (RUN_STEP_TOO_SMALL, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
+            return (RUN_STEP_TOO_SMALL, next_k, ws[iy, iw], ws[iy, iw + 1], ws[iy, iw + 2],
                     accepted, rejected, nfev, deviation)
         last = t + h >= t_end * (1.0 - 1e-13)
         if last:
@@ -683,35 +661,39 @@ def integrate_dopri5(  # noqa: C901
         # Written here, not in a helper: numba's inlined helper ran the driver 8 % slower
         # (127 against 117 us on the default scene at rtol 3.2e-5).
         for i in range(size):
-            y1[i] = y[i] + h * A21 * k0[i]
-        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-             ode.a0_scale, ode.inv_m0, f, k1)
+            ws[iy1, i] = ws[iy, i] + h * A21 * ws[ik0, i]
+        _rhs(ws, iy1, _K1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z,
+             ode.f_static, ode.tau, ode.a0_scale, ode.inv_m0)
         for i in range(size):
-            y1[i] = y[i] + h * (A31 * k0[i] + A32 * k1[i])
-        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-             ode.a0_scale, ode.inv_m0, f, k2)
+            ws[iy1, i] = ws[iy, i] + h * (A31 * ws[ik0, i] + A32 * ws[_K1, i])
+        _rhs(ws, iy1, _K2, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z,
+             ode.f_static, ode.tau, ode.a0_scale, ode.inv_m0)
         for i in range(size):
-            y1[i] = y[i] + h * (A41 * k0[i] + A42 * k1[i] + A43 * k2[i])
-        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-             ode.a0_scale, ode.inv_m0, f, k3)
+            ws[iy1, i] = ws[iy, i] + h * (A41 * ws[ik0, i] + A42 * ws[_K1, i]
+                                          + A43 * ws[_K2, i])
+        _rhs(ws, iy1, _K3, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z,
+             ode.f_static, ode.tau, ode.a0_scale, ode.inv_m0)
         for i in range(size):
-            y1[i] = y[i] + h * (A51 * k0[i] + A52 * k1[i] + A53 * k2[i] + A54 * k3[i])
-        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-             ode.a0_scale, ode.inv_m0, f, k4)
+            ws[iy1, i] = ws[iy, i] + h * (A51 * ws[ik0, i] + A52 * ws[_K1, i]
+                                          + A53 * ws[_K2, i] + A54 * ws[_K3, i])
+        _rhs(ws, iy1, _K4, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z,
+             ode.f_static, ode.tau, ode.a0_scale, ode.inv_m0)
         for i in range(size):
-            y1[i] = y[i] + h * (A61 * k0[i] + A62 * k1[i] + A63 * k2[i] + A64 * k3[i]
-                                + A65 * k4[i])
-        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-             ode.a0_scale, ode.inv_m0, f, k5)
+            ws[iy1, i] = ws[iy, i] + h * (A61 * ws[ik0, i] + A62 * ws[_K1, i]
+                                          + A63 * ws[_K2, i] + A64 * ws[_K3, i]
+                                          + A65 * ws[_K4, i])
+        _rhs(ws, iy1, _K5, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z,
+             ode.f_static, ode.tau, ode.a0_scale, ode.inv_m0)
         for i in range(size):
-            y1[i] = y[i] + h * (A71 * k0[i] + A73 * k2[i] + A74 * k3[i] + A75 * k4[i]
-                                + A76 * k5[i])
-        _rhs(y1, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z, ode.f_static, ode.tau,
-             ode.a0_scale, ode.inv_m0, f, k6)
+            ws[iy1, i] = ws[iy, i] + h * (A71 * ws[ik0, i] + A73 * ws[_K2, i]
+                                          + A74 * ws[_K3, i] + A75 * ws[_K4, i]
+                                          + A76 * ws[_K5, i])
+        _rhs(ws, iy1, ik6, ode.n, ode.inv_m, ode.g, ode.a_s, ode.a_b, ode.inv_z,
+             ode.f_static, ode.tau, ode.a0_scale, ode.inv_m0)
         nfev += 6
-        err = _error_norm(y, y1, h, k0, k2, k3, k4, k5, k6, atol, rtol, size)
+        err = _error_norm(ws, iy, iy1, ik0, ik6, h, rtol, size)
         if not np.isfinite(err):
-            return (RUN_NONFINITE, next_k, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2],
+            return (RUN_NONFINITE, next_k, ws[iy, iw], ws[iy, iw + 1], ws[iy, iw + 2],
                     accepted, rejected, nfev, deviation)
         # err^EXPO and facold^BETA through exp/log, cheaper than two pow calls.
         log_err = log(err) if err > 0.0 else -745.0
@@ -722,33 +704,60 @@ def integrate_dopri5(  # noqa: C901
             h = h / min(1.0 / FAC_MIN, fac11 / SAFETY)
             continue
 
-        # Accepted: dense output of [t, t + h], kept for the peak refinement.
-        _dense_coefficients(y, y1, h, k0, k2, k3, k4, k5, k6, rc, size)
-        if n_hist == hist_t.size:  # grown apart from the store: a rare branch
+        # Accepted: dense output of [t, t + h]; its tracked components kept for the peak
+        # refinement (the history grows in a rare branch of its own).
+        _dense_outputs(ws, iy, iy1, ik0, ik6, h, size if traces else 0, track_idx)
+        if n_hist == hist_t.size:
             hist_t, hist_h, hist_c = _grown(hist_t, hist_h, hist_c)
-        _keep(hist_t, hist_h, hist_c, n_hist, t, h, rc, track_idx)
+        hist_t[n_hist] = t
+        hist_h[n_hist] = h
+        for c in range(_TRACK):
+            for p in range(5):
+                hist_c[n_hist, p, c] = ws[_RC + p, track_idx[c]]
         n_hist += 1
 
         t_new = t_end if last else t + h
-        e_new = _balance(y1, n, u0, m, g, a_s, a_b, m0, a_0)
+        # The energy balance (chain energy + plate work + dissipated) of the new state.
+        if iy1 == _Y:
+            e_new = chain_energy(u_a, v_a, u0, ws[iy1, iw], m, g, a_s, a_b, m0, a_0)
+        else:
+            e_new = chain_energy(u_b, v_b, u0, ws[iy1, iw], m, g, a_s, a_b, m0, a_0)
+        e_new = e_new + ws[iy1, iw + 1] + ws[iy1, iw + 2]
         if not np.isfinite(e_new):
-            return (RUN_NONFINITE, next_k, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
+            return (RUN_NONFINITE, next_k, ws[iy1, iw], ws[iy1, iw + 1], ws[iy1, iw + 2],
                     accepted + 1, rejected, nfev, deviation)
         deviation = max(deviation, abs(e_new - e_start))
-        # The samples in (t, t + h].
+        # The samples in (t, t + h], in blocks of at most _BLOCK: the sensor reading from the
+        # dense output, the energy balance interpolated between the step ends, the peak tracker.
+        # Written here, not in a helper, for the reason of _KERNEL.
         stop = next_k
         while stop < n_samples and (stop * interval <= t_new or (last and stop ==
                                                                   n_samples - 1)):
             stop += 1
-        if stop > next_k:
-            _powers(rc, pw)
-            bad = _emit(pw, th, scratch, f_bot, next_k, stop, t, h, last, interval, n_samples,
-                        e_prev, e_new, n, a_s, a_b, tau, sensor, a_0, samples, energy, pk,
-                        u_trace, v_trace, f_trace, w_trace)
-            if bad > 0:
-                return (RUN_NONFINITE, bad, y1[2 * np1], y1[2 * np1 + 1], y1[2 * np1 + 2],
-                        accepted + 1, rejected, nfev, deviation)
-            next_k = stop
+        while next_k < stop:
+            cnt = min(stop - next_k, _BLOCK)
+            for c in range(cnt):
+                ws[_TH, c] = ((next_k + c) * interval - t) / h
+            if last and next_k + cnt == n_samples:
+                ws[_TH, cnt - 1] = 1.0  # the run's last sample is the last step's end
+            if traces:
+                _sample_block(ws[_PW:_PW + 5], ws[_TH], cnt, next_k, n, a_s, a_b, tau, sensor,
+                              scratch, samples, u_trace, v_trace, f_trace, w_trace, a_0)
+                for c in range(cnt):
+                    ws[_FBOT, c] = scratch[9, c]
+            else:
+                _sample_sensor(ws, cnt, n, a_s, a_b, tau, sensor, a_up)
+                for c in range(cnt):
+                    samples[next_k + c] = ws[_OUT, c]
+            for c in range(cnt):
+                energy[next_k + c] = (1.0 - ws[_TH, c]) * e_prev + ws[_TH, c] * e_new
+            for c in range(cnt):
+                kk = next_k + c
+                if not np.isfinite(samples[kk]):
+                    return (RUN_NONFINITE, kk + 1, ws[iy1, iw], ws[iy1, iw + 1],
+                            ws[iy1, iw + 2], accepted + 1, rejected, nfev, deviation)
+                track_peaks(pk, kk * interval, interval, samples[kk], ws[_FBOT, c])
+            next_k += cnt
 
         accepted += 1
         # PI controller; no growth right after a rejection.
@@ -759,18 +768,18 @@ def integrate_dopri5(  # noqa: C901
             h_new = min(h_new, h)
         log_fac_old = max(log_err, log(1e-4))
         last_rejected = False
-        y, y1 = y1, y
-        k0, k6 = k6, k0
+        iy, iy1 = iy1, iy
+        ik0, ik6 = ik6, ik0
         t = t_new
         h = h_new
         e_prev = e_new
 
     for i in range(np1):
-        u[i] = y[i]
-        v[i] = y[np1 + i]
+        u[i] = ws[iy, i]
+        v[i] = ws[iy, np1 + i]
     if not pk[PK_BOT_F] >= 0.0:
-        return (RUN_NONFINITE, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted,
+        return (RUN_NONFINITE, n_samples, ws[iy, iw], ws[iy, iw + 1], ws[iy, iw + 2], accepted,
                 rejected, nfev, deviation)
     _refine_peaks(rec, interval, t_end, hist_t, hist_h, hist_c, n_hist, n)
-    return (RUN_OK, n_samples, y[2 * np1], y[2 * np1 + 1], y[2 * np1 + 2], accepted, rejected,
+    return (RUN_OK, n_samples, ws[iy, iw], ws[iy, iw + 1], ws[iy, iw + 2], accepted, rejected,
             nfev, deviation)
