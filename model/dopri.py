@@ -733,7 +733,11 @@ def integrate_dopri5(  # noqa: C901
             # The samples in (t, t + h], in blocks of at most _BLOCK: the sensor reading from the
             # dense output, the energy balance interpolated between the step ends, the peak tracker.
             # Written here, not in a helper, for the reason of _KERNEL.
-            stop = next_k
+            # The first sample past the step: the comparisons decide, started from the estimate
+            # t_new / interval (counting up from next_k cost a comparison per sample).
+            stop = min(max(int(t_new / interval), next_k), n_samples)
+            while stop > next_k and not ((stop - 1) * interval <= t_new or last):
+                stop -= 1
             while stop < n_samples and (stop * interval <= t_new or (last and stop ==
                                                                       n_samples - 1)):
                 stop += 1
