@@ -110,13 +110,36 @@ def _rhs(
     ws: np.ndarray, src: int, dst: int, n: int, inv_m: float, g: float, a_s: float, a_b: float,
     inv_z: float, f_static: float, tau: float, a0_scale: float, inv_m0: float,
 ) -> None:
-    """Row ``dst`` of the work array ``ws`` = y'(row ``src``); row _F receives the sphere contact
-    forces as scratch. The striker: ``a0_scale`` its contact constant over the chain's (1.0 for
-    one of the chain's spheres), ``inv_m0`` 1 / its mass. One array, not three (see _KERNEL).
+    """Row ``dst`` of the work array ``ws`` = y'(row ``src``). The striker: ``a0_scale`` its
+    contact constant over the chain's (1.0 for one of the chain's spheres), ``inv_m0`` 1 / its
+    mass. One array, not three (see _KERNEL).
+
+    Elastic contacts: each force is evaluated once, going down the chain, and carried to the
+    next particle in a scalar; damped contacts (and a striker alone) store the forces in row _F
+    first and difference them. Measured on the default scene (driver 50 us): the stored form
+    for elastic contacts took 58 us, forces evaluated twice in a vectorised loop 85 us, and this
+    code with the damped form split off into a function of its own 60 us (the smaller function,
+    presumably inlined into the driver's seven call sites).
     """
     y, dy = src, dst
-    fr = _F
     np1 = n + 1
+    if tau <= 0.0 and n > 0:
+        f_b = hertz(a_b, ws[y, n] - ws[y, 2 * np1])
+        for i in range(np1):
+            ws[dy, i] = ws[y, np1 + i]
+        f_prev = hertz(a_s, ws[y, 0] - ws[y, 1]) * a0_scale  # Hertz is linear in the constant
+        ws[dy, np1] = g - f_prev * inv_m0
+        for i in range(1, n):
+            f_i = hertz(a_s, ws[y, i] - ws[y, i + 1])
+            ws[dy, np1 + i] = g + (f_prev - f_i) * inv_m
+            f_prev = f_i
+        ws[dy, np1 + n] = g + (f_prev - f_b) * inv_m
+        w_dot = (f_b - f_static) * inv_z
+        ws[dy, 2 * np1] = w_dot
+        ws[dy, 2 * np1 + 1] = f_b * w_dot
+        ws[dy, 2 * np1 + 2] = 0.0
+        return
+    fr = _F
     power = 0.0
     if tau > 0.0:
         for j in range(n):
