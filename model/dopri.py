@@ -93,10 +93,9 @@ FASTMATH = {"reassoc", "contract", "nsz"}
 
 # Rows of the driver's work array (see integrate_dopri5): the state and its 5th-order update,
 # the stages k0 .. k6, atol, the dense output in Hairer's form (_RC, 5 rows) and in powers of
-# theta (_PW, 5 rows), a block's step fractions, sensor readings and bottom forces, and the RHS's
-# scratch (the last row).
+# theta (_PW, 5 rows), and a block's step fractions, sensor readings and bottom forces.
 _Y, _Y1, _K0, _K1, _K2, _K3, _K4, _K5, _K6, _ATOL = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
-_RC, _PW, _TH, _OUT, _FBOT, _F, _ROWS = 10, 15, 20, 21, 22, 23, 24
+_RC, _PW, _TH, _OUT, _FBOT, _ROWS = 10, 15, 20, 21, 22, 23
 
 # Samples evaluated together (see _sample_block).
 _BLOCK = 64
@@ -114,12 +113,12 @@ def _rhs(
     contact constant over the chain's (1.0 for one of the chain's spheres), ``inv_m0`` 1 / its
     mass. One array, not three (see _KERNEL).
 
-    Elastic contacts: each force is evaluated once, going down the chain, and carried to the
-    next particle in a scalar; damped contacts (and a striker alone) store the forces in row _F
-    first and difference them. Measured on the default scene (driver 50 us): the stored form
-    for elastic contacts took 58 us, forces evaluated twice in a vectorised loop 85 us, and this
-    code with the damped form split off into a function of its own 60 us (the smaller function,
-    presumably inlined into the driver's seven call sites).
+    Each contact force is evaluated once, going down the chain, and carried to the next
+    particle in a scalar. Measured on the default scene (driver 50 us): storing the forces in a
+    row first and differencing them took 58 us, forces evaluated twice in a vectorised loop
+    85 us, and the elastic code with the damped form split off into a function of its own 60 us
+    (the smaller function, presumably inlined into the driver's seven call sites); the damped
+    scene ran 58 us stored, 53 carried.
     """
     y, dy = src, dst
     np1 = n + 1
@@ -139,30 +138,28 @@ def _rhs(
         ws[dy, 2 * np1 + 1] = f_b * w_dot
         ws[dy, 2 * np1 + 2] = 0.0
         return
-    fr = _F
-    power = 0.0
-    if tau > 0.0:
-        for j in range(n):
-            ws[fr, j], lost = kuwabara_kono(a_s, tau, ws[y, j] - ws[y, j + 1],
-                                            ws[y, np1 + j] - ws[y, np1 + j + 1])
-            power += lost
-        if a0_scale != 1.0:  # the striker's contact dissipates at its own constant
-            rate = ws[y, np1] - ws[y, np1 + 1]
-            power += (a0_scale - 1.0) * kuwabara_kono(a_s, tau, ws[y, 0] - ws[y, 1], rate)[1]
-    else:
-        for j in range(n):
-            ws[fr, j] = hertz(a_s, ws[y, j] - ws[y, j + 1])
-    ws[fr, 0] *= a0_scale  # both force laws are linear in the contact constant
+    # Damped contacts (and a striker alone): the same, with the dissipated power summed.
     f_b = hertz(a_b, ws[y, n] - ws[y, 2 * np1])
     for i in range(np1):
         ws[dy, i] = ws[y, np1 + i]
+    power = 0.0
     if n == 0:
         ws[dy, np1] = g - f_b * inv_m0
     else:
-        ws[dy, np1] = g - ws[fr, 0] * inv_m0
+        f_prev, lost_0 = kuwabara_kono(a_s, tau, ws[y, 0] - ws[y, 1],
+                                       ws[y, np1] - ws[y, np1 + 1])
+        power = lost_0
+        f_prev *= a0_scale  # the force law is linear in the contact constant
+        ws[dy, np1] = g - f_prev * inv_m0
         for i in range(1, n):
-            ws[dy, np1 + i] = g + (ws[fr, i - 1] - ws[fr, i]) * inv_m
-        ws[dy, np1 + n] = g + (ws[fr, n - 1] - f_b) * inv_m
+            f_i, lost = kuwabara_kono(a_s, tau, ws[y, i] - ws[y, i + 1],
+                                      ws[y, np1 + i] - ws[y, np1 + i + 1])
+            power += lost
+            ws[dy, np1 + i] = g + (f_prev - f_i) * inv_m
+            f_prev = f_i
+        ws[dy, np1 + n] = g + (f_prev - f_b) * inv_m
+        if a0_scale != 1.0:  # the striker's contact dissipates at its own constant
+            power += (a0_scale - 1.0) * lost_0
     w_dot = (f_b - f_static) * inv_z
     ws[dy, 2 * np1] = w_dot
     ws[dy, 2 * np1 + 1] = f_b * w_dot
@@ -610,8 +607,8 @@ def integrate_dopri5(  # noqa: C901
 
     # The vectors of a step are rows of one work array (see _KERNEL and _work_array): y and y1
     # (the 5th-order solution), k0 .. k6 (k0 = y'(y), k6 = y'(y1)), atol, the dense output, the
-    # step fractions of a block of samples, their readings and bottom forces, and the RHS's
-    # scratch. y and y1, k0 and k6 trade rows at every accepted step.
+    # step fractions of a block of samples, their readings and bottom forces. y and y1, k0 and
+    # k6 trade rows at every accepted step.
     ws = _work_array(size)
     iy, iy1, ik0, ik6 = _Y, _Y1, _K0, _K6
     _tolerances(u, v, m0, a_0, rtol, ws[_ATOL])  # the striker: the largest speed
