@@ -282,6 +282,10 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 forget_plates()
                 chain = _timed_plate(spec, i_t, i_l, todo, store)
                 if damped is not None:
+                    if (i_t, i_l, todo) == ends[0]:
+                        # a kind's first damped chain compiles its kernels (a second on the
+                        # dashpot against its 4 ms): run once untimed
+                        _timed_plate(damped, i_t, i_l, todo, store)
                     chains.append((chain, _timed_plate(damped, i_t, i_l, todo, store)))
                 again, again_store = chain, responses  # (not the scratch: dropped after)
                 if result["greens_computed"] > 0:

@@ -104,6 +104,33 @@ def test_the_workers_time_the_pilot_plate_as_the_pilot_timed_it(tmp_path: Path,
     assert computed[2:] == [1]  # and a first build's computes them, as its pilot did
 
 
+def test_a_kinds_first_damped_chain_is_not_timed(tmp_path: Path, monkeypatch) -> None:
+    """The first damped chain of each plate kind compiles its kernels on a fresh install (a
+    second on the dashpot, against a few milliseconds): the pilot runs it once untimed, so the
+    layers' estimate counts the chains' time, not the compiler's (it had planned 82 s for a
+    28 s build). Here a kind's first damped run takes 5 s, every other run 10 ms."""
+    sweep = _sweep()
+    run = table_build._timed_plate
+    slow: set[str] = set()
+
+    def timed(spec: dict, i_t: int, i_l: int, todo: list[int], store: str | None = None
+              ) -> float:
+        run(spec, i_t, i_l, todo, store)
+        kind = table_build._kind(sweep, i_t, i_l)
+        if spec["scene"].get("effects", {}).get("dissipation") and kind not in slow:
+            slow.add(kind)
+            return 5.0
+        return 0.01
+
+    monkeypatch.setattr(table_build, "_timed_plate", timed)
+    with h5py.File(tmp_path / "t.h5", "w") as fh:
+        table_build.create(fh, sweep)
+        plan = table_build._pilot(fh, sweep, sweep.to_dict(), 1, None, str(tmp_path / "store"),
+                                  1, False)[0]
+    assert slow == {"meshed", "dashpot"}  # both kinds' first damped runs happened
+    assert plan.damped_factor == 1.0
+
+
 def test_busy_workers_are_never_counted_faster_than_the_pilot() -> None:
     """The plan scales its estimate by the workers' time over the pilot's: a ratio under 1 is
     the timing disturbed (it made plans a third short), one over 4 too; in between it counts."""
