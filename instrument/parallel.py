@@ -15,7 +15,9 @@ model, which imports nothing of the instrument.
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 #: Environment of Dask worker processes: one compute thread each (the cores are the workers).
@@ -27,6 +29,20 @@ WORKER_ENV = {
 }
 
 R = TypeVar("R")
+
+LOCAL_START_S = 2.0
+"""Seconds a local cluster costs a batch before its workers take tasks: their processes' start
+and the model's load in each (measured 1.5-2.2 s on two cores, idle). A batch whose tasks take
+less than that here finishes before the workers could have started."""
+
+
+@dataclass
+class Runs:
+    """Where :func:`run_tasks` ran a batch's tasks: ``here`` in this process, ``workers`` on
+    Dask (a local cluster or the scheduler's)."""
+
+    here: int = 0
+    workers: int = 0
 
 
 def default_workers() -> int:
@@ -54,31 +70,51 @@ def local_cluster(workers: int) -> Any:
 
 
 def run_tasks(fn: Callable[..., R], tasks: Sequence[tuple[Any, ...]], workers: int,
-              scheduler: str | None) -> Iterator[R]:
+              scheduler: str | None, *, here_first: bool = False,
+              runs: Runs | None = None) -> Iterator[R]:
     """``fn(*task)`` for every task, serially or on Dask; yields results as they complete.
 
     Serial when ``workers <= 1`` and no scheduler is given; else a :func:`local_cluster` of at
     most one worker a task (closed afterwards) or the cluster at ``scheduler`` (left running).
-    ``fn`` must be importable by name in a worker process (a module-level function).
+    With ``here_first`` a batch that would start a local cluster first runs its tasks here, one
+    at a time, while the rest at the slowest task's pace here would take no longer than on the
+    cluster, its start (:data:`LOCAL_START_S`) counted: a small batch never waits for workers,
+    and a large one starts them after its first task. ``runs`` (when given) counts where the
+    tasks ran. ``fn`` must be importable by name in a worker process (a module-level function).
     """
+    runs = Runs() if runs is None else runs
     if scheduler is None and workers <= 1:
         for task in tasks:
+            runs.here += 1
             yield fn(*task)
         return
+    queue = list(tasks)
+    if scheduler is None and here_first:
+        slowest = 0.0
+        while queue and (runs.here == 0 or slowest * len(queue) <= (
+                slowest * len(queue) / min(workers, len(queue)) + LOCAL_START_S)):
+            started = time.perf_counter()
+            result = fn(*queue.pop(0))
+            slowest = max(slowest, time.perf_counter() - started)
+            runs.here += 1
+            yield result
+        if not queue:
+            return
     from dask.distributed import Client, as_completed
 
     cluster = None
     if scheduler is None:
-        cluster = local_cluster(min(workers, max(1, len(tasks))))
+        cluster = local_cluster(min(workers, max(1, len(queue))))
         client = Client(cluster)
     else:
         client = Client(scheduler, timeout="30s")
     try:
-        futures = [client.submit(fn, *task, pure=False) for task in tasks]
+        futures = [client.submit(fn, *task, pure=False) for task in queue]
         for future in as_completed(futures):
-            result: R = future.result()
+            done: R = future.result()
             future.release()
-            yield result
+            runs.workers += 1
+            yield done
     finally:
         client.close()
         if cluster is not None:

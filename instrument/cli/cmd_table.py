@@ -117,8 +117,10 @@ def plan_text(plan: BuildPlan, before_s: float = 0.0) -> str:
     if abs(plan.slowdown - 1.0) >= 0.1:
         lines.append(f"  (a plate takes {plan.slowdown:.2g}x the pilot's time with every worker "
                      "busy: counted)")
-    lines.append(f"  estimated time: {duration(plan.remaining_s)} on {plan.workers} worker"
-                 f"{'s' * (plan.workers != 1)} after a {duration(plan.pilot_wall_s)} pilot"
+    where = ("here, a plate at a time (less than the workers' start would take)" if plan.here
+             else f"on {plan.workers} worker{'s' * (plan.workers != 1)}")
+    lines.append(f"  estimated time: {duration(plan.remaining_s)} {where} after a "
+                 f"{duration(plan.pilot_wall_s)} pilot"
                  f"{started} ({duration(before_s + plan.elapsed_s + plan.remaining_s)} in all)")
     return "\n".join(lines)
 

@@ -16,7 +16,10 @@ plate and a task costs milliseconds.
 
 Execution goes through :func:`solitonde.instrument.parallel.run_tasks`: serial in this process
 (``workers=1``), a Dask ``LocalCluster`` (default: one single-threaded process per core), or an
-existing Dask cluster (``scheduler='tcp://host:port'``). Whatever runs the tasks, only the driver
+existing Dask cluster (``scheduler='tcp://host:port'``). A build too small to repay the local
+workers' start (a rebuild from the store, a handful of plates) runs here: planned from the pilot,
+or, without a plan, while the plates run here faster than the workers would start. Whatever runs
+the tasks, only the driver
 writes the file (:mod:`.table_file`): results stream back, each plate's points are written and
 flushed together with their ``done`` mask, so an interrupted build resumes where it stopped. The
 file is built as ``<out>.partial`` and renamed onto ``<out>`` (``os.replace``) only when complete.
@@ -40,6 +43,8 @@ import h5py
 import numpy as np
 
 from solitonde.instrument.parallel import (
+    LOCAL_START_S,
+    Runs,
     default_workers,
     local_cluster,
     run_tasks,
@@ -125,6 +130,11 @@ class BuildPlan:
     slopes_eta_s: float = 0.0
     elapsed_s: float = 0.0
     """Seconds the build had run when the plan was made (the pilot, the workers' start)."""
+    serial_s: float = 0.0
+    """The rest of the sweep's seconds run here, one plate at a time (what a small build does
+    when the workers' start would cost more than they save)."""
+    here: bool = False
+    """The sweep runs here, not on the workers asked for: cheaper than their start."""
     damped_factor: float = 1.0
     """A damped chain's time over the elastic one's on the pilot's plates (the layers' chains are
     damped), by which the layers' estimate is scaled."""
@@ -207,12 +217,14 @@ def _kind(sweep: Sweep, i_t: int, i_l: int) -> str:
 
 
 def _ends(tasks: Sequence[tuple[int, int, list[int]]]) -> list[tuple[int, int, list[int]]]:
-    """The pilot's plates of one kind: at its thinnest, middle and thickest thickness (fewer if
+    """The pilot's plates of one kind: at its thickest, middle and thinnest thickness (fewer if
     some are the same), each at the middle of that thickness's distances (the cost varies less
-    with the distance than with the thickness; the middle one stands for them)."""
+    with the distance than with the thickness; the middle one stands for them). The thickest,
+    usually the cheapest (its step is the longest), comes first: the kind's first plate loads
+    or compiles the kernels and is run twice, the others once."""
     present = sorted({t[0] for t in tasks})
     out = []
-    for i_t in sorted({present[0], present[len(present) // 2], present[-1]}):
+    for i_t in sorted({present[0], present[len(present) // 2], present[-1]}, reverse=True):
         same = sorted((t for t in tasks if t[0] == i_t), key=lambda t: t[1])
         out.append(same[len(same) // 2])
     return out
@@ -269,6 +281,7 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 t0 = time.perf_counter()
                 result = run_plate(spec, i_t, i_l, todo, store)
                 t_write = time.perf_counter()
+                ran = t_write - t0
                 written += write_plate(fh, result)
                 write_s.append(time.perf_counter() - t_write)
                 plates += 1
@@ -276,9 +289,10 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                 stored[kind] = stored.get(kind, True) and result["greens_computed"] == 0
                 # Timed again, warm: the first run of an installation compiles the numba kernels
                 # (minutes), which the workers then load from the cache; that is no plate's
-                # cost. Once with the store (a layer's cost), once without it (a point's, unless
-                # the store held this plate's responses: a rebuild needs no more), each run
-                # building its plate as a worker does.
+                # cost. Once with the store (a layer's cost), and the kind's first plate once
+                # without it (a point's, unless the store held this plate's responses: a rebuild
+                # needs no more); the kind's later plates ran with its kernels loaded, so their
+                # first run is their point's cost. Each run builds its plate as a worker does.
                 forget_plates()
                 chain = _timed_plate(spec, i_t, i_l, todo, store)
                 if damped is not None:
@@ -288,8 +302,10 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                         _timed_plate(damped, i_t, i_l, todo, store)
                     chains.append((chain, _timed_plate(damped, i_t, i_l, todo, store)))
                 again, again_store = chain, responses  # (not the scratch: dropped after)
-                if result["greens_computed"] > 0:
+                if result["greens_computed"] > 0 and (i_t, i_l, todo) == ends[0]:
                     again, again_store = _timed_plate(spec, i_t, i_l, todo), None
+                elif result["greens_computed"] > 0:  # the kind's kernels ran before: no compile
+                    again, again_store = ran, None
                 costs[kind].append((sweep.thicknesses_m[i_t], again / len(todo),
                                     chain / len(todo)))
                 timed.setdefault(kind, []).append(((i_t, i_l), todo, again, chain))
@@ -322,7 +338,8 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
     plan = BuildPlan(sweep, sum(len(t[2]) for t in tasks), len(tasks), points_by_kind, costs,
                      time.perf_counter() - started, work / lanes + len(rest) * write, lanes,
                      compile_s, layers, layer_work / layer_lanes + layer_writes,
-                     slopes_eta_s=slopes_s, damped_factor=damped_factor)
+                     slopes_eta_s=slopes_s, damped_factor=damped_factor,
+                     serial_s=work + len(rest) * write)
     assert warm is not None  # the pilot ran at least one plate
     return plan, written, plates, warm[1]
 
@@ -397,11 +414,14 @@ def build_table(
     with h5py.File(part, "r+") as fh:
         start_session(fh, runner)
         eta = None
+        runs = Runs()
         with contextlib.ExitStack() as stack:
-            sweep_scheduler = scheduler
+            sweep_scheduler, sweep_workers = scheduler, workers
             if plan is not None and max_plates is None and pending(fh, sweep):
                 the_plan, written, plates, sweep_scheduler = _plan_build(
                     fh, sweep, spec, stack, workers, scheduler, store, layers, slopes)
+                if sweep_scheduler is None:
+                    sweep_workers = the_plan.workers
                 eta = the_plan.eta_s
                 the_plan.elapsed_s = time.perf_counter() - started
                 plan(the_plan)
@@ -409,13 +429,16 @@ def build_table(
             if max_plates is not None:
                 tasks = tasks[:max(0, max_plates)]
             try:
-                more, more_plates = _run_plates(fh, spec, tasks, workers, sweep_scheduler,
-                                                progress, eta, on_plate, store)
+                more, more_plates = _run_plates(fh, spec, tasks, sweep_workers,
+                                                sweep_scheduler, progress, eta, on_plate, store,
+                                                runs)
             finally:
                 fh.attrs["build_wall_s"] = (float(fh.attrs["build_wall_s"])
                                             + time.perf_counter() - started)
                 fh.flush()
         written, plates = written + more, plates + more_plates
+        if scheduler is None and runs.workers == 0:
+            runner = runner_label(1, None)  # every plate ran here
         complete = bool(fh["done"][...].all())
         if complete:
             if slopes:
@@ -437,6 +460,13 @@ def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.
                                              slopes)
     if not pending(fh, sweep) or (scheduler is None and workers <= 1):
         return the_plan, written, plates, scheduler
+    if scheduler is None and the_plan.serial_s <= the_plan.eta_s + LOCAL_START_S:
+        # cheaper here than the workers' start: the sweep runs serially (its layers start
+        # their own workers, or run here in turn)
+        the_plan.eta_s, the_plan.workers, the_plan.here = the_plan.serial_s, 1, True
+        if layers:
+            the_plan.layers_eta_s += LOCAL_START_S
+        return the_plan, written, plates, None
     address, the_plan.start_s, the_plan.slowdown = _start_workers(stack, spec, warm,
                                                                   the_plan.workers, scheduler)
     the_plan.eta_s *= the_plan.slowdown
@@ -541,9 +571,11 @@ def _stream(client: Any, task: tuple[Any, ...], addresses: list[str], seconds: f
 def _run_plates(fh: h5py.File, spec: SweepDict, tasks: Sequence[tuple[int, int, list[int]]],
                 workers: int, scheduler: str | None, progress: bool, eta: float | None,
                 on_plate: Callable[[PlateResult], None] | None,
-                responses: str | None = None) -> tuple[int, int]:
+                responses: str | None = None, runs: Runs | None = None) -> tuple[int, int]:
     """Run the pending plates ``tasks`` through the executor and write each as it comes back;
-    returns the points and plates written (those of a plate that raised are not counted)."""
+    returns the points and plates written (those of a plate that raised are not counted).
+    Without a scheduler the first plates run here while that is cheaper than starting local
+    workers (:func:`~solitonde.instrument.parallel.run_tasks`; ``runs`` counts where)."""
     written = plates = 0
     bar = None
     if progress:
@@ -555,7 +587,8 @@ def _run_plates(fh: h5py.File, spec: SweepDict, tasks: Sequence[tuple[int, int, 
             bar.set_postfix_str(f"planned {eta:.0f} s", refresh=True)
     try:
         jobs = [(spec, i_t, i_l, todo, responses) for i_t, i_l, todo in tasks]
-        for result in run_tasks(run_plate, jobs, workers, scheduler):
+        for result in run_tasks(run_plate, jobs, workers, scheduler, here_first=True,
+                                runs=runs):
             n = write_plate(fh, result)
             written += n
             plates += 1

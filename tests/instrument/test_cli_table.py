@@ -213,4 +213,9 @@ def test_the_plan_says_what_it_counted() -> None:
     assert "  material slopes: 1 s" in lines
     # the seconds the command ran before its build began count in the total
     assert plan_text(plan, before_s=2.0).splitlines()[-1].endswith("(1.5 min in all)")
+    small = BuildPlan(sweep, 1, 1, {"dashpot": 1}, {"dashpot": [(3e-3, 0.5, 0.1)]},
+                      pilot_wall_s=1.0, eta_s=2.0, workers=1, elapsed_s=1.0, here=True)
+    assert plan_text(small).splitlines()[-1] == (
+        "  estimated time: 2 s here, a plate at a time (less than the workers' start would "
+        "take) after a 1 s pilot (3 s in all)")
     assert "  (a plate takes 1.3x the pilot's time with every worker busy: counted)" in lines

@@ -4,6 +4,7 @@ Green's functions across sphere sizes, features as the signal package measures t
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import h5py
@@ -22,6 +23,7 @@ from solitonde.instrument.tables.table import (
     TableError,
 )
 from solitonde.instrument.tables.table_build import (
+    BuildPlan,
     Sweep,
     build_table,
     partial_path,
@@ -109,6 +111,38 @@ def test_build_through_a_separate_dask_cluster_matches_serial(reference: Path,
     finally:
         cluster.close()
     same_table(reference, out, rtol=1e-12)
+
+
+def test_a_small_build_runs_here_without_starting_workers(reference: Path,
+                                                          tmp_path: Path) -> None:
+    """Twelve points of a coarse plate take about a second here, less than two workers' start:
+    with two workers asked for and no plan, every plate runs in this process, and the report
+    and the provenance say so; with a plan, the plan says one worker and no start."""
+    out = tmp_path / "small.h5"
+    report = build_table(tiny_sweep(), out, workers=2)
+    assert report.complete and report.runner == "serial"
+    assert ModelTable.load(out).provenance["runner"] == "serial"
+    same_table(reference, out)
+    plans: list[BuildPlan] = []
+    again = build_table(tiny_sweep(), tmp_path / "planned.h5", workers=2, plan=plans.append)
+    assert again.runner == "serial" and plans[0].workers == 1 and plans[0].start_s == 0.0
+    assert plans[0].eta_s == plans[0].serial_s
+
+
+def test_a_batch_starts_workers_once_its_rest_is_worth_their_start(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tasks run here first; once the rest at the slowest task's pace would take longer here
+    than on the workers with their start counted, the workers take the rest."""
+    from solitonde.instrument import parallel
+
+    cheap = parallel.Runs()
+    assert list(parallel.run_tasks(abs, [(-k,) for k in range(5)], 2, None, here_first=True,
+                                   runs=cheap)) == [0, 1, 2, 3, 4]
+    assert (cheap.here, cheap.workers) == (5, 0)
+    monkeypatch.setattr(parallel, "LOCAL_START_S", 0.01)  # a start cheaper than one task
+    dear = parallel.Runs()
+    list(parallel.run_tasks(time.sleep, [(0.05,)] * 4, 2, None, here_first=True, runs=dear))
+    assert (dear.here, dear.workers) == (1, 3)
 
 
 def test_file_appears_only_when_complete(tmp_path: Path) -> None:
