@@ -29,7 +29,7 @@ import numpy as np
 from .errors import WaveformError
 from .kernels import TRUNC_SPAN
 from .outliers import MIN_SHOTS, cutoff, modified_z
-from .pulses import Detection, DetectOptions, detect
+from .pulses import Detection, DetectOptions, detect, detect_each
 from .waveform import Waveform
 
 EXTRACTOR_VERSION = 2
@@ -184,8 +184,8 @@ def extract(waveform: Waveform, **options: Any) -> Features:
 
 def extract_many(waveforms: Sequence[Waveform], **options: Any) -> list[Features]:
     """:func:`extract` over many shots with the options validated once."""
-    opts = DetectOptions.from_kwargs(options)
-    return [from_detection(detect(w, opts)) for w in waveforms]
+    return [from_detection(d)
+            for d in detect_each(waveforms, DetectOptions.from_kwargs(options))]
 
 
 @dataclass(frozen=True)

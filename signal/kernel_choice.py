@@ -56,6 +56,19 @@ _state = threading.Lock()
 _bridging = False
 _driver: subprocess.Popen[bytes] | None = None
 _spent = 0.0
+_kernels: types.ModuleType | None = None
+
+
+def _compiled() -> types.ModuleType:
+    """:mod:`solitonde.signal.kernels`, imported on first use and kept: it imports numba, which
+    importing this module (:mod:`.waveform` does) should not, and an import statement run per
+    shot costs about half a microsecond of the extractor's hundred."""
+    global _kernels
+    if _kernels is None:
+        from . import kernels
+
+        _kernels = kernels
+    return _kernels
 
 
 def _marker() -> Path:
@@ -144,8 +157,7 @@ def current() -> types.ModuleType:
     interpreted copy while a background compile started by :func:`start` runs and this process
     has spent less than :data:`BRIDGE_BUDGET_S` on interpreted work."""
     global _bridging, _driver
-    from . import kernels as K
-
+    K = _compiled()
     if not _bridging:
         return K
     if _marker().is_file():
@@ -169,14 +181,15 @@ def locate_and_measure(x: np.ndarray, args: tuple[Any, ...]
     :func:`~solitonde.signal.pulses.kernel_args`). Interpreted work counts against
     :data:`BRIDGE_BUDGET_S`."""
     global _spent
-    from . import kernels as K
-
+    K = _compiled()
     kern = current()
+    if kern is K:  # compiled: no interpreted time to count
+        located = K.locate(x, *args[: K.LOCATE_ARGS])
+        return located, K.measure(*located, *args[K.LOCATE_ARGS :])
     started = time.perf_counter()
     located = kern.locate(x, *args[: K.LOCATE_ARGS])
     rows = kern.measure(*located, *args[K.LOCATE_ARGS :])
-    if kern is not K:
-        _spent += time.perf_counter() - started
+    _spent += time.perf_counter() - started
     return located, rows
 
 

@@ -55,6 +55,7 @@ types and the flag logic. The steps, each chosen so that a number is never picke
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -360,18 +361,40 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
         For bad options, or a pre-trigger segment that does not fit the record.
     """
     opts = options if options is not None else DetectOptions.from_kwargs(kwargs)
-    x = waveform.force
+    return _detect(waveform, opts, {})
+
+
+KernelArgs = dict[tuple[int, float], tuple[Any, ...]]
+""":func:`kernel_args` per record length and sample period, for one :class:`DetectOptions`."""
+
+
+def detect_each(waveforms: Iterable[Waveform], options: DetectOptions) -> Iterator[Detection]:
+    """:func:`detect` of each shot in turn, with ``options``: the kernel's arguments are worked
+    out once per record length and sample period, not per shot."""
+    args: KernelArgs = {}
+    for waveform in waveforms:
+        yield _detect(waveform, options, args)
+
+
+def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detection:
+    """:func:`detect` with its options checked, taking the kernel's arguments from ``args`` (or
+    adding them there)."""
     dt = waveform.dt
     t0 = waveform.t0
+    x = waveform.force
     if opts.lowpass_hz is not None:
         x = lowpass(x, dt, opts.lowpass_hz)
-    x = np.ascontiguousarray(x, dtype=np.float64)
+    if x is not waveform.samples:  # a Waveform's own samples are contiguous float64 already
+        x = np.ascontiguousarray(x, dtype=np.float64)
     if x.flags.writeable:  # volts scaled, or low-passed: the kernels' one type is read-only
         x = x.view()
         x.setflags(write=False)
+    shot_args = args.get((x.size, dt))
+    if shot_args is None:
+        shot_args = args[(x.size, dt)] = kernel_args(opts, x.size, dt)
     # K.analyze in two calls: each half is compiled on its own (side by side on a fresh install,
     # interpreted until then: solitonde.signal.kernel_choice) and nothing compiles the whole again.
-    located, rows_array = kernel_choice.locate_and_measure(x, kernel_args(opts, x.size, dt))
+    located, rows_array = kernel_choice.locate_and_measure(x, shot_args)
     head_array = located[0]
     head = head_array.tolist()  # Python floats: cheaper to read one by one than numpy scalars
     rows = rows_array.tolist()
@@ -543,4 +566,4 @@ def _not(value: Any) -> Any:
 
 
 def _ordered(raised: dict[str, Any]) -> tuple[str, ...]:
-    return tuple(f for f in FLAGS if raised[f])
+    return tuple([f for f in FLAGS if raised[f]])
