@@ -54,6 +54,24 @@ def _posterior(chi2: np.ndarray, best: float, g0: FineGrid
     return post, profile_t, profile_l, finite
 
 
+def _posterior_compiled(chi2: np.ndarray, best: float, g0: FineGrid
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_posterior` to the bit in three compiled passes (:mod:`.posterior_kernel`), exp
+    taken only where it is not exactly 0; ``chi2`` is left holding the deviance over its
+    minimum (what p_D averages) and the posterior gets its own memory."""
+    from solitonde.instrument.inference.posterior_kernel import exponents, weigh
+
+    finite = np.empty(chi2.shape, dtype=bool)
+    cells, x = np.empty(chi2.size, dtype=np.intp), np.empty(chi2.size)
+    count = exponents(chi2, best, finite, cells, x)
+    like = np.exp(x[:count], out=x[:count])
+    post = np.empty(chi2.shape)
+    profile_t, profile_l = np.empty(chi2.shape[0]), np.empty(chi2.shape[1])
+    weigh(cells[:count], like, g0.weight_t, g0.weight_l, post, profile_t, profile_l)
+    post /= post.sum()
+    return post, profile_t, profile_l, finite
+
+
 def _estimate(post: np.ndarray, profile_t: np.ndarray, profile_l: np.ndarray, g0: FineGrid,
               items: list[FeatureSummary], cal: Calibration | None, fit: float, n_terms: int
               ) -> Estimate:
@@ -108,17 +126,20 @@ def _strict_explained(est: Estimate, dev: Deviance, post: np.ndarray,
 
 def _adequacy_inputs(est: Estimate, dev: Deviance, post: np.ndarray, finite: np.ndarray,
                      i_best: tuple[np.intp, ...], items: list[FeatureSummary],
-                     cal: Calibration | None) -> None:
+                     cal: Calibration | None, over_best: np.ndarray | None = None) -> None:
     """What the adequacy check reads: the effective number of parameters the data fix (the
     posterior mean of the deviance over its minimum, Spiegelhalter et al.'s p_D), the material's
-    shift and, per seen size, the posterior's weight on floor cells."""
-    d_best = float(dev.misfit[i_best] + dev.logdet[i_best] + dev.bound_terms[i_best])
-    if use_compiled():
+    shift and, per seen size, the posterior's weight on floor cells. ``over_best``: the
+    deviance over its minimum per cell where the compiled posterior kept it (None: computed
+    here)."""
+    if over_best is not None:
+        # the deviance over its minimum as the posterior left it: on the cells with features
+        # (penalty 0) the same numbers as the expression below
         from solitonde.instrument.inference.posterior_kernel import weighted_excess
 
-        excess = weighted_excess(post, dev.misfit, dev.logdet, dev.bound_terms, finite, d_best,
-                                 int(np.count_nonzero(finite)))
+        excess = weighted_excess(post, over_best, finite, int(np.count_nonzero(finite)))
     else:
+        d_best = float(dev.misfit[i_best] + dev.logdet[i_best] + dev.bound_terms[i_best])
         deviance = dev.misfit + dev.logdet + dev.bound_terms
         excess = post[finite] * (deviance[finite] - d_best)
     est.extra["p_d"] = float(np.sum(excess))
@@ -134,9 +155,18 @@ def answer(dev: Deviance, items: list[FeatureSummary], cal: Calibration | None,
            return_posterior: bool) -> Estimate:
     """The estimate from the likelihood ``dev`` of exactly ``items``; ``out_of_range`` where no
     table point explains them."""
-    chi2 = dev.total()
-    best = float(chi2.min())
-    i_best = np.unravel_index(int(np.argmin(chi2)), chi2.shape)
+    compiled = use_compiled()
+    if compiled:
+        from solitonde.instrument.inference.posterior_kernel import total_and_best
+
+        chi2 = np.empty(dev.shape)
+        at = total_and_best(dev.misfit, dev.logdet, dev.penalty, dev.bound_terms, chi2)
+        best = float(chi2.flat[at])
+    else:
+        chi2 = dev.total()
+        best = float(chi2.min())
+        at = int(np.argmin(chi2))
+    i_best = np.unravel_index(at, chi2.shape)
     if not math.isfinite(best):
         return out_of_range(items, cal, best, dev.n_terms,
                             "the model detects no reflection anywhere in the table for these "
@@ -151,9 +181,10 @@ def answer(dev: Deviance, items: list[FeatureSummary], cal: Calibration | None,
                                 "table's range or not this kind of plate; no extrapolated "
                                 "number is given")
     g0 = dev.grids[0]
-    post, profile_t, profile_l, finite = _posterior(chi2, best, g0)
+    post, profile_t, profile_l, finite = (_posterior_compiled if compiled else _posterior)(
+        chi2, best, g0)
     est = _estimate(post, profile_t, profile_l, g0, items, cal, fit, dev.n_terms)
-    _adequacy_inputs(est, dev, post, finite, i_best, items, cal)
+    _adequacy_inputs(est, dev, post, finite, i_best, items, cal, chi2 if compiled else None)
     if return_posterior:
         est.posterior = {"thickness_m": g0.thickness_m, "distance_m": g0.distance_m,
                          "density": post}

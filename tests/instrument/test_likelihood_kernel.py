@@ -147,3 +147,35 @@ def test_an_inversion_makes_no_blas_call(table: ModelTable, monkeypatch: pytest.
     rng = np.random.default_rng(0)
     w, a = rng.random((481, 238)), rng.random((481, 238))
     assert weighted_sum(w, a) == pytest.approx(float(np.dot(w.ravel(), a.ravel())), rel=1e-12)
+
+
+def test_exp_is_exactly_zero_below_the_compiled_posteriors_cut() -> None:
+    """The compiled posterior hands numpy's exp only the exponents from ``EXP_ZERO`` up and
+    writes 0 for the others: numpy's exp must give exactly 0 there."""
+    from solitonde.instrument.inference.posterior_kernel import EXP_ZERO
+
+    below = np.concatenate([np.linspace(EXP_ZERO - 100.0, EXP_ZERO, 100_001)[:-1],
+                            [np.nextafter(EXP_ZERO, -np.inf), -1e300, -np.inf]])
+    assert not np.exp(below).any()
+
+
+def test_the_compiled_best_cell_is_numpys() -> None:
+    """``total_and_best`` sums the deviance's parts in ``Deviance.total``'s order and picks the
+    cell ``np.argmin`` picks: the first of equal minima, the first NaN where there is one."""
+    from solitonde.instrument.inference.posterior_kernel import total_and_best
+
+    rng = np.random.default_rng(1)
+    parts = [rng.random((7, 5)) for _ in range(4)]
+    parts[0][2, 3] = parts[0][4, 1] = -1.0  # two equal minima (the others' parts equal too)
+    for p in parts[1:]:
+        p[2, 3] = p[4, 1] = 0.25
+    parts[2][0, 0] = np.inf
+    for nan_at in (None, (3, 2), (6, 4)):
+        if nan_at is not None:
+            parts[1][nan_at] = np.nan
+        out = np.empty((7, 5))
+        at = total_and_best(*parts, out)
+        expected = parts[0] + parts[1] + parts[2] + parts[3]
+        assert np.array_equal(out, expected, equal_nan=True)
+        assert at == int(np.argmin(expected))
+        assert np.array_equal(out.flat[at], expected.min(), equal_nan=True)
