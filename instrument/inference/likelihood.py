@@ -65,7 +65,17 @@ def use_compiled() -> bool:
 def per_distance(x: Any, n_l: int) -> np.ndarray:
     """A number, or a row over the grid's distance axis as :func:`calibration_along` gives it,
     as one contiguous value per distance column (what the compiled kernels take)."""
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=float), (1, n_l))[0])
+    out = np.empty(n_l)
+    out[...] = x  # a row (1, n_l) fills it as it is, a number everywhere
+    return out
+
+
+def per_distance_rows(values: Sequence[Any], n_l: int) -> np.ndarray:
+    """:func:`per_distance` of each of ``values``, stacked (one row per value)."""
+    out = np.empty((len(values), n_l))
+    for row, x in zip(out, values, strict=True):
+        row[...] = x
+    return out
 
 
 class CellLikelihood(TypedDict):
@@ -189,7 +199,7 @@ class Deviance:
             if has_u and self.ur_sum is None:
                 self.ur_sum = new((2, *self.shape))
             models, model_vars, us = stacks.get(chunk)
-            obs, scale, s2, rel2 = (np.stack([per_distance(t[k], n_l) for t in chunk])
+            obs, scale, s2, rel2 = (per_distance_rows([t[k] for t in chunk], n_l)
                                     for k in (2, 3, 4, 5))
             unscaled = np.array([bool(np.ndim(t[3]) == 0 and t[3] == 1.0) for t in chunk])
             has_rel = np.array([bool(np.any(t[5])) for t in chunk])
@@ -204,8 +214,16 @@ class Deviance:
         """One more term in the variances' product: its log taken every :data:`LOG_BATCH`."""
         self.terms += 1
         if self.terms % LOG_BATCH == 0:
-            self.logdet += np.log(self.det)
+            self._log_det()
             self.det.fill(1.0)
+
+    def _log_det(self) -> None:
+        """The log of the variances' product added to ``logdet``; the first one written in
+        its place (0 + x is x: one pass over the grid less)."""
+        if self.terms > LOG_BATCH:
+            self.logdet += np.log(self.det)
+        else:
+            np.log(self.det, out=self.logdet)
 
     def add_material(self, u: np.ndarray, var: np.ndarray, r: np.ndarray) -> np.ndarray:
         """One term's share of ``U^T D^-1 r`` and ``U^T D^-1 U``; returns ``U^T D^-1`` (per
@@ -222,7 +240,7 @@ class Deviance:
     def close_logs(self) -> None:
         """The log of the product left over from the last batch."""
         if self.terms % LOG_BATCH:
-            self.logdet += np.log(self.det)
+            self._log_det()
 
     def total(self) -> np.ndarray:
         """-2 log L per cell: misfit, log-determinant, the cells without features (inf), and the
