@@ -179,3 +179,15 @@ def test_the_compiled_best_cell_is_numpys() -> None:
         assert np.array_equal(out, expected, equal_nan=True)
         assert at == int(np.argmin(expected))
         assert np.array_equal(out.flat[at], expected.min(), equal_nan=True)
+
+
+def test_the_fits_p_value_is_scipys_chi2_sf() -> None:
+    """The adequacy check's p-value calls ``chdtrc`` itself: what ``chi2.sf`` gives, to the
+    bit, at and below 0 and over the range a fit reaches."""
+    from scipy.stats import chi2
+
+    from solitonde.instrument.inference.adequacy import _chi2_sf
+
+    for dof in (1.0, 1.7, 4.0, 5.93, 12.0):
+        for x in (-1e-12, 0.0, 1e-300, 0.3, 1.0, 4.2, 33.0, 1e3, 1e5, 1e300):
+            assert _chi2_sf(x, dof) == float(chi2.sf(x, dof)), (x, dof)
