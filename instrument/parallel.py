@@ -15,8 +15,6 @@ model, which imports nothing of the instrument.
 from __future__ import annotations
 
 import os
-import sys
-import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -69,50 +67,6 @@ def local_cluster(workers: int) -> Any:
 
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         env=dict(WORKER_ENV), dashboard_address=":0", silence_logs=40)
-
-
-BACKGROUND_NICE = 10
-"""Niceness of the processes of a cluster started in the background: lower priority than the
-work in this process (a pilot being timed), which keeps its core while they start."""
-
-
-class BackgroundCluster:
-    """A :func:`local_cluster` starting in a background thread while this process works on.
-
-    On Linux a thread's priority is its own and the processes it starts inherit it: the starting
-    thread lowers its own (:data:`BACKGROUND_NICE`), so the workers' start (their imports) takes
-    the cores this process leaves idle, not this process's, and the workers then run their tasks
-    at that priority (against each other, the same; against this process, which writes their
-    results, lower). Elsewhere the priority is the process's, and is left as it is.
-    """
-
-    def __init__(self, workers: int) -> None:
-        self._out: dict[str, Any] = {}
-        self._thread = threading.Thread(target=self._start, args=(workers,), daemon=True,
-                                        name="solitonde-cluster-start")
-        self._thread.start()
-
-    def _start(self, workers: int) -> None:
-        try:
-            if sys.platform.startswith("linux"):
-                os.nice(BACKGROUND_NICE)  # this thread only
-            self._out["cluster"] = local_cluster(workers)
-        except BaseException as exc:  # raised again where the cluster is asked for
-            self._out["error"] = exc
-
-    def cluster(self) -> Any:
-        """The started cluster (waits for its start; raises what the start raised)."""
-        self._thread.join()
-        if "error" in self._out:
-            raise self._out["error"]
-        return self._out["cluster"]
-
-    def close(self) -> None:
-        """Close the cluster once started (waits for its start)."""
-        self._thread.join()
-        cluster = self._out.pop("cluster", None)
-        if cluster is not None:
-            cluster.close()
 
 
 def run_tasks(fn: Callable[..., R], tasks: Sequence[tuple[Any, ...]], workers: int,

@@ -44,7 +44,6 @@ import numpy as np
 
 from solitonde.instrument.parallel import (
     LOCAL_START_S,
-    BackgroundCluster,
     Runs,
     default_workers,
     local_cluster,
@@ -456,13 +455,7 @@ def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.
                 workers: int, scheduler: str | None, store: str | None, layers: int,
                 slopes: bool) -> tuple[BuildPlan, int, int, str | None]:
     """The pilot, then the workers started (a local cluster closed with ``stack``) and timed:
-    the plan, the points and plates the pilot wrote, and the scheduler the sweep runs on. A
-    sweep of many plates starts its local workers in the background as the pilot begins
-    (:data:`EARLY_START_PLATES`)."""
-    early = None
-    if scheduler is None and workers > 1 and len(pending(fh, sweep)) >= EARLY_START_PLATES:
-        early = BackgroundCluster(workers)
-        stack.callback(early.close)
+    the plan, the points and plates the pilot wrote, and the scheduler the sweep runs on."""
     the_plan, written, plates, warm = _pilot(fh, sweep, spec, workers, scheduler, store, layers,
                                              slopes)
     if not pending(fh, sweep) or (scheduler is None and workers <= 1):
@@ -474,24 +467,13 @@ def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.
         if layers:
             the_plan.layers_eta_s += LOCAL_START_S
         return the_plan, written, plates, None
-    if early is not None:
-        scheduler = str(early.cluster().scheduler_address)
     address, the_plan.start_s, the_plan.slowdown = _start_workers(stack, spec, warm,
                                                                   the_plan.workers, scheduler)
     the_plan.eta_s *= the_plan.slowdown
     the_plan.layers_eta_s *= the_plan.slowdown
-    if layers and (scheduler is None or early is not None):
-        # the layers start their own local cluster
-        the_plan.layers_eta_s += max(the_plan.start_s, LOCAL_START_S)
+    if layers and scheduler is None:
+        the_plan.layers_eta_s += the_plan.start_s  # the layers start their own local cluster
     return the_plan, written, plates, address
-
-
-EARLY_START_PLATES = 64
-"""A sweep of at least this many plates starts its local workers as its pilot begins
-(:class:`~solitonde.instrument.parallel.BackgroundCluster`): they start on the cores the pilot
-leaves idle, and the plan's "start" is then what remains of it after the pilot. Smaller sweeps
-start them only once the pilot's plan says they repay their start (a rebuild from the store may
-not)."""
 
 
 PARALLEL_SLOWDOWN_RANGE = (1.0, 4.0)

@@ -145,42 +145,6 @@ def test_a_batch_starts_workers_once_its_rest_is_worth_their_start(
     assert (dear.here, dear.workers) == (1, 3)
 
 
-def test_a_large_sweep_starts_its_workers_during_the_pilot(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """With the thresholds lowered so that this small sweep counts as large, its local workers
-    start in the background as the pilot begins, at a lower priority on Linux, and the sweep's
-    rest runs on them: the table is the serial build's."""
-    import os
-    import sys
-
-    from dask.distributed import Client
-
-    from solitonde.instrument import parallel
-    from solitonde.instrument.tables import table_build
-
-    monkeypatch.setattr(table_build, "EARLY_START_PLATES", 1)
-    monkeypatch.setattr(table_build, "LOCAL_START_S", 0.0)
-    sweep = Sweep([4.76e-3], [3e-3, 4e-3, 5e-3], [0.0, 0.01, 0.02, 0.3], scene=FAST)
-    serial = build_table(sweep, tmp_path / "serial.h5", workers=1)
-    niceness: list[int] = []
-    started = parallel.BackgroundCluster.cluster
-
-    def cluster(self: parallel.BackgroundCluster) -> object:
-        out = started(self)
-        with Client(out.scheduler_address) as client:
-            niceness.extend(client.run(os.nice, 0).values())
-        return out
-
-    monkeypatch.setattr(parallel.BackgroundCluster, "cluster", cluster)
-    plans: list[BuildPlan] = []
-    report = build_table(sweep, tmp_path / "early.h5", workers=2, plan=plans.append)
-    assert report.complete and report.runner.startswith("dask LocalCluster")
-    assert not plans[0].here and plans[0].workers == 2 and len(niceness) == 2
-    if sys.platform.startswith("linux"):
-        assert set(niceness) == {min(19, os.nice(0) + parallel.BACKGROUND_NICE)}
-    same_table(serial.path, report.path, rtol=1e-12)
-
-
 def test_file_appears_only_when_complete(tmp_path: Path) -> None:
     """While plates are being written the output name does not exist."""
     out = tmp_path / "t.h5"
