@@ -14,7 +14,9 @@ model, which imports nothing of the instrument.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -67,6 +69,14 @@ def local_cluster(workers: int) -> Any:
 
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                         env=dict(WORKER_ENV), dashboard_address=":0", silence_logs=40)
+
+
+def close_later(cluster: Any, waits: contextlib.ExitStack) -> None:
+    """Begin closing ``cluster`` in a thread (its processes end while this one goes on) and
+    have ``waits`` wait for it when it closes."""
+    closer = threading.Thread(target=cluster.close, name="solitonde-cluster-close")
+    closer.start()
+    waits.callback(closer.join)
 
 
 def run_tasks(fn: Callable[..., R], tasks: Sequence[tuple[Any, ...]], workers: int,

@@ -19,18 +19,12 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import typer
 
 from solitonde.instrument.cli.main import HELP_MARKUP
-from solitonde.instrument.inference.material_spread import (
-    describe_spread,
-    spread_of,
-    spread_source,
-)
-from solitonde.instrument.inference.tier_match import TierMatchRow
-from solitonde.instrument.inference.tier_match import summary as tier_summary
 from solitonde.instrument.service.settings import DEFAULT_TABLE
 from solitonde.instrument.tables.sweep import (
     PAPER_DIAMETERS_M,
@@ -43,6 +37,9 @@ from solitonde.instrument.tables.table_build import BuildPlan, build_table, part
 from solitonde.model.errors import SceneError
 from solitonde.model.scene import SceneDict, apply_overrides, load_scene_file, scene_from_dict
 from solitonde.signal.features import EXTRACTOR_VERSION
+
+if TYPE_CHECKING:  # the inference's modules load scipy.interpolate: only `table info` needs them
+    from solitonde.instrument.inference.tier_match import TierMatchRow
 
 DEFAULT_TABLE_PATH = DEFAULT_TABLE
 
@@ -255,6 +252,13 @@ def info_command(
     except TableError as exc:
         _fail(str(exc))
         return
+    from solitonde.instrument.inference.material_spread import (
+        describe_spread,
+        spread_of,
+        spread_source,
+    )
+    from solitonde.instrument.inference.tier_match import summary as tier_summary
+
     spread, source = spread_of(table), spread_source(table)
     data: TableInfo = {**table.summary(), "material_spread": {**spread, "source": source},
                        "tier_match": tier_summary(table)}

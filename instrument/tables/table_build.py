@@ -45,6 +45,7 @@ import numpy as np
 from solitonde.instrument.parallel import (
     LOCAL_START_S,
     Runs,
+    close_later,
     default_workers,
     local_cluster,
     run_tasks,
@@ -411,51 +412,58 @@ def build_table(
     else:
         with h5py.File(part, "w") as fh:
             create(fh, sweep)
-    with h5py.File(part, "r+") as fh:
-        start_session(fh, runner)
-        eta = None
-        runs = Runs()
-        with contextlib.ExitStack() as stack:
-            sweep_scheduler, sweep_workers = scheduler, workers
-            if plan is not None and max_plates is None and pending(fh, sweep):
-                the_plan, written, plates, sweep_scheduler = _plan_build(
-                    fh, sweep, spec, stack, workers, scheduler, store, layers, slopes)
-                if sweep_scheduler is None:
-                    sweep_workers = the_plan.workers
-                eta = the_plan.eta_s
-                the_plan.elapsed_s = time.perf_counter() - started
-                plan(the_plan)
-            tasks = pending(fh, sweep)
-            if max_plates is not None:
-                tasks = tasks[:max(0, max_plates)]
-            try:
-                more, more_plates = _run_plates(fh, spec, tasks, sweep_workers,
-                                                sweep_scheduler, progress, eta, on_plate, store,
-                                                runs)
-            finally:
-                fh.attrs["build_wall_s"] = (float(fh.attrs["build_wall_s"])
-                                            + time.perf_counter() - started)
-                fh.flush()
-        written, plates = written + more, plates + more_plates
-        if scheduler is None and runs.workers == 0:
-            runner = runner_label(1, None)  # every plate ran here
-        complete = bool(fh["done"][...].all())
+    # a local cluster closes in the background while the slopes and the file are finished;
+    # the build returns once it has
+    with contextlib.ExitStack() as closing:
+        with h5py.File(part, "r+") as fh:
+            start_session(fh, runner)
+            eta = None
+            runs = Runs()
+            with contextlib.ExitStack() as stack:
+                sweep_scheduler, sweep_workers = scheduler, workers
+                if plan is not None and max_plates is None and pending(fh, sweep):
+                    the_plan, written, plates, sweep_scheduler = _plan_build(
+                        fh, sweep, spec, stack, workers, scheduler, store, layers, slopes,
+                        closing)
+                    if sweep_scheduler is None:
+                        sweep_workers = the_plan.workers
+                    eta = the_plan.eta_s
+                    the_plan.elapsed_s = time.perf_counter() - started
+                    plan(the_plan)
+                tasks = pending(fh, sweep)
+                if max_plates is not None:
+                    tasks = tasks[:max(0, max_plates)]
+                try:
+                    more, more_plates = _run_plates(fh, spec, tasks, sweep_workers,
+                                                    sweep_scheduler, progress, eta, on_plate, store,
+                                                    runs)
+                finally:
+                    fh.attrs["build_wall_s"] = (float(fh.attrs["build_wall_s"])
+                                                + time.perf_counter() - started)
+                    fh.flush()
+            written, plates = written + more, plates + more_plates
+            if scheduler is None and runs.workers == 0:
+                runner = runner_label(1, None)  # every plate ran here
+            complete = bool(fh["done"][...].all())
+            if complete:
+                if slopes:
+                    write_slopes(fh, simulate_slopes(sweep))
+                fh.attrs["provenance"] = json.dumps(provenance(fh, sweep, runner, command,
+                                                               table_id))
+                fh.attrs["complete"] = True
         if complete:
-            if slopes:
-                write_slopes(fh, simulate_slopes(sweep))
-            fh.attrs["provenance"] = json.dumps(provenance(fh, sweep, runner, command, table_id))
-            fh.attrs["complete"] = True
-    if complete:
-        os.replace(part, out)
+            os.replace(part, out)
     return BuildReport(out if complete else part, complete, written, plates,
                        time.perf_counter() - started, runner)
 
 
 def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.ExitStack,
                 workers: int, scheduler: str | None, store: str | None, layers: int,
-                slopes: bool) -> tuple[BuildPlan, int, int, str | None]:
-    """The pilot, then the workers started (a local cluster closed with ``stack``) and timed:
-    the plan, the points and plates the pilot wrote, and the scheduler the sweep runs on."""
+                slopes: bool, closing: contextlib.ExitStack
+                ) -> tuple[BuildPlan, int, int, str | None]:
+    """The pilot, then the workers started (a local cluster, its close begun with ``stack``
+    and waited for with ``closing``) and timed: the plan, the points and plates the pilot wrote,
+    and the scheduler the sweep runs on."""
     the_plan, written, plates, warm = _pilot(fh, sweep, spec, workers, scheduler, store, layers,
                                              slopes)
     if not pending(fh, sweep) or (scheduler is None and workers <= 1):
@@ -468,7 +476,8 @@ def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.
             the_plan.layers_eta_s += LOCAL_START_S
         return the_plan, written, plates, None
     address, the_plan.start_s, the_plan.slowdown = _start_workers(stack, spec, warm,
-                                                                  the_plan.workers, scheduler)
+                                                                  the_plan.workers, scheduler,
+                                                                  closing)
     the_plan.eta_s *= the_plan.slowdown
     the_plan.layers_eta_s *= the_plan.slowdown
     if layers and scheduler is None:
@@ -505,11 +514,12 @@ def _timed_plate(spec: SweepDict, i_t: int, i_l: int, todo: list[int],
 
 
 def _start_workers(stack: contextlib.ExitStack, spec: SweepDict,
-                   warm: WarmPlate, workers: int,
-                   scheduler: str | None) -> tuple[str, float, float]:
-    """Start the sweep's local cluster (closed with ``stack``; an existing ``scheduler`` is
-    used as it is), have every worker load the model on the pilot plate ``warm``, then run that
-    plate as a stream of tasks on every worker at once (:data:`WARM_TIMING_S`): returns the
+                   warm: WarmPlate, workers: int, scheduler: str | None,
+                   closing: contextlib.ExitStack) -> tuple[str, float, float]:
+    """Start the sweep's local cluster (its close begun with ``stack`` and waited for with
+    ``closing``; an existing ``scheduler`` is used as it is), have every worker load the model
+    on the pilot plate ``warm``, then run that plate as a stream of tasks on every worker at
+    once (:data:`WARM_TIMING_S`): returns the
     scheduler's address, the seconds taken (which the plan then counts as spent, not guessed),
     and how much slower a plate runs in the sweep than here alone (cores that share a physical
     core or memory bandwidth run slower together; a worker runs slower than this process, and
@@ -518,14 +528,16 @@ def _start_workers(stack: contextlib.ExitStack, spec: SweepDict,
 
     started = time.perf_counter()
     if scheduler is None:
-        scheduler = str(stack.enter_context(local_cluster(workers)).scheduler_address)
+        cluster = local_cluster(workers)
+        stack.callback(close_later, cluster, closing)
+        scheduler = str(cluster.scheduler_address)
     task = (spec, *warm.task, warm.store)
     with Client(scheduler, timeout="30s") as client:
         addresses = list(client.scheduler_info()["workers"])
         # one run each loads the model's kernels in that worker
         client.gather([client.submit(_timed_plate, *task, workers=[address], pure=False,
                                      allow_other_workers=False) for address in addresses])
-        alone = _repeat_here(task, WARM_TIMING_S / 2)
+        alone = _repeat_here(task, WARM_TIMING_S / 2, warm.seconds)
         together = _stream(client, task, addresses, WARM_TIMING_S)
     return scheduler, time.perf_counter() - started, parallel_slowdown(together, alone)
 
@@ -539,11 +551,11 @@ def parallel_slowdown(together_s: float, alone_s: float) -> float:
     return min(max(together_s / alone_s, low), high)
 
 
-def _repeat_here(task: tuple[Any, ...], seconds: float) -> float:
+def _repeat_here(task: tuple[Any, ...], seconds: float, before: float) -> float:
     """The median seconds of a plate run here, again and again for at least ``seconds`` (and
-    twice)."""
-    times: list[float] = []
-    started = time.perf_counter()
+    twice), the pilot's run of it (``before`` seconds) counted as the first."""
+    times = [before]
+    started = time.perf_counter() - before
     while len(times) < 2 or time.perf_counter() - started < seconds:
         times.append(_timed_plate(*task))
     return float(np.median(times))
