@@ -19,10 +19,10 @@ Execution goes through :func:`solitonde.instrument.parallel.run_tasks`: serial i
 existing Dask cluster (``scheduler='tcp://host:port'``). A build too small to repay the local
 workers' start (a rebuild from the store, a handful of plates) runs here: planned from the pilot,
 or, without a plan, while the plates run here faster than the workers would start. Whatever runs
-the tasks, only the driver
-writes the file (:mod:`.table_file`): results stream back, each plate's points are written and
-flushed together with their ``done`` mask, so an interrupted build resumes where it stopped. The
-file is built as ``<out>.partial`` and renamed onto ``<out>`` (``os.replace``) only when complete.
+the tasks, only the driver writes the file (:mod:`.table_file`): results stream back, each
+plate's points are written and flushed together with their ``done`` mask, so an interrupted
+build resumes where it stopped. The file is built as ``<out>.partial`` and renamed onto ``<out>``
+(``os.replace``) only when complete.
 """
 
 from __future__ import annotations
@@ -519,11 +519,11 @@ def _start_workers(stack: contextlib.ExitStack, spec: SweepDict,
     """Start the sweep's local cluster (its close begun with ``stack`` and waited for with
     ``closing``; an existing ``scheduler`` is used as it is), have every worker load the model
     on the pilot plate ``warm``, then run that plate as a stream of tasks on every worker at
-    once (:data:`WARM_TIMING_S`): returns the
-    scheduler's address, the seconds taken (which the plan then counts as spent, not guessed),
-    and how much slower a plate runs in the sweep than here alone (cores that share a physical
-    core or memory bandwidth run slower together; a worker runs slower than this process, and
-    short tasks share the cores with their messages)."""
+    once (:data:`WARM_TIMING_S`): returns the scheduler's address, the seconds taken (which the
+    plan then counts as spent, not guessed), and how much slower a plate runs in the sweep than
+    here alone (cores that share a physical core or memory bandwidth run slower together; a
+    worker runs slower than this process, and short tasks share the cores with their
+    messages)."""
     from dask.distributed import Client
 
     started = time.perf_counter()
