@@ -407,14 +407,8 @@ def build_table(
     written = plates = 0
     spec = sweep.to_dict()
     out.parent.mkdir(parents=True, exist_ok=True)
-    if part.exists():
-        check_partial(part, sweep)
-    else:
-        with h5py.File(part, "w") as fh:
-            create(fh, sweep)
-    # a local cluster closes in the background while the slopes and the file are finished;
-    # the build returns once it has
-    with contextlib.ExitStack() as closing:
+    _start_partial(part, sweep)
+    with contextlib.ExitStack() as closing:  # waits for a local cluster closing meanwhile
         with h5py.File(part, "r+") as fh:
             start_session(fh, runner)
             eta = None
@@ -444,17 +438,33 @@ def build_table(
             written, plates = written + more, plates + more_plates
             if scheduler is None and runs.workers == 0:
                 runner = runner_label(1, None)  # every plate ran here
-            complete = bool(fh["done"][...].all())
-            if complete:
-                if slopes:
-                    write_slopes(fh, simulate_slopes(sweep))
-                fh.attrs["provenance"] = json.dumps(provenance(fh, sweep, runner, command,
-                                                               table_id))
-                fh.attrs["complete"] = True
+            complete = _finish(fh, sweep, slopes, runner, command, table_id)
         if complete:
             os.replace(part, out)
     return BuildReport(out if complete else part, complete, written, plates,
                        time.perf_counter() - started, runner)
+
+
+def _start_partial(part: Path, sweep: Sweep) -> None:
+    """Create ``part`` for ``sweep``, or check that the one there was started for it."""
+    if part.exists():
+        check_partial(part, sweep)
+    else:
+        with h5py.File(part, "w") as fh:
+            create(fh, sweep)
+
+
+def _finish(fh: h5py.File, sweep: Sweep, slopes: bool, runner: str, command: str | None,
+            table_id: str | None) -> bool:
+    """Whether every point is done; if so, the slopes (with ``slopes``) and the provenance
+    written and the file marked complete."""
+    if not bool(fh["done"][...].all()):
+        return False
+    if slopes:
+        write_slopes(fh, simulate_slopes(sweep))
+    fh.attrs["provenance"] = json.dumps(provenance(fh, sweep, runner, command, table_id))
+    fh.attrs["complete"] = True
+    return True
 
 
 def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.ExitStack,
