@@ -107,7 +107,7 @@ def plan_text(plan: BuildPlan, before_s: float = 0.0) -> str:
         lines.append(f"  {plan.layers} dissipation layer{'s' * (plan.layers != 1)}: the plates' "
                      f"responses read from the store, only the chains run (damped: "
                      f"{plan.damped_factor:.2g}x the elastic chain's time): "
-                     f"{duration(plan.layers_eta_s)}")
+                     f"{duration(plan.layers_eta_s)}" + (" here" if plan.layers_here else ""))
     if plan.slopes_eta_s >= 0.5:
         lines.append(f"  material slopes: {duration(plan.slopes_eta_s)}")
     started = f" and the workers' {duration(plan.start_s)} start" if plan.start_s else ""
@@ -198,12 +198,19 @@ def build_command(
         kernel_choice.start()
         store = True if responses is None else responses
         before = _process_seconds()
+        plans: list[BuildPlan] = []
+
+        def show(plan: BuildPlan) -> None:
+            plans.append(plan)
+            typer.echo(plan_text(plan, before), err=as_json)
+
         report = build_table(sweep, out, workers=workers, scheduler=scheduler, progress=progress,
-                             command=command, table_id=table_id,
-                             plan=lambda p: typer.echo(plan_text(p, before), err=as_json),
+                             command=command, table_id=table_id, plan=show,
                              responses=store, layers=len(dissipation_layer))
         if report.complete and dissipation_layer:
-            _add_layer(out, dissipation_layer, [], workers, progress, as_json, scheduler, store)
+            here = bool(plans) and plans[0].layers_here  # too few plates for workers
+            _add_layer(out, dissipation_layer, [], 1 if here else workers, progress, as_json,
+                       scheduler, store)
     except (TableError, SceneError) as exc:
         _fail(str(exc))
         return

@@ -136,6 +136,10 @@ class BuildPlan:
     when the workers' start would cost more than they save)."""
     here: bool = False
     """The sweep runs here, not on the workers asked for: cheaper than their start."""
+    layers_serial_s: float = 0.0
+    """The layers' seconds run here, one plate at a time."""
+    layers_here: bool = False
+    """The layers run here, not on the workers asked for: cheaper than their start."""
     damped_factor: float = 1.0
     """A damped chain's time over the elastic one's on the pilot's plates (the layers' chains are
     damped), by which the layers' estimate is scaled."""
@@ -340,7 +344,8 @@ def _pilot(fh: h5py.File, sweep: Sweep, spec: SweepDict, workers: int,
                      time.perf_counter() - started, work / lanes + len(rest) * write, lanes,
                      compile_s, layers, layer_work / layer_lanes + layer_writes,
                      slopes_eta_s=slopes_s, damped_factor=damped_factor,
-                     serial_s=work + len(rest) * write)
+                     serial_s=work + len(rest) * write,
+                     layers_serial_s=layer_work + layer_writes)
     assert warm is not None  # the pilot ran at least one plate
     return plan, written, plates, warm[1]
 
@@ -476,22 +481,26 @@ def _plan_build(fh: h5py.File, sweep: Sweep, spec: SweepDict, stack: contextlib.
     and the scheduler the sweep runs on."""
     the_plan, written, plates, warm = _pilot(fh, sweep, spec, workers, scheduler, store, layers,
                                              slopes)
-    if not pending(fh, sweep) or (scheduler is None and workers <= 1):
+    local = scheduler is None and workers > 1
+    if local and layers and the_plan.layers_serial_s <= the_plan.layers_eta_s + LOCAL_START_S:
+        # the layers are cheaper here than on workers started for them
+        the_plan.layers_eta_s, the_plan.layers_here = the_plan.layers_serial_s, True
+    if not pending(fh, sweep) or (scheduler is None and not local):
         return the_plan, written, plates, scheduler
-    if scheduler is None and the_plan.serial_s <= the_plan.eta_s + LOCAL_START_S:
-        # cheaper here than the workers' start: the sweep runs serially (its layers start
-        # their own workers, or run here in turn)
+    if local and the_plan.serial_s <= the_plan.eta_s + LOCAL_START_S:
+        # cheaper here than the workers' start: the sweep runs serially
         the_plan.eta_s, the_plan.workers, the_plan.here = the_plan.serial_s, 1, True
-        if layers:
-            the_plan.layers_eta_s += LOCAL_START_S
+        if layers and not the_plan.layers_here:
+            the_plan.layers_eta_s += LOCAL_START_S  # their own workers start
         return the_plan, written, plates, None
     address, the_plan.start_s, the_plan.slowdown = _start_workers(stack, spec, warm,
                                                                   the_plan.workers, scheduler,
                                                                   closing)
     the_plan.eta_s *= the_plan.slowdown
-    the_plan.layers_eta_s *= the_plan.slowdown
-    if layers and scheduler is None:
-        the_plan.layers_eta_s += the_plan.start_s  # the layers start their own local cluster
+    if not the_plan.layers_here:
+        the_plan.layers_eta_s *= the_plan.slowdown
+        if layers and scheduler is None:
+            the_plan.layers_eta_s += the_plan.start_s  # they start their own local cluster
     return the_plan, written, plates, address
 
 

@@ -117,16 +117,19 @@ def test_a_small_build_runs_here_without_starting_workers(reference: Path,
                                                           tmp_path: Path) -> None:
     """Twelve points of a coarse plate take about a second here, less than two workers' start:
     with two workers asked for and no plan, every plate runs in this process, and the report
-    and the provenance say so; with a plan, the plan says one worker and no start."""
+    and the provenance say so; with a plan, the plan says one worker and no start, and that
+    its dissipation layers run here too."""
     out = tmp_path / "small.h5"
     report = build_table(tiny_sweep(), out, workers=2)
     assert report.complete and report.runner == "serial"
     assert ModelTable.load(out).provenance["runner"] == "serial"
     same_table(reference, out)
     plans: list[BuildPlan] = []
-    again = build_table(tiny_sweep(), tmp_path / "planned.h5", workers=2, plan=plans.append)
+    again = build_table(tiny_sweep(), tmp_path / "planned.h5", workers=2, plan=plans.append,
+                        layers=3)
     assert again.runner == "serial" and plans[0].workers == 1 and plans[0].start_s == 0.0
     assert plans[0].eta_s == plans[0].serial_s
+    assert plans[0].layers_here and plans[0].layers_eta_s == plans[0].layers_serial_s > 0
 
 
 def test_a_batch_starts_workers_once_its_rest_is_worth_their_start(
