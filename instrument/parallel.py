@@ -34,8 +34,9 @@ R = TypeVar("R")
 
 LOCAL_START_S = 2.0
 """Seconds a local cluster costs a batch before its workers take tasks: their processes' start
-and the model's load in each (measured 1.5-2.2 s on two cores, idle). A batch whose tasks take
-less than that here finishes before the workers could have started."""
+and the model's load in each (measured on two idle cores: 0.3 s and about 1 s; a table build's
+timing of the workers brings it to 1.9-2.3 s). A batch whose tasks take less than that here
+finishes before the workers could have started."""
 
 
 @dataclass
@@ -100,12 +101,13 @@ def run_tasks(fn: Callable[..., R], tasks: Sequence[tuple[Any, ...]], workers: i
         return
     queue = list(tasks)
     if scheduler is None and here_first:
-        slowest = 0.0
-        while queue and (runs.here == 0 or slowest * len(queue) <= (
+        slowest, ran = 0.0, 0
+        while queue and (ran == 0 or slowest * len(queue) <= (
                 slowest * len(queue) / min(workers, len(queue)) + LOCAL_START_S)):
             started = time.perf_counter()
             result = fn(*queue.pop(0))
             slowest = max(slowest, time.perf_counter() - started)
+            ran += 1
             runs.here += 1
             yield result
         if not queue:
