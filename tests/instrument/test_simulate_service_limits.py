@@ -45,7 +45,7 @@ def test_simulate_service_never_records_particle_traces(tmp_path: Path, monkeypa
     original = sim.simulate
 
     def spy(scene, **kwargs):
-        seen.append(scene.output.traces)
+        seen.append((scene.effects.plate_model, scene.output.traces))
         return original(scene, **kwargs)
 
     monkeypatch.setattr(sim, "simulate", spy)
@@ -53,7 +53,10 @@ def test_simulate_service_never_records_particle_traces(tmp_path: Path, monkeypa
     with TestClient(build_app(Settings(store_path=tmp_path / "s.sqlite"))) as client:
         r = client.post("/v1/simulate", json={"scene": scene, "include_trace": False})
     assert r.status_code == 200, r.text
-    assert seen == [False]
+    # the request's scene, and the reference runs the extraction makes for itself (the chain's
+    # relaxation on a rigid plate, cached per process: absent when an earlier test made them),
+    # all without traces
+    assert ("halfspace", False) in seen and not any(traces for _, traces in seen)
 
 
 @pytest.mark.parametrize("sem", [
