@@ -22,11 +22,13 @@ from .tiers import (
     DOPRI5_PLATE_MODELS,
     MESHED_PLATE_MODELS,
     STATIC_PLATE_MODELS,
+    TIERS,
     BottomBoundary,
     StepPlan,
     make_boundary,
     resolve_plate_model,
 )
+from .tiers.meshed import SEM_DOF_WEIGHT
 
 #: Verlet steps per period of the stiffest chain oscillation (see :func:`choose_time_step`).
 STEPS_PER_PERIOD = 1600
@@ -161,12 +163,9 @@ def check_solver(scene: Scene) -> tuple[str, str] | None:
     return name, reason
 
 
-PLATE_DOF_WEIGHT = 4.0
-"""One spectral-element degree of freedom advanced one step costs about as much as 4 chain
-particles advanced one step, so plate work is counted in chain-equivalent units. Measured on one
-idle core: the chain (Verlet, default scene) ~3.5e8 particle-steps/s; the coupled SEM plate with
-the sum-factorised stiffness ~9e7 dof-steps/s (default mesh, 14,400 to 52,728 steps). The dense
-stiffness this weight was first set for ran ~2.6e7 dof-steps/s (weight 25)."""
+PLATE_DOF_WEIGHT = SEM_DOF_WEIGHT
+"""The 3-D spectral-element plate's weight (:data:`~.tiers.meshed.SEM_DOF_WEIGHT`): each meshed
+tier states its own (``Tier.dof_weight``; Mindlin's is lighter)."""
 
 CONVOLUTION_WEIGHT = 0.25
 """The ``greens`` plate convolves the whole force history at every plate step (sum over the
@@ -226,8 +225,9 @@ def plan(
     them at hand.
 
     Raises SceneError for a solver that cannot run the scene's plate model (before any mesh).
-    ``cost = chain steps x (particles + 1) + PLATE_DOF_WEIGHT x plate steps x plate dofs``, plus
-    ``CONVOLUTION_WEIGHT x plate_steps^2 / 2`` for ``greens``; about 3.5e8 per CPU second.
+    ``cost = chain steps x (particles + 1) + dof weight x plate steps x plate dofs`` (the
+    tier's ``dof_weight``), plus ``CONVOLUTION_WEIGHT x plate_steps^2 / 2`` for the convolved
+    tiers; about 3.5e8-4.6e8 per CPU second.
     """
     if boundary is not None:  # built by the caller, after its own check_solver
         name, reason = boundary.name, boundary.reason
@@ -249,7 +249,7 @@ def plan(
     if boundary is None and name in MESHED_PLATE_MODELS:
         steps = max(n_samples - 1, _plate_steps_floor(scene, duration, name))
         dofs = _plate_dofs(scene, name)
-        floor = float(steps) * (particles + PLATE_DOF_WEIGHT * dofs)
+        floor = float(steps) * (particles + TIERS[name].dof_weight * dofs)
         if name in CONVOLVED_PLATE_MODELS:
             floor += CONVOLUTION_WEIGHT * 0.5 * float(steps) ** 2
         if floor > budget:
@@ -271,7 +271,8 @@ def plan(
         plate_steps = per_sample * (n_samples - 1)
         chain_steps = plate_steps * r
         plate_dofs = int(plate.n_dofs)
-    cost = float(chain_steps) * particles + PLATE_DOF_WEIGHT * float(plate_steps) * plate_dofs
+    cost = (float(chain_steps) * particles
+            + TIERS[name].dof_weight * float(plate_steps) * plate_dofs)
     if name in CONVOLVED_PLATE_MODELS:
         cost += CONVOLUTION_WEIGHT * 0.5 * float(plate_steps) ** 2
     estimate = ("upper bound (verlet step counts)" if integrator == "dopri5"

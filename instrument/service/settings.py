@@ -71,9 +71,8 @@ class Settings:
         declares more in its header is refused (413) before its data is read.
     max_simulation_cost:
         Budget for ``POST /v1/simulate`` in chain particle-steps (integration steps x particles;
-        spectral-element plate dof-steps counted 4 times, see
-        :data:`~solitonde.model.plan.PLATE_DOF_WEIGHT`); 5e8 is about 1.5 CPU
-        seconds.
+        a meshed plate's dof-steps at its tier's weight: 4 for the 3-D spectral elements, 1.4
+        for Mindlin, see ``Tier.dof_weight``); 5e8 is about 1.1-1.5 CPU seconds.
     store_synchronous:
         SQLite ``synchronous`` pragma. ``NORMAL`` (WAL) keeps every committed measurement when the
         process is killed; ``FULL`` also survives power loss at the cost of one fsync per write.

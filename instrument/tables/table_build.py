@@ -176,13 +176,14 @@ def plate_model_costs(sweep: Sweep, i_t: int, i_l: int) -> list[tuple[float, flo
     the plate's response comes from the store). Exact step and dof counts: a plate's cost jumps
     where the step, quantised to the sample period, halves (a 5 mm steel plate costs as much as a
     4 mm one and twice a 6 mm one), which no smooth law in the thickness follows."""
-    from solitonde.model.plan import PLATE_DOF_WEIGHT, plan
+    from solitonde.model.plan import plan
+    from solitonde.model.tiers import TIERS
 
     out = []
     for i_d in range(len(sweep.diameters_m)):
         run = plan(sweep.scene_at(i_d, i_t, i_l))
-        out.append((run.cost,
-                    run.cost - PLATE_DOF_WEIGHT * float(run.plate_steps) * run.plate_dofs))
+        plate = TIERS[run.plate_model].dof_weight * float(run.plate_steps) * run.plate_dofs
+        out.append((run.cost, run.cost - plate))
     return out
 
 

@@ -113,6 +113,8 @@ class Tier:
     dopri5: ``solver.integrator = "dopri5"`` can run it (an ODE tier).
     meshed: the plate is a mesh (3-D spectral elements or Mindlin).
     convolved: the meshed plate is a cached contact response, convolved with the force.
+    dof_weight: what one plate degree of freedom advanced one step costs, in chain
+        particle-steps (a run's price, :func:`solitonde.model.plan.plan`); 0 without a mesh.
     """
 
     name: str
@@ -121,3 +123,4 @@ class Tier:
     dopri5: bool = False
     meshed: bool = False
     convolved: bool = False
+    dof_weight: float = 0.0

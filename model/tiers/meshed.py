@@ -278,14 +278,28 @@ class GreensBoundary(_PlateTier):
                         extra, w_end=w)
 
 
+SEM_DOF_WEIGHT = 4.0
+"""One 3-D spectral-element degree of freedom advanced one step costs about as much as 4 chain
+particles advanced one step. Measured on one idle core: the chain (Verlet) 3.5e8-4.6e8
+particle-steps/s; the coupled 3-D plate with the sum-factorised stiffness 3.9 chain
+particle-steps a dof-step (a 3 mm plate 20 mm from the support, 29,889 dofs). The dense stiffness
+this weight was first set for cost 25."""
+
+MINDLIN_DOF_WEIGHT = 1.4
+"""One Mindlin plate degree of freedom advanced one step, in chain particle-steps: its order-4
+stiffness product runs 16 elements to a vector lane (:mod:`solitonde.model.mindlin_kernels`),
+2.1-2.4 ns a dof-step. Measured on one idle core, coupled to the chain: 1.36 (a 3 mm plate 20 mm
+from the support, 17,331 dofs)."""
+
 TIERS = (
-    Tier("sem", lambda scene, reason, cache: SemBoundary("sem", scene, reason), meshed=True),
+    Tier("sem", lambda scene, reason, cache: SemBoundary("sem", scene, reason), meshed=True,
+         dof_weight=SEM_DOF_WEIGHT),
     Tier("greens", lambda scene, reason, cache: GreensBoundary("greens", scene, reason, cache),
-         meshed=True, convolved=True),
+         meshed=True, convolved=True, dof_weight=SEM_DOF_WEIGHT),
     Tier("mindlin", lambda scene, reason, cache: SemBoundary("mindlin", scene, reason),
-         meshed=True),
+         meshed=True, dof_weight=MINDLIN_DOF_WEIGHT),
     Tier("mindlin_greens",
          lambda scene, reason, cache: GreensBoundary("mindlin_greens", scene, reason, cache),
-         meshed=True, convolved=True),
+         meshed=True, convolved=True, dof_weight=MINDLIN_DOF_WEIGHT),
 )
 """The meshed tiers, for :mod:`.registry`."""
