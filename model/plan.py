@@ -28,7 +28,6 @@ from .tiers import (
     make_boundary,
     resolve_plate_model,
 )
-from .tiers.meshed import SEM_DOF_WEIGHT
 
 #: Verlet steps per period of the stiffest chain oscillation (see :func:`choose_time_step`).
 STEPS_PER_PERIOD = 1600
@@ -162,10 +161,6 @@ def check_solver(scene: Scene) -> tuple[str, str] | None:
         )
     return name, reason
 
-
-PLATE_DOF_WEIGHT = SEM_DOF_WEIGHT
-"""The 3-D spectral-element plate's weight (:data:`~.tiers.meshed.SEM_DOF_WEIGHT`): each meshed
-tier states its own (``Tier.dof_weight``; Mindlin's is lighter)."""
 
 CONVOLUTION_WEIGHT = 0.25
 """The ``greens`` plate convolves the whole force history at every plate step (sum over the
