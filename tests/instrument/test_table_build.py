@@ -148,6 +148,50 @@ def test_a_batch_starts_workers_once_its_rest_is_worth_their_start(
     assert (dear.here, dear.workers) == (1, 3)
 
 
+def _worker_state() -> tuple[int, int, bool]:
+    """In a worker: numba's threads, BLAS's most threads, whether the model's plate kernels
+    were imported before the worker ran anything of its own."""
+    import sys
+
+    import numba
+    from threadpoolctl import threadpool_info
+
+    blas = max((p["num_threads"] for p in threadpool_info()), default=1)
+    return numba.get_num_threads(), blas, "solitonde.model.sem_kernels" in sys.modules
+
+
+@pytest.mark.skipif(__import__("sys").platform != "linux", reason="workers fork only on Linux")
+def test_local_workers_are_forked_with_the_model_loaded_and_one_thread_each() -> None:
+    """A local cluster's workers start from this process (the model's modules already there)
+    and run single-threaded whatever pools this process had."""
+    from dask.distributed import Client
+
+    import solitonde.model.sem_kernels  # noqa: F401  (this process has the model loaded)
+    from solitonde.instrument.parallel import local_cluster
+
+    with local_cluster(2) as cluster, Client(cluster) as client:
+        states = client.run(_worker_state)
+    assert len(states) == 2
+    assert set(states.values()) == {(1, 1, True)}
+
+
+def test_a_build_on_local_workers_matches_serial(reference: Path, tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the workers' start made free the tiny sweep runs on two forked local workers, and
+    gives the serial table (up to the last bit of the fits' BLAS reductions)."""
+    from solitonde.instrument import parallel
+
+    monkeypatch.setattr(parallel, "LOCAL_START_S", 0.0)
+    runs = parallel.Runs()
+    out = tmp_path / "local.h5"
+    tasks = [(k,) for k in range(3)]
+    assert sorted(parallel.run_tasks(abs, tasks, 2, None, runs=runs)) == [0, 1, 2]
+    assert runs.workers == 3
+    report = build_table(tiny_sweep(), out, workers=2)
+    assert report.complete and report.runner.startswith("dask LocalCluster")
+    same_table(reference, out, rtol=1e-12)
+
+
 def test_file_appears_only_when_complete(tmp_path: Path) -> None:
     """While plates are being written the output name does not exist."""
     out = tmp_path / "t.h5"
