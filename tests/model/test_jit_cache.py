@@ -150,6 +150,30 @@ def test_a_clone_at_another_path_loads_the_compiled_kernels(package_copy: Path,
     assert there["f"] == first["f"]
 
 
+def test_a_clone_at_another_path_loads_the_inference_kernels(tmp_path: Path) -> None:
+    """The inference's kernels (outside the model and the signal packages) are filed by their
+    place in the package too: another clone of the same source loads them compiled."""
+    code = """
+        import json
+        from solitonde.instrument.inference import likelihood_kernel as k
+        k.warm()
+        print(json.dumps({"file": k.__file__,
+                          "hits": sum(k.add_terms.stats.cache_hits.values())}))
+    """
+    clones = []
+    for name in ("first", "second"):
+        dest = tmp_path / name / "solitonde"
+        for folder in ("model", "signal", "instrument"):
+            shutil.copytree(ROOT / folder, dest / folder,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+        clones.append(dest.parent)
+    cache = str(tmp_path / "cache")
+    first = _run(code, tmp_path, _env(PYTHONPATH=str(clones[0]), SOLITONDE_CACHE_DIR=cache))
+    there = _run(code, tmp_path, _env(PYTHONPATH=str(clones[1]), SOLITONDE_CACHE_DIR=cache))
+    assert there["file"].startswith(str(clones[1]))
+    assert first["hits"] == 0 and there["hits"] == 1, "the other clone compiled again"
+
+
 def test_the_background_compile_files_the_kernels_where_this_process_looks() -> None:
     """The extractor's background compile imports only solitonde.signal: it gets this process's
     locators through its environment, ours first, so it files the kernels under the package's
