@@ -93,10 +93,15 @@ def local_cluster(workers: int) -> Any:
 
 def dask_setup(worker: Any) -> None:
     """Dask's preload hook, run in each worker of a :func:`local_cluster` as it starts: numba
-    and BLAS at one thread, which a forked worker's inherited pools would not otherwise be."""
+    and BLAS at one thread, which a forked worker's inherited pools would not otherwise be.
+
+    A forked worker's numba read its pool's size in this process; numba re-reads the environment
+    before each compile and refuses a size that differs from the one its pool was started with,
+    so the worker's environment keeps that size, and one thread of the pool runs."""
     import numba
     from threadpoolctl import threadpool_limits
 
+    os.environ["NUMBA_NUM_THREADS"] = str(numba.config.NUMBA_NUM_THREADS)
     numba.set_num_threads(1)
     threadpool_limits(1)
 
