@@ -99,9 +99,10 @@ def dask_setup(worker: Any) -> None:
     before each compile and refuses a size that differs from the one its pool was started with,
     so the worker's environment keeps that size, and one thread of the pool runs."""
     import numba
+    from numba.core import config
     from threadpoolctl import threadpool_limits
 
-    os.environ["NUMBA_NUM_THREADS"] = str(numba.config.NUMBA_NUM_THREADS)
+    os.environ["NUMBA_NUM_THREADS"] = str(config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     numba.set_num_threads(1)
     threadpool_limits(1)
 
