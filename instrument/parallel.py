@@ -37,10 +37,13 @@ R = TypeVar("R")
 LOCAL_START_METHOD = "fork" if sys.platform == "linux" else "spawn"
 """How a local cluster's worker processes start. Forked, they inherit this process's imported
 modules and the kernels it loaded: two workers take tasks 0.1-0.15 s after the cluster starts
-(spawned, each imports the package and loads the model's kernels anew: about 1.3 s). Nothing
-here forks while it holds a lock a worker needs: the model's kernels run single-threaded and
-the service never starts a local cluster. Elsewhere than Linux fork is unsafe (macOS's system
-libraries), and the workers are spawned."""
+(spawned, each imports the package and loads the model's kernels anew: about 1.3 s). A fork
+copies only the forking thread (Dask's event loop, while the main thread waits for the
+cluster). A table build starts its clusters before its bars; a study's bar (validate) may be
+running, and its thread only writes the terminal, which a worker does not. The model's kernels
+are single-threaded, and the service, whose threads serve requests, never starts a local
+cluster. Elsewhere than Linux fork
+is unsafe (macOS's system libraries), and the workers are spawned."""
 
 LOCAL_START_S = 1.0
 """Seconds a local cluster costs a batch before its workers take tasks. Forked workers start in
