@@ -42,8 +42,8 @@ copies only the forking thread (Dask's event loop, while the main thread waits f
 cluster). A table build starts its clusters before its bars; a study's bar (validate) may be
 running, and its thread only writes the terminal, which a worker does not. The model's kernels
 are single-threaded, and the service, whose threads serve requests, never starts a local
-cluster. Elsewhere than Linux fork
-is unsafe (macOS's system libraries), and the workers are spawned."""
+cluster. Elsewhere than Linux fork is unsafe (macOS's system libraries), and the workers are
+spawned."""
 
 LOCAL_START_S = 1.0
 """Seconds a local cluster costs a batch before its workers take tasks. Forked workers start in

@@ -6,10 +6,10 @@ hash of the module's absolute folder, so a second clone of the same source, a ch
 elsewhere, or a CI job in another work folder compiles every kernel again (minutes) although the
 cache folder (:mod:`solitonde.model.jit_cache`, keyed by the version and a hash of the kernels'
 source) already holds them. :class:`PackageLocator` names it after the module's folder relative to
-the ``solitonde`` package (``model``, ``model/tiers``, ``signal``, ``instrument/inference``)
-instead. That is safe because the cache folder already changes with any change of the model's and
-the signal's source, and numba checks each file's content hash: the inference's kernels, which
-call nothing outside their own file, are kept true by that check alone.
+its package (``model``, ``model/tiers``, ``signal``, ``instrument/inference``) instead. That is
+safe because the cache folder already changes with any change of the model's and the signal's
+source, and numba checks each file's content hash: the inference's kernels, which call nothing
+outside their own file, are kept true by that check alone.
 
 :func:`solitonde.model.jit_cache.configure` puts it first among numba's locators in the process
 (numba's own follow, for any other code) once numba's caching module is loaded; this module
@@ -26,26 +26,31 @@ from typing import Any
 from numba.core import config
 from numba.core.caching import UserProvidedCacheLocator
 
+PACKAGES = ("solitonde.model", "solitonde.signal", "solitonde.instrument")
+"""The packages whose kernels this locator files: every kernel of solitonde lives in them (the
+instrument's in :mod:`solitonde.instrument.inference`). Named, not imported: finding a package
+imports only its parent."""
 
-def _roots() -> list[Path]:
-    """The folders ``solitonde`` is imported from: the parent of each of ``solitonde.model``'s
-    folders (a checkout's root, or ``site-packages/solitonde``). Found through the model's
-    package, since an editable install's ``solitonde`` lists an import hook, not a folder."""
-    spec = util.find_spec("solitonde.model")
-    return [Path(root).resolve().parent
-            for root in ((spec.submodule_search_locations or []) if spec else [])]
+
+def _roots() -> list[tuple[str, Path]]:
+    out = []
+    for name in PACKAGES:
+        spec = util.find_spec(name)
+        for root in (spec.submodule_search_locations or []) if spec else []:
+            out.append((name.rsplit(".", 1)[1], Path(root).resolve()))
+    return out
 
 
 _ROOTS = _roots()
 
 
 def package_folder(py_file: str) -> str | None:
-    """``py_file``'s folder relative to the ``solitonde`` package (``model``, ``model/tiers``,
-    ``signal``, ``instrument/inference``), or None for a file outside it."""
+    """``py_file``'s folder relative to its package (``model``, ``model/tiers``, ``signal``,
+    ``instrument/inference``), or None for a file outside the kernel packages."""
     path = Path(py_file).parent.resolve()
-    for root in _ROOTS:
-        if root in path.parents:
-            return path.relative_to(root).as_posix()
+    for name, root in _ROOTS:
+        if path == root or root in path.parents:
+            return "/".join((name, *path.relative_to(root).parts))
     return None
 
 
