@@ -248,3 +248,22 @@ def test_patch_deflection_converges_where_a_point_force_does_not() -> None:
     assert np.all(point[1:] / point[:-1] > 1.03)  # measured +10 %, +4.7 % (h / 2, h / 1.5)
     assert point[-1] / point[0] > 1.1
     assert np.ptp(patch) < 5e-3 * patch.mean()
+
+
+def test_single_threaded_blas_limits_every_blas_pool_and_restores_them() -> None:
+    """Inside, every BLAS pool of the process (numpy's and scipy's, which compiled code calls)
+    runs one thread; after, each has its count back (two here, whatever the machine's cores)."""
+    import scipy.linalg.cython_blas  # noqa: F401  (scipy's BLAS loaded, as compiled code has it)
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from solitonde.model.sem import single_threaded_blas
+
+    def counts() -> list[int]:
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert len(counts()) >= 2 and set(counts()) == {2}  # numpy's and scipy's
+        for _ in range(2):  # the pools found once serve every entry
+            with single_threaded_blas():
+                assert set(counts()) == {1}
+            assert set(counts()) == {2}
