@@ -94,9 +94,25 @@ def local_cluster(workers: int) -> Any:
                             preload=[__name__])
 
 
+_thread_limit: int | None = None
+
+
+def limit_threads(threads: int | None) -> None:
+    """Threads this package's own passes may use in this process from now on (the inversion's
+    grid passes, :mod:`.inference.grid_threads`); None: as many as the process has cores."""
+    global _thread_limit
+    _thread_limit = threads
+
+
+def thread_limit() -> int | None:
+    """What :func:`limit_threads` set (None: no limit)."""
+    return _thread_limit
+
+
 def dask_setup(worker: Any) -> None:
-    """Dask's preload hook, run in each worker of a :func:`local_cluster` as it starts: numba
-    and BLAS at one thread, which a forked worker's inherited pools would not otherwise be.
+    """Dask's preload hook, run in each worker of a :func:`local_cluster` as it starts: numba,
+    BLAS and this package's own threads (:func:`limit_threads`) at one, which a forked
+    worker's inherited pools would not otherwise be.
 
     A forked worker's numba read its pool's size in this process; numba re-reads the environment
     before each compile and refuses a size that differs from the one its pool was started with,
@@ -108,6 +124,7 @@ def dask_setup(worker: Any) -> None:
     os.environ["NUMBA_NUM_THREADS"] = str(config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     numba.set_num_threads(1)
     threadpool_limits(1)
+    limit_threads(1)
 
 
 def close_later(cluster: Any, waits: contextlib.ExitStack) -> None:

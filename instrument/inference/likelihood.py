@@ -32,6 +32,7 @@ from solitonde.instrument.inference.calibration import (
     calibration_along,
 )
 from solitonde.instrument.inference.fine_grid import FineGrid, fine_grid
+from solitonde.instrument.inference.grid_threads import run_in_bands
 from solitonde.instrument.inference.inversion_inputs import MIN_TOF_STD_S, FeatureSummary
 from solitonde.instrument.inference.model_error import FLOOR_ARR_MAX, REFLECTION_D_OVER_T
 from solitonde.instrument.inference.woodbury import UPPER, bilinear2, solve2
@@ -49,6 +50,7 @@ scale, the variance added (scatter, calibration), a relative variance on the mod
 material's columns (None without a spread); the four middle ones numbers or rows over distance."""
 _NO_U = np.zeros((2, 1, 1))
 _NO_M = np.zeros((3, 1, 1))
+_ONE = np.ones((1, 1))
 """Placeholders for the material's arrays where there is no spread (the kernel ignores them)."""
 
 
@@ -129,6 +131,9 @@ class Deviance:
     shared_q: np.ndarray = field(default_factory=lambda: np.zeros(0))
     pristine: bool = False
     """``misfit`` and ``det`` not yet filled: the compiled pass starts their sums itself."""
+    m_det: np.ndarray | None = None
+    """``det (I + M)`` per cell where the compiled pass has applied Woodbury's correction to
+    ``misfit`` already (its log still to be added to ``logdet``)."""
 
     @classmethod
     def empty(cls, grids: list[FineGrid], n_terms: int, compiled: bool = False) -> Deviance:
@@ -182,8 +187,11 @@ class Deviance:
         """Gaussian terms, each batch of the variances' product in one compiled pass
         (:func:`.likelihood_kernel.add_terms`): what :meth:`add_term_numpy` does term by term,
         to the bit, without the residual and variance arrays (which only the shared errors
-        need). ``stacks`` keeps each set of terms' arrays stacked, so a set asked for again is
-        not copied again."""
+        need), in bands of thickness rows on two threads (:mod:`.grid_threads`). With a
+        material spread, the pass that adds the last terms applies Woodbury's correction too
+        (``m_det``): ``terms`` are all the seen sizes' terms, and ``penalty`` is complete.
+        ``stacks`` keeps each set of terms' arrays stacked, so a set asked for again is not
+        copied again."""
         from solitonde.instrument.inference.likelihood_kernel import add_terms
 
         n_l = self.shape[1]
@@ -203,9 +211,14 @@ class Deviance:
                                     for k in (2, 3, 4, 5))
             unscaled = np.array([bool(np.ndim(t[3]) == 0 and t[3] == 1.0) for t in chunk])
             has_rel = np.array([bool(np.any(t[5])) for t in chunk])
-            add_terms(models, model_vars, us, obs, scale, s2, rel2, unscaled, has_rel, has_u,
-                      fresh, self.misfit, self.det, _NO_M if self.m_sum is None else self.m_sum,
-                      _NO_U if self.ur_sum is None else self.ur_sum)
+            finish = has_u and not terms  # the last terms: Woodbury's correction follows
+            if finish:
+                self.m_det = np.empty(self.shape)
+            run_in_bands(add_terms, self.shape[0], models, model_vars, us, obs, scale, s2, rel2,
+                         unscaled, has_rel, has_u, fresh, self.misfit, self.det,
+                         _NO_M if self.m_sum is None else self.m_sum,
+                         _NO_U if self.ur_sum is None else self.ur_sum, self.penalty,
+                         _ONE if self.m_det is None else self.m_det, finish)
             self.pristine = False
             for _ in chunk:
                 self._counted()
@@ -396,12 +409,8 @@ def _apply_woodbury(dev: Deviance) -> None:
         dev.shared_q[n_e, n_e] = err.q
     if dev.m_sum is None or dev.ur_sum is None:
         return
-    if not shared and use_compiled():  # one pass; the numbers are the same to the bit
-        from solitonde.instrument.inference.likelihood_kernel import woodbury
-
-        det = np.empty(dev.shape)
-        woodbury(dev.m_sum, dev.ur_sum, dev.penalty, dev.misfit, det)
-        dev.logdet += np.log(det, out=det)
+    if dev.m_det is not None:  # the compiled pass applied it; the numbers are the same
+        dev.logdet += np.log(dev.m_det, out=dev.m_det)
         return
     quad, logdet_m = solve2(dev.m_sum, dev.ur_sum)
     ok = np.isfinite(dev.penalty)

@@ -1,4 +1,4 @@
-"""The likelihood's Gaussian terms over every fine cell in one compiled pass; and Woodbury's
+"""The likelihood's Gaussian terms over every fine cell in one compiled pass, with Woodbury's
 correction for the material's spread.
 
 A term (a sphere size's TOF or ARR): its variance, residual, chi^2 share, the variances'
@@ -23,14 +23,39 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
+def _woodbury_row(m3: np.ndarray, ur: np.ndarray, penalty: np.ndarray, misfit: np.ndarray,
+                  m_det: np.ndarray, i: int) -> None:
+    """The material's rank-2 covariance applied to row ``i`` (:func:`.woodbury.solve2`'s closed
+    form, in its order): ``misfit`` less ``b^T (I + M)^-1 b`` and ``m_det`` set to
+    ``det (I + M)`` where the cell has features (``penalty`` finite), 1 elsewhere; the caller
+    adds ``log(m_det)`` (numpy's log, as the numpy path takes it)."""
+    for j in range(misfit.shape[1]):
+        if not np.isfinite(penalty[i, j]):
+            m_det[i, j] = 1.0
+            continue
+        a00 = m3[0, i, j] + 1.0
+        a01 = m3[1, i, j]
+        a11 = m3[2, i, j] + 1.0
+        d = a00 * a11 - a01 * a01
+        b0 = ur[0, i, j]
+        b1 = ur[1, i, j]
+        misfit[i, j] -= (a11 * b0 * b0 - 2.0 * a01 * b0 * b1 + a00 * b1 * b1) / d
+        m_det[i, j] = d
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
 def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: np.ndarray,
               scale: np.ndarray, s2: np.ndarray, rel2: np.ndarray, unscaled: np.ndarray,
               has_rel: np.ndarray, has_u: bool, fresh: bool, misfit: np.ndarray,
-              det: np.ndarray, m3: np.ndarray, ur: np.ndarray) -> None:
+              det: np.ndarray, m3: np.ndarray, ur: np.ndarray, penalty: np.ndarray,
+              m_det: np.ndarray, finish: bool, start: int, stop: int) -> None:
     """Add K terms to ``misfit`` (chi^2), ``det`` (the variances' product) and, where
-    ``has_u``, to ``m3`` (``U^T D^-1 U``'s upper entries) and ``ur`` (``U^T D^-1 r``); with
-    ``fresh``, the sums start here (0, and 1 for the product: the arrays need no filling).
+    ``has_u``, to ``m3`` (``U^T D^-1 U``'s upper entries) and ``ur`` (``U^T D^-1 r``), on the
+    thickness rows ``start..stop-1`` only (:mod:`.grid_threads` runs bands of rows at once);
+    with ``fresh``, the sums start here (0, and 1 for the product: the arrays need no filling).
+    With ``finish`` and ``has_u`` (the last terms), each row then gets Woodbury's correction
+    (:func:`_woodbury_row`, into ``m_det``) while it is still in the cache.
 
     The per-term arrays are stacked along a first axis of length K: ``models``, ``model_vars``
     (K, n_t, n_l), the model's value and variance per cell; ``us`` (K, 2, n_t, n_l) the
@@ -45,8 +70,8 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
     cells, its flags fixed, vectorises. One division per cell and term, its reciprocal
     multiplied."""
     n_k = models.shape[0]
-    n_t, n_l = misfit.shape
-    for i in range(n_t):
+    n_l = misfit.shape[1]
+    for i in range(start, stop):
         if fresh:
             misfit[i] = 0.0
             det[i] = 1.0
@@ -87,37 +112,15 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
                     m3[2, i, j] += c1 * u1
                 mis[j] += (r * r) * iv
                 prod[j] *= v
-
-
-@njit(cache=True, error_model="numpy")
-def woodbury(m3: np.ndarray, ur: np.ndarray, penalty: np.ndarray, misfit: np.ndarray,
-             det: np.ndarray) -> None:
-    """The material's rank-2 covariance applied per cell (:func:`.woodbury.solve2`'s closed
-    form, in its order): ``misfit`` less ``b^T (I + M)^-1 b`` and ``det`` set to
-    ``det (I + M)`` where the cell has features (``penalty`` finite), 1 elsewhere; the caller
-    adds ``log(det)`` (numpy's log, as the numpy path takes it)."""
-    n_t, n_l = misfit.shape
-    for i in range(n_t):
-        for j in range(n_l):
-            if not np.isfinite(penalty[i, j]):
-                det[i, j] = 1.0
-                continue
-            a00 = m3[0, i, j] + 1.0
-            a01 = m3[1, i, j]
-            a11 = m3[2, i, j] + 1.0
-            d = a00 * a11 - a01 * a01
-            b0 = ur[0, i, j]
-            b1 = ur[1, i, j]
-            misfit[i, j] -= (a11 * b0 * b0 - 2.0 * a01 * b0 * b1 + a00 * b1 * b1) / d
-            det[i, j] = d
+        if finish and has_u:
+            _woodbury_row(m3, ur, penalty, misfit, m_det, i)
 
 
 def warm() -> None:
     """Load (on a fresh install: compile) the kernels, on one cell with the argument types the
     likelihood passes."""
-    three = np.zeros((3, 1, 1))
-    woodbury(three, np.zeros((2, 1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.ones((1, 1)))
     rows, flags = np.ones((1, 1)), np.ones(1, dtype=np.bool_)  # flags as numpy bools
     add_terms(np.ones((1, 1, 1)), np.ones((1, 1, 1)), np.zeros((1, 2, 1, 1)), rows, rows, rows,
               rows, flags, flags, True, True, np.zeros((1, 1)), np.ones((1, 1)),
-              np.zeros((3, 1, 1)), np.zeros((2, 1, 1)))
+              np.zeros((3, 1, 1)), np.zeros((2, 1, 1)), np.zeros((1, 1)), np.ones((1, 1)), True,
+              0, 1)

@@ -148,19 +148,22 @@ def test_a_batch_starts_workers_once_its_rest_is_worth_their_start(
     assert (dear.here, dear.workers) == (1, 3)
 
 
-def _worker_state() -> tuple[int, int, bool, int]:
-    """In a worker: numba's threads, BLAS's most threads, whether the model's plate kernels
-    were imported before the worker ran anything of its own, and a kernel compiled there (numba
-    re-reads the environment before a compile, and refuses a thread count that differs from
-    its pool's)."""
+def _worker_state() -> tuple[int, int, int, bool, int]:
+    """In a worker: numba's threads, BLAS's most threads, the inversion's grid threads, whether
+    the model's plate kernels were imported before the worker ran anything of its own, and a
+    kernel compiled there (numba re-reads the environment before a compile, and refuses a
+    thread count that differs from its pool's)."""
     import sys
 
     import numba
     from threadpoolctl import threadpool_info
 
+    from solitonde.instrument.inference import grid_threads
+
     blas = max((p["num_threads"] for p in threadpool_info()), default=1)
     fresh = numba.njit(lambda x: x + 1)(1)
-    return (numba.get_num_threads(), blas, "solitonde.model.sem_kernels" in sys.modules, fresh)
+    return (numba.get_num_threads(), blas, grid_threads.threads(),
+            "solitonde.model.sem_kernels" in sys.modules, fresh)
 
 
 @pytest.mark.skipif(__import__("sys").platform != "linux", reason="workers fork only on Linux")
@@ -176,7 +179,7 @@ def test_local_workers_are_forked_with_the_model_loaded_and_one_thread_each() ->
     with local_cluster(2) as cluster, Client(cluster) as client:
         states = client.run(_worker_state)
     assert len(states) == 2
-    assert set(states.values()) == {(1, 1, True, 2)}
+    assert set(states.values()) == {(1, 1, 1, True, 2)}
 
 
 def test_a_build_on_local_workers_matches_serial(reference: Path, tmp_path: Path,

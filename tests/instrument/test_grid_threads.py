@@ -1,0 +1,143 @@
+"""The inversion's heaviest grid pass in bands of rows on two threads: every row once, the same
+numbers to the bit as one thread, a band the helper cannot take run by the caller, errors
+raised, one thread where the process is limited, and a forked child that makes its own helper."""
+
+from __future__ import annotations
+
+import multiprocessing
+import sys
+import threading
+import time
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+import solitonde.instrument.inference.grid_threads as gt
+import solitonde.instrument.inference.likelihood as lk
+from solitonde.instrument import parallel
+from solitonde.instrument.inference.fine_grid import predict
+from solitonde.instrument.inference.inversion_inputs import FeatureSummary
+from solitonde.instrument.inference.material_spread import spread_of
+from solitonde.instrument.tables import bundled
+from solitonde.instrument.tables.table import ModelTable
+
+
+@pytest.fixture
+def two_cores(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two bands whatever this machine has (one core time-slices them)."""
+    monkeypatch.setattr(gt, "default_workers", lambda: 2)
+    monkeypatch.setattr(parallel, "_thread_limit", None)
+
+
+def _recorder(seen: list[tuple[int, int, str]], slow_first: float = 0.0):  # type: ignore[no-untyped-def]
+    def kernel(out: np.ndarray, start: int, stop: int) -> None:
+        if start == 0:
+            time.sleep(slow_first)  # the helper takes its band meanwhile
+        out[start:stop] += 1
+        seen.append((start, stop, threading.current_thread().name))
+    return kernel
+
+
+@pytest.mark.parametrize("n_rows", [1, 63, 64, 481])
+def test_bands_cover_every_row_once(n_rows: int) -> None:
+    for parts in (1, 2, 3):
+        spans = gt.bands(n_rows, parts)
+        rows = [i for a, b in spans for i in range(a, b)]
+        assert rows == list(range(n_rows))
+        sizes = [b - a for a, b in spans]
+        assert max(sizes) - min(sizes) <= 1
+
+
+def test_two_bands_run_on_two_threads(two_cores: None) -> None:
+    seen: list[tuple[int, int, str]] = []
+    out = np.zeros(481)
+    gt.run_in_bands(_recorder(seen, slow_first=0.05), 481, out)
+    assert np.all(out == 1)
+    assert sorted(s[:2] for s in seen) == [(0, 240), (240, 481)]
+    names = {start: name for start, _, name in seen}
+    assert names[0] == threading.current_thread().name
+    assert names[240].startswith("solitonde-grid")
+
+
+def test_a_band_the_helper_has_not_started_runs_here(two_cores: None) -> None:
+    """The helper busy with another caller's band (held here by an event): this call does not
+    wait for it, it runs its second band itself."""
+    release = threading.Event()
+    blocker: Future[bool] = gt._helpers().submit(release.wait, 10.0)
+    try:
+        seen: list[tuple[int, int, str]] = []
+        out = np.zeros(200)
+        start = time.perf_counter()
+        gt.run_in_bands(_recorder(seen), 200, out)
+        took = time.perf_counter() - start
+    finally:
+        release.set()
+        blocker.result()
+    assert np.all(out == 1)
+    assert {name for *_, name in seen} == {threading.current_thread().name}
+    assert took < 5.0  # not the blocker's 10 s
+
+
+def test_an_error_in_either_band_is_raised(two_cores: None) -> None:
+    def kernel(start: int, stop: int) -> None:
+        if start > 0:
+            raise ValueError("band 2")
+        time.sleep(0.05)
+
+    with pytest.raises(ValueError, match="band 2"):
+        gt.run_in_bands(kernel, 100)
+
+
+def test_small_grids_and_limited_processes_run_whole(two_cores: None,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    seen: list[tuple[int, int, str]] = []
+    gt.run_in_bands(_recorder(seen), gt.MIN_ROWS - 1, np.zeros(gt.MIN_ROWS - 1))
+    assert [s[:2] for s in seen] == [(0, gt.MIN_ROWS - 1)]
+    monkeypatch.setattr(parallel, "_thread_limit", 1)  # what a Dask worker's hook sets
+    assert gt.threads() == 1
+    seen.clear()
+    gt.run_in_bands(_recorder(seen), 481, np.zeros(481))
+    assert [s[:2] for s in seen] == [(0, 481)]
+
+
+def test_the_likelihood_in_two_bands_is_one_threads_to_the_bit(
+        two_cores: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three sphere sizes with the material's spread and Woodbury's correction in the banded
+    pass: every array the same as the pass over the whole grid on one thread."""
+    table = ModelTable.load(bundled.default_table())
+    items = []
+    for k, d in enumerate((4.76e-3, 9.53e-3, 19.05e-3)):
+        tof, arr = predict(table, d, 3.3e-3, 0.02)
+        items.append(FeatureSummary(d, tof * (1 + 1e-3 * k), arr * 0.98, 3e-7, 0.004, 5))
+    spread = spread_of(table)
+    banded = lk.deviance(table, items, None, spread)
+    assert gt.threads() == 2 and banded.m_det is not None
+    monkeypatch.setattr(parallel, "_thread_limit", 1)
+    whole = lk.deviance(table, items, None, spread)
+    for name in ("misfit", "logdet", "det", "m_sum", "ur_sum"):
+        assert np.array_equal(getattr(banded, name), getattr(whole, name)), name
+
+
+def _child(queue: multiprocessing.Queue) -> None:  # type: ignore[type-arg]
+    seen: list[tuple[int, int, str]] = []
+    out = np.zeros(300)
+    gt.run_in_bands(_recorder(seen, slow_first=0.05), 300, out)
+    queue.put((float(out.sum()), sorted(name.startswith("solitonde-grid") for *_, name in seen)))
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="fork is Linux's start method here")
+def test_a_forked_child_makes_its_own_helper(two_cores: None) -> None:
+    """The parent's helper thread exists (a fork copies the pool, not its thread): the child's
+    pass still finishes, on a helper of its own."""
+    gt.run_in_bands(_recorder([], slow_first=0.01), 300, np.zeros(300))
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_child, args=(queue,))
+    child.start()
+    child.join(30)
+    if child.is_alive():
+        child.kill()
+        pytest.fail("the forked child's pass hung on the parent's helper")
+    assert child.exitcode == 0
+    assert queue.get(timeout=5) == (300.0, [False, True])
