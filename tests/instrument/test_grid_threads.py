@@ -141,3 +141,24 @@ def test_a_forked_child_makes_its_own_helper(two_cores: None) -> None:
         pytest.fail("the forked child's pass hung on the parent's helper")
     assert child.exitcode == 0
     assert queue.get(timeout=5) == (300.0, [False, True])
+
+
+def test_inversions_from_many_threads_at_once_are_each_ones_alone(two_cores: None) -> None:
+    """The service's request threads invert at once, their bands queued on one helper: each
+    answer is the one the same inputs give alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from solitonde.instrument.inference.inversion import invert
+
+    table = ModelTable.load(bundled.default_table())
+    cases = []
+    for k, (t, at) in enumerate(((2.6e-3, 0.3), (3.3e-3, 0.02), (4.4e-3, 0.1), (5.2e-3, 0.2))):
+        items = []
+        for d in (4.76e-3, 9.53e-3, 19.05e-3):
+            tof, arr = predict(table, d, t, at)
+            items.append(FeatureSummary(d, tof, arr * (1 - 0.01 * k), 3e-7, 0.004, 5))
+        cases.append(items)
+    alone = [invert(table, items).to_dict() for items in cases]
+    with ThreadPoolExecutor(8) as pool:
+        together = list(pool.map(lambda i: invert(table, cases[i % 4]).to_dict(), range(32)))
+    assert together == [alone[i % 4] for i in range(32)]
