@@ -158,17 +158,23 @@ def test_the_store_keeps_under_its_cap_dropping_the_least_recently_used(
     assert store.info().bytes <= store.cap_bytes
 
 
+def _write_often(folder: Path, a: np.ndarray) -> None:
+    store = DiskGreensCache(folder)
+    for _ in range(15):
+        store.store("k", a)
+
+
 def test_concurrent_writers_of_one_response_leave_a_whole_file(tmp_path: Path) -> None:
-    """Writers race on one key while a reader loads it: every load is whole or None, never a
-    torn file, and the last file is one writer's array."""
+    """Writer processes (as Dask workers are) race on one key while a reader loads it: every
+    load is whole or None, never a torn file, and the last file is one writer's array. (Writers
+    as threads of one process would race CPython 3.11's parser instead: numpy reads a file's
+    header with ``ast.literal_eval``, which two threads at once can fail with a SystemError.)"""
+    import multiprocessing
+
     store = DiskGreensCache(tmp_path)
     arrays = [np.full(20_000, float(i)) for i in range(4)]
     seen: list[np.ndarray | None] = []
     done = threading.Event()
-
-    def write(a: np.ndarray) -> None:
-        for _ in range(15):
-            store.store("k", a)
 
     def read() -> None:
         while not done.is_set():
@@ -176,13 +182,15 @@ def test_concurrent_writers_of_one_response_leave_a_whole_file(tmp_path: Path) -
 
     reader = threading.Thread(target=read)
     reader.start()
-    writers = [threading.Thread(target=write, args=(a,)) for a in arrays]
+    ctx = multiprocessing.get_context("fork" if sys.platform == "linux" else "spawn")
+    writers = [ctx.Process(target=_write_often, args=(tmp_path, a)) for a in arrays]
     for w in writers:
         w.start()
     for w in writers:
-        w.join()
+        w.join(60)
     done.set()
     reader.join()
+    assert [w.exitcode for w in writers] == [0, 0, 0, 0]
     final = store.load("k")
     assert final is not None and any(np.array_equal(final, a) for a in arrays)
     for got in seen:
