@@ -3,8 +3,8 @@ at once.
 
 Adding the likelihood's terms streams every term's per-cell arrays (about 20 MB for three sphere
 sizes with the material's spread) from memory: one core waits on memory for about half of the
-pass. Two threads, each adding every term over its own band of rows, take the pass in a little
-over half the time; each cell sees the same operations in the same order, so the numbers are the
+pass. Two threads, each adding every term over its own band of rows, take the pass in about two
+thirds of the time; each cell sees the same operations in the same order, so the numbers are the
 same to the bit. The kernel releases the GIL (``nogil``), so the bands run in parallel from
 Python threads, which (unlike numba's own ``parallel`` pools) any number of the service's request
 threads may do at once.
@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from itertools import pairwise
 from typing import Any
 
@@ -65,23 +65,31 @@ def bands(n_rows: int, parts: int) -> list[tuple[int, int]]:
 
 def run_in_bands(kernel: Callable[..., Any], n_rows: int, *args: Any) -> None:
     """``kernel(*args, start, stop)`` over every band of the ``n_rows`` rows: the first band on
-    this thread, the others on a helper thread, returning when all are done (re-raising the
-    first error). A band the helper has not started by the time this thread is done with its
-    own (every core busy, or another request's band ahead of it) runs here instead, so a busy
-    machine costs no more than one thread would. The kernel must write only its own rows."""
+    this thread, the others on a helper thread, returning when all are done. A band the helper
+    has not started by the time this thread is done with its own (every core busy, or another
+    request's band ahead of it), or cannot take (the interpreter shutting down), runs here
+    instead, so a busy machine costs no more than one thread would. An error in this thread's
+    band is raised once the helper has stopped (nothing writes the arrays after this returns);
+    else the first error of the other bands, in row order. The kernel must write only its own
+    rows."""
     parts = threads() if n_rows >= MIN_ROWS else 1
-    spans = bands(n_rows, parts)
-    if len(spans) == 1:
-        kernel(*args, 0, n_rows)
-        return
-    pool = _helpers()
-    pending: list[tuple[Future[Any], tuple[int, int]]] = [
-        (pool.submit(kernel, *args, a, b), (a, b)) for a, b in spans[1:]]
+    first, *others = bands(n_rows, parts)
+    pending: list[tuple[Future[Any] | None, tuple[int, int]]] = []
+    for span in others:
+        try:
+            pending.append((_helpers().submit(kernel, *args, *span), span))
+        except RuntimeError:  # no new threads while the interpreter shuts down
+            pending.append((None, span))
     try:
-        kernel(*args, *spans[0])
-    finally:
-        for future, span in pending:
-            if future.cancel():
-                kernel(*args, *span)
-            else:
-                future.result()
+        kernel(*args, *first)
+    except BaseException:
+        for future, _ in pending:
+            if future is not None:
+                future.cancel()
+        wait([future for future, _ in pending if future is not None])
+        raise
+    for future, span in pending:
+        if future is None or future.cancel():
+            kernel(*args, *span)
+        else:
+            future.result()

@@ -48,10 +48,11 @@ Term = tuple[np.ndarray, np.ndarray, Any, Any, Any, Any, "np.ndarray | None"]
 """One Gaussian term: the model and its variance per cell, the measured value, the calibration's
 scale, the variance added (scatter, calibration), a relative variance on the model, and the
 material's columns (None without a spread); the four middle ones numbers or rows over distance."""
+# Placeholders the kernel neither reads nor writes: the material's arrays where there is no
+# spread, Woodbury's determinant before the last terms.
 _NO_U = np.zeros((2, 1, 1))
 _NO_M = np.zeros((3, 1, 1))
 _ONE = np.ones((1, 1))
-"""Placeholders for the material's arrays where there is no spread (the kernel ignores them)."""
 
 
 def use_compiled() -> bool:
@@ -132,8 +133,8 @@ class Deviance:
     pristine: bool = False
     """``misfit`` and ``det`` not yet filled: the compiled pass starts their sums itself."""
     m_det: np.ndarray | None = None
-    """``det (I + M)`` per cell where the compiled pass has applied Woodbury's correction to
-    ``misfit`` already (its log still to be added to ``logdet``)."""
+    """Where the compiled pass has applied Woodbury's correction to ``misfit``: ``det (I + M)``
+    per cell, until :func:`_apply_woodbury` adds its log to ``logdet`` (in this memory)."""
 
     @classmethod
     def empty(cls, grids: list[FineGrid], n_terms: int, compiled: bool = False) -> Deviance:

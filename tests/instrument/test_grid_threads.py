@@ -89,6 +89,42 @@ def test_an_error_in_either_band_is_raised(two_cores: None) -> None:
         gt.run_in_bands(kernel, 100)
 
 
+def test_the_callers_error_is_raised_once_the_helper_has_stopped(two_cores: None) -> None:
+    """Both bands fail: the caller's error is the one raised, and only after the helper's band
+    has ended (no thread writes the arrays once the call is over)."""
+    started = threading.Event()
+    ended: list[str] = []
+
+    def kernel(start: int, stop: int) -> None:
+        if start == 0:
+            assert started.wait(10.0)  # the helper has its band
+            raise KeyError("band 1")
+        started.set()
+        time.sleep(0.1)
+        ended.append("band 2")
+        raise ValueError("band 2")
+
+    with pytest.raises(KeyError, match="band 1"):
+        gt.run_in_bands(kernel, 100)
+    assert ended == ["band 2"]
+
+
+def test_without_new_threads_every_band_runs_here(two_cores: None,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """While the interpreter shuts down a pool takes no new work: the caller runs it all."""
+    class Closed:
+        def submit(self, *args: object) -> None:
+            raise RuntimeError("cannot schedule new futures after interpreter shutdown")
+
+    monkeypatch.setattr(gt, "_helpers", Closed)
+    seen: list[tuple[int, int, str]] = []
+    out = np.zeros(300)
+    gt.run_in_bands(_recorder(seen), 300, out)
+    assert np.all(out == 1)
+    assert sorted(s[:2] for s in seen) == [(0, 150), (150, 300)]
+    assert {name for *_, name in seen} == {threading.current_thread().name}
+
+
 def test_small_grids_and_limited_processes_run_whole(two_cores: None,
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[tuple[int, int, str]] = []
