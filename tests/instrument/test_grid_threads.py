@@ -30,10 +30,17 @@ def two_cores(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(parallel, "_thread_limit", None)
 
 
-def _recorder(seen: list[tuple[int, int, str]], slow_first: float = 0.0):  # type: ignore[no-untyped-def]
+def _recorder(seen: list[tuple[int, int, str]], wait_for_helper: bool = False):  # type: ignore[no-untyped-def]
+    """A kernel that marks its rows in ``out`` and records its band and thread; with
+    ``wait_for_helper``, the first band waits (up to 10 s) until another band has started, so
+    that the helper takes its band however busy the machine."""
+    started = threading.Event()
+
     def kernel(out: np.ndarray, start: int, stop: int) -> None:
-        if start == 0:
-            time.sleep(slow_first)  # the helper takes its band meanwhile
+        if start > 0:
+            started.set()
+        elif wait_for_helper:
+            started.wait(10.0)
         out[start:stop] += 1
         seen.append((start, stop, threading.current_thread().name))
     return kernel
@@ -52,7 +59,7 @@ def test_bands_cover_every_row_once(n_rows: int) -> None:
 def test_two_bands_run_on_two_threads(two_cores: None) -> None:
     seen: list[tuple[int, int, str]] = []
     out = np.zeros(481)
-    gt.run_in_bands(_recorder(seen, slow_first=0.05), 481, out)
+    gt.run_in_bands(_recorder(seen, wait_for_helper=True), 481, out)
     assert np.all(out == 1)
     assert sorted(s[:2] for s in seen) == [(0, 240), (240, 481)]
     names = {start: name for start, _, name in seen}
@@ -158,7 +165,7 @@ def test_the_likelihood_in_two_bands_is_one_threads_to_the_bit(
 def _child(queue: multiprocessing.Queue) -> None:  # type: ignore[type-arg]
     seen: list[tuple[int, int, str]] = []
     out = np.zeros(300)
-    gt.run_in_bands(_recorder(seen, slow_first=0.05), 300, out)
+    gt.run_in_bands(_recorder(seen, wait_for_helper=True), 300, out)
     queue.put((float(out.sum()), sorted(name.startswith("solitonde-grid") for *_, name in seen)))
 
 
@@ -166,7 +173,7 @@ def _child(queue: multiprocessing.Queue) -> None:  # type: ignore[type-arg]
 def test_a_forked_child_makes_its_own_helper(two_cores: None) -> None:
     """The parent's helper thread exists (a fork copies the pool, not its thread): the child's
     pass still finishes, on a helper of its own."""
-    gt.run_in_bands(_recorder([], slow_first=0.01), 300, np.zeros(300))
+    gt.run_in_bands(_recorder([], wait_for_helper=True), 300, np.zeros(300))
     ctx = multiprocessing.get_context("fork")
     queue = ctx.Queue()
     child = ctx.Process(target=_child, args=(queue,))
