@@ -9,8 +9,8 @@ same to the bit. The kernel releases the GIL (``nogil``), so the bands run in pa
 Python threads, which (unlike numba's own ``parallel`` pools) any number of the service's request
 threads may do at once.
 
-A process meant to use one core (a Dask worker of a table build or a study: its preload hook
-limits it) runs the pass whole on its own thread.
+A process meant to use one core (a local cluster's Dask worker in a table build or a study: its
+preload hook limits it) runs the pass whole on its own thread.
 """
 
 from __future__ import annotations

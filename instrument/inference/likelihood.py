@@ -134,7 +134,7 @@ class Deviance:
     """``misfit`` and ``det`` not yet filled: the compiled pass starts their sums itself."""
     m_det: np.ndarray | None = None
     """Where the compiled pass has applied Woodbury's correction to ``misfit``: ``det (I + M)``
-    per cell, until :func:`_apply_woodbury` adds its log to ``logdet`` (in this memory)."""
+    per cell, which :func:`_apply_woodbury` then replaces by its log, added to ``logdet``."""
 
     @classmethod
     def empty(cls, grids: list[FineGrid], n_terms: int, compiled: bool = False) -> Deviance:
