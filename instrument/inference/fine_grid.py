@@ -10,6 +10,7 @@ where no support is in reach (:mod:`.thickness_spline`); with them the model err
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -102,6 +103,11 @@ class FineGrid:
     model_arr_var_strict: np.ndarray
     """The interpolation error alone, without the floor nodes' looseness (the adequacy check
     asks whether a clear reflection is explained without it)."""
+
+    @functools.cached_property
+    def has_floor(self) -> bool:
+        """Whether any cell leans on a floor node (else every posterior's weight there is 0)."""
+        return bool(np.any(self.floor_weight))
 
     @property
     def model_tof_std_s(self) -> float:

@@ -15,11 +15,12 @@ factor's uncertainty stays in C, per position.
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import threading
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypedDict
 
@@ -53,6 +54,13 @@ material's columns (None without a spread); the four middle ones numbers or rows
 _NO_U = np.zeros((2, 1, 1))
 _NO_M = np.zeros((3, 1, 1))
 _ONE = np.ones((1, 1))
+
+
+@functools.lru_cache(maxsize=4)
+def _zeros(shape: tuple[int, ...]) -> np.ndarray:
+    """Zeros of ``shape``, shared: the hidden sizes' bound terms where there are none (never
+    written: :meth:`Deviance.add_bound` makes a new sum)."""
+    return np.zeros(shape)
 
 
 def use_compiled() -> bool:
@@ -112,7 +120,9 @@ class Deviance:
     """The likelihood's parts per cell, summed term by term over the sphere sizes.
 
     The log-variances are kept as one log of a running product, taken every :data:`LOG_BATCH`
-    terms (a log over the grid costs as much as the rest of a term)."""
+    terms (a log over the grid costs as much as the rest of a term). ``penalty`` (the cells
+    without features: inf) and, without hidden sizes, ``bound_terms`` are shared with other
+    inversions and never written in place."""
 
     grids: list[FineGrid]
     n_terms: int
@@ -133,25 +143,36 @@ class Deviance:
     pristine: bool = False
     """``misfit`` and ``det`` not yet filled: the compiled pass starts their sums itself."""
     m_det: np.ndarray | None = None
-    """Where the compiled pass has applied Woodbury's correction to ``misfit``: ``det (I + M)``
-    per cell, which :func:`_apply_woodbury` then replaces by its log, added to ``logdet``."""
+    """Where the compiled pass has applied Woodbury's correction: ``log det (I + M)`` per cell
+    (already added to ``logdet``; the pass holds ``det (I + M)`` there until it takes the log)."""
+    logged: int = 0
+    """Terms whose variances' log is in ``logdet``."""
+    chi2: np.ndarray | None = None
+    """-2 log L per cell (:meth:`total`'s numbers), where the compiled pass added the last terms
+    with ``total``; ``row_min`` each thickness row's least value, ``best_at`` the least cell's
+    flat index, as ``np.argmin`` gives it."""
+    row_min: np.ndarray | None = None
+    best_at: int = -1
 
     @classmethod
-    def empty(cls, grids: list[FineGrid], n_terms: int, compiled: bool = False) -> Deviance:
-        """No term added yet; ``compiled``: for :meth:`add_terms_compiled`, which fills the
-        sums as it adds the first terms (:meth:`settle` fills them if it adds none)."""
+    def empty(cls, grids: list[FineGrid], n_terms: int, penalty: np.ndarray,
+              compiled: bool = False) -> Deviance:
+        """No term added yet; ``penalty`` the seen sizes' summed penalty (:class:`StackCache`:
+        shared, never written); ``compiled``: for :meth:`add_terms_compiled`, which fills the
+        sums and the first log as it adds the first terms (:meth:`settle` fills them if it adds
+        none)."""
         shape = grids[0].tof_s.shape
-        sums = (np.empty(shape), np.empty(shape)) if compiled else (np.zeros(shape),
-                                                                     np.ones(shape))
-        return cls(grids, n_terms, misfit=sums[0], bound_terms=np.zeros(shape),
-                   logdet=np.zeros(shape), det=sums[1], penalty=np.zeros(shape),
-                   pristine=compiled)
+        new = np.empty if compiled else np.zeros
+        return cls(grids, n_terms, misfit=new(shape), bound_terms=_zeros(shape),
+                   logdet=new(shape), det=np.empty(shape) if compiled else np.ones(shape),
+                   penalty=penalty, pristine=compiled)
 
     def settle(self) -> None:
-        """Fill ``misfit`` (0) and ``det`` (1) if no compiled pass has started them yet, so that
-        they hold the sums of the terms added so far: none."""
+        """Fill ``misfit`` (0), ``logdet`` (0) and ``det`` (1) if no compiled pass has started
+        them yet, so that they hold the sums of the terms added so far: none."""
         if self.pristine:
             self.misfit.fill(0.0)
+            self.logdet.fill(0.0)
             self.det.fill(1.0)
             self.pristine = False
 
@@ -160,8 +181,8 @@ class Deviance:
         return self.misfit.shape
 
     def add_bound(self, term: np.ndarray) -> None:
-        """A hidden size's bound term."""
-        self.bound_terms += term
+        """A hidden size's bound term (a new sum: the empty one is shared)."""
+        self.bound_terms = self.bound_terms + term
         self.bound_list.append(term)
 
     def add_term(self, r: np.ndarray, var: np.ndarray) -> None:
@@ -184,17 +205,19 @@ class Deviance:
             self.add_material(u if unscaled else u * scale, var, r)
         self.add_term(r, var)
 
-    def add_terms_compiled(self, terms: Sequence[Term], stacks: StackCache) -> None:
+    def add_terms_compiled(self, terms: Sequence[Term], stacks: StackCache,
+                           total: bool = False) -> None:
         """Gaussian terms, each batch of the variances' product in one compiled pass
         (:func:`.likelihood_kernel.add_terms`): what :meth:`add_term_numpy` does term by term,
         to the bit, without the residual and variance arrays (which only the shared errors
-        need), in bands of thickness rows on two threads (:mod:`.grid_threads`). With a
-        material spread, the pass that adds the last terms applies Woodbury's correction too
-        (``m_det``): ``terms`` are all the seen sizes' terms, and ``penalty`` is complete.
-        ``stacks`` keeps each set of terms' arrays stacked, so a set asked for again is not
-        copied again."""
-        from solitonde.instrument.inference.likelihood_kernel import add_terms
-
+        need), in bands of thickness rows on two threads (:mod:`.grid_threads`). Each band
+        takes its rows' logs too (numpy's, as :meth:`close_logs` takes them). With a material
+        spread, the pass that adds the last terms applies Woodbury's correction too (``m_det``):
+        ``terms`` are all the seen sizes' terms, and ``penalty`` is complete. With ``total``
+        (``penalty`` and the hidden sizes' bounds complete too), that pass also sums each row's
+        deviance into ``chi2`` and finds its least cell (``best_at``), while the row is still
+        in the cache. ``stacks`` keeps each set of terms' arrays stacked, so a set asked for
+        again is not copied again."""
         n_l = self.shape[1]
         while terms:
             room = LOG_BATCH - self.terms % LOG_BATCH  # the chunk ends at a log's batch
@@ -215,29 +238,67 @@ class Deviance:
             finish = has_u and not terms  # the last terms: Woodbury's correction follows
             if finish:
                 self.m_det = np.empty(self.shape)
-            run_in_bands(add_terms, self.shape[0], models, model_vars, us, obs, scale, s2, rel2,
-                         unscaled, has_rel, has_u, fresh, self.misfit, self.det,
-                         _NO_M if self.m_sum is None else self.m_sum,
-                         _NO_U if self.ur_sum is None else self.ur_sum, self.penalty,
-                         _ONE if self.m_det is None else self.m_det, finish)
+            counted = self.terms + len(chunk)
+            log_now = counted % LOG_BATCH == 0 or not terms
+            summed = total and not terms
+            if summed:
+                self.chi2, self.row_min = np.empty(self.shape), np.empty(self.shape[0])
+            args = (models, model_vars, us, obs, scale, s2, rel2, unscaled, has_rel, has_u,
+                    fresh, self.misfit, self.det, _NO_M if self.m_sum is None else self.m_sum,
+                    _NO_U if self.ur_sum is None else self.ur_sum, self.penalty,
+                    _ONE if self.m_det is None else self.m_det, finish)
+            bests: dict[int, int] = {}
+            run_in_bands(self._band, self.shape[0], args, log_now, counted, finish, summed,
+                         bests)
             self.pristine = False
-            for _ in chunk:
-                self._counted()
+            self.terms = counted
+            if log_now:
+                self.logged = counted
+            if counted % LOG_BATCH == 0:
+                self.det.fill(1.0)
+            if summed:
+                assert self.chi2 is not None
+                self.best_at = _first_least(self.chi2, [bests[k] for k in sorted(bests)])
+
+    def _band(self, args: tuple[Any, ...], log_now: bool, counted: int, finish: bool,
+              summed: bool, bests: dict[int, int], start: int, stop: int) -> None:
+        """One band of :meth:`add_terms_compiled`'s pass, rows ``start..stop-1``: the terms
+        (``args``: the kernel's), then with ``log_now`` the log of the variances' product
+        (``counted`` terms in it), with ``finish`` Woodbury's log-determinant, and with
+        ``summed`` the deviance and its least cell (into ``bests``, by the band's first row)."""
+        from solitonde.instrument.inference.likelihood_kernel import add_terms
+        from solitonde.instrument.inference.posterior_kernel import total_and_best
+
+        kernel: Callable[..., None] = add_terms  # the kernel's arguments, then the band's rows
+        kernel(*args, start, stop)
+        if log_now:
+            self._log_rows(start, stop, counted)
+        if finish:
+            assert self.m_det is not None
+            m_det = self.m_det[start:stop]
+            self.logdet[start:stop] += np.log(m_det, out=m_det)
+        if summed:
+            assert self.chi2 is not None and self.row_min is not None
+            bests[start] = total_and_best(self.misfit, self.logdet, self.penalty,
+                                          self.bound_terms, self.chi2, self.row_min, start, stop)
 
     def _counted(self) -> None:
         """One more term in the variances' product: its log taken every :data:`LOG_BATCH`."""
         self.terms += 1
         if self.terms % LOG_BATCH == 0:
-            self._log_det()
+            self._log_rows(0, self.shape[0], self.terms)
+            self.logged = self.terms
             self.det.fill(1.0)
 
-    def _log_det(self) -> None:
-        """The log of the variances' product added to ``logdet``; the first one written in
-        its place (0 + x is x: one pass over the grid less)."""
-        if self.terms > LOG_BATCH:
-            self.logdet += np.log(self.det)
+    def _log_rows(self, start: int, stop: int, terms: int) -> None:
+        """The log of the variances' product (``terms`` counted) added to ``logdet`` on rows
+        ``start..stop-1``; the first one written in its place (0 + x is x: one pass over the
+        grid less)."""
+        rows = slice(start, stop)
+        if terms > LOG_BATCH:
+            self.logdet[rows] += np.log(self.det[rows])
         else:
-            np.log(self.det, out=self.logdet)
+            np.log(self.det[rows], out=self.logdet[rows])
 
     def add_material(self, u: np.ndarray, var: np.ndarray, r: np.ndarray) -> np.ndarray:
         """One term's share of ``U^T D^-1 r`` and ``U^T D^-1 U``; returns ``U^T D^-1`` (per
@@ -253,8 +314,9 @@ class Deviance:
 
     def close_logs(self) -> None:
         """The log of the product left over from the last batch."""
-        if self.terms % LOG_BATCH:
-            self._log_det()
+        if self.terms % LOG_BATCH and self.logged < self.terms:
+            self._log_rows(0, self.shape[0], self.terms)
+            self.logged = self.terms
 
     def total(self) -> np.ndarray:
         """-2 log L per cell: misfit, log-determinant, the cells without features (inf), and the
@@ -271,6 +333,17 @@ class Deviance:
         return sum(max(0.0, float(b[at]) - 2.0 * math.log(2.0)) for b in self.bound_list)
 
 
+def _first_least(values: np.ndarray, candidates: list[int]) -> int:
+    """Of the bands' least cells (flat indices, in row order), the one ``np.argmin`` of the
+    whole ``values`` gives: the first NaN, else the first of the least values."""
+    at, best = -1, math.inf
+    for k in candidates:
+        v = values.flat[k]
+        if at < 0 or v < best or (v != v and best == best):
+            at, best = k, v
+    return at
+
+
 STACKS_KEPT = 4
 """Sets of terms whose stacked arrays a table keeps (:class:`StackCache`)."""
 _Stacked = tuple[list[np.ndarray], tuple[np.ndarray, ...]]
@@ -281,12 +354,15 @@ stacks."""
 class StackCache:
     """Terms' per-cell arrays stacked along a first axis, as :meth:`Deviance.add_terms_compiled`
     passes them, kept for the last :data:`STACKS_KEPT` sets of terms of one table (the service
-    inverts the same sizes again and again; a stack of three sizes' terms is about 20 MB).
-    A set is known by the identity of its arrays, which the entry holds, so an id is never
-    reused while its entry lives. Safe for the service's threads."""
+    inverts the same sizes again and again; a stack of three sizes' terms is about 20 MB), and
+    likewise each set of sizes' summed penalty. A set is known by the identity of its arrays,
+    which the entry holds, so an id is never reused while its entry lives. Safe for the
+    service's threads."""
 
     def __init__(self) -> None:
         self.kept: OrderedDict[tuple[int, ...], _Stacked] = OrderedDict()
+        self.sums: OrderedDict[tuple[Any, ...], tuple[list[np.ndarray], np.ndarray]] = (
+            OrderedDict())
         self.lock = threading.Lock()
 
     def get(self, terms: Sequence[Term]) -> tuple[np.ndarray, ...]:
@@ -307,6 +383,25 @@ class StackCache:
                 while len(self.kept) > STACKS_KEPT:
                     self.kept.popitem(last=False)
         return hit[1]
+
+    def penalty(self, grids: Sequence[FineGrid], shape: tuple[int, ...]) -> np.ndarray:
+        """The sum of ``grids``' penalties (inf on a cell where a size has no features), added
+        in their order to zeros of ``shape``; shared: never written."""
+        arrays = [g.penalty for g in grids]
+        key = (shape, *(id(a) for a in arrays))
+        with self.lock:
+            hit = self.sums.get(key)
+            if hit is not None:
+                self.sums.move_to_end(key)
+                return hit[1]
+        total = np.zeros(shape)
+        for a in arrays:
+            total += a
+        with self.lock:
+            self.sums[key] = (arrays, total)
+            while len(self.sums) > STACKS_KEPT:
+                self.sums.popitem(last=False)
+        return total
 
     @staticmethod
     def of(table: ModelTable) -> StackCache:
@@ -411,7 +506,6 @@ def _apply_woodbury(dev: Deviance) -> None:
     if dev.m_sum is None or dev.ur_sum is None:
         return
     if dev.m_det is not None:  # the compiled pass applied it; the numbers are the same
-        dev.logdet += np.log(dev.m_det, out=dev.m_det)
         return
     quad, logdet_m = solve2(dev.m_sum, dev.ur_sum)
     ok = np.isfinite(dev.penalty)
@@ -434,14 +528,16 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
     grids = [fine_grid(table, table.diameter_index(i.diameter_m)) for i in items]
     n_terms = 2 * sum(not i.hidden for i in items) + sum(i.hidden for i in items)
     compiled = use_compiled() and not shared_calibration
-    dev = Deviance.empty(grids, n_terms, compiled)
+    stacks = StackCache.of(table)
+    penalty = stacks.penalty([g for i, g in zip(items, grids, strict=True) if not i.hidden],
+                             grids[0].tof_s.shape)
+    dev = Deviance.empty(grids, n_terms, penalty, compiled)
     seen: list[Term] = []
     for item, g in zip(items, grids, strict=True):
         if item.hidden:
             dev.add_bound(_hidden_term(item, g, cal))
             continue
         terms = _seen_terms(table, item, g, cal, spread, shared_calibration)
-        dev.penalty += g.penalty
         if shared_calibration:
             _add_shared(dev, terms, g, cal)
         elif compiled:
@@ -449,8 +545,8 @@ def deviance(table: ModelTable, items: list[FeatureSummary], cal: Calibration | 
         else:
             for term in terms:
                 dev.add_term_numpy(term)
-    if seen:  # every size's terms in one pass
-        dev.add_terms_compiled(seen, StackCache.of(table))
+    if seen:  # every size's terms in one pass, the deviance summed as it ends
+        dev.add_terms_compiled(seen, stacks, total=True)
     dev.settle()
     dev.close_logs()
     _apply_woodbury(dev)

@@ -29,6 +29,7 @@ nothing changes.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypedDict
 
@@ -148,14 +149,14 @@ def _widen(ci: tuple[float | None, float | None], lo: float, hi: float
 
 
 def resolve(thickness: ParameterEstimate, distance: ParameterEstimate, t_m: np.ndarray,
-            distance_m: np.ndarray, post: np.ndarray, weight_t: np.ndarray,
+            distance_m: np.ndarray, density: Callable[[], np.ndarray], weight_t: np.ndarray,
             weight_l: np.ndarray, profile_t: np.ndarray, lower_physical: bool
             ) -> tuple[ParameterEstimate, ParameterEstimate, list[Reading]]:
     """The answer for thickness and distance with the ridge taken into account (module doc).
 
-    ``post`` is the normalised posterior on the (t, L) grid (prior masses ``weight_t`` and
-    ``weight_l``), ``profile_t`` the likelihood ratio to the best cell, maximised over L, per
-    thickness.
+    ``density()`` gives the normalised posterior on the (t, L) grid (prior masses ``weight_t``
+    and ``weight_l``; asked for only where the data fit separate readings), ``profile_t`` the
+    likelihood ratio to the best cell, maximised over L, per thickness.
     Returns the thickness and distance answers and the readings (empty unless ``ambiguous``).
     """
     if thickness.status not in ("constrained", "lower_bound_only", "upper_bound_only"):
@@ -180,6 +181,7 @@ def resolve(thickness: ParameterEstimate, distance: ParameterEstimate, t_m: np.n
     groups = _merge(_bridged(profile_runs, profile_t) + ([own] if own is not None else []))
     if len(groups) <= 1:
         return _widened(thickness, t_m, profile_t, profile_runs), distance, []
+    post = density()
     like = post / (weight_t[:, None] * weight_l[None, :])
     like /= like.max()
     readings = [_reading(span, _bounds(span, profile_runs, own, thickness, log_t, profile_t),

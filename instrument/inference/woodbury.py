@@ -23,19 +23,22 @@ def solve2(m3: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return quad, np.log(det)
 
 
-def material_shift(m3: np.ndarray, b: np.ndarray, post: np.ndarray) -> list[float]:
+def material_shift(m3: np.ndarray, b: np.ndarray, cells: np.ndarray, post: np.ndarray
+                   ) -> list[float]:
     """The posterior mean of the plate material's departure from the table's, in its spread's
     standard deviations along ``(d ln E', d ln rho)``: per cell ``(I + M)^-1 b`` (the Gaussian
     material term's own posterior mean, M and b as in :func:`solve2`), averaged over the
-    posterior. Two or more in E' means the data fit a plate at the edge of the grade's range."""
+    posterior ``post`` on ``cells`` (flat indices; every other cell's is 0). Two or more in E'
+    means the data fit a plate at the edge of the grade's range."""
     # the cells that carry the posterior (a billionth of its peak and up) decide the mean
-    cells = np.flatnonzero(post.ravel() > 1e-9 * float(post.max()))
-    a00, a01, a11 = (m.ravel()[cells] for m in m3)
+    kept = np.flatnonzero(post > 1e-9 * float(post.max()))
+    at = cells[kept]
+    a00, a01, a11 = (np.take(m, at) for m in m3)
     a00 = a00 + 1.0
     a11 = a11 + 1.0
     det = a00 * a11 - a01 * a01
-    b0, b1 = (v.ravel()[cells] for v in b)
-    w = post.ravel()[cells] / det
+    b0, b1 = (np.take(v, at) for v in b)
+    w = post[kept] / det
     return [weighted_sum(w, a11 * b0 - a01 * b1), weighted_sum(w, a00 * b1 - a01 * b0)]
 
 

@@ -158,8 +158,9 @@ def test_the_likelihood_in_two_bands_is_one_threads_to_the_bit(
     assert gt.threads() == 2 and banded.m_det is not None
     monkeypatch.setattr(parallel, "_thread_limit", 1)
     whole = lk.deviance(table, items, None, spread)
-    for name in ("misfit", "logdet", "det", "m_sum", "ur_sum"):
+    for name in ("misfit", "logdet", "det", "m_sum", "ur_sum", "chi2", "row_min"):
         assert np.array_equal(getattr(banded, name), getattr(whole, name)), name
+    assert banded.best_at == whole.best_at == int(np.argmin(whole.total()))
 
 
 def _child(queue: multiprocessing.Queue) -> None:  # type: ignore[type-arg]

@@ -152,7 +152,7 @@ def test_an_inversion_makes_no_blas_call(table: ModelTable, monkeypatch: pytest.
 def test_exp_is_exactly_zero_below_the_compiled_posteriors_cut() -> None:
     """The compiled posterior hands numpy's exp only the exponents from ``EXP_ZERO`` up and
     writes 0 for the others: numpy's exp must give exactly 0 there."""
-    from solitonde.instrument.inference.posterior_kernel import EXP_ZERO
+    from solitonde.instrument.inference.cell_posterior import EXP_ZERO
 
     below = np.concatenate([np.linspace(EXP_ZERO - 100.0, EXP_ZERO, 100_001)[:-1],
                             [np.nextafter(EXP_ZERO, -np.inf), -1e300, -np.inf]])
@@ -173,10 +173,11 @@ def test_the_compiled_best_cell_is_numpys() -> None:
     for nan_at in (None, (3, 2), (6, 4)):
         if nan_at is not None:
             parts[1][nan_at] = np.nan
-        out = np.empty((7, 5))
-        at = total_and_best(*parts, out)
+        out, row_min = np.empty((7, 5)), np.empty(7)
+        at = total_and_best(*parts, out, row_min, 0, 7)
         expected = parts[0] + parts[1] + parts[2] + parts[3]
         assert np.array_equal(out, expected, equal_nan=True)
+        assert np.array_equal(row_min, expected.min(axis=1), equal_nan=True)
         assert at == int(np.argmin(expected))
         assert np.array_equal(out.flat[at], expected.min(), equal_nan=True)
 

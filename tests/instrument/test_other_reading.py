@@ -113,7 +113,7 @@ def test_two_separate_groups_make_an_ambiguous_answer_with_two_readings() -> Non
     answer = ParameterEstimate(5.0e-3, 5.0e-3, (4.95e-3, 5.05e-3), (4.9e-3, 5.1e-3),
                                "constrained")
     distance = ParameterEstimate(0.3, 0.3, (0.29, 0.31), (0.28, 0.32), "constrained")
-    got_t, got_l, readings = ridge.resolve(answer, distance, t, l_axis, post, w_t, w_l,
+    got_t, got_l, readings = ridge.resolve(answer, distance, t, l_axis, lambda: post, w_t, w_l,
                                            profile, lower_physical=True)
     assert got_t.status == "ambiguous" and len(readings) == 2
     assert sum(r.weight for r in readings) == pytest.approx(1.0)
@@ -140,7 +140,7 @@ def test_one_group_reaching_beyond_widens_the_interval_and_a_slight_reach_does_n
         np.exp(-0.5 * ((log_t - centre) / sd) ** 2), 0.5 * (log_t > centre - 6 * sd)),
         np.exp(-0.5 * ((log_t - centre) / sd) ** 2))
     t, l_axis, post, w_t, w_l = _ridge_case(ridge_profile, np.full(n, 0.3))
-    got, _, readings = ridge.resolve(answer, distance, t, l_axis, post, w_t, w_l,
+    got, _, readings = ridge.resolve(answer, distance, t, l_axis, lambda: post, w_t, w_l,
                                      ridge_profile, lower_physical=True)
     assert readings == [] and got.status == "constrained"
     assert got.ci95[0] == pytest.approx(np.exp(centre - 6 * sd), rel=0.01)
@@ -148,7 +148,7 @@ def test_one_group_reaching_beyond_widens_the_interval_and_a_slight_reach_does_n
     # grid points: within a tenth of a cell)
     assert got.ci95[1] == pytest.approx(answer.ci95[1], rel=3e-4)
     slight = np.exp(-0.5 * ((log_t - centre) / (1.1 * sd)) ** 2)
-    got, _, _ = ridge.resolve(answer, distance, t, l_axis, post, w_t, w_l, slight,
+    got, _, _ = ridge.resolve(answer, distance, t, l_axis, lambda: post, w_t, w_l, slight,
                               lower_physical=True)
     assert got.ci95 == answer.ci95
     assert LR_LEVELS[1] < 0.5  # the ridge's plateau is inside the 95 % set
@@ -167,8 +167,8 @@ def test_a_one_sided_bound_moved_by_under_one_percent_is_left_and_a_longer_reach
         end = np.log(bound) + past
         profile = np.where(log_t <= end, 1.0, np.exp(-0.5 * ((log_t - end) / 0.002) ** 2))
         t, l_axis, post, w_t, w_l = _ridge_case(profile, np.full(n, 0.3))
-        got, _, readings = ridge.resolve(answer, distance, t, l_axis, post, w_t, w_l, profile,
-                                         lower_physical=True)
+        got, _, readings = ridge.resolve(answer, distance, t, l_axis, post.copy, w_t, w_l,
+                                         profile, lower_physical=True)
         assert readings == [] and got.status == "upper_bound_only"
         if widened:
             assert got.ci95[1] == pytest.approx(bound * np.exp(past), rel=0.01)
