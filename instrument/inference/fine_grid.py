@@ -26,6 +26,7 @@ from solitonde.instrument.inference.model_error import (
     REFLECTION_D_OVER_T,
     node_variance,
     node_variances,
+    single_precision,
 )
 from solitonde.instrument.inference.thickness_spline import (
     read_columns,
@@ -91,6 +92,8 @@ class FineGrid:
     penalty: np.ndarray
     model_tof_var: np.ndarray
     model_arr_var: np.ndarray
+    """The model error per cell, rounded to single precision
+    (:func:`~.model_error.single_precision`)."""
     weight_t: np.ndarray
     weight_l: np.ndarray
     floor_weight: np.ndarray
@@ -176,8 +179,10 @@ def fine_grid(table: ModelTable, i_d: int) -> FineGrid:
         arr=wt @ arr @ wl.T,
         valid=valid,
         penalty=np.where(valid, 0.0, np.inf),
-        model_tof_var=wt @ (tof_var + floor * (FLOOR_TOF_REL_STD * tof) ** 2) @ wl.T,
-        model_arr_var=wt @ (arr_var + floor * (FLOOR_ARR_REL_STD * arr) ** 2) @ wl.T,
+        model_tof_var=single_precision(
+            wt @ (tof_var + floor * (FLOOR_TOF_REL_STD * tof) ** 2) @ wl.T),
+        model_arr_var=single_precision(
+            wt @ (arr_var + floor * (FLOOR_ARR_REL_STD * arr) ** 2) @ wl.T),
         model_tof_var_strict=wt @ tof_var @ wl.T,
         model_arr_var_strict=wt @ arr_var @ wl.T,
         weight_t=_cell_widths(log_t),

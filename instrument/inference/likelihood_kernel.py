@@ -58,7 +58,8 @@ def add_terms(models: np.ndarray, model_vars: np.ndarray, us: np.ndarray, obs: n
     (:func:`_woodbury_row`, into ``m_det``) while it is still in the cache.
 
     The per-term arrays are stacked along a first axis of length K: ``models``, ``model_vars``
-    (K, n_t, n_l), the model's value and variance per cell; ``us`` (K, 2, n_t, n_l) the
+    (K, n_t, n_l), the model's value and (float32) variance per cell; ``us`` (K, 2, n_t, n_l,
+    float32: the values are single-precision ones, widened exactly as they are read) the
     material's columns before the calibration's scale (read only where ``has_u``). Per distance
     column, rows (K, n_l): ``obs`` the measured value, ``scale`` the calibration's factor,
     ``s2`` the scatter's and calibration's variance, ``rel2`` a relative variance on the model.
@@ -120,7 +121,9 @@ def warm() -> None:
     """Load (on a fresh install: compile) the kernels, on one cell with the argument types the
     likelihood passes."""
     rows, flags = np.ones((1, 1)), np.ones(1, dtype=np.bool_)  # flags as numpy bools
-    add_terms(np.ones((1, 1, 1)), np.ones((1, 1, 1)), np.zeros((1, 2, 1, 1)), rows, rows, rows,
+    single = np.float32
+    add_terms(np.ones((1, 1, 1)), np.ones((1, 1, 1), dtype=single),
+              np.zeros((1, 2, 1, 1), dtype=single), rows, rows, rows,
               rows, flags, flags, True, True, np.zeros((1, 1)), np.ones((1, 1)),
               np.zeros((3, 1, 1)), np.zeros((2, 1, 1)), np.zeros((1, 1)), np.ones((1, 1)), True,
               0, 1)

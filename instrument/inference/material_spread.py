@@ -49,6 +49,7 @@ from typing import Any, TypedDict
 
 import numpy as np
 
+from solitonde.instrument.inference.model_error import single_precision
 from solitonde.instrument.tables.table import ModelTable
 
 SPREAD_ORDER = ("youngs_modulus_rel_sd", "poisson_ratio_sd", "density_rel_sd")
@@ -108,7 +109,8 @@ def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float],
     ``floor_rule`` (the inversion's ``(REFLECTION_D_OVER_T, FLOOR_ARR_MAX)``): thickness nodes
     beyond that D/t whose far reflection is weaker than that ARR keep the exchange rates.
 
-    Cached on the table per sphere size, spread and floor rule.
+    Rounded to single precision (:func:`~.model_error.single_precision`); cached on the table
+    per sphere size, spread and floor rule.
     """
     sd = np.array([float(spread.get(k) or 0.0) for k in SPREAD_ORDER])
     family = table.family
@@ -161,7 +163,7 @@ def sensitivity(table: ModelTable, grid: Any, spread: Mapping[str, float],
             jac += _far_correction(np.where(floor[:, None], np.nan, simulated[name][i_d]),
                                    table.axes["thickness_m"], log_t, jac[:, -1, :])[:, None, :]
         jac[~near] = 0.0
-        out.append(np.ascontiguousarray(np.moveaxis(jac * sd2, -1, 0)))
+        out.append(single_precision(np.ascontiguousarray(np.moveaxis(jac * sd2, -1, 0))))
     result = (out[0], out[1])
     table._cache[key] = result
     return result

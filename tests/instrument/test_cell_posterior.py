@@ -115,6 +115,7 @@ def test_a_row_at_the_cut_is_read() -> None:
     chi2[20, 6] = -2.0 * EXP_ZERO  # exponent exactly EXP_ZERO
     chi2[30, 8] = np.nextafter(-2.0 * EXP_ZERO, np.inf)
     row_min, at = _row_min(chi2)
+    assert at == 10 * N_L + 4
     g0 = _grid()
     cp = from_deviance_compiled(chi2, 0.0, row_min, g0)
     _same(cp, from_deviance(chi2.copy(), 0.0, g0))
