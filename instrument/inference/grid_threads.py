@@ -1,7 +1,7 @@
 """The fine grid's heaviest compiled pass split into bands of thickness rows, run on two threads
 at once.
 
-Adding the likelihood's terms streams every term's per-cell arrays (about 20 MB for three sphere
+Adding the likelihood's terms streams every term's per-cell arrays (about 14 MB for three sphere
 sizes with the material's spread) from memory: one core waits on memory for about half of the
 pass. Two threads, each adding every term over its own band of rows, take the pass in about two
 thirds of the time; each cell sees the same operations in the same order, so the numbers are the
@@ -26,7 +26,8 @@ from solitonde.instrument.parallel import default_workers, thread_limit
 
 MAX_THREADS = 2
 """Bands per pass: memory, not arithmetic, bounds the pass, and two cores' streams are most of
-what it gains (three sizes with the spread: about 2.0 ms on one thread, 1.3 ms on two)."""
+what it gains (three sizes with the spread, the logs and the sum included: about 2.2 ms on one
+thread, 1.2-1.5 ms on two)."""
 
 MIN_ROWS = 64
 """A grid with fewer thickness rows runs whole: handing a band to a thread costs about 50 us."""

@@ -363,7 +363,7 @@ stacks."""
 class StackCache:
     """Terms' per-cell arrays stacked along a first axis, as :meth:`Deviance.add_terms_compiled`
     passes them, kept for the last :data:`STACKS_KEPT` sets of terms of one table (the service
-    inverts the same sizes again and again; a stack of three sizes' terms is about 20 MB), and
+    inverts the same sizes again and again; a stack of three sizes' terms is about 14 MB), and
     likewise each set of sizes' summed penalty. A set is known by the identity of its arrays,
     which the entry holds, so an id is never reused while its entry lives. Safe for the
     service's threads."""

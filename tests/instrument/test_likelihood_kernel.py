@@ -192,3 +192,16 @@ def test_the_fits_p_value_is_scipys_chi2_sf() -> None:
     for dof in (1.0, 1.7, 4.0, 5.93, 12.0):
         for x in (-1e-12, 0.0, 1e-300, 0.3, 1.0, 4.2, 33.0, 1e3, 1e5, 1e300):
             assert _chi2_sf(x, dof) == float(chi2.sf(x, dof)), (x, dof)
+
+
+def test_a_term_not_in_single_precision_is_refused(table: ModelTable) -> None:
+    """The pass streams the variances and material columns as float32; a value float32 does not
+    hold exactly (one not rounded where it was made) is refused, not silently rounded, so the
+    compiled and numpy paths cannot part."""
+    from solitonde.instrument.inference.fine_grid import fine_grid
+
+    g = fine_grid(table, 0)
+    assert np.array_equal(g.model_tof_var.astype(np.float32), g.model_tof_var)
+    term = (g.tof_s, g.model_tof_var * (1.0 + 1e-12), 1.0, 1.0, 0.0, 0.0, None)
+    with pytest.raises(ValueError, match="single-precision"):
+        lk.StackCache().get([term])
