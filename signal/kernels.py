@@ -40,7 +40,7 @@ from .pulse_fit import (  # noqa: F401
     solve_spd,
     template,
 )
-from .robust import MAD_POINTS, detrended_mad, median, median_inplace, select  # noqa: F401
+from .robust import MAD_POINTS, detrended_mad, kth_smallest, median  # noqa: F401
 from .smoothing import (  # noqa: F401
     prefix_and_triangle,
     prefix_sum,
@@ -404,10 +404,10 @@ def _level_noise(y: np.ndarray, n_pre: int, ref: float, floor: float) -> tuple[f
     d = np.empty(y.size - 1)
     for i in range(d.size):
         d[i] = y[i + 1] - y[i]
-    med = median_inplace(d)
+    med = median(d)
     for i in range(d.size):
         d[i] = abs(d[i] - med)
-    return ref, max(MAD_TO_SIGMA * median_inplace(d) / np.sqrt(2.0), floor)
+    return ref, max(MAD_TO_SIGMA * median(d) / np.sqrt(2.0), floor)
 
 
 @njit(cache=True, inline="always")
@@ -461,10 +461,10 @@ def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, 
     """(sign, record median in the sign-corrected trace, prefix sums, lightly smoothed trace
     (sign-corrected)): the polarity from the smoothed trace against the record's median."""
     step = max(1, x.size // 1024)
-    spread = np.empty((x.size + step - 1) // step)  # every step-th sample (median reorders it)
+    spread = np.empty((x.size + step - 1) // step)  # every step-th sample
     for i in range(spread.size):
         spread[i] = x[i * step]
-    ref = median_inplace(spread)
+    ref = median(spread)
     csum, s1 = prefix_and_triangle(x, np.int64(2))  # type: ignore[arg-type]  # int64, not a literal
     sign = sign_in
     if sign == 0.0:

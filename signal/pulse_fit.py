@@ -115,6 +115,64 @@ def solve_lu(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> float:
     return det
 
 
+@njit(cache=True, inline="always")
+def _normal_equations(wt: np.ndarray, jac: np.ndarray, y: np.ndarray, f: np.ndarray,
+                      g: np.ndarray, jtj: np.ndarray) -> None:
+    """``g = J^T W (y - f)`` and ``jtj = J^T W J``, each entry summed over the points in order.
+
+    One pass with every entry's sum in its own register: the sums are independent chains of
+    additions, which one loop per entry would run one after the other, each waiting on its
+    own additions. The products and their order per entry are a loop per entry's, so the
+    numbers are the same to the bit. Three or four parameters (``jac``'s columns)."""
+    nfree = jac.shape[1]
+    g0 = g1 = g2 = g3 = 0.0
+    m00 = m01 = m02 = m03 = m11 = m12 = m13 = m22 = m23 = m33 = 0.0
+    if nfree == 3:
+        for i in range(wt.size):
+            w = wt[i]
+            r = y[i] - f[i]
+            j0, j1, j2 = jac[i, 0], jac[i, 1], jac[i, 2]
+            g0 += w * j0 * r
+            g1 += w * j1 * r
+            g2 += w * j2 * r
+            m00 += w * j0 * j0
+            m01 += w * j0 * j1
+            m02 += w * j0 * j2
+            m11 += w * j1 * j1
+            m12 += w * j1 * j2
+            m22 += w * j2 * j2
+    else:
+        for i in range(wt.size):
+            w = wt[i]
+            r = y[i] - f[i]
+            j0, j1, j2, j3 = jac[i, 0], jac[i, 1], jac[i, 2], jac[i, 3]
+            g0 += w * j0 * r
+            g1 += w * j1 * r
+            g2 += w * j2 * r
+            g3 += w * j3 * r
+            m00 += w * j0 * j0
+            m01 += w * j0 * j1
+            m02 += w * j0 * j2
+            m03 += w * j0 * j3
+            m11 += w * j1 * j1
+            m12 += w * j1 * j2
+            m13 += w * j1 * j3
+            m22 += w * j2 * j2
+            m23 += w * j2 * j3
+            m33 += w * j3 * j3
+    g[0], g[1], g[2] = g0, g1, g2
+    jtj[0, 0], jtj[1, 1], jtj[2, 2] = m00, m11, m22
+    jtj[0, 1] = jtj[1, 0] = m01
+    jtj[0, 2] = jtj[2, 0] = m02
+    jtj[1, 2] = jtj[2, 1] = m12
+    if nfree > 3:
+        g[3] = g3
+        jtj[3, 3] = m33
+        jtj[0, 3] = jtj[3, 0] = m03
+        jtj[1, 3] = jtj[3, 1] = m13
+        jtj[2, 3] = jtj[3, 2] = m23
+
+
 @njit(cache=True)
 def fit_pulse(
     t: np.ndarray, y: np.ndarray, wt: np.ndarray, p0: np.ndarray, skew: float, nfree: int,
@@ -146,17 +204,7 @@ def fit_pulse(
     step = np.empty(nfree)
     tmin, tmax = t[0], t[n - 1]
     for _ in range(max_iter):
-        for k in range(nfree):
-            acc = 0.0
-            for i in range(n):
-                acc += wt[i] * jac[i, k] * (y[i] - f[i])
-            g[k] = acc
-            for q in range(k, nfree):
-                acc = 0.0
-                for i in range(n):
-                    acc += wt[i] * jac[i, k] * jac[i, q]
-                jtj[k, q] = acc
-                jtj[q, k] = acc
+        _normal_equations(wt, jac, y, f, g, jtj)
         improved = False
         for _inner in range(8):
             for k in range(nfree):
