@@ -68,6 +68,18 @@ def vmin(a: np.ndarray) -> float:
 
 
 @njit(cache=True, inline="always")
+def vminmax(a: np.ndarray) -> tuple[float, float]:
+    """Smallest and largest value of a non-empty finite array in one vectorised pass (equal to
+    ``a.min()`` and ``a.max()``)."""
+    lo = a[0]
+    hi = a[0]
+    for i in range(a.size):
+        lo = _fmin(lo, a[i])
+        hi = _fmax(hi, a[i])
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
 def vargmax(a: np.ndarray) -> int:
     """Index of the first largest value, as ``np.argmax`` (vectorised maximum, then a scan)."""
     m = vmax(a)

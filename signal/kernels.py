@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .extrema import vargmax, vargmin, vmax, vmin
+from .extrema import vargmax, vargmin, vmax, vmin, vminmax
 from .gap_drift import D_GAP, D_MISFIT, D_MISFIT_N, drift_at, gap_drift
 from .peak_refine import LADDER, common_rung, pre_impact_baseline, refine_peak
 from .pulse_fit import (  # noqa: F401
@@ -368,7 +368,7 @@ def block_average(t: np.ndarray, y: np.ndarray, w: np.ndarray, m: int
 
 
 @njit(cache=True)
-def _onset_pretrigger(s1: np.ndarray, ref: float) -> int:
+def _onset_pretrigger(s1: np.ndarray, ref: float, top: float) -> int:
     """Samples before the first rise (a first guess; refined once the pulses are known).
 
     The rise is the first crossing of a quarter of the largest excursion above ``ref``; its onset
@@ -376,7 +376,7 @@ def _onset_pretrigger(s1: np.ndarray, ref: float) -> int:
     as a margin. Returns 0 when the record starts inside that rise (no pre-trigger exists).
     """
     n = s1.size
-    big = max(0.0, vmax(s1) - ref)  # rounding is monotonic: max(s1[i] - ref) = max(s1) - ref
+    big = max(0.0, top - ref)  # rounding is monotonic: max(s1[i] - ref) = max(s1) - ref
     if big <= 0:
         return max(MIN_PRETRIGGER, n // 10)
     cross = 0
@@ -457,22 +457,25 @@ def _widths(v: np.ndarray, peaks: np.ndarray, bounds: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _polarity(x: np.ndarray, sign_in: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+def _polarity(x: np.ndarray, sign_in: float
+              ) -> tuple[float, float, np.ndarray, np.ndarray, float]:
     """(sign, record median in the sign-corrected trace, prefix sums, lightly smoothed trace
-    (sign-corrected)): the polarity from the smoothed trace against the record's median."""
+    (sign-corrected), that trace's largest value): the polarity from the smoothed trace against
+    the record's median."""
     step = max(1, x.size // 1024)
     spread = np.empty((x.size + step - 1) // step)  # every step-th sample
     for i in range(spread.size):
         spread[i] = x[i * step]
     ref = median(spread)
     csum, s1 = prefix_and_triangle(x, np.int64(2))  # type: ignore[arg-type]  # int64, not a literal
+    low, high = vminmax(s1)
     sign = sign_in
     if sign == 0.0:
-        sign = 1.0 if vmax(s1) - ref >= ref - vmin(s1) else -1.0
+        sign = 1.0 if high - ref >= ref - low else -1.0
     if sign < 0:
         for i in range(s1.size):
             s1[i] = -s1[i]
-    return sign, ref * sign, csum, s1
+    return sign, ref * sign, csum, s1, high if sign > 0 else -low  # negation is exact
 
 
 @njit(cache=True)
@@ -889,15 +892,15 @@ def locate(x: np.ndarray, sign_in: float, n_pre_in: int, h_in: int, thr_sigma: f
     """
     n = x.size
     head = np.zeros(HEAD)
-    sign, ref, csum, s1 = _polarity(x, sign_in)
+    sign, ref, csum, s1, s1_top = _polarity(x, sign_in)
     y = x if sign > 0 else _negated(x)  # read only: a positive trace is used in place
     head[H_SIGN] = sign
-    ymax = vmax(y)
+    ymin, ymax = vminmax(y)
 
-    n_pre = n_pre_in if n_pre_in > 0 else _onset_pretrigger(s1, ref)
+    n_pre = n_pre_in if n_pre_in > 0 else _onset_pretrigger(s1, ref, s1_top)
     if n_pre == 0:
         head[H_EARLY] = 1.0
-    span = max(0.0, ymax - ref, ref - vmin(y))  # = max |y[i] - ref| (monotonic rounding)
+    span = max(0.0, ymax - ref, ref - ymin)  # = max |y[i] - ref| (monotonic rounding)
     floor = NOISE_FLOOR * max(span, 1e-300)
     base, sigma = _level_noise(y, n_pre, ref, floor)
     line = np.empty(n)

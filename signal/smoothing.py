@@ -123,12 +123,25 @@ def triangle_prefix(x: np.ndarray, c: np.ndarray, h: int, sign: float) -> np.nda
         for i in range(n):
             out[i] = sign * x[i]
         return out
-    mid = np.empty(n)
-    _box_from_prefix(c, h, mid)
-    if sign < 0:
-        for i in range(n):
-            mid[i] = -mid[i]
-    _box_into(mid, h, np.empty(n + 1), out)
+    # The first box's values (:func:`_box_from_prefix`'s, in its three parts) go straight into
+    # the second box's running sum: the sum waits on its own additions, and each value is
+    # worked out while it does.
+    c2 = np.empty(n + 1)
+    c2[0] = 0.0
+    acc = 0.0
+    inv = 1.0 / (2 * h + 1)
+    for i in range(min(h, n)):
+        hi = min(n, i + h + 1)
+        acc += sign * (c[hi] / hi)
+        c2[i + 1] = acc
+    for i in range(h, n - h):
+        acc += sign * ((c[i + h + 1] - c[i - h]) * inv)
+        c2[i + 1] = acc
+    for i in range(max(n - h, h), n):
+        lo = i - h
+        acc += sign * ((c[n] - c[lo]) / (n - lo))
+        c2[i + 1] = acc
+    _box_from_prefix(c2, h, out)
     return out
 
 
