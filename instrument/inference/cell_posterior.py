@@ -23,6 +23,10 @@ import numpy as np
 
 from solitonde.instrument.inference.fine_grid import FineGrid
 
+CARRYING = 1e-16
+"""The share of the peak cell's weight from which a cell counts in the adequacy check's sums
+(:attr:`CellPosterior.carrying`): the cells left out hold less than this times their number of
+the posterior (under 1e-10 of it on the fine grid), against thresholds of 5 and 10 %."""
 EXP_ZERO = -746.0
 """An exponent below which ``exp`` is exactly 0: below ln(2^-1075) = -745.13 the result is under
 half the smallest subnormal and rounds to 0 (tests/instrument/test_likelihood_kernel.py checks
@@ -61,6 +65,13 @@ class CellPosterior:
     def at_cells(self, values: np.ndarray) -> np.ndarray:
         """A grid-shaped array's values on :attr:`cells`."""
         return np.take(values, self.cells)
+
+    @functools.cached_property
+    def carrying(self) -> np.ndarray:
+        """The positions in :attr:`cells` whose weight is at least :data:`CARRYING` of the
+        largest: far fewer than the cells whose weight is not 0 (a Gaussian's 1e-16 lies at 8.6
+        standard deviations, its underflow at 39)."""
+        return np.flatnonzero(self.weight >= CARRYING * float(self.weight.max()))
 
 
 def from_deviance(chi2: np.ndarray, best: float, g0: FineGrid) -> CellPosterior:

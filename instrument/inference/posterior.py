@@ -69,9 +69,12 @@ def _strict_explained(floor_mass: dict[float, float], dev: Deviance, cp: CellPos
                       items: list[FeatureSummary], cal: Calibration | None) -> dict[float, float]:
     """Per seen size resting on floor cells (``floor_mass`` at least :data:`MIN_FLOOR_MASS`):
     the posterior probability that its TOF and ARR are explained without the floor nodes'
-    looseness (their chi^2 within the 1e-3 tail)."""
+    looseness (their chi^2 within the 1e-3 tail), over the cells that carry the posterior
+    (:attr:`~.cell_posterior.CellPosterior.carrying`)."""
     out: dict[float, float] = {}
     limit = _chi2_limit_at(2, 1e-3)
+    at = cp.carrying
+    cells, weight = cp.cells[at], cp.weight[at]
     for item, g in zip(items, dev.grids, strict=True):
         if item.hidden or floor_mass[item.diameter_m] < MIN_FLOOR_MASS:
             continue
@@ -86,14 +89,14 @@ def _strict_explained(floor_mass: dict[float, float], dev: Deviance, cp: CellPos
                 g.tof_s, g.arr, g.model_tof_var_strict, g.model_arr_var_strict,
                 per_distance(item.tof_s - offset, n_l), per_distance(s_tof**2 + o_std**2, n_l),
                 item.arr, per_distance(factor, n_l), per_distance(f_std, n_l), s_arr**2, limit,
-                cp.cells, cp.cols)
+                cells, cp.cols[at])
         else:
             strict = ((item.tof_s - offset - g.tof_s) ** 2
                       / (s_tof**2 + o_std**2 + g.model_tof_var_strict)
                       + (item.arr - factor * g.arr) ** 2
                       / (s_arr**2 + factor**2 * g.model_arr_var_strict + (f_std * g.arr) ** 2))
-            explained = cp.at_cells(strict) <= limit
-        out[item.diameter_m] = float(np.sum(cp.weight[explained]))
+            explained = np.take(strict, cells) <= limit
+        out[item.diameter_m] = float(np.sum(weight[explained]))
     return out
 
 
@@ -102,13 +105,14 @@ def _adequacy_inputs(est: Estimate, dev: Deviance, cp: CellPosterior,
     """What the adequacy check reads, into ``est.extra``: the effective number of parameters
     the data fix (the posterior mean of the deviance over its minimum, Spiegelhalter et al.'s
     p_D), the material's shift and, per seen size, the posterior's weight on floor cells and
-    the share its strict model error explains."""
+    the share its strict model error explains (these two over the cells that carry it)."""
     # the cells that carry weight have a finite deviance (or NaN: then every weight is NaN)
     est.extra["p_d"] = float(np.sum(cp.weight * cp.over_best))
     if dev.m_sum is not None and dev.ur_sum is not None:
         est.extra["material_shift_sd"] = material_shift(dev.m_sum, dev.ur_sum, cp.cells,
                                                         cp.weight)
-    floor_mass = {i.diameter_m: (weighted_sum(cp.weight, cp.at_cells(g.floor_weight))
+    at = cp.carrying
+    floor_mass = {i.diameter_m: (weighted_sum(cp.weight[at], np.take(g.floor_weight, cp.cells[at]))
                                  if g.has_floor else 0.0)
                   for i, g in zip(items, dev.grids, strict=True) if not i.hidden}
     est.extra["floor_mass"] = floor_mass

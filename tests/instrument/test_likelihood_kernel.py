@@ -205,3 +205,23 @@ def test_a_term_not_in_single_precision_is_refused(table: ModelTable) -> None:
     term = (g.tof_s, g.model_tof_var * (1.0 + 1e-12), 1.0, 1.0, 0.0, 0.0, None)
     with pytest.raises(ValueError, match="single-precision"):
         lk.StackCache().get([term])
+
+
+def test_the_adequacy_sums_over_the_carrying_cells_are_the_whole_posteriors(
+        table: ModelTable, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The floor share and the strict share are summed over the cells with at least CARRYING of
+    the peak's weight: against every cell with weight (CARRYING 0) they differ by less than
+    1e-10, on answers resting on floor cells."""
+    import solitonde.instrument.inference.cell_posterior as cell_posterior
+
+    for t, at in ((2.0e-3, 0.2), (2.1e-3, 0.35)):
+        items = _inputs(table, (9.53e-3, 19.05e-3), t, at)
+        est = invert(table, items)
+        with monkeypatch.context() as m:
+            m.setattr(cell_posterior, "CARRYING", 0.0)
+            every = invert(table, items)
+        assert est.extra["floor_mass"][19.05e-3] > 0.1 and est.extra["strict_explained"]
+        for key in ("floor_mass", "strict_explained"):
+            assert est.extra[key].keys() == every.extra[key].keys()
+            for d, value in est.extra[key].items():
+                assert abs(value - every.extra[key][d]) < 1e-10, (key, d)
