@@ -67,8 +67,8 @@ def _split(src: np.ndarray, dst: np.ndarray, lo: int, hi: int, pivot: float,
            inclusive: bool) -> int:
     """The values of ``src[lo:hi]`` below ``pivot`` (or not above it, when ``inclusive``) into
     ``dst[lo:i]``, the others into ``dst[i:hi]``; returns ``i``. Each value is written at both
-    ends of what is left and only the right end's counter moves on: no branch, and no step reads
-    what another wrote."""
+    ends of what is left and only the end it belongs to moves on (the other write is overwritten
+    later): no branch, and no step reads what another wrote."""
     left = lo
     right = hi - 1
     for j in range(lo, hi):

@@ -4,9 +4,10 @@ The posterior is the likelihood ``exp(-chi^2 / 2)`` (over its best cell) times e
 mass (uniform in log t and in L). Most cells lie so far below the best that their posterior is
 exactly 0 (``exp`` of an exponent under :data:`EXP_ZERO`): on a plate far from a support, where
 the features do not depend on L, about a fifth of the 114,000 cells carry any weight, near a
-support far fewer. Every sum the answer takes (the marginals, p_D, the floor's share, the
-material's shift, the strict share) runs over those cells only, in C order, and the grid-shaped
-density is made only where it is asked for (the ridge's readings, ``return_posterior``).
+support far fewer. Every sum the answer takes (the marginals, p_D, the material's shift) runs
+over those cells only, in C order (the floor's and the strict share over the ones that carry
+it, :data:`CARRYING`), and the grid-shaped density is made only where it is asked for (the
+ridge's readings, ``return_posterior``).
 
 Two builders give the same numbers to the bit: :func:`from_deviance` with numpy expressions
 (a process without numba: ``solitonde invert``) and :func:`from_deviance_compiled` with the
@@ -24,9 +25,10 @@ import numpy as np
 from solitonde.instrument.inference.fine_grid import FineGrid
 
 CARRYING = 1e-16
-"""The share of the peak cell's weight from which a cell counts in the adequacy check's sums
-(:attr:`CellPosterior.carrying`): the cells left out hold less than this times their number of
-the posterior (under 1e-10 of it on the fine grid), against thresholds of 5 and 10 %."""
+"""The share of the peak cell's weight from which a cell counts in the floor and strict shares
+(:attr:`CellPosterior.carrying`): each cell left out holds under this share of the posterior
+(the peak holds at most all of it), all of them together under 1e-11 on the fine grid, against
+the shares' thresholds of 10 and 5 %."""
 EXP_ZERO = -746.0
 """An exponent below which ``exp`` is exactly 0: below ln(2^-1075) = -745.13 the result is under
 half the smallest subnormal and rounds to 0 (tests/instrument/test_likelihood_kernel.py checks
