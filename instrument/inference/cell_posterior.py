@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -64,16 +65,22 @@ class CellPosterior:
         out.ravel()[self.cells] = self.weight
         return out
 
-    def at_cells(self, values: np.ndarray) -> np.ndarray:
-        """A grid-shaped array's values on :attr:`cells`."""
-        return np.take(values, self.cells)
-
     @functools.cached_property
-    def carrying(self) -> np.ndarray:
-        """The positions in :attr:`cells` whose weight is at least :data:`CARRYING` of the
-        largest: far fewer than the cells whose weight is not 0 (a Gaussian's 1e-16 lies at 8.6
-        standard deviations, its underflow at 39)."""
-        return np.flatnonzero(self.weight >= CARRYING * float(self.weight.max()))
+    def carrying(self) -> Carrying:
+        """The cells whose weight is at least :data:`CARRYING` of the largest: far fewer than
+        the cells whose weight is not 0 (a Gaussian's 1e-16 lies at 8.6 standard deviations,
+        its underflow at 39)."""
+        at = np.flatnonzero(self.weight >= CARRYING * float(self.weight.max()))
+        return Carrying(self.cells[at], self.cols[at], self.weight[at])
+
+
+class Carrying(NamedTuple):
+    """The cells that carry a posterior (:attr:`CellPosterior.carrying`): flat indices, distance
+    columns and weights."""
+
+    cells: np.ndarray
+    cols: np.ndarray
+    weight: np.ndarray
 
 
 def from_deviance(chi2: np.ndarray, best: float, g0: FineGrid) -> CellPosterior:

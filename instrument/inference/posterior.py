@@ -73,8 +73,7 @@ def _strict_explained(floor_mass: dict[float, float], dev: Deviance, cp: CellPos
     (:attr:`~.cell_posterior.CellPosterior.carrying`)."""
     out: dict[float, float] = {}
     limit = _chi2_limit_at(2, 1e-3)
-    at = cp.carrying
-    cells, weight = cp.cells[at], cp.weight[at]
+    cells, cols, weight = cp.carrying
     for item, g in zip(items, dev.grids, strict=True):
         if item.hidden or floor_mass[item.diameter_m] < MIN_FLOOR_MASS:
             continue
@@ -89,7 +88,7 @@ def _strict_explained(floor_mass: dict[float, float], dev: Deviance, cp: CellPos
                 g.tof_s, g.arr, g.model_tof_var_strict, g.model_arr_var_strict,
                 per_distance(item.tof_s - offset, n_l), per_distance(s_tof**2 + o_std**2, n_l),
                 item.arr, per_distance(factor, n_l), per_distance(f_std, n_l), s_arr**2, limit,
-                cells, cp.cols[at])
+                cells, cols)
         else:
             strict = ((item.tof_s - offset - g.tof_s) ** 2
                       / (s_tof**2 + o_std**2 + g.model_tof_var_strict)
@@ -111,8 +110,9 @@ def _adequacy_inputs(est: Estimate, dev: Deviance, cp: CellPosterior,
     if dev.m_sum is not None and dev.ur_sum is not None:
         est.extra["material_shift_sd"] = material_shift(dev.m_sum, dev.ur_sum, cp.cells,
                                                         cp.weight)
-    at = cp.carrying
-    floor_mass = {i.diameter_m: (weighted_sum(cp.weight[at], np.take(g.floor_weight, cp.cells[at]))
+    carrying = cp.carrying
+    floor_mass = {i.diameter_m: (weighted_sum(carrying.weight,
+                                              np.take(g.floor_weight, carrying.cells))
                                  if g.has_floor else 0.0)
                   for i, g in zip(items, dev.grids, strict=True) if not i.hidden}
     est.extra["floor_mass"] = floor_mass
