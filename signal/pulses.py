@@ -57,7 +57,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -376,11 +376,39 @@ def detect_each(waveforms: Iterable[Waveform], options: DetectOptions) -> Iterat
         yield _detect(waveform, options, args)
 
 
-def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detection:
-    """:func:`detect` with its options checked, taking the kernel's arguments from ``args`` (or
-    adding them there)."""
+class Shot(NamedTuple):
+    """One shot as the kernels left it: ``head[H_*]`` and one row ``rows[j][P_*]`` per pulse
+    (Python floats: cheaper to read one by one than numpy scalars), and the time axis."""
+
+    head: list[float]
+    rows: list[list[float]]
+    t0: float
+    dt: float
+    end_s: float
+    """Time of the record's last sample."""
+
+
+class Verdict(NamedTuple):
+    """What the pulses of a :class:`Shot` with at least one pulse are, and the flags it raises:
+    the one reading of the kernels' output that :func:`detect` and
+    :func:`solitonde.signal.features.extract` share."""
+
+    reflected: bool
+    """``rows[1]`` is the reflection."""
+    secondary: range
+    """The rows listed as secondary pulses."""
+    raised: dict[str, Any]
+    """:func:`quality_flags`' answer."""
+    flags: tuple[str, ...]
+    """The raised flags, in :data:`FLAGS` order."""
+    width_ratio: float
+    """The incident's width over a solitary wave's of its force (:func:`width_ratio`)."""
+
+
+def analyzed(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Shot:
+    """The kernels' output on ``waveform`` (newtons, low-passed where ``opts`` say so), taking
+    the kernel's arguments from ``args`` (or adding them there)."""
     dt = waveform.dt
-    t0 = waveform.t0
     x = waveform.force
     if opts.lowpass_hz is not None:
         x = lowpass(x, dt, opts.lowpass_hz)
@@ -394,16 +422,50 @@ def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detect
         shot_args = args[(x.size, dt)] = kernel_args(opts, x.size, dt)
     # K.analyze in two calls: each half is compiled on its own (side by side on a fresh install,
     # interpreted until then: solitonde.signal.kernel_choice) and nothing compiles the whole again.
-    located, rows_array = kernel_choice.locate_and_measure(x, shot_args)
-    head_array = located[0]
-    head = head_array.tolist()  # Python floats: cheaper to read one by one than numpy scalars
-    rows = rows_array.tolist()
+    located, rows = kernel_choice.locate_and_measure(x, shot_args)
+    t0 = waveform.t0
+    return Shot(located[0].tolist(), rows.tolist(), t0, dt, t0 + (x.size - 1) * dt)
+
+
+def judged(shot: Shot, opts: DetectOptions) -> Verdict:
+    """The pulses' roles and the flags of a shot holding at least one pulse."""
+    head, rows, t0, dt = shot.head, shot.rows, shot.t0, shot.dt
+    inc = rows[0]
+    reflected = len(rows) > 1 and not head[K.H_NOREF]
+    first = 2 if reflected else 1
+    secondary = range(first, min(len(rows), first + opts.max_secondary))
+    noise = head[K.H_SIGMA]
+    amp = inc[K.P_AMP]
+    ratio = width_ratio(inc[K.P_WIDTH] * dt, amp, opts.pulse_width_1n_s)
+    early_one = not reflected and len(rows) > 1 and early_pulse(
+        np.array([(t0 + r[K.P_TIME] * dt) - (t0 + inc[K.P_TIME] * dt) for r in rows[1:]]),
+        np.array([r[K.P_AMP] for r in rows[1:]]) / amp, trip_s(opts.travel_time_1n_s, amp))
+    raised = quality_flags(
+        detected=True, has_reflection=reflected, early=bool(head[K.H_EARLY]),
+        saturated=bool(head[K.H_SATURATED]), sign=head[K.H_SIGN],
+        incident_merged=bool(inc[K.P_MERGED]),
+        reflection_merged=reflected and bool(rows[1][K.P_MERGED]), more_than_two=len(rows) > 2,
+        incident_cut=bool(inc[K.P_TRUNC]), reflection_cut=reflected and bool(rows[1][K.P_TRUNC]),
+        train=bool(head[K.H_TRAIN]), low_snr_db=opts.low_snr_db, width_ratio=ratio,
+        check_snr_db=snr_db(rows[1][K.P_AMP] if reflected else amp, noise),
+        early_pulse=bool(early_one),
+        # no gap fit (misfit_n 0) is never unsteady: skip unsteady's numpy work (8 us a shot)
+        unsteady=head[K.H_MISFIT_N] > 0 and bool(
+            unsteady(head[K.H_MISFIT], head[K.H_MISFIT_N], noise, amp)))
+    return Verdict(reflected, secondary, raised, _ordered(raised), ratio)
+
+
+def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detection:
+    """:func:`detect` with its options checked, taking the kernel's arguments from ``args`` (or
+    adding them there)."""
+    shot = analyzed(waveform, opts, args)
+    head, rows, t0, dt = shot.head, shot.rows, shot.t0, shot.dt
     sign = head[K.H_SIGN]
     notes: list[str] = []
     noise = head[K.H_SIGMA]
     common = {"noise_N": noise, "threshold_N": head[K.H_THR],
               "pretrigger_samples": int(head[K.H_NPRE]), "smooth_samples": int(head[K.H_SMOOTH]),
-              "record_end_s": t0 + (x.size - 1) * dt}
+              "record_end_s": shot.end_s}
     if head[K.H_EARLY]:
         notes.append("the incident pulse starts before a pre-trigger segment could be taken")
     if not rows:
@@ -417,32 +479,24 @@ def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detect
             secondary=(), flags=_ordered(raised), notes=(*notes, "no pulse rises above the noise"),
             **common,
         )
-    pulses = []
-    cut_secondary = False
-    for k, row in enumerate(rows):
-        amp = row[K.P_AMP]
-        # The shot is truncated when a measured pulse is (quality_flags); a cut secondary is
-        # only noted.
-        if row[K.P_TRUNC] and not (k == 0 or (k == 1 and not head[K.H_NOREF])):
-            cut_secondary = True
-        pulses.append(Pulse(
-            time_s=t0 + row[K.P_TIME] * dt, peak_N=amp, baseline_N=sign * row[K.P_BASE],
-            width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
-            end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(amp, noise), index=int(row[K.P_INDEX]),
-            method=METHODS[int(row[K.P_METHOD])], rise_N=row[K.P_RISE],
-            level_N=sign * row[K.P_LEVEL_N], peak_time_s=t0 + row[K.P_PEAK_TIME] * dt,
-            peak_height_N=row[K.P_PEAK_AMP],
-        ))
-    if cut_secondary:
+    verdict = judged(shot, opts)
+    pulses = tuple(Pulse(
+        time_s=t0 + row[K.P_TIME] * dt, peak_N=row[K.P_AMP], baseline_N=sign * row[K.P_BASE],
+        width_s=row[K.P_WIDTH] * dt, onset_s=t0 + row[K.P_ONSET] * dt,
+        end_s=t0 + row[K.P_END] * dt, snr_db=snr_db(row[K.P_AMP], noise),
+        index=int(row[K.P_INDEX]), method=METHODS[int(row[K.P_METHOD])], rise_N=row[K.P_RISE],
+        level_N=sign * row[K.P_LEVEL_N], peak_time_s=t0 + row[K.P_PEAK_TIME] * dt,
+        peak_height_N=row[K.P_PEAK_AMP],
+    ) for row in rows)
+    # The shot is truncated when a measured pulse is (quality_flags); a cut secondary is only
+    # noted.
+    if any(row[K.P_TRUNC] for row in rows[1 + verdict.reflected:]):
         notes.append("a secondary pulse runs past the end of the record (TOF and ARR are whole)")
     incident = pulses[0]
-    gated_out = bool(head[K.H_NOREF])
-    reflected = pulses[1] if len(pulses) > 1 and not gated_out else None
-    first_secondary = 1 if reflected is None else 2
-    secondary = tuple(pulses[first_secondary : first_secondary + opts.max_secondary])
-    if len(pulses) > first_secondary + opts.max_secondary:
-        notes.append(f"{len(pulses) - first_secondary - opts.max_secondary} further secondary "
-                     "pulses not listed")
+    reflected = pulses[1] if verdict.reflected else None
+    unlisted = len(pulses) - verdict.secondary.stop
+    if unlisted > 0:
+        notes.append(f"{unlisted} further secondary pulses not listed")
     train = int(head[K.H_TRAIN])
     if train:
         notes.append(f"{train} pulse(s) follow the incident sooner than a reflection can arrive "
@@ -451,27 +505,11 @@ def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detect
     upper = None
     if reflected is None:
         upper = head[K.H_UPPER]
-        if gated_out and len(pulses) > 1:
+        if head[K.H_NOREF] and len(pulses) > 1:
             notes.append("no pulse arrives when the chain's geometry puts the reflection")
     if reflected is not None and not rows[1][K.P_LEVEL]:
         notes.append("no quiet samples before the reflection: its baseline is the slow trend")
-    check = reflected if reflected is not None else incident
-    ratio = width_ratio(incident.width_s, incident.peak_N, opts.pulse_width_1n_s)
-    early_one = reflected is None and early_pulse(
-        np.array([p.time_s - incident.time_s for p in pulses[1:]]),
-        np.array([p.peak_N for p in pulses[1:]]) / incident.peak_N,
-        trip_s(opts.travel_time_1n_s, incident.peak_N))
-    has_ref = reflected is not None
-    raised = quality_flags(
-        detected=True, has_reflection=has_ref, early=bool(head[K.H_EARLY]),
-        saturated=bool(head[K.H_SATURATED]), sign=sign, incident_merged=bool(rows[0][K.P_MERGED]),
-        reflection_merged=has_ref and bool(rows[1][K.P_MERGED]), more_than_two=len(pulses) > 2,
-        incident_cut=bool(rows[0][K.P_TRUNC]), reflection_cut=has_ref and bool(rows[1][K.P_TRUNC]),
-        train=bool(train), check_snr_db=check.snr_db, low_snr_db=opts.low_snr_db,
-        width_ratio=ratio, early_pulse=bool(early_one),
-        # no gap fit (misfit_n 0) is never unsteady: skip unsteady's numpy work (8 us a shot)
-        unsteady=head[K.H_MISFIT_N] > 0 and bool(
-            unsteady(head[K.H_MISFIT], head[K.H_MISFIT_N], noise, rows[0][K.P_AMP])))
+    raised = verdict.raised
     if raised["unsteady_baseline"]:
         share = head[K.H_MISFIT] / rows[0][K.P_AMP]
         notes.append(f"the baseline fitted on the pre-trigger and the gap misses them by "
@@ -482,11 +520,12 @@ def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detect
                      "puts the reflection: the chain below the sensor is shorter than stated")
     if raised["implausible_units"]:
         notes.append(f"the incident pulse is {incident.width_s:.3g} s wide at {incident.peak_N:.3g}"
-                     f" N, {ratio:.3g} times a solitary wave of that force in this chain")
+                     f" N, {verdict.width_ratio:.3g} times a solitary wave of that force in this "
+                     "chain")
     return Detection(
-        baseline_N=incident.baseline_N, pulses=tuple(pulses), incident=incident,
-        reflected=reflected, secondary=secondary, flags=_ordered(raised), arr_upper_bound=upper,
-        notes=tuple(notes), **common,
+        baseline_N=incident.baseline_N, pulses=pulses, incident=incident, reflected=reflected,
+        secondary=pulses[verdict.secondary.start : verdict.secondary.stop],
+        flags=verdict.flags, arr_upper_bound=upper, notes=tuple(notes), **common,
     )
 
 

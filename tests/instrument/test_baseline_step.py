@@ -23,7 +23,8 @@ from solitonde.instrument.inference import chain_geometry, shot_measure
 from solitonde.instrument.tables.measured import detect_options
 from solitonde.signal import io as signal_io
 from solitonde.signal.batch import extract_batch
-from solitonde.signal.features import extract
+from solitonde.signal.features import extract, from_detection
+from solitonde.signal.pulses import detect
 
 
 def _recording(folder: Path, step_n: float, drift: float = 0.0) -> Path:
@@ -75,3 +76,4 @@ def test_the_batch_path_flags_the_same_shots(folder: Path) -> None:
                           **options)
     assert table.to_features() == expected
     assert [("unsteady_baseline" in f.flags) for f in expected] == [True] * 5 + [False] * 5
+    assert [from_detection(detect(w, **options)) for w in waves] == expected

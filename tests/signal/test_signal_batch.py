@@ -7,8 +7,8 @@ import pytest
 
 from solitonde.signal.batch import FLAG_BITS, extract_batch
 from solitonde.signal.errors import WaveformError
-from solitonde.signal.features import extract
-from solitonde.signal.pulses import FLAGS
+from solitonde.signal.features import extract, extract_many, from_detection
+from solitonde.signal.pulses import FLAGS, detect
 from solitonde.signal.synth import degrade, pulse_train
 from solitonde.signal.waveform import Waveform
 
@@ -65,6 +65,24 @@ def test_batch_equals_extract_on_every_kind_of_shot(shots):
         if f is not None:
             assert table.flags[i] == sum(FLAG_BITS[name] for name in f.flags)
             assert (f.tof_s is None) == np.isnan(table.tof_s[i])
+
+
+@pytest.mark.parametrize("chain", [{}, {"travel_time_1n_s": 1.5e-4, "pulse_width_1n_s": 2.5e-5,
+                                    "max_secondary": 1}], ids=["plain", "chain"])
+def test_extract_equals_the_features_of_detect(shots, chain):
+    """extract reads the features straight from the kernels' rows; detect builds every pulse
+    and from_detection reads them there: the same features, flags and error, shot for shot."""
+    for row in shots:
+        wave = Waveform(-3e-5, DT, row)
+        try:
+            expected = from_detection(detect(wave, **chain))
+        except WaveformError as exc:
+            with pytest.raises(WaveformError) as got:
+                extract(wave, **chain)
+            assert str(got.value) == str(exc)
+            continue
+        assert extract(wave, **chain) == expected
+        assert extract_many([wave, wave], **chain) == [expected, expected]
 
 
 def test_batch_equals_extract_with_the_chains_gate_and_width_law(shots):
