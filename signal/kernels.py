@@ -462,12 +462,14 @@ def _polarity(x: np.ndarray, sign_in: float
     """(sign, record median in the sign-corrected trace, prefix sums, lightly smoothed trace
     (sign-corrected), that trace's largest value): the polarity from the smoothed trace against
     the record's median."""
+    # The running sums first: the first pass over a shot's samples, which arrive from memory
+    # while the sums wait on their own additions; the strided samples are then in cache.
+    csum, s1 = prefix_and_triangle(x, np.int64(2))  # type: ignore[arg-type]  # int64, not a literal
     step = max(1, x.size // 1024)
     spread = np.empty((x.size + step - 1) // step)  # every step-th sample
     for i in range(spread.size):
         spread[i] = x[i * step]
     ref = median(spread)
-    csum, s1 = prefix_and_triangle(x, np.int64(2))  # type: ignore[arg-type]  # int64, not a literal
     low, high = vminmax(s1)
     sign = sign_in
     if sign == 0.0:

@@ -116,28 +116,38 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
     claim a precision it does not have.
     """
     out = np.zeros(6)
-    _poly_peak_into(y, c, h, lo, hi, sigma, curvature, out)
+    _poly_peak_into(y, c, h, lo, hi, sigma, curvature, out, np.empty((SCRATCH, 5)))
     return out
 
 
+SCRATCH = 16
+"""Rows of five in the scratch array of :func:`_poly_peak_into` (its normal equations, their
+right-hand side, and :func:`_quartic_peak`'s work): one array per refined pulse instead of
+eleven per window, whose allocations were a fortieth of the extractor's time."""
+
+
 @njit(cache=True)
-def _template_curvature(height: float, w: float, r: float, hw: int, frac: float) -> float:
+def _template_curvature(height: float, w: float, r: float, hw: int, frac: float,
+                        out: np.ndarray, scratch: np.ndarray) -> float:
     """:func:`poly_peak`'s curvature (``out[5]``) of the template ``height exp(-|u / w|^r)``
-    sampled at ``u = i - hw - frac``, ``i = 0 .. 2 hw``, over its whole width (0: none)."""
+    sampled at ``u = i - hw - frac``, ``i = 0 .. 2 hw``, over its whole width (0: none);
+    ``out`` (six) and ``scratch`` (``SCRATCH`` x 5) are overwritten."""
     shape = np.empty(2 * hw + 1)
     for i in range(shape.size):
         shape[i] = height * np.exp(-(abs(i - hw - frac) / w) ** r)
-    out = np.zeros(6)
-    _poly_peak_into(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0, out)
+    _poly_peak_into(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0, out, scratch)
     return out[5]
 
 
 @njit(cache=True, inline="always")
 def _poly_peak_into(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
-                    curvature: float, out: np.ndarray) -> None:
-    """:func:`poly_peak` into ``out`` (zeros): the sums over the window, then
-    :func:`_quartic_peak`. Inlined into its two callers, which pass the record (read only) and
-    the template (writable); the rest is compiled once for both."""
+                    curvature: float, out: np.ndarray, scratch: np.ndarray) -> None:
+    """:func:`poly_peak` into ``out`` (set to zeros first), with ``scratch`` (``SCRATCH`` x 5,
+    overwritten) for the work: the sums over the window, then :func:`_quartic_peak`. Inlined
+    into its two callers, which pass the record (read only) and the template (writable); the
+    rest is compiled once for both."""
+    for q in range(out.size):
+        out[q] = 0.0
     a = max(c - h, lo)
     b = min(c + h, hi)
     if b - a < 6 or a >= c or b <= c:
@@ -174,7 +184,7 @@ def _poly_peak_into(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: floa
         m33 += p3 * p3
         m34 += p3 * p4
         m44 += p4 * p4
-    m = np.empty((5, 5))
+    m = scratch[:5]
     m[0, 0] = float(b - a + 1)
     m[0, 1] = m[1, 0] = m01
     m[0, 2] = m[2, 0] = m02
@@ -190,20 +200,23 @@ def _poly_peak_into(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: floa
     m[3, 3] = m33
     m[3, 4] = m[4, 3] = m34
     m[4, 4] = m44
-    rhs = np.empty(5)
+    rhs = scratch[5]
     rhs[0], rhs[1], rhs[2], rhs[3], rhs[4] = r0, r1, r2, r3, r4
-    _quartic_peak(m, rhs, c, h, a, b, sigma, curvature, out)
+    _quartic_peak(m, rhs, c, h, a, b, sigma, curvature, out, scratch[6:])
 
 
 @njit(cache=True)
 def _quartic_peak(m: np.ndarray, rhs: np.ndarray, c: int, h: int, a: int, b: int, sigma: float,
-                  curvature: float, out: np.ndarray) -> None:
+                  curvature: float, out: np.ndarray, scratch: np.ndarray) -> None:
     """The rest of :func:`poly_peak` from the normal equations ``m coef = rhs`` of the window
     ``[a, b]`` (``u = (i - c) / h``): the quartic's maximum and its standard errors into
-    ``out`` (left zero where there is none)."""
+    ``out`` (zeros, left so where there is none); ``scratch`` (10 x 5) is overwritten."""
     inv_h = 1.0 / h
-    work = m.copy()
-    coef = np.zeros(5)
+    work = scratch[:5]
+    for i in range(5):
+        for q in range(5):
+            work[i, q] = m[i, q]
+    coef = scratch[5]
     if not solve_spd(work, rhs, coef):
         return
     c1, c2, c3, c4 = coef[1], coef[2], coef[3], coef[4]
@@ -228,14 +241,15 @@ def _quartic_peak(m: np.ndarray, rhs: np.ndarray, c: int, h: int, a: int, b: int
     out[5] = curv * inv_h * inv_h
     if curvature < 0:
         curv = curvature * h * h
-    gt = np.zeros(5)
-    ga = np.zeros(5)
+    gt = scratch[6]
+    ga = scratch[7]
+    gt[0] = 0.0
     ga[0] = 1.0
     for k in range(1, 5):
         ga[k] = ga[k - 1] * u
         gt[k] = -k * ga[k - 1] / curv
-    var = np.zeros(2)
-    sol = np.zeros(5)
+    var = scratch[8]
+    sol = scratch[9]
     for k in range(2):
         g = gt if k == 0 else ga
         for i in range(5):
@@ -272,12 +286,15 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     """
     nl = len(LADDER)
     est = np.zeros((nl, 6))
+    alt = np.empty(6)
+    scratch = np.empty((SCRATCH, 5))
     halves = np.zeros(nl, dtype=np.int64)
     for k in range(nl):
         halves[k] = max(MIN_HALF, round(w * (-np.log(1.0 - LADDER[k])) ** (1.0 / r)))
     # The errors use the template's curvature over the widest window, not each fit's own: noise
     # that sharpens a fitted top would otherwise claim a precision the window does not have.
-    curvature = _template_curvature(height, w, r, halves[nl - 1], t_fit - np.floor(t_fit))
+    curvature = _template_curvature(height, w, r, halves[nl - 1], t_fit - np.floor(t_fit), alt,
+                                    scratch)
     values[:] = np.nan
     values[nl] = top_fit
     if not curvature < 0:
@@ -289,7 +306,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
         c = round(centre)
         if c <= lo or c >= hi:
             continue
-        _set_row(est, k, poly_peak(y, c, halves[k], lo, hi, sigma, curvature))
+        _poly_peak_into(y, c, halves[k], lo, hi, sigma, curvature, est[k], scratch)
         # Usable only where the noise leaves the peak well inside the window: beyond that the
         # cubic's maximum is a root of a noisy derivative, far from Gaussian, and would overrule
         # the wider windows by chance.
@@ -306,7 +323,7 @@ def refine_peak(y: np.ndarray, t_fit: float, top_fit: float, height: float, w: f
     while first < nl and est[first, 4] == 0:
         first += 1
     if first == nl or abs(top_i - est[first, 0]) > halves[first]:
-        alt = poly_peak(y, top_i, halves[0], lo, hi, sigma, curvature)
+        _poly_peak_into(y, top_i, halves[0], lo, hi, sigma, curvature, alt, scratch)
         if alt[4] > 0 and alt[2] <= RESOLVED * halves[0] and (
                 first == nl or alt[1] > est[first, 1] + AGREE_SIGMAS * max(alt[3],
                                                                            est[first, 3])):
