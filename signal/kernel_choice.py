@@ -1,15 +1,17 @@
 """Which kernels ``detect`` runs: the compiled ones, or interpreted ones while those compile.
 
 A fresh install, or an update (the cache folder follows the version and the source,
-:mod:`solitonde.model.jit_cache`), has no compiled kernels. numba would compile the feature
-extractor's two kernels, :func:`~solitonde.signal.kernels.locate` and
-:func:`~solitonde.signal.kernels.measure`, in the first shot's ``detect``: tens of seconds on two
-cores before the first answer of ``solitonde serve`` or ``solitonde analyze``.
+:mod:`solitonde.model.jit_cache`), has no compiled kernels. ``detect`` runs the feature
+extractor as one call, :func:`~solitonde.signal.kernels.analyze`, which numba would compile with
+its two halves, :func:`~solitonde.signal.kernels.locate` and
+:func:`~solitonde.signal.kernels.measure`, in the first shot's ``detect``: tens of seconds on one
+core before the first answer of ``solitonde serve`` or ``solitonde analyze``.
 
 Instead, :func:`start` (which those commands call) starts a background process
 (:mod:`solitonde.signal.precompile`) that compiles both halves side by side into the on-disk
 cache (``locate`` in one process, ``measure`` and the
-samples' check :func:`~solitonde.signal.kernels.first_invalid` in another), and until they are
+samples' check :func:`~solitonde.signal.kernels.first_invalid` in another), then ``analyze``,
+which links the two compiled halves (a few seconds). Until they are
 there ``detect`` runs the same kernels interpreted (:mod:`solitonde.signal.interpreted`): a
 fraction of a second per shot instead of a fraction of a millisecond, the same numbers to
 round-off. When the background compile has finished, the next shot loads the compiled kernels
@@ -72,7 +74,7 @@ def _compiled() -> types.ModuleType:
 
 
 def _marker() -> Path:
-    """The file that says both halves are in the cache, for this CPU."""
+    """The file that says the halves and ``analyze`` are in the cache, for this CPU."""
     import numba
     from llvmlite import binding
 
@@ -174,23 +176,20 @@ def current() -> types.ModuleType:
     return interpreted.kernels()
 
 
-def locate_and_measure(x: np.ndarray, args: tuple[Any, ...]
-                       ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    """Both halves of the extractor on one shot's samples, with :func:`current`'s kernels:
-    ``locate``'s arrays and ``measure``'s pulse rows (``args`` from
+def analyze(x: np.ndarray, args: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The extractor on one shot's samples, with :func:`current`'s kernels: ``head`` and the
+    pulse rows of :func:`~solitonde.signal.kernels.analyze` (``args`` from
     :func:`~solitonde.signal.pulses.kernel_args`). Interpreted work counts against
     :data:`BRIDGE_BUDGET_S`."""
     global _spent
     K = _compiled()
     kern = current()
     if kern is K:  # compiled: no interpreted time to count
-        located = K.locate(x, *args[: K.LOCATE_ARGS])
-        return located, K.measure(*located, *args[K.LOCATE_ARGS :])
+        return K.analyze(x, *args)  # type: ignore[no-any-return]
     started = time.perf_counter()
-    located = kern.locate(x, *args[: K.LOCATE_ARGS])
-    rows = kern.measure(*located, *args[K.LOCATE_ARGS :])
+    head, rows = kern.analyze(x, *args)
     _spent += time.perf_counter() - started
-    return located, rows
+    return head, rows
 
 
 def finish(timeout_s: float = CHILD_TIMEOUT_S) -> None:

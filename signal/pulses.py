@@ -420,11 +420,10 @@ def analyzed(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Shot:
     shot_args = args.get((x.size, dt))
     if shot_args is None:
         shot_args = args[(x.size, dt)] = kernel_args(opts, x.size, dt)
-    # K.analyze in two calls: each half is compiled on its own (side by side on a fresh install,
-    # interpreted until then: solitonde.signal.kernel_choice) and nothing compiles the whole again.
-    located, rows = kernel_choice.locate_and_measure(x, shot_args)
+    # compiled, or interpreted while a fresh install compiles (solitonde.signal.kernel_choice)
+    head, rows = kernel_choice.analyze(x, shot_args)
     t0 = waveform.t0
-    return Shot(located[0].tolist(), rows.tolist(), t0, dt, t0 + (x.size - 1) * dt)
+    return Shot(head.tolist(), rows.tolist(), t0, dt, t0 + (x.size - 1) * dt)
 
 
 def judged(shot: Shot, opts: DetectOptions) -> Verdict:

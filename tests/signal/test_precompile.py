@@ -1,5 +1,6 @@
 """The first answer after an install: the extractor runs interpreted while its two halves
-compile side by side in the background, and what the background compiled is what detect loads.
+compile side by side in the background (then the call detect makes, which links them), and what
+the background compiled is what detect loads.
 
 The interpreted kernels must give the compiled ones' numbers (to round-off) and flags. The
 background's work is only of use when its kernels have the very argument types detect passes
@@ -43,8 +44,9 @@ def _types(args: tuple[object, ...]) -> tuple[object, ...]:
 @pytest.mark.parametrize(("units", "options"), [("N", {}), ("V", {}), ("N", {"lowpass_hz": 2e5})])
 def test_the_example_arguments_have_the_types_detect_passes(monkeypatch, units, options):
     """Newtons (read-only samples), volts scaled (a new, writable array) and a low-passed trace:
-    detect hands each half the types precompile compiles them for, and a Waveform its samples'
-    check, so one compilation serves."""
+    detect hands ``analyze`` the types precompile compiles it for, and a Waveform its samples'
+    check, so one compilation serves; ``analyze`` hands its halves the types they are compiled
+    for (numba compiles a caller's calls for the argument types it infers)."""
     seen: dict[str, tuple[object, ...]] = {}
 
     def recorder(name: str, real):  # real: a numba dispatcher
@@ -53,15 +55,19 @@ def test_the_example_arguments_have_the_types_detect_passes(monkeypatch, units, 
             return real(*args)
         return call
 
-    monkeypatch.setattr(K, "locate", recorder("locate", K.locate))
-    monkeypatch.setattr(K, "measure", recorder("measure", K.measure))
+    monkeypatch.setattr(K, "analyze", recorder("analyze", K.analyze))
     monkeypatch.setattr(K, "first_invalid", recorder("first_invalid", K.first_invalid))
     detection = detect(_shot(units), **options)
     assert detection.incident is not None and detection.reflected is not None
-    locate_args, measure_args = precompile._example_args()
-    assert seen["locate"] == _types(locate_args)
-    assert seen["measure"] == _types(measure_args)
+    locate_args, measure_args, analyze_args = precompile._example_args()
+    assert seen["analyze"] == _types(analyze_args)
     assert seen["first_invalid"] == _types(locate_args[:1])
+    # analyze passes its own arguments on to locate, and locate's results with the rest to
+    # measure: the types the background compiles each half for
+    located = tuple(K.locate.overloads[_types(locate_args)].signature.return_type)
+    rest = _types(measure_args)[len(located):]
+    assert _types(analyze_args) == (*_types(locate_args), *rest)
+    assert (*located, *rest) == _types(measure_args)
 
 
 @pytest.fixture
@@ -183,9 +189,9 @@ def test_a_compile_under_way_is_not_started_twice(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_from_an_empty_cache_detect_loads_the_backgrounds_kernels(tmp_path: Path) -> None:
-    """A fresh cache folder: start compiles both halves in the background while the first shot
-    is extracted interpreted; after finish the next shot compiles nothing: ``locate``,
-    ``measure`` and ``first_invalid`` come from the cache the background wrote."""
+    """A fresh cache folder: start compiles both halves, then ``analyze``, in the background
+    while the first shot is extracted interpreted; after finish the next shot compiles nothing:
+    ``analyze`` and ``first_invalid`` come from the cache the background wrote."""
     code = """
         import json
         import solitonde.instrument  # configures the cache folder
@@ -196,14 +202,13 @@ def test_from_an_empty_cache_detect_loads_the_backgrounds_kernels(tmp_path: Path
         kernel_choice.start()
         x = pulse_train(4000, 5e-7, [(300e-6, 50.0, 40e-6), (900e-6, 30.0, 40e-6)])
         first = detect(Waveform(0.0, 5e-7, x))
-        interpreted = kernel_choice._spent > 0 and not K.locate.signatures
+        interpreted = kernel_choice._spent > 0 and not K.analyze.signatures
         kernel_choice.finish()
         d = detect(Waveform(0.0, 5e-7, x))
         print(json.dumps({
             "interpreted_first": interpreted,
-            "hits": [sum(f.stats.cache_hits.values()) for f in (K.locate, K.measure)],
-            "misses": [sum(f.stats.cache_misses.values())
-                       for f in (K.locate, K.measure, K.first_invalid)],
+            "hits": [sum(f.stats.cache_hits.values()) for f in (K.analyze, K.first_invalid)],
+            "misses": [sum(f.stats.cache_misses.values()) for f in (K.analyze, K.first_invalid)],
             "marker": kernel_choice._marker().is_file(),
             "tof_first": first.reflected.time_s - first.incident.time_s,
             "tof": d.reflected.time_s - d.incident.time_s}))
@@ -216,14 +221,15 @@ def test_from_an_empty_cache_detect_loads_the_backgrounds_kernels(tmp_path: Path
     assert out.returncode == 0, out.stderr
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["interpreted_first"]
-    assert result["hits"] == [1, 1] and result["misses"] == [0, 0, 0]
+    assert result["hits"] == [1, 1] and result["misses"] == [0, 0]
     assert result["marker"]
     assert result["tof"] == pytest.approx(600e-6, abs=2 * DT)
     assert result["tof_first"] == pytest.approx(result["tof"], rel=1e-12)
 
 
 def test_compiled_halves_give_what_the_kernel_in_one_call_gives():
-    """detect's two calls and analyze's one: the same numbers, bit for bit."""
+    """The halves a fresh install compiles side by side, called one after the other, and
+    analyze (detect's call): the same numbers, bit for bit."""
     from solitonde.signal.pulses import DetectOptions, kernel_args
 
     x = np.ascontiguousarray(_shot().samples)
