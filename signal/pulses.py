@@ -462,9 +462,9 @@ def _detect(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Detect
     sign = head[K.H_SIGN]
     notes: list[str] = []
     noise = head[K.H_SIGMA]
-    common = {"noise_N": noise, "threshold_N": head[K.H_THR],
-              "pretrigger_samples": int(head[K.H_NPRE]), "smooth_samples": int(head[K.H_SMOOTH]),
-              "record_end_s": shot.end_s}
+    common: dict[str, Any] = {
+        "noise_N": noise, "threshold_N": head[K.H_THR], "pretrigger_samples": int(head[K.H_NPRE]),
+        "smooth_samples": int(head[K.H_SMOOTH]), "record_end_s": shot.end_s}
     if head[K.H_EARLY]:
         notes.append("the incident pulse starts before a pre-trigger segment could be taken")
     if not rows:
