@@ -1,9 +1,9 @@
 """Throughput of feature extraction on one core for 10,000-sample shots (run: -m bench -s).
 
 Figures: the per-shot path (``extract_many``, one ``extract`` per Waveform, what the CLI and the
-service run), the batch path (``extract_batch`` on a 2-D array, one thread), the share of the
-per-shot time spent in the numba kernel, and the kernel called as its two halves (what the
-per-shot path does, so that a fresh install compiles them side by side) against one call.
+service run), the batch path (``extract_batch`` on a 2-D array, one thread), and the share of
+the per-shot time spent in the numba kernel (one call of ``kernels.analyze`` a shot, as the
+per-shot path makes it).
 Baseline measured in the same run: a plain scipy pipeline (median baseline, zero-phase
 Butterworth, scipy.signal.find_peaks, parabolic peak refinement) that gives TOF and ARR but none
 of the drift handling, shape fit or flags.
@@ -102,14 +102,6 @@ def test_throughput(one_core):
     ours = _rate(lambda lo, hi: extract_many(shots[lo:hi]), SHOTS)
     batch = _rate(lambda lo, hi: extract_batch(block[lo:hi], DT), SHOTS, chunk=20)
     kernel = _rate(kernel_only, SHOTS)
-    locate_args, measure_args = args[: kernels.LOCATE_ARGS], args[kernels.LOCATE_ARGS :]
-
-    def two_calls(lo: int, hi: int) -> None:  # what detect does: the halves, called from Python
-        for w in shots[lo:hi]:
-            kernels.measure(*kernels.locate(w.samples, *locate_args), *measure_args)
-
-    two_calls(0, 5)
-    halves = _rate(two_calls, SHOTS)
     base = _rate(lambda lo, hi: [scipy_pipeline(w, sos) for w in shots[lo:hi]], SHOTS)
     feats = extract_many(shots[:50])
     assert all(f.tof_s is not None for f in feats)
@@ -120,7 +112,5 @@ def test_throughput(one_core):
           f"({1e6 / batch:.0f} us per shot)")
     print(f"numba kernel share of the per-shot time: {ours / kernel:.0%} "
           f"(kernel alone {1e6 / kernel:.0f} us per shot)")
-    print(f"the kernel as its two halves (locate, measure), per shot: {1e6 / halves:.0f} us; "
-          f"speed against the kernel in one call: {halves / kernel:.3f}")
     print(f"scipy find_peaks pipeline: {base:,.0f} waveforms/s")
     print(f"ratio solitonde / scipy: per shot {ours / base:.2f}, batch {batch / base:.2f}")
