@@ -126,17 +126,28 @@ right-hand side, and :func:`_quartic_peak`'s work): one array per refined pulse 
 eleven per window, whose allocations were a fortieth of the extractor's time."""
 
 
+CURVATURE_POINTS = 32
+"""The template's curvature (:func:`_template_curvature`) is taken on ``2 CURVATURE_POINTS + 1``
+points spread evenly over the widest window, or on its samples where it has fewer: within 2.5 %
+of the value on every sample (half-widths of 4 to 2,000 samples, r 1.8 to 3.2), which scales a
+standard error; a point costs a ``pow`` and an ``exp``, and on every sample of a 100-sample
+half-width they took 3 % of the extractor's time."""
+
+
 @njit(cache=True)
 def _template_curvature(height: float, w: float, r: float, hw: int, frac: float,
                         out: np.ndarray, scratch: np.ndarray) -> float:
-    """:func:`poly_peak`'s curvature (``out[5]``) of the template ``height exp(-|u / w|^r)``
-    sampled at ``u = i - hw - frac``, ``i = 0 .. 2 hw``, over its whole width (0: none);
-    ``out`` (six) and ``scratch`` (``SCRATCH`` x 5) are overwritten."""
-    shape = np.empty(2 * hw + 1)
+    """:func:`poly_peak`'s curvature (``out[5]``, per sample squared) of the template
+    ``height exp(-|u / w|^r)`` over the window ``u = -hw - frac .. hw - frac`` (0: none), on
+    :data:`CURVATURE_POINTS` either side of the centre; ``out`` (six) and ``scratch``
+    (``SCRATCH`` x 5) are overwritten."""
+    k = min(hw, CURVATURE_POINTS)
+    step = hw / k
+    shape = np.empty(2 * k + 1)
     for i in range(shape.size):
-        shape[i] = height * np.exp(-(abs(i - hw - frac) / w) ** r)
-    _poly_peak_into(shape, hw, hw, 0, shape.size - 1, 1.0, 0.0, out, scratch)
-    return out[5]
+        shape[i] = height * np.exp(-(abs((i - k) * step - frac) / w) ** r)
+    _poly_peak_into(shape, k, k, 0, shape.size - 1, 1.0, 0.0, out, scratch)
+    return out[5] / (step * step)
 
 
 @njit(cache=True, inline="always")
