@@ -240,6 +240,7 @@ def _extracted(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Fea
 
 
 def _no_pulse(threshold_N: float, noise_N: float) -> NoReturn:
+    """The error of a shot in which no pulse rises above the detection threshold."""
     raise WaveformError(
         "samples",
         f"no pulse rises above the noise (threshold {threshold_N:.3g} N over a noise of "

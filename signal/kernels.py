@@ -864,10 +864,10 @@ def analyze(
         drift is then measured on the gap before the reflection too. Empty: the pre-trigger's
         baseline.
 
-    The work is :func:`locate` then :func:`measure`, two compilations of about equal size: the
-    per-shot path (:func:`solitonde.signal.pulses.detect`) calls them one after the other, so a
-    fresh install can compile them side by side (:mod:`solitonde.signal.precompile`); this
-    composition serves :func:`analyze_batch`.
+    The work is :func:`locate` then :func:`measure`, two compilations of about equal size,
+    which a fresh install compiles side by side and this function then links
+    (:mod:`solitonde.signal.precompile`); the per-shot path
+    (:func:`solitonde.signal.pulses.detect`) and :func:`analyze_batch` call it.
 
     Returns
     -------

@@ -123,7 +123,7 @@ def poly_peak(y: np.ndarray, c: int, h: int, lo: int, hi: int, sigma: float,
 SCRATCH = 16
 """Rows of five in the scratch array of :func:`_poly_peak_into` (its normal equations, their
 right-hand side, and :func:`_quartic_peak`'s work): one array per refined pulse instead of
-eleven per window, whose allocations were a fortieth of the extractor's time."""
+eleven per window (about 80 allocations a shot, 2 % of the extractor's time)."""
 
 
 CURVATURE_POINTS = 32

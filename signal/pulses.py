@@ -1,8 +1,8 @@
 """Pulse detection: baseline and noise, incident, reflected and secondary pulses, quality flags.
 
-All the work on the samples is one numba pass (:func:`solitonde.signal.kernels.analyze`, here
-called as its two halves ``locate`` and ``measure``); this module holds the options, the result
-types and the flag logic. The steps, each chosen so that a number is never picked out of noise:
+All the work on the samples is one numba pass (:func:`solitonde.signal.kernels.analyze`);
+this module holds the options, the result types and the flag logic. The steps, each chosen so
+that a number is never picked out of noise:
 
 1. Pre-trigger segment: everything before the first rise (first crossing of a quarter of the
    largest excursion, walked back to its onset), then, once pulses are known, everything before

@@ -51,6 +51,21 @@ def test_to_dict_copies_the_lists() -> None:
     assert d["tof_s"] == 1e-4 and d["arr_upper_bound"] is None
 
 
+def test_features_whole_are_the_constructors_and_take_every_field() -> None:
+    """Features.whole (the extractor's fast path) builds what the constructor builds: equal,
+    the same dict and pickle, frozen; a missing or an extra field is an error naming it."""
+    f = _features(arr_local=0.49, reflection_window_s=3e-3)
+    values = {name: getattr(f, name) for name in JSON_KEYS}
+    made = Features.whole(values)
+    assert made == f and made.to_dict() == f.to_dict() and pickle.loads(pickle.dumps(made)) == f
+    with pytest.raises(AttributeError):
+        made.arr = 1.0  # type: ignore[misc]
+    with pytest.raises(TypeError, match="missing \\['arr'\\], extra \\[\\]"):
+        Features.whole({k: v for k, v in values.items() if k != "arr"})
+    with pytest.raises(TypeError, match="extra \\['arr_db'\\]"):
+        Features.whole({**values, "arr_db": 1.0})
+
+
 def test_the_batch_table_has_a_column_for_every_field_and_no_other() -> None:
     n = np.zeros(2)
     columns = {name: n for name in FIELD_KINDS}
