@@ -214,11 +214,12 @@ def _extracted(waveform: Waveform, opts: DetectOptions, args: KernelArgs) -> Fea
     inc_a = inc[K.P_AMP]
     inc_w = inc[K.P_WIDTH] * dt
     ref = rows[1] if verdict.reflected else None
+    ref_t = None if ref is None else t0 + ref[K.P_TIME] * dt
     return Features.whole({
-        "tof_s": None if ref is None else (t0 + ref[K.P_TIME] * dt) - inc_t,
+        "tof_s": None if ref_t is None else ref_t - inc_t,
         "arr": None if ref is None else ref[K.P_AMP] / inc_a,
         "incident_time_s": inc_t,
-        "reflected_time_s": None if ref is None else t0 + ref[K.P_TIME] * dt,
+        "reflected_time_s": ref_t,
         "incident_peak_N": inc_a,
         "reflected_peak_N": None if ref is None else ref[K.P_AMP],
         "snr_db": snr_db(inc_a, head[K.H_SIGMA]),

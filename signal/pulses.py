@@ -55,7 +55,6 @@ that a number is never picked out of noise:
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, fields
 from typing import Any, NamedTuple
 
@@ -366,14 +365,6 @@ def detect(waveform: Waveform, options: DetectOptions | None = None, **kwargs: A
 
 KernelArgs = dict[tuple[int, float], tuple[Any, ...]]
 """:func:`kernel_args` per record length and sample period, for one :class:`DetectOptions`."""
-
-
-def detect_each(waveforms: Iterable[Waveform], options: DetectOptions) -> Iterator[Detection]:
-    """:func:`detect` of each shot in turn, with ``options``: the kernel's arguments are worked
-    out once per record length and sample period, not per shot."""
-    args: KernelArgs = {}
-    for waveform in waveforms:
-        yield _detect(waveform, options, args)
 
 
 class Shot(NamedTuple):
